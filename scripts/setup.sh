@@ -1,0 +1,37 @@
+#!/usr/bin/env bash
+# Sourced by demo.sh and test.sh: installs what is missing, quickly when nothing is.
+# Debian system libraries (open3d: libusb; Qt/OpenGL tests: Xvfb + Mesa), then .venv with insitu.
+set -euo pipefail
+ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+VENV="$ROOT/.venv"
+
+need_pkgs=()
+for pkg in libusb-1.0-0 xvfb xauth libgl1 libegl1 libgl1-mesa-dri libglx-mesa0 libxkbcommon0 \
+           libxkbcommon-x11-0 libfontconfig1 libdbus-1-3 fonts-dejavu-core; do
+    dpkg-query -W -f='${Status}' "$pkg" 2>/dev/null | grep -q "install ok installed" || need_pkgs+=("$pkg")
+done
+if ((${#need_pkgs[@]})); then
+    echo "insitu setup: installing system packages: ${need_pkgs[*]}"
+    SUDO=""; [ "$(id -u)" -eq 0 ] || SUDO="sudo"
+    $SUDO apt-get update -qq
+    DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq --no-install-recommends "${need_pkgs[@]}" >/dev/null
+fi
+
+PY="${PYTHON:-python3.11}"
+command -v "$PY" >/dev/null || PY=python3
+if [ ! -x "$VENV/bin/python" ]; then
+    echo "insitu setup: creating $VENV"
+    "$PY" -m venv "$VENV"
+fi
+STAMP="$VENV/.insitu-installed"
+if [ ! -f "$STAMP" ] || [ "$ROOT/pyproject.toml" -nt "$STAMP" ]; then
+    echo "insitu setup: installing insitu and its packages into $VENV"
+    LOG="$VENV/pip-install.log"
+    if ! "$VENV/bin/python" -m pip install -e "$ROOT[test]" >"$LOG" 2>&1; then
+        tail -n 30 "$LOG" >&2
+        echo "insitu setup: pip install failed (full log: $LOG)" >&2
+        exit 1
+    fi
+    touch "$STAMP"
+fi
+export PATH="$VENV/bin:$PATH"

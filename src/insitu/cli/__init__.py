@@ -1,0 +1,1 @@
+"""The headless commands (shared/spec/cli.md): thin layers over insitu.services."""

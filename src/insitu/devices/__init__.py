@@ -1,0 +1,1 @@
+"""Device protocols and their backends: sim (the virtual rig), replay (recorded sequences)."""

@@ -1,0 +1,33 @@
+"""Every failure a user can cause or meet is an :class:`InsituError`.
+
+The CLI prints ``str(error)`` as one line and exits non-zero; no traceback for these.
+Messages name the file, the field and the expected value.
+"""
+
+
+class InsituError(Exception):
+    """Base of all user-facing failures."""
+
+
+class FormatError(InsituError):
+    """A file is missing, unreadable or does not match its format (spec/formats.md)."""
+
+
+class ConfigError(InsituError):
+    """A rig or calibration file is invalid or does not fit the rig."""
+
+
+class CalibrationError(InsituError):
+    """A calibration cannot be computed from the data given."""
+
+
+class MeasurementError(InsituError):
+    """A measurement cannot be made (no line, heights not bracketed, empty result)."""
+
+
+class DeviceError(InsituError):
+    """A device failed, timed out or refused a command. The laser is off when this is raised."""
+
+
+class SafetyError(InsituError):
+    """A request would fire the laser where it must not (outside field or focus range)."""

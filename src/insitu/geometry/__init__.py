@@ -1,0 +1,1 @@
+"""Models of the camera and the scan head: pure numpy, no devices."""

@@ -1,0 +1,1 @@
+"""3-D measurement: camera rays against the scan head's light planes."""

@@ -1,0 +1,56 @@
+"""Frames of a line scan in, point cloud out — streaming: one frame at a time, flat memory."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from insitu.errors import MeasurementError
+from insitu.formats.pointcloud import PointCloud
+from insitu.geometry.camera import CameraModel
+from insitu.measure.plane import reconstruct_line
+from insitu.vision.centres import gray_centroid
+
+
+class ScanReconstructor:
+    """Accumulates points frame by frame with Method 1 (light plane, Li et al. §2.1).
+
+    camera: the operator's calibrated camera. pivot_height_mm, telecentric: the scan head's
+    nominal geometry (formats.md ``scan_head``).
+    """
+
+    method = "plane"
+
+    def __init__(self, camera: CameraModel, pivot_height_mm: float, telecentric: bool = False,
+                 min_points: int = 5):
+        self.camera, self.H, self.telecentric = camera, pivot_height_mm, telecentric
+        self.min_points = min_points
+        self._chunks: list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]] = []
+        self.frames = 0
+        self.frames_with_line = 0
+
+    def add(self, index: int, image: np.ndarray, start, end) -> int:
+        """Process frame ``index`` of the line start → end (mm); returns the points it gave."""
+        if image.shape != (self.camera.height, self.camera.width):
+            raise MeasurementError(
+                f"frame {index}: {image.shape[1]}×{image.shape[0]} px, but the camera "
+                f"calibration is for {self.camera.width}×{self.camera.height} px")
+        self.frames += 1
+        centres = gray_centroid(image)
+        if len(centres) < self.min_points:
+            return 0
+        pts = reconstruct_line(self.camera, centres.uv, start, end, self.H, self.telecentric)
+        ok = np.isfinite(pts).all(axis=1)
+        if ok.sum() < self.min_points:
+            return 0
+        self.frames_with_line += 1
+        self._chunks.append((pts[ok], np.full(ok.sum(), index, np.int32), centres.peak[ok],
+                             np.clip(centres.contrast[ok] / 255.0, 0, 1)))
+        return int(ok.sum())
+
+    def cloud(self) -> PointCloud:
+        """All points so far. Raises MeasurementError when no frame showed a line."""
+        if not self._chunks:
+            raise MeasurementError(f"no laser line found in any of {self.frames} frames "
+                                   "(laser off, exposure too low, or the part outside the view)")
+        pts, line, inten, qual = (np.concatenate(c) for c in zip(*self._chunks))
+        return PointCloud(pts, {"intensity": inten, "line": line, "quality": qual})

@@ -1,0 +1,127 @@
+"""Use cases shared by the CLI, the GUI and the tests: they take progress callbacks and a
+cancel event, touch devices and files, and return plain results."""
+
+from __future__ import annotations
+
+import threading
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from insitu.devices.sim import SimCamera, SimScanHead, SimWorld
+from insitu.errors import InsituError, MeasurementError
+from insitu.formats.pointcloud import PointCloud, write_ply
+from insitu.formats.sequence import Sequence
+from insitu.geometry.camera import CameraModel
+from insitu.measure.scan import ScanReconstructor
+from insitu.sim.record import default_region, scan_lines
+from insitu.sim.rig import SimRig, default_rig
+from insitu.sim.workpieces import load_mesh_workpiece, make_workpiece
+
+Progress = Callable[[int, int], None]
+
+
+@dataclass(frozen=True)
+class ScanSummary:
+    points: int
+    frames: int
+    frames_with_line: int
+    method: str
+    seconds: float
+    bounds_min: tuple[float, float, float]
+    bounds_max: tuple[float, float, float]
+
+    @property
+    def coverage(self) -> float:
+        """Fraction of frames whose line gave points."""
+        return self.frames_with_line / max(self.frames, 1)
+
+
+@dataclass(frozen=True)
+class ScanResult:
+    cloud: PointCloud
+    summary: ScanSummary
+
+
+class Cancelled(InsituError):
+    """The operator cancelled; what was measured so far is kept in ``partial``."""
+
+
+def _finish(rec: ScanReconstructor, t0: float) -> ScanResult:
+    cloud = rec.cloud()
+    lo, hi = cloud.points.min(axis=0), cloud.points.max(axis=0)
+    return ScanResult(cloud, ScanSummary(len(cloud), rec.frames, rec.frames_with_line, rec.method,
+                                         time.perf_counter() - t0, tuple(lo), tuple(hi)))
+
+
+def scan_replay(folder: str | Path, progress: Progress | None = None,
+                cancel: threading.Event | None = None) -> ScanResult:
+    """Reconstruct a recorded scan sequence (formats.md §1) with Method 1."""
+    t0 = time.perf_counter()
+    seq = Sequence.open(folder)
+    if seq.kind != "scan":
+        raise MeasurementError(f"{seq.folder}: a '{seq.kind}' sequence, not a scan")
+    cam = seq.camera
+    rec = ScanReconstructor(CameraModel(cam.width, cam.height, cam.K_array, cam.dist_array,
+                                        cam.R_array, cam.t_array),
+                            seq.scan_head.pivot_height_mm, seq.scan_head.lens == "telecentric")
+    for i, frame, image in seq:
+        if cancel is not None and cancel.is_set():
+            raise Cancelled(f"scan cancelled after {i} of {len(seq)} frames")
+        rec.add(i, image, frame.line.start, frame.line.end)
+        if progress:
+            progress(i + 1, len(seq))
+    return _finish(rec, t0)
+
+
+def sim_world(workpiece: str = "step-block", seed: int = 0, binning: int = 1,
+              rig: SimRig | None = None) -> SimWorld:
+    """The simulated station with ``workpiece`` (a catalogue name or a mesh file) on the table."""
+    part = (load_mesh_workpiece(workpiece) if Path(workpiece).suffix.lower() in
+            (".stl", ".ply", ".obj") else make_workpiece(workpiece))
+    return SimWorld(rig or default_rig(seed=seed, binning=binning), parts=[part], seed=seed)
+
+
+def scan_live(world: SimWorld, spacing: float = 0.5, region=None,
+              progress: Progress | None = None, cancel: threading.Event | None = None
+              ) -> ScanResult:
+    """Drive the (simulated) rig: step the line over ``region`` (x0, x1, y0, y1) mm and
+    reconstruct each frame as it arrives. The laser is off when this returns or raises."""
+    t0 = time.perf_counter()
+    region = tuple(region) if region is not None else default_region(world)
+    _check_region(region, world)
+    lines = scan_lines(region, spacing)
+    rig = world.rig
+    rec = ScanReconstructor(rig.operator_camera, rig.nominal.pivot_height_mm,
+                            rig.nominal.lens == "telecentric")
+    camera, head = SimCamera(world), SimScanHead(world)
+    try:
+        for i, (a, b) in enumerate(lines):
+            if cancel is not None and cancel.is_set():
+                raise Cancelled(f"scan cancelled after {i} of {len(lines)} lines")
+            head.show_line(a, b)
+            rec.add(i, camera.grab(), a, b)
+            if progress:
+                progress(i + 1, len(lines))
+    finally:
+        head.off()
+    return _finish(rec, t0)
+
+
+def _check_region(region, world: SimWorld) -> None:
+    x0, x1, y0, y1 = region
+    half = np.asarray(world.rig.nominal.field_size_mm) / 2
+    if not (x0 < x1 and y0 < y1):
+        raise MeasurementError(f"--region {x0:g} {x1:g} {y0:g} {y1:g}: expected X0 < X1 and Y0 < Y1")
+    if max(abs(x0), abs(x1)) > half[0] or max(abs(y0), abs(y1)) > half[1]:
+        raise MeasurementError(f"--region {x0:g} {x1:g} {y0:g} {y1:g}: outside the scan field "
+                               f"±{half[0]:g} × ±{half[1]:g} mm")
+
+
+def save_cloud(result: ScanResult, path: str | Path) -> None:
+    if len(result.cloud) == 0:
+        raise MeasurementError("the scan gave no points; nothing written")
+    write_ply(path, result.cloud)

@@ -1,0 +1,151 @@
+"""The simulated rig: a *true* geometry, and the *operator's* calibration that differs from it
+by realistic calibration errors — so measurement errors are real and calibration has work.
+
+Default rig: after Li et al. §3.1 — 5 MPix camera (2448 × 2048, 3.45 µm pixels) with a 16 mm
+lens on the side of the head, ~200 mm field of view at ~360 mm; scan head with d = 350 mm.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from insitu.geometry.beams import ScanHeadOptics, TwoMirrorHead
+from insitu.geometry.camera import CameraModel, rotation_about
+from insitu.geometry.distortion import (FieldDistortion, NoDistortion, PolynomialFieldDistortion,
+                                        distortion_from_dict)
+
+PIXEL_PITCH_MM = 0.00345
+LENS_FOCAL_MM = 16.0
+FULL_SIZE = (2448, 2048)
+
+
+@dataclass(frozen=True)
+class Optics:
+    """Light and sensor physics of the simulated rig.
+
+    beam_waist_mm: 1/e² radius of the focused laser at the focal plane; wavelength_mm for its
+    Rayleigh range. f_number and camera focus distance set the camera's blur. Sensor: gain in
+    electrons per DN, read noise and dark level in DN, 8-bit output.
+    """
+
+    beam_waist_mm: float = 0.15
+    wavelength_mm: float = 680e-6
+    f_number: float = 8.0
+    camera_focus_mm: float = 362.0
+    line_power: float = 2.5e4       # DN·mm² reaching the sensor per mm of line, for albedo 1
+    spot_power: float = 6.0e3       # DN·mm² for a whole spot, albedo 1
+    ambient_dn: float = 14.0        # room light on an albedo-1 surface facing up
+    speckle_contrast: float = 0.35
+    speckle_grain_px: float = 1.6
+    secondary_fraction: float = 0.25
+    electrons_per_dn: float = 8.0
+    read_noise_dn: float = 1.2
+    dark_dn: float = 3.0
+
+    @property
+    def rayleigh_mm(self) -> float:
+        return np.pi * self.beam_waist_mm**2 / self.wavelength_mm
+
+    def beam_radius_mm(self, defocus_mm: np.ndarray) -> np.ndarray:
+        """1/e² beam radius at a distance ``defocus_mm`` from the focus along the beam."""
+        return self.beam_waist_mm * np.sqrt(1.0 + (np.asarray(defocus_mm) / self.rayleigh_mm) ** 2)
+
+
+@dataclass(frozen=True)
+class ScanHeadNominal:
+    """What the operator knows of the head (formats.md ``scan_head`` plus the two-mirror d, e)."""
+
+    lens: str = "non-telecentric"
+    pivot_height_mm: float = 350.0
+    mirror_distance_mm: float = 350.0
+    mirror_separation_mm: float = 12.0
+    field_size_mm: tuple[float, float] = (200.0, 200.0)
+    z_range_mm: tuple[float, float] = (-25.0, 25.0)
+
+    def to_dict(self) -> dict:
+        """The ``scan_head`` object of a recorded sequence."""
+        return {"lens": self.lens, "pivot_height_mm": self.pivot_height_mm,
+                "field_size_mm": list(self.field_size_mm), "z_range_mm": list(self.z_range_mm)}
+
+
+@dataclass(frozen=True)
+class SimRig:
+    """True camera and head, and the operator's calibration of them."""
+
+    camera: CameraModel                 # true
+    head: TwoMirrorHead                 # true kinematics
+    distortion: FieldDistortion         # true field distortion
+    operator_camera: CameraModel        # as calibrated
+    nominal: ScanHeadNominal = field(default_factory=ScanHeadNominal)
+    optics: Optics = field(default_factory=Optics)
+    seed: int = 0
+
+    @property
+    def beams(self) -> ScanHeadOptics:
+        """The true beams: where the laser really goes for a command."""
+        return ScanHeadOptics(self.head, self.distortion)
+
+    def truth_dict(self) -> dict:
+        dist = self.distortion
+        return {
+            "seed": self.seed,
+            "camera": self.camera.to_dict(),
+            "scan_head": {"mirror_distance_mm": self.head.mirror_distance_mm,
+                          "mirror_separation_mm": self.head.mirror_separation_mm,
+                          "field_distortion": dist.to_dict() if hasattr(dist, "to_dict")
+                          else {"type": "none"}},
+            "optics": {k: getattr(self.optics, k) for k in self.optics.__dataclass_fields__},
+        }
+
+    @classmethod
+    def from_truth_dict(cls, truth: dict, operator_camera: CameraModel) -> "SimRig":
+        sh = truth["scan_head"]
+        return cls(CameraModel.from_dict(truth["camera"]),
+                   TwoMirrorHead(sh["mirror_distance_mm"], sh["mirror_separation_mm"]),
+                   distortion_from_dict(sh.get("field_distortion")), operator_camera,
+                   optics=Optics(**truth.get("optics", {})), seed=int(truth.get("seed", 0)))
+
+
+def _camera_pose(rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+    """Camera on the side of the head (−x), ~24° off vertical, mounted slightly imperfectly."""
+    base = CameraModel.look_at(1, 1, np.eye(3), np.zeros(5), [-150.0, 0.0, 330.0],
+                               [0.0, 0.0, 0.0], [0.0, 1.0, 0.0])
+    wobble = rotation_about(rng.normal(size=3), np.deg2rad(0.6))
+    R = wobble @ base.R
+    centre = base.centre_world + rng.normal(0.0, 1.0, 3)
+    return R, -R @ centre
+
+
+def default_rig(seed: int = 0, binning: int = 1, distortion_rms_mm: float = 0.8,
+                calibration_errors: bool = True) -> SimRig:
+    """The embedded default rig. ``binning`` divides the image size (small test frames)."""
+    rng = np.random.default_rng(seed)
+    w, h = FULL_SIZE[0] // binning, FULL_SIZE[1] // binning
+    f = LENS_FOCAL_MM / PIXEL_PITCH_MM / binning
+    K = np.array([[f, 0, (w - 1) / 2 + rng.normal(0, 6 / binning)],
+                  [0, f, (h - 1) / 2 + rng.normal(0, 6 / binning)], [0, 0, 1]])
+    dist = np.array([-0.09, 0.15, 0.0, 0.0, -0.06]) + rng.normal(0, [0.01, 0.02, 3e-4, 3e-4, 0.01])
+    R, t = _camera_pose(rng)
+    camera = CameraModel(w, h, K, dist, R, t)
+    head = TwoMirrorHead(350.0 + rng.normal(0, 0.6), 12.0 + rng.normal(0, 0.3))
+    distortion = (PolynomialFieldDistortion.random(rng, distortion_rms_mm)
+                  if distortion_rms_mm > 0 else NoDistortion())
+    operator = operator_calibration(camera, rng) if calibration_errors else camera
+    return SimRig(camera, head, distortion, operator, seed=seed)
+
+
+def operator_calibration(camera: CameraModel, rng: np.random.Generator) -> CameraModel:
+    """The true camera seen through a good but imperfect calibration: focal length ~0.03 %,
+    principal point ~0.4 px, distortion, pose ~0.02° and ~0.08 mm off."""
+    px = camera.K[0, 0] * PIXEL_PITCH_MM / LENS_FOCAL_MM  # 1 / binning
+    K = camera.K.copy()
+    K[0, 0] *= 1 + rng.normal(0, 3e-4)
+    K[1, 1] *= 1 + rng.normal(0, 3e-4)
+    K[:2, 2] += rng.normal(0, 0.4 * px, 2)
+    dist = camera.dist + rng.normal(0, [2e-3, 5e-3, 3e-5, 3e-5, 5e-3])
+    dR = rotation_about(rng.normal(size=3), np.deg2rad(0.02))
+    R = dR @ camera.R
+    centre = camera.centre_world + rng.normal(0, 0.08, 3)
+    return replace(camera, K=K, dist=dist, R=R, t=-R @ centre)

@@ -1,0 +1,1 @@
+"""Image processing: laser line centres and spots."""
