@@ -3,7 +3,8 @@
 from __future__ import annotations
 
 import contextlib
-from collections.abc import Iterator
+import functools
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import typer
@@ -20,6 +21,17 @@ def fail(message: str) -> None:
     """Print one line naming the problem and exit non-zero."""
     err_console.print(f"[bold red]error:[/] {message}", highlight=False, soft_wrap=True)
     raise typer.Exit(1)
+
+
+def one_line_errors(command: Callable) -> Callable:
+    """Decorate a command: an InsituError becomes one line on stderr and exit code 1."""
+    @functools.wraps(command)
+    def wrapper(*args, **kwargs):
+        try:
+            return command(*args, **kwargs)
+        except InsituError as e:
+            fail(str(e))
+    return wrapper
 
 
 @contextlib.contextmanager

@@ -1,4 +1,4 @@
-"""``insitu``: the headless commands. Every InsituError becomes one line and exit code 1."""
+"""insitu: in-situ structured-light measurement and laser marking (headless commands)."""
 
 from __future__ import annotations
 
@@ -9,7 +9,6 @@ import typer
 from insitu.cli import scan as scan_cmd
 from insitu.cli import sim as sim_cmd
 from insitu.cli.common import err_console
-from insitu.errors import InsituError
 
 app = typer.Typer(help=__doc__.split("\n")[0] if __doc__ else None, no_args_is_help=True,
                   pretty_exceptions_enable=False, add_completion=False)
@@ -20,9 +19,6 @@ app.add_typer(sim_cmd.app, name="sim")
 def main() -> None:
     try:
         app()
-    except InsituError as e:
-        err_console.print(f"[bold red]error:[/] {e}", highlight=False, soft_wrap=True)
-        sys.exit(1)
     except KeyboardInterrupt:
         err_console.print("[bold red]error:[/] interrupted")
         sys.exit(130)

@@ -8,9 +8,10 @@ from typing import Annotated
 import typer
 from rich.table import Table
 
-from insitu.cli.common import check_output, console, fail, progress_bar
+from insitu.cli.common import check_output, console, fail, one_line_errors, progress_bar
 
 
+@one_line_errors
 def scan(
     out: Annotated[Path, typer.Option("-o", "--output", help="Point cloud to write (.ply).")],
     replay: Annotated[Path | None, typer.Option(help="Recorded scan folder to reconstruct.")] = None,
@@ -21,6 +22,7 @@ def scan(
     region: Annotated[tuple[float, float, float, float] | None,
                       typer.Option(help="Region X0 X1 Y0 Y1, mm (default: the whole part).")] = None,
     seed: Annotated[int, typer.Option(help="Simulated rig: seed.")] = 0,
+    binning: Annotated[int, typer.Option(help="Simulated rig: divide the image size by this.")] = 1,
 ) -> None:
     """Scan a part (or replay a recorded scan) and write its point cloud."""
     from insitu import services
@@ -36,7 +38,7 @@ def scan(
         if replay is not None:
             result = services.scan_replay(replay, progress=progress)
         else:
-            world = services.sim_world(workpiece, seed=seed)
+            world = services.sim_world(workpiece, seed=seed, binning=binning)
             result = services.scan_live(world, spacing=spacing, region=region, progress=progress)
     services.save_cloud(result, out)
     s = result.summary

@@ -7,7 +7,7 @@ from typing import Annotated
 
 import typer
 
-from insitu.cli.common import check_output, console, fail, progress_bar
+from insitu.cli.common import check_output, console, fail, one_line_errors, progress_bar
 from insitu.sim import record
 from insitu.sim.workpieces import WORKPIECES
 
@@ -15,6 +15,7 @@ app = typer.Typer(help="The simulated rig.", no_args_is_help=True)
 
 
 @app.command("record")
+@one_line_errors
 def record_cmd(
     kind: Annotated[str, typer.Argument(help="scan | height-calibration | field-calibration | "
                                              "camera-calibration")],

@@ -1,0 +1,1 @@
+"""The files of shared/spec/formats.md (recorded sequences, point clouds, jobs), with validation."""

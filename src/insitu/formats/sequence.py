@@ -1,0 +1,362 @@
+"""Recorded sequences (formats.md §1): a folder with ``sequence.json`` and ``frames/%05d.png``.
+
+:class:`Sequence` reads one (validated, frames streamed one at a time); :class:`SequenceWriter`
+records one atomically. Models keep fields they don't know (other tools may add some).
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Iterator
+from pathlib import Path, PurePosixPath
+from typing import Annotated, Any, Literal
+
+import cv2
+import numpy as np
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
+
+from insitu.errors import FormatError
+from insitu.formats.atomic import atomic_folder, atomic_write_text
+from insitu.formats.validation import (Finite, Matrix3, Positive, PositivePair, Range, Vec2, Vec3,
+                                       bad, dump_json, numbers, plain, read_json, show,
+                                       validation_message)
+
+FORMAT = "insitu-sequence/1"
+Kind = Literal["scan", "height-calibration", "field-calibration", "camera-calibration"]
+KINDS: tuple[str, ...] = Kind.__args__
+FRAME_NAME = "frames/{:05d}.png"
+_CONFIG = ConfigDict(extra="allow", allow_inf_nan=False)
+
+
+class CameraSpec(BaseModel):
+    """The rig's camera as known to the operator: intrinsics K (px), OpenCV distortion, and
+    extrinsics mapping a world point X (mm) to camera coordinates ``R @ X + t``."""
+
+    model_config = _CONFIG
+    width: int = Field(gt=0)
+    height: int = Field(gt=0)
+    K: Matrix3
+    dist: Annotated[list[Finite], numbers(4, 5, 8, 12, 14, what=" (OpenCV distortion)")]
+    R: Matrix3
+    t: Vec3
+
+    @field_validator("K")
+    @classmethod
+    def _intrinsics(cls, K: list[list[float]]) -> list[list[float]]:
+        if not (K[0][0] > 0 and K[1][1] > 0):
+            raise bad("expected fx = K[0][0] > 0 and fy = K[1][1] > 0", K)
+        if K[2] != [0, 0, 1]:
+            raise bad("expected [0, 0, 1]", K[2], at="[2]")
+        return K
+
+    @field_validator("R")
+    @classmethod
+    def _rotation(cls, R: list[list[float]]) -> list[list[float]]:
+        a = np.asarray(R, np.float64)
+        err, det = float(np.abs(a @ a.T - np.eye(3)).max()), float(np.linalg.det(a))
+        if err > 1e-6 or det <= 0:
+            raise bad("expected a rotation matrix (R @ R.T = I within 1e-6, det +1), got "
+                      f"max |R @ R.T - I| = {err:.3g}, det = {det:.6g}")
+        return R
+
+    K_array = property(lambda self: np.array(self.K, np.float64), doc="(3, 3) float64, px.")
+    dist_array = property(lambda self: np.array(self.dist, np.float64),
+                          doc="(N,) float64, OpenCV order [k1, k2, p1, p2, k3, ...].")
+    R_array = property(lambda self: np.array(self.R, np.float64),
+                       doc="(3, 3) float64 rotation, world → camera.")
+    t_array = property(lambda self: np.array(self.t, np.float64),
+                       doc="(3,) float64 translation, mm, world → camera.")
+
+
+class ScanHeadSpec(BaseModel):
+    """Nominal scan-head geometry: beam pivot height H above z = 0, usable field, focus range (mm)."""
+
+    model_config = _CONFIG
+    lens: Literal["non-telecentric", "telecentric"]
+    pivot_height_mm: Positive
+    field_size_mm: PositivePair
+    z_range_mm: Range
+
+
+class LineSpec(BaseModel):
+    """A line commanded on the nominal plane z = 0, from ``start`` [x1, y1] to ``end`` (mm)."""
+
+    model_config = _CONFIG
+    start: Vec2
+    end: Vec2
+
+    @model_validator(mode="after")
+    def _not_a_point(self) -> "LineSpec":
+        if self.start == self.end:
+            raise bad(f"expected start != end, got both {show(self.start)}")
+        return self
+
+
+class FrameSpec(BaseModel):
+    """One frame: image ``file`` (relative to the folder) and what the head showed (mm)."""
+
+    model_config = _CONFIG
+    file: str
+    line: LineSpec | None = None
+    spot: Vec2 | None = None
+    plate_z_mm: Finite | None = None
+    exposure_ms: Positive | None = None
+
+    @field_validator("file")
+    @classmethod
+    def _relative(cls, f: str) -> str:
+        p = PurePosixPath(f.replace("\\", "/"))
+        if not f or "\x00" in f or p.is_absolute() or ".." in p.parts or ":" in f[:2]:
+            raise bad("expected a path relative to the sequence folder", f)
+        return f
+
+
+class CheckerboardSpec(BaseModel):
+    """Inner-corner counts (as OpenCV's patternSize) and square side, mm."""
+
+    model_config = _CONFIG
+    cols: int = Field(ge=2)
+    rows: int = Field(ge=2)
+    square_mm: Positive
+
+
+def frame_problems(kind: str, frame: FrameSpec) -> list[tuple[str, str]]:
+    """(field, message) for each per-kind rule of formats.md that ``frame`` breaks."""
+    need = {"scan": ("line",), "height-calibration": ("line", "plate_z_mm"),
+            "field-calibration": ("spot", "plate_z_mm")}.get(kind, ())
+    return [(name, f"missing (required in a '{kind}' sequence)") for name in need
+            if getattr(frame, name) is None]
+
+
+class SequenceSpec(BaseModel):
+    """The content of ``sequence.json``."""
+
+    model_config = _CONFIG
+    format: Literal["insitu-sequence/1"]
+    kind: Kind
+    camera: CameraSpec | None = None
+    scan_head: ScanHeadSpec
+    frames: list[FrameSpec]
+    checkerboard: CheckerboardSpec | None = None
+
+    @field_validator("frames", mode="before")
+    @classmethod
+    def _some_frames(cls, v: Any) -> Any:
+        if isinstance(v, list) and not v:
+            raise bad("expected at least one frame", v)
+        return v
+
+    @model_validator(mode="after")
+    def _per_kind(self) -> "SequenceSpec":
+        if self.camera is None and self.kind != "camera-calibration":
+            raise bad(f"missing (required in a '{self.kind}' sequence)", at="camera")
+        if self.checkerboard is None and self.kind == "camera-calibration":
+            raise bad("missing (required in a 'camera-calibration' sequence)", at="checkerboard")
+        problems = [(f"frames[{i}].{name}", msg) for i, f in enumerate(self.frames)
+                    for name, msg in frame_problems(self.kind, f)]
+        if problems:
+            raise bad(problems[0][1], at=problems[0][0], more=len(problems) - 1)
+        return self
+
+
+def _validate(model: type[BaseModel], data: Any, source: str, prefix: str = "") -> Any:
+    try:
+        return model.model_validate(data)
+    except ValidationError as e:
+        raise FormatError(validation_message(source, e, prefix)) from None
+
+
+def _check_size(where: str, img: np.ndarray, cam: CameraSpec | None, shape=None) -> None:
+    """FormatError unless ``img`` is camera width x height (or ``shape`` if no camera)."""
+    expect, whose = ((cam.height, cam.width), "camera is") if cam else (shape, "earlier frames are")
+    if expect is not None and img.shape != tuple(expect):
+        raise FormatError(f"{where}: image is {img.shape[1]}x{img.shape[0]} pixels, {whose} "
+                          f"{expect[1]}x{expect[0]} (width x height)")
+
+
+def _exists(path: Path) -> bool:
+    try:
+        return path.is_file()
+    except (OSError, ValueError):
+        return False
+
+
+class Sequence:
+    """A recorded sequence folder. Frames are read from disk on demand, one at a time."""
+
+    def __init__(self, folder: Path, spec: SequenceSpec):
+        self.folder, self.spec = Path(folder), spec
+
+    @classmethod
+    def open(cls, folder: str | Path) -> "Sequence":
+        """Validate ``folder/sequence.json`` and check that every frame file exists."""
+        folder = Path(folder)
+        if not folder.is_dir():
+            raise FormatError(f"{folder}: " + ("not a folder" if folder.exists()
+                                               else "no such sequence folder"))
+        path = folder / "sequence.json"
+        data = read_json(path, missing="missing (a recorded sequence folder holds sequence.json)")
+        spec = _validate(SequenceSpec, data, str(path))
+        missing = [f.file for f in spec.frames if not _exists(folder / f.file)]
+        if missing:
+            raise FormatError(f"{folder}: frame file {missing[0]} is missing ({len(missing)} of "
+                              f"{len(spec.frames)} frame files missing)")
+        return cls(folder, spec)
+
+    kind = property(lambda self: self.spec.kind)
+    camera = property(lambda self: self.spec.camera)
+    scan_head = property(lambda self: self.spec.scan_head)
+    frames = property(lambda self: self.spec.frames)
+    checkerboard = property(lambda self: self.spec.checkerboard)
+
+    def __len__(self) -> int:
+        return len(self.spec.frames)
+
+    def __repr__(self) -> str:
+        return f"Sequence({str(self.folder)!r}, kind={self.kind!r}, frames={len(self)})"
+
+    def read_frame(self, i: int) -> np.ndarray:
+        """Frame ``i`` as (H, W) uint8 or uint16; FormatError naming the file if it is not one."""
+        path = self.folder / self.spec.frames[i].file
+        try:
+            img = cv2.imdecode(np.fromfile(path, np.uint8), cv2.IMREAD_UNCHANGED)
+        except OSError as e:
+            raise FormatError(f"{path}: cannot read ({e.strerror or e})") from e
+        except cv2.error:
+            img = None
+        if img is None:
+            raise FormatError(f"{path}: not a readable image (expected a PNG)")
+        if img.ndim == 3 and img.shape[2] == 1:
+            img = img[:, :, 0]
+        elif img.ndim == 3 and img.shape[2] == 3:
+            if not (np.array_equal(img[..., 0], img[..., 1])
+                    and np.array_equal(img[..., 0], img[..., 2])):
+                raise FormatError(f"{path}: expected a single-channel (grey) image, got a colour "
+                                  "image with 3 channels that differ")
+            img = np.ascontiguousarray(img[..., 0])
+        elif img.ndim != 2:
+            raise FormatError(f"{path}: expected a single-channel (grey) image, "
+                              f"got {img.shape[2]} channels")
+        if img.dtype not in (np.uint8, np.uint16):
+            raise FormatError(f"{path}: expected an 8- or 16-bit image, got {img.dtype}")
+        _check_size(str(path), img, self.spec.camera)
+        return img
+
+    def __iter__(self) -> Iterator[tuple[int, FrameSpec, np.ndarray]]:
+        """(index, frame spec, image) in acquisition order, one image in memory at a time."""
+        for i, frame in enumerate(self.spec.frames):
+            yield i, frame, self.read_frame(i)
+
+    @property
+    def has_truth(self) -> bool:
+        return (self.folder / "truth.json").is_file()
+
+    def read_truth(self) -> dict:
+        """The simulator's ``truth.json``. Only tests and benchmarks may read it, to score a
+        result; the software never measures with it."""
+        path = self.folder / "truth.json"
+        data = read_json(path, missing="no truth.json (only simulated sequences have one)")
+        if not isinstance(data, dict):
+            raise FormatError(f"{path}: expected a JSON object, got {type(data).__name__}")
+        return data
+
+
+class SequenceWriter:
+    """Record a sequence into ``folder``, which appears complete at the end of the ``with``
+    block (or not at all if anything raises). Images are written as they come, never held.
+
+    ``scan_head``, ``camera``, ``checkerboard``: dicts or the models above; ``truth``: any
+    JSON-able dict (numpy arrays and scalars allowed), written as ``truth.json``.
+    """
+
+    def __init__(self, folder: str | Path, kind: str, scan_head: Any, camera: Any = None,
+                 checkerboard: Any = None, truth: dict | None = None):
+        self.folder = Path(folder)
+        self._source = str(self.folder / "sequence.json")
+        if kind not in KINDS:
+            raise FormatError(f"{self._source}: kind: expected one of {', '.join(KINDS)}, "
+                              f"got {kind!r}")
+        if camera is None and kind != "camera-calibration":
+            raise FormatError(f"{self._source}: camera: missing (required in a '{kind}' sequence)")
+        self.kind = kind
+        self._head, self._camera, self._board = plain(scan_head), plain(camera), plain(checkerboard)
+        _validate(ScanHeadSpec, self._head, self._source, "scan_head")
+        self._cam = None if camera is None else _validate(CameraSpec, self._camera, self._source,
+                                                          "camera")
+        if checkerboard is not None:
+            _validate(CheckerboardSpec, self._board, self._source, "checkerboard")
+        self._truth = None if truth is None else plain(truth)
+        self._frames: list[dict] = []
+        self._size: tuple[int, ...] | None = None
+        self._cm, self._tmp = None, None
+
+    def __len__(self) -> int:
+        return len(self._frames)
+
+    def __enter__(self) -> "SequenceWriter":
+        self._cm = atomic_folder(self.folder)
+        self._tmp = self._cm.__enter__()
+        try:
+            (self._tmp / "frames").mkdir()
+        except BaseException as e:
+            self._cm.__exit__(type(e), e, e.__traceback__)
+            raise
+        return self
+
+    def add(self, image: np.ndarray, **frame_fields: Any) -> int:
+        """Write the next frame ((H, W) uint8/uint16) with its fields (line, spot, plate_z_mm,
+        exposure_ms, ...); returns its index."""
+        if self._tmp is None:
+            raise RuntimeError("SequenceWriter.add() outside its 'with' block")
+        i, where = len(self._frames), f"{self._source}: frames[{len(self._frames)}]"
+        if (not isinstance(image, np.ndarray) or image.ndim != 2
+                or image.dtype not in (np.uint8, np.uint16)):
+            got = (f"{image.dtype} {image.shape}" if isinstance(image, np.ndarray)
+                   else type(image).__name__)
+            raise FormatError(f"{where}: expected a (H, W) uint8 or uint16 image, got {got}")
+        _check_size(where, image, self._cam, self._size)
+        self._size = image.shape
+        frame = {"file": FRAME_NAME.format(i), **plain(frame_fields)}
+        spec = _validate(FrameSpec, frame, self._source, f"frames[{i}]")
+        problems = frame_problems(self.kind, spec)
+        if problems:
+            raise FormatError(f"{where}.{problems[0][0]}: {problems[0][1]}")
+        ok, buf = cv2.imencode(".png", image, [cv2.IMWRITE_PNG_COMPRESSION, 1])
+        if not ok:
+            raise FormatError(f"{where}: OpenCV could not encode the image as PNG")
+        with open(self._tmp / frame["file"], "wb") as f:
+            f.write(buf.tobytes())
+            f.flush()
+            os.fsync(f.fileno())
+        self._frames.append(frame)
+        return i
+
+    def _finish(self) -> None:
+        data = {"format": FORMAT, "kind": self.kind, "camera": self._camera,
+                "scan_head": self._head, "frames": self._frames, "checkerboard": self._board}
+        spec = _validate(SequenceSpec, data, self._source)
+        atomic_write_text(self._tmp / "sequence.json",
+                          dump_json(spec.model_dump(mode="json", exclude_none=True)))
+        if self._truth is not None:
+            try:
+                truth = dump_json(self._truth)
+            except (TypeError, ValueError) as e:
+                raise FormatError(f"{self.folder / 'truth.json'}: cannot be written as JSON "
+                                  f"({e})") from e
+            atomic_write_text(self._tmp / "truth.json", truth)
+
+    def __exit__(self, exc_type, exc, tb) -> bool:
+        cm, self._cm = self._cm, None
+        try:
+            if exc_type is None:
+                try:
+                    self._finish()
+                except BaseException as e:
+                    cm.__exit__(type(e), e, e.__traceback__)
+                    raise
+                cm.__exit__(None, None, None)
+            else:
+                cm.__exit__(exc_type, exc, tb)
+        finally:
+            self._tmp = None
+        return False

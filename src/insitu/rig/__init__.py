@@ -1,0 +1,1 @@
+"""The rig as configured: which device backends to use and its calibration files."""

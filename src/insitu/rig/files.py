@@ -1,0 +1,163 @@
+"""Calibration and rig configuration files: readable JSON (mm, degrees), stored under ``calib/``.
+
+Every calibration carries ``schema_version``, ``kind``, ``created`` (ISO-8601 UTC), ``units``,
+the ``inputs`` it came from and its ``residuals`` (after mrcal's ``.cameramodel``). Load and
+save with :func:`load_json_model` / :func:`save_json_model`; a file that is missing or not JSON
+is a FormatError, one that does not fit its model a ConfigError, both naming file and field.
+"""
+
+from __future__ import annotations
+
+from datetime import datetime, timezone
+from pathlib import Path
+from typing import Any, ClassVar, Literal, TypeVar
+
+from pydantic import BaseModel, ConfigDict, Field, PrivateAttr, ValidationError, field_validator
+
+from insitu.errors import ConfigError, InsituError
+from insitu.formats.atomic import atomic_write_text
+from insitu.formats.sequence import CameraSpec, ScanHeadSpec
+from insitu.formats.validation import (Positive, PositivePair, Range, bad, dump_json, read_json,
+                                       show, validation_message)
+
+M = TypeVar("M", bound=BaseModel)
+
+
+def utc_now() -> str:
+    """Now as ISO-8601 UTC to the second, e.g. ``2024-05-01T12:00:00Z``."""
+    return datetime.now(timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ")
+
+
+class JsonFile(BaseModel):
+    """A model stored as one JSON file; remembers the path it was loaded from, if any."""
+
+    SCHEMA_VERSION: ClassVar[int] = 1
+    model_config = ConfigDict(extra="allow", allow_inf_nan=False)
+    schema_version: int = 1
+    _path: Path | None = PrivateAttr(default=None)
+
+    @field_validator("schema_version")
+    @classmethod
+    def _known_version(cls, v: int) -> int:
+        if not 1 <= v <= cls.SCHEMA_VERSION:
+            raise bad(f"expected 1 to {cls.SCHEMA_VERSION} (this version of insitu)", v)
+        return v
+
+    @property
+    def path(self) -> Path | None:
+        """The file this was loaded from or last saved to."""
+        return self._path
+
+
+class CalibrationEnvelope(JsonFile):
+    """What every calibration file carries besides its result."""
+
+    kind: str
+    created: str = Field(default_factory=utc_now)
+    units: str = "mm"
+    inputs: list[str] = []
+    residuals: dict[str, float] = {}
+    notes: str = ""
+
+    @field_validator("created")
+    @classmethod
+    def _iso_time(cls, v: str) -> str:
+        try:
+            datetime.fromisoformat(v)
+        except ValueError:
+            raise bad("expected an ISO-8601 time such as '2024-05-01T12:00:00Z'", v) from None
+        return v
+
+
+class CameraCalibration(CalibrationEnvelope):
+    """A calibrated camera (intrinsics px, extrinsics world → camera mm) and its residuals."""
+
+    kind: Literal["camera"] = "camera"
+    camera: CameraSpec
+    rms_px: float | None = None
+    per_view_rms_px: list[float] = []
+    std_intrinsics: list[float] = []
+
+
+class ScanHeadConfig(CalibrationEnvelope):
+    """Scan-head geometry: pivot height H, two-mirror distance d and separation e, usable field
+    and focus range, mm."""
+
+    kind: Literal["scan-head"] = "scan-head"
+    lens: Literal["non-telecentric", "telecentric"] = "non-telecentric"
+    pivot_height_mm: Positive
+    mirror_distance_mm: Positive
+    mirror_separation_mm: float = Field(ge=0)
+    field_size_mm: PositivePair
+    z_range_mm: Range
+
+    def to_spec(self) -> ScanHeadSpec:
+        """The ``scan_head`` object of a recorded sequence (formats.md §1)."""
+        return ScanHeadSpec(lens=self.lens, pivot_height_mm=self.pivot_height_mm,
+                            field_size_mm=self.field_size_mm, z_range_mm=self.z_range_mm)
+
+
+class RigConfig(JsonFile):
+    """Which backend drives each device, and where the calibration files are. Relative paths
+    are relative to the rig file's folder (see :meth:`resolve`). Unknown fields are refused
+    (this file is written by hand: a typo must not pass silently)."""
+
+    model_config = ConfigDict(extra="forbid", allow_inf_nan=False)
+    kind: Literal["rig"] = "rig"
+    camera: Literal["sim", "replay", "opencv", "genicam"] = "sim"
+    scan_head: Literal["sim", "rtc", "lmc"] = "sim"
+    stage: Literal["none", "sim", "grbl"] = "sim"
+    camera_calibration: str | None = None
+    scan_head_config: str | None = None
+    height_calibration: str | None = None
+    field_correction: str | None = None
+    sim_seed: int = 0
+    options: dict[str, Any] = {}
+
+    @property
+    def folder(self) -> Path:
+        """The folder relative paths are taken from: the rig file's, else the current one."""
+        return self._path.parent if self._path is not None else Path(".")
+
+    def resolve(self, path: str | Path | None) -> Path | None:
+        """``path`` (``~`` expanded) as absolute, or relative to :attr:`folder`; None stays None."""
+        if path is None or path == "":
+            return None
+        p = Path(path).expanduser()
+        return p if p.is_absolute() else self.folder / p
+
+
+def _expected_kind(model: type[BaseModel]) -> str | None:
+    field = model.model_fields.get("kind")
+    return field.default if field is not None and isinstance(field.default, str) else None
+
+
+def load_json_model(path: str | Path, model: type[M], error: type[InsituError] = ConfigError) -> M:
+    """Read ``path`` as ``model``. Missing or not JSON: FormatError. Wrong ``kind``, newer
+    ``schema_version`` or an invalid field: ``error`` (ConfigError), naming file and field."""
+    path = Path(path)
+    data = read_json(path)
+    if isinstance(data, dict):
+        kind = _expected_kind(model)
+        if kind is not None and "kind" in data and data["kind"] != kind:
+            raise error(f"{path}: kind: expected {kind!r}, got {show(data['kind'])}")
+        version, newest = data.get("schema_version"), getattr(model, "SCHEMA_VERSION", None)
+        if (newest is not None and isinstance(version, int) and not isinstance(version, bool)
+                and version > newest):
+            raise error(f"{path}: schema_version {version} is newer than this version of insitu "
+                        f"reads (up to {newest}); update insitu to read it")
+    try:
+        obj = model.model_validate(data)
+    except ValidationError as e:
+        raise error(validation_message(path, e)) from None
+    if isinstance(obj, JsonFile):
+        obj._path = path
+    return obj
+
+
+def save_json_model(path: str | Path, model: BaseModel) -> None:
+    """Write ``model`` to ``path`` atomically as indented JSON (FormatError if that fails)."""
+    path = Path(path)
+    atomic_write_text(path, dump_json(model.model_dump(mode="json")))
+    if isinstance(model, JsonFile):
+        model._path = path

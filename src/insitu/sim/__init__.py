@@ -1,0 +1,1 @@
+"""The simulated rig: workpieces, scene ray casting, rendering and recorded sequences."""
