@@ -70,3 +70,29 @@ def test_bad_input_one_line_error_and_no_file(tmp_path, args, message):
     assert message in res.output
     assert "Traceback" not in res.output
     assert not (tmp_path / "c.ply").exists() and not list(tmp_path.glob(".*"))
+
+
+def test_rig_file_drives_the_simulated_rig_with_its_calibration(tmp_path):
+    res = _run("sim", "calib", "-o", tmp_path / "calib")
+    assert res.exit_code == 0, res.output
+    rig = tmp_path / "calib" / "rig.json"
+    out = tmp_path / "c.ply"
+    res = _run("scan", "-o", out, "--rig", rig, "--region", -2, 2, -45, 45, "--spacing", 2)
+    assert res.exit_code == 0, res.output
+    assert len(read_ply(out)) > 1000
+    # a calibration for another camera size is refused, naming the file
+    res = _run("scan", "-o", tmp_path / "d.ply", "--rig", rig, "--binning", 4)
+    assert res.exit_code == 1 and "camera.json" in res.output
+    # real backends are refused clearly (not probed)
+    rig.write_text(rig.read_text().replace('"camera": "sim"', '"camera": "genicam"'))
+    res = _run("scan", "-o", tmp_path / "d.ply", "--rig", rig)
+    assert res.exit_code == 1 and "genicam" in res.output
+    assert not (tmp_path / "d.ply").exists()
+
+
+def test_scan_preview_picture(scan_rec, tmp_path):
+    res = _run("scan", "--replay", scan_rec, "-o", tmp_path / "c.ply", "--preview", tmp_path / "c.png")
+    assert res.exit_code == 0, res.output
+    import cv2
+    img = cv2.imread(str(tmp_path / "c.png"))
+    assert img is not None and (img < 250).any()

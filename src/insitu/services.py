@@ -6,19 +6,19 @@ from __future__ import annotations
 import threading
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
 
 from insitu.devices.sim import SimCamera, SimScanHead, SimWorld
-from insitu.errors import InsituError, MeasurementError
+from insitu.errors import ConfigError, InsituError, MeasurementError
 from insitu.formats.pointcloud import PointCloud, write_ply
 from insitu.formats.sequence import Sequence
 from insitu.geometry.camera import CameraModel
 from insitu.measure.scan import ScanReconstructor
 from insitu.sim.record import default_region, scan_lines
-from insitu.sim.rig import SimRig, default_rig
+from insitu.sim.rig import ScanHeadNominal, SimRig, default_rig
 from insitu.sim.workpieces import load_mesh_workpiece, make_workpiece
 
 Progress = Callable[[int, int], None]
@@ -83,6 +83,38 @@ def sim_world(workpiece: str = "step-block", seed: int = 0, binning: int = 1,
     part = (load_mesh_workpiece(workpiece) if Path(workpiece).suffix.lower() in
             (".stl", ".ply", ".obj") else make_workpiece(workpiece))
     return SimWorld(rig or default_rig(seed=seed, binning=binning), parts=[part], seed=seed)
+
+
+def sim_world_from_rig_file(path: str | Path, workpiece: str = "step-block",
+                            binning: int = 1) -> SimWorld:
+    """The simulated station a rig file describes, measuring with the calibration files it
+    names (the simulator's truth stays; only the operator's knowledge comes from the files)."""
+    from insitu.rig.files import CameraCalibration, RigConfig, ScanHeadConfig, load_json_model
+
+    cfg = load_json_model(path, RigConfig)
+    real = {k: v for k, v in (("camera", cfg.camera), ("scan_head", cfg.scan_head),
+                              ("stage", cfg.stage)) if v not in ("sim", "none")}
+    if real:
+        k, v = next(iter(real.items()))
+        raise ConfigError(f"{path}: {k}: the '{v}' backend is not available in this version "
+                          "(only 'sim')")
+    world = sim_world(workpiece, seed=cfg.sim_seed, binning=binning)
+    rig = world.rig
+    if cfg.camera_calibration:
+        cam = load_json_model(cfg.resolve(cfg.camera_calibration), CameraCalibration).camera
+        model = CameraModel(cam.width, cam.height, cam.K_array, cam.dist_array, cam.R_array,
+                            cam.t_array)
+        if (model.width, model.height) != (rig.camera.width, rig.camera.height):
+            raise ConfigError(f"{cfg.camera_calibration}: camera is {model.width}×{model.height} "
+                              f"px, the rig's is {rig.camera.width}×{rig.camera.height} px")
+        rig = replace(rig, operator_camera=model)
+    if cfg.scan_head_config:
+        head = load_json_model(cfg.resolve(cfg.scan_head_config), ScanHeadConfig)
+        rig = replace(rig, nominal=ScanHeadNominal(
+            head.lens, head.pivot_height_mm, head.mirror_distance_mm, head.mirror_separation_mm,
+            tuple(head.field_size_mm), tuple(head.z_range_mm)))
+    world.rig = rig
+    return world
 
 
 def scan_live(world: SimWorld, spacing: float = 0.5, region=None,

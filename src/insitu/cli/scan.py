@@ -23,6 +23,7 @@ def scan(
                       typer.Option(help="Region X0 X1 Y0 Y1, mm (default: the whole part).")] = None,
     seed: Annotated[int, typer.Option(help="Simulated rig: seed.")] = 0,
     binning: Annotated[int, typer.Option(help="Simulated rig: divide the image size by this.")] = 1,
+    preview: Annotated[Path | None, typer.Option(help="Also write a picture of the cloud (.png).")] = None,
 ) -> None:
     """Scan a part (or replay a recorded scan) and write its point cloud."""
     from insitu import services
@@ -32,15 +33,17 @@ def scan(
         fail(f"--method {method!r}: expected 'plane'")
     if spacing <= 0:
         fail(f"--spacing {spacing:g}: expected a positive line spacing in mm")
-    if rig is not None:
-        fail(f"--rig {rig}: only the simulated rig is available in this version")
     with progress_bar("scanning") as progress:
         if replay is not None:
             result = services.scan_replay(replay, progress=progress)
         else:
-            world = services.sim_world(workpiece, seed=seed, binning=binning)
+            world = (services.sim_world_from_rig_file(rig, workpiece, binning) if rig is not None
+                     else services.sim_world(workpiece, seed=seed, binning=binning))
             result = services.scan_live(world, spacing=spacing, region=region, progress=progress)
     services.save_cloud(result, out)
+    if preview is not None:
+        from insitu.measure.preview import save_cloud_picture
+        save_cloud_picture(result.cloud.points, check_output(preview, ".png"))
     s = result.summary
     table = Table(title=f"scan → {out}", show_header=False)
     table.add_row("method", s.method)

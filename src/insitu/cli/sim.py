@@ -49,3 +49,30 @@ def record_cmd(
         else:
             record.record_camera_calibration(world, out, views=views, progress=progress)
     console.print(f"wrote {out}")
+
+
+@app.command("calib")
+@one_line_errors
+def calib_cmd(
+    out: Annotated[Path, typer.Option("-o", "--output", help="Folder for the files (created).")],
+    seed: Annotated[int, typer.Option(help="Seed of the simulated rig.")] = 0,
+) -> None:
+    """Write the simulated rig's files as its operator knows them: camera.json (calibrated
+    camera, with realistic errors), scan-head.json (nominal geometry) and rig.json."""
+    from insitu.rig.files import CameraCalibration, RigConfig, ScanHeadConfig, save_json_model
+    from insitu.sim.rig import default_rig
+
+    out.mkdir(parents=True, exist_ok=True)
+    rig = default_rig(seed=seed)
+    source = [f"simulated rig, seed {seed}"]
+    save_json_model(out / "camera.json", CameraCalibration(
+        camera=rig.operator_camera.to_dict(), inputs=source,
+        notes="the simulated operator's calibration: the true camera plus realistic errors"))
+    n = rig.nominal
+    save_json_model(out / "scan-head.json", ScanHeadConfig(
+        lens=n.lens, pivot_height_mm=n.pivot_height_mm, mirror_distance_mm=n.mirror_distance_mm,
+        mirror_separation_mm=n.mirror_separation_mm, field_size_mm=list(n.field_size_mm),
+        z_range_mm=list(n.z_range_mm), inputs=source))
+    save_json_model(out / "rig.json", RigConfig(camera_calibration="camera.json",
+                                                scan_head_config="scan-head.json", sim_seed=seed))
+    console.print(f"wrote {out}/camera.json, scan-head.json, rig.json")

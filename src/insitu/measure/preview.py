@@ -13,7 +13,7 @@ from insitu.geometry.camera import rotation_about
 
 
 def cloud_picture(points: np.ndarray, size: tuple[int, int] = (900, 600),
-                  azimuth_deg: float = -35.0, elevation_deg: float = 35.0,
+                  azimuth_deg: float = 60.0, elevation_deg: float = 30.0,
                   z_exaggeration: float = 1.0) -> np.ndarray:
     """(H, W, 3) uint8 BGR image of points (N, 3) mm, coloured by z (turbo colour map)."""
     pts = np.asarray(points, float)
