@@ -6,6 +6,7 @@ import sys
 
 import typer
 
+from insitu.cli import calibrate as calibrate_cmd
 from insitu.cli import scan as scan_cmd
 from insitu.cli import sim as sim_cmd
 from insitu.cli.common import err_console
@@ -13,6 +14,7 @@ from insitu.cli.common import err_console
 app = typer.Typer(help=__doc__.split("\n")[0] if __doc__ else None, no_args_is_help=True,
                   pretty_exceptions_enable=False, add_completion=False)
 app.command("scan")(scan_cmd.scan)
+app.add_typer(calibrate_cmd.app, name="calibrate")
 app.add_typer(sim_cmd.app, name="sim")
 
 

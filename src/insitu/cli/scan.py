@@ -15,7 +15,14 @@ from insitu.cli.common import check_output, console, fail, one_line_errors, prog
 def scan(
     out: Annotated[Path, typer.Option("-o", "--output", help="Point cloud to write (.ply).")],
     replay: Annotated[Path | None, typer.Option(help="Recorded scan folder to reconstruct.")] = None,
-    method: Annotated[str, typer.Option(help="plane: light-plane intersection (Method 1).")] = "plane",
+    height_cal: Annotated[Path | None, typer.Option(
+        "--height-cal", help="Height calibration: a recorded folder or a file from "
+                             "'insitu calibrate height'.")] = None,
+    method: Annotated[str | None, typer.Option(
+        help="plane: light-plane intersection only (Method 1); height: with the height "
+             "calibration (Method 2, the default when --height-cal is given).")] = None,
+    height_model: Annotated[str | None, typer.Option(
+        help="With --method height: sheet (ours, the default) or paper (Li et al.'s P1 + P2).")] = None,
     rig: Annotated[Path | None, typer.Option(help="Rig file (default: the simulated rig).")] = None,
     workpiece: Annotated[str, typer.Option(help="Simulated rig: the part on the table.")] = "step-block",
     spacing: Annotated[float, typer.Option(help="Line spacing, mm.")] = 0.5,
@@ -29,17 +36,27 @@ def scan(
     from insitu import services
 
     check_output(out, ".ply")
-    if method != "plane":
-        fail(f"--method {method!r}: expected 'plane'")
+    method = method or ("height" if height_cal is not None else "plane")
+    if method not in ("plane", "height"):
+        fail(f"--method {method!r}: expected 'plane' or 'height'")
+    if method == "height" and height_cal is None:
+        fail("--method height needs --height-cal HCAL")
+    if height_model not in (None, "sheet", "paper"):
+        fail(f"--height-model {height_model!r}: expected 'sheet' or 'paper'")
     if spacing <= 0:
         fail(f"--spacing {spacing:g}: expected a positive line spacing in mm")
+    cal = None
+    if method == "height":
+        with progress_bar("height calibration") as progress:
+            cal = services.load_height_calibration(height_cal, progress)
     with progress_bar("scanning") as progress:
         if replay is not None:
-            result = services.scan_replay(replay, progress=progress)
+            result = services.scan_replay(replay, cal, height_model, progress=progress)
         else:
             world = (services.sim_world_from_rig_file(rig, workpiece, binning) if rig is not None
                      else services.sim_world(workpiece, seed=seed, binning=binning))
-            result = services.scan_live(world, spacing=spacing, region=region, progress=progress)
+            result = services.scan_live(world, spacing=spacing, region=region, height_cal=cal,
+                                        model=height_model, progress=progress)
     services.save_cloud(result, out)
     if preview is not None:
         from insitu.measure.preview import save_cloud_picture

@@ -29,7 +29,8 @@ class LaserState:
 @dataclass
 class SimWorld:
     """The virtual station. ``parts``: what stands on the table; ``plate_z``: height of the
-    calibration plate's top on the stage, None when no plate is mounted."""
+    calibration plate's top on the Z stage (which then stands in for the table), None when no
+    plate is mounted."""
 
     rig: SimRig
     parts: list[Workpiece] = field(default_factory=list)
@@ -39,10 +40,10 @@ class SimWorld:
     _renderer: Renderer | None = field(default=None, repr=False)
 
     def scene_parts(self) -> list[Workpiece]:
-        parts = [make_workpiece("table")]
+        """The table, or the calibration plate on the Z stage in its place."""
         if self.plate_z is not None:
-            parts.append(make_workpiece("plate", top_z=self.plate_z))
-        return parts + list(self.parts)
+            return [make_workpiece("plate", top_z=self.plate_z)] + list(self.parts)
+        return [make_workpiece("table")] + list(self.parts)
 
     def renderer(self) -> Renderer:
         if self._renderer is None:

@@ -204,3 +204,27 @@ def check_bracket(model, z: np.ndarray, what: str, tol_mm: float = 2.0) -> None:
     if len(zf) and (zf.min() < lo - tol_mm or zf.max() > hi + tol_mm):
         raise MeasurementError(f"{what}: measured heights {zf.min():.1f} … {zf.max():.1f} mm are "
                                f"outside the height calibration's {lo:g} … {hi:g} mm")
+
+
+def height_residuals(model, camera: CameraModel, obs: list[LineObservation]) -> dict[str, float]:
+    """Height error of ``model`` on calibration frames: RMS and max |Z − plate height|, mm."""
+    err = np.concatenate([model.points(camera, o.x_mm, o.u, o.v)[:, 2] - o.z_mm for o in obs])
+    err = err[np.isfinite(err)]
+    return {"rms_mm": float(np.sqrt(np.mean(err**2))), "max_mm": float(np.max(np.abs(err))),
+            "points": float(len(err))}
+
+
+def cross_validate_sheet(obs: list[LineObservation], camera: CameraModel,
+                         pivot_height_mm: float) -> dict[str, float]:
+    """Leave-one-height-out: fit without each plate height, test on it (needs ≥ 3 heights)."""
+    heights = np.unique([o.z_mm for o in obs])
+    errs = []
+    for z in heights[1:-1]:  # interpolation only: the end heights would be extrapolation
+        model = SheetHeightModel.fit([o for o in obs if o.z_mm != z], camera, pivot_height_mm)
+        test = [o for o in obs if o.z_mm == z]
+        errs.append(np.concatenate([model.points(camera, o.x_mm, o.u, o.v)[:, 2] - z for o in test]))
+    if not errs:
+        return {}
+    e = np.concatenate(errs)
+    e = e[np.isfinite(e)]
+    return {"cv_rms_mm": float(np.sqrt(np.mean(e**2))), "cv_max_mm": float(np.max(np.abs(e)))}

@@ -7,26 +7,33 @@ import numpy as np
 from insitu.errors import MeasurementError
 from insitu.formats.pointcloud import PointCloud
 from insitu.geometry.camera import CameraModel
+from insitu.measure.heightcal import PaperHeightModel, SheetHeightModel, check_bracket
 from insitu.measure.plane import reconstruct_line
 from insitu.vision.centres import gray_centroid
 
 
 class ScanReconstructor:
-    """Accumulates points frame by frame with Method 1 (light plane, Li et al. §2.1).
+    """Accumulates points frame by frame.
 
-    camera: the operator's calibrated camera. pivot_height_mm, telecentric: the scan head's
-    nominal geometry (formats.md ``scan_head``).
+    camera: the calibrated camera (for a height model: the one it was fitted through).
+    pivot_height_mm, telecentric: the scan head's nominal geometry (formats.md ``scan_head``).
+    height_model: None for Method 1 (light plane, Li et al. §2.1), else Method 2 with that
+    height calibration (Li et al. §2.2, or ours).
     """
 
-    method = "plane"
-
     def __init__(self, camera: CameraModel, pivot_height_mm: float, telecentric: bool = False,
+                 height_model: SheetHeightModel | PaperHeightModel | None = None,
                  min_points: int = 5):
         self.camera, self.H, self.telecentric = camera, pivot_height_mm, telecentric
+        self.model = height_model
         self.min_points = min_points
-        self._chunks: list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]] = []
+        self._chunks: list[tuple[np.ndarray, ...]] = []
         self.frames = 0
         self.frames_with_line = 0
+
+    @property
+    def method(self) -> str:
+        return "plane" if self.model is None else f"height ({self.model.name})"
 
     def add(self, index: int, image: np.ndarray, start, end) -> int:
         """Process frame ``index`` of the line start → end (mm); returns the points it gave."""
@@ -38,7 +45,13 @@ class ScanReconstructor:
         centres = gray_centroid(image)
         if len(centres) < self.min_points:
             return 0
-        pts = reconstruct_line(self.camera, centres.uv, start, end, self.H, self.telecentric)
+        if self.model is None:
+            pts = reconstruct_line(self.camera, centres.uv, start, end, self.H, self.telecentric)
+        else:
+            if abs(start[0] - end[0]) > 1e-9:
+                raise MeasurementError(f"frame {index}: the height calibration needs lines "
+                                       f"along y (constant x), got {list(start)} → {list(end)}")
+            pts = self.model.points(self.camera, float(start[0]), centres.u, centres.v)
         ok = np.isfinite(pts).all(axis=1)
         if ok.sum() < self.min_points:
             return 0
@@ -48,9 +61,12 @@ class ScanReconstructor:
         return int(ok.sum())
 
     def cloud(self) -> PointCloud:
-        """All points so far. Raises MeasurementError when no frame showed a line."""
+        """All points so far. Raises MeasurementError when no frame showed a line or the
+        heights leave the calibrated range."""
         if not self._chunks:
             raise MeasurementError(f"no laser line found in any of {self.frames} frames "
                                    "(laser off, exposure too low, or the part outside the view)")
         pts, line, inten, qual = (np.concatenate(c) for c in zip(*self._chunks))
+        if self.model is not None:
+            check_bracket(self.model, pts[:, 2], "scan")
         return PointCloud(pts, {"intensity": inten, "line": line, "quality": qual})

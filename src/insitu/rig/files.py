@@ -97,6 +97,55 @@ class ScanHeadConfig(CalibrationEnvelope):
                             field_size_mm=self.field_size_mm, z_range_mm=self.z_range_mm)
 
 
+class SheetModelSpec(BaseModel):
+    """Our height model (insitu.measure.heightcal.SheetHeightModel)."""
+
+    model_config = ConfigDict(allow_inf_nan=False)
+    pivot_height_mm: Positive
+    exponents: list[tuple[int, int, int]] = Field(min_length=1)
+    coefficients_mm: list[float] = Field(min_length=1)
+    scale_mm: tuple[Positive, Positive, Positive]
+    x_range_mm: Range
+    z_range_mm: Range
+
+    @field_validator("coefficients_mm")
+    @classmethod
+    def _one_per_term(cls, v: list[float], info) -> list[float]:
+        n = len(info.data.get("exponents", []))
+        if n and len(v) != n:
+            raise bad(f"expected {n} coefficients (one per exponent)", f"{len(v)} values")
+        return v
+
+
+class PaperModelSpec(BaseModel):
+    """Li et al.'s model (insitu.measure.heightcal.PaperHeightModel)."""
+
+    model_config = ConfigDict(allow_inf_nan=False)
+    ref_u: list[float] = Field(min_length=5)
+    ref_v: list[float] = Field(min_length=5)
+    offsets_mm: list[float] = Field(min_length=2)
+    heights_mm: list[float] = Field(min_length=2)
+    P_px: list[list[float]]
+
+    @field_validator("P_px")
+    @classmethod
+    def _grid(cls, v: list[list[float]], info) -> list[list[float]]:
+        k, j = len(info.data.get("offsets_mm", [])), len(info.data.get("heights_mm", []))
+        if k and j and (len(v) != k or any(len(r) != j for r in v)):
+            raise bad(f"expected a {k} × {j} grid (offsets × heights)", f"{len(v)} rows")
+        return v
+
+
+class HeightCalibration(CalibrationEnvelope):
+    """Height calibration (Li et al. §2.2 and ours) with the camera it was fitted through."""
+
+    kind: Literal["height-calibration"] = "height-calibration"
+    camera: CameraSpec
+    model: Literal["sheet", "paper"] = "sheet"
+    sheet: SheetModelSpec
+    paper: PaperModelSpec | None = None
+
+
 class RigConfig(JsonFile):
     """Which backend drives each device, and where the calibration files are. Relative paths
     are relative to the rig file's folder (see :meth:`resolve`). Unknown fields are refused

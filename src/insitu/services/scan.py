@@ -1,11 +1,10 @@
-"""Use cases shared by the CLI, the GUI and the tests: they take progress callbacks and a
-cancel event, touch devices and files, and return plain results."""
+"""Scanning use cases: replay a recorded scan, or drive the rig; both stream frames through the
+same reconstruction."""
 
 from __future__ import annotations
 
 import threading
 import time
-from collections.abc import Callable
 from dataclasses import dataclass, replace
 from pathlib import Path
 
@@ -17,11 +16,13 @@ from insitu.formats.pointcloud import PointCloud, write_ply
 from insitu.formats.sequence import Sequence
 from insitu.geometry.camera import CameraModel
 from insitu.measure.scan import ScanReconstructor
+from insitu.rig.files import HeightCalibration
+from insitu.services.common import Progress, camera_model
+from insitu.services.height import check_same_camera, height_model
 from insitu.sim.record import default_region, scan_lines
 from insitu.sim.rig import ScanHeadNominal, SimRig, default_rig
 from insitu.sim.workpieces import load_mesh_workpiece, make_workpiece
 
-Progress = Callable[[int, int], None]
 
 
 @dataclass(frozen=True)
@@ -57,17 +58,29 @@ def _finish(rec: ScanReconstructor, t0: float) -> ScanResult:
                                          time.perf_counter() - t0, tuple(lo), tuple(hi)))
 
 
-def scan_replay(folder: str | Path, progress: Progress | None = None,
+def reconstructor(camera: CameraModel, pivot_height_mm: float, telecentric: bool,
+                  height_cal: HeightCalibration | None, model: str | None,
+                  where: str) -> ScanReconstructor:
+    """Method 1 without a height calibration, else Method 2 with it (``model``: "sheet",
+    "paper" or None for the calibration's default)."""
+    if height_cal is None:
+        return ScanReconstructor(camera, pivot_height_mm, telecentric)
+    check_same_camera(height_cal, camera.width, camera.height, where)
+    cal_camera, hmodel = height_model(height_cal, model)
+    return ScanReconstructor(cal_camera, pivot_height_mm, telecentric, hmodel)
+
+
+def scan_replay(folder: str | Path, height_cal: HeightCalibration | None = None,
+                model: str | None = None, progress: Progress | None = None,
                 cancel: threading.Event | None = None) -> ScanResult:
-    """Reconstruct a recorded scan sequence (formats.md §1) with Method 1."""
+    """Reconstruct a recorded scan sequence (formats.md §1): Method 1, or Method 2 when a
+    height calibration is given."""
     t0 = time.perf_counter()
     seq = Sequence.open(folder)
     if seq.kind != "scan":
         raise MeasurementError(f"{seq.folder}: a '{seq.kind}' sequence, not a scan")
-    cam = seq.camera
-    rec = ScanReconstructor(CameraModel(cam.width, cam.height, cam.K_array, cam.dist_array,
-                                        cam.R_array, cam.t_array),
-                            seq.scan_head.pivot_height_mm, seq.scan_head.lens == "telecentric")
+    rec = reconstructor(camera_model(seq.camera), seq.scan_head.pivot_height_mm,
+                        seq.scan_head.lens == "telecentric", height_cal, model, str(seq.folder))
     for i, frame, image in seq:
         if cancel is not None and cancel.is_set():
             raise Cancelled(f"scan cancelled after {i} of {len(seq)} frames")
@@ -101,9 +114,8 @@ def sim_world_from_rig_file(path: str | Path, workpiece: str = "step-block",
     world = sim_world(workpiece, seed=cfg.sim_seed, binning=binning)
     rig = world.rig
     if cfg.camera_calibration:
-        cam = load_json_model(cfg.resolve(cfg.camera_calibration), CameraCalibration).camera
-        model = CameraModel(cam.width, cam.height, cam.K_array, cam.dist_array, cam.R_array,
-                            cam.t_array)
+        model = camera_model(
+            load_json_model(cfg.resolve(cfg.camera_calibration), CameraCalibration).camera)
         if (model.width, model.height) != (rig.camera.width, rig.camera.height):
             raise ConfigError(f"{cfg.camera_calibration}: camera is {model.width}×{model.height} "
                               f"px, the rig's is {rig.camera.width}×{rig.camera.height} px")
@@ -118,6 +130,7 @@ def sim_world_from_rig_file(path: str | Path, workpiece: str = "step-block",
 
 
 def scan_live(world: SimWorld, spacing: float = 0.5, region=None,
+              height_cal: HeightCalibration | None = None, model: str | None = None,
               progress: Progress | None = None, cancel: threading.Event | None = None
               ) -> ScanResult:
     """Drive the (simulated) rig: step the line over ``region`` (x0, x1, y0, y1) mm and
@@ -127,8 +140,8 @@ def scan_live(world: SimWorld, spacing: float = 0.5, region=None,
     _check_region(region, world)
     lines = scan_lines(region, spacing)
     rig = world.rig
-    rec = ScanReconstructor(rig.operator_camera, rig.nominal.pivot_height_mm,
-                            rig.nominal.lens == "telecentric")
+    rec = reconstructor(rig.operator_camera, rig.nominal.pivot_height_mm,
+                        rig.nominal.lens == "telecentric", height_cal, model, "live scan")
     camera, head = SimCamera(world), SimScanHead(world)
     try:
         for i, (a, b) in enumerate(lines):

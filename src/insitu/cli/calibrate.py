@@ -1,0 +1,36 @@
+"""``insitu calibrate …``: calibrations from recorded sequences."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated
+
+import typer
+from rich.table import Table
+
+from insitu.cli.common import check_output, console, one_line_errors, progress_bar
+
+app = typer.Typer(help="Calibrations from recorded sequences.", no_args_is_help=True)
+
+
+@app.command("height")
+@one_line_errors
+def height_cmd(
+    hcal: Annotated[Path, typer.Argument(help="Recorded height-calibration folder.")],
+    out: Annotated[Path, typer.Option("-o", "--output", help="Height calibration file (.json).")],
+) -> None:
+    """Fit the height calibration (Li et al. §2.2, and ours, the default) and write it with its
+    residuals."""
+    from insitu.rig.files import save_json_model
+    from insitu.services import calibrate_height
+
+    check_output(out, ".json")
+    with progress_bar("height calibration") as progress:
+        cal = calibrate_height(hcal, progress)
+    save_json_model(out, cal)
+    table = Table(title=f"height calibration → {out}", show_header=False)
+    table.add_row("recording", cal.notes)
+    table.add_row("default model", cal.model)
+    for key, value in cal.residuals.items():
+        table.add_row(key, f"{value:.4f}" if key.endswith("_mm") else f"{value:,.0f}")
+    console.print(table)

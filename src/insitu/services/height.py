@@ -1,0 +1,90 @@
+"""Height calibration use cases: fit from a recorded sequence, save, load."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from insitu.errors import CalibrationError, MeasurementError
+from insitu.formats.sequence import Sequence
+from insitu.geometry.camera import CameraModel
+from insitu.measure.heightcal import (LineObservation, PaperHeightModel, SheetHeightModel,
+                                      cross_validate_sheet, height_residuals)
+from insitu.rig.files import HeightCalibration, load_json_model
+from insitu.services.common import Progress, camera_model
+from insitu.vision.centres import gray_centroid
+
+
+def observations(seq: Sequence, progress: Progress | None = None) -> list[LineObservation]:
+    """Line centres of every frame of a height-calibration sequence, one frame at a time."""
+    if seq.kind != "height-calibration":
+        raise CalibrationError(f"{seq.folder}: a '{seq.kind}' sequence, not a height calibration")
+    obs = []
+    for i, frame, image in seq:
+        (x0, _), (x1, _) = frame.line.start, frame.line.end
+        if abs(x0 - x1) > 1e-9:
+            raise CalibrationError(f"{seq.folder}: frames[{i}].line: the height calibration needs "
+                                   f"lines along y (constant x), got x {x0:g} → {x1:g}")
+        c = gray_centroid(image)
+        if len(c) < 20:
+            raise CalibrationError(f"{seq.folder}: {frame.file}: no laser line found "
+                                   f"(offset {x0:g} mm, plate at {frame.plate_z_mm:g} mm)")
+        obs.append(LineObservation(float(x0), float(frame.plate_z_mm), c.u, c.v))
+        if progress:
+            progress(i + 1, len(seq))
+    return obs
+
+
+def calibrate_height(folder: str | Path, progress: Progress | None = None) -> HeightCalibration:
+    """Fit both height models from a recorded height-calibration folder; ours is the default."""
+    seq = Sequence.open(folder)
+    camera = camera_model(seq.camera)
+    H = seq.scan_head.pivot_height_mm
+    obs = observations(seq, progress)
+    sheet = SheetHeightModel.fit(obs, camera, H)
+    residuals = {f"sheet_{k}": v for k, v in height_residuals(sheet, camera, obs).items()}
+    residuals.update({f"sheet_{k}": v for k, v in cross_validate_sheet(obs, camera, H).items()})
+    paper = None
+    if any(o.x_mm == 0.0 and o.z_mm == 0.0 for o in obs):
+        paper = PaperHeightModel.fit(obs)
+        residuals.update({f"paper_{k}": v for k, v in height_residuals(paper, camera, obs).items()})
+    heights = sorted({o.z_mm for o in obs})
+    offsets = sorted({o.x_mm for o in obs})
+    return HeightCalibration(
+        camera=seq.camera, model="sheet", sheet=sheet.to_dict(),
+        paper=paper.to_dict() if paper else None, inputs=[str(Path(folder))],
+        residuals=residuals,
+        notes=f"{len(obs)} frames: plate at {heights[0]:g} … {heights[-1]:g} mm "
+              f"({len(heights)} heights), lines at {offsets[0]:g} … {offsets[-1]:g} mm "
+              f"({len(offsets)} offsets)")
+
+
+def load_height_calibration(path: str | Path, progress: Progress | None = None
+                            ) -> HeightCalibration:
+    """A height calibration file, or a recorded height-calibration folder (fitted now)."""
+    path = Path(path)
+    if path.is_dir():
+        return calibrate_height(path, progress)
+    return load_json_model(path, HeightCalibration)
+
+
+def height_model(cal: HeightCalibration, which: str | None = None
+                 ) -> tuple[CameraModel, SheetHeightModel | PaperHeightModel]:
+    """The camera the calibration was fitted through and the model to measure with
+    (``which``: "sheet", "paper" or None for the file's default)."""
+    which = which or cal.model
+    if which == "paper":
+        if cal.paper is None:
+            raise MeasurementError("this height calibration has no paper model (its recording "
+                                   "has no line at offset 0 on the plate at height 0)")
+        model = PaperHeightModel.from_dict(cal.paper.model_dump())
+    else:
+        model = SheetHeightModel.from_dict(cal.sheet.model_dump())
+    return camera_model(cal.camera), model
+
+
+def check_same_camera(cal: HeightCalibration, width: int, height: int, where: str) -> None:
+    if (cal.camera.width, cal.camera.height) != (width, height):
+        raise MeasurementError(
+            f"{where}: the camera is {width}×{height} px but the height calibration "
+            f"({cal.inputs[0] if cal.inputs else 'file'}) was made with a "
+            f"{cal.camera.width}×{cal.camera.height} px camera: another rig")
