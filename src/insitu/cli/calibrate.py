@@ -26,7 +26,7 @@ def height_cmd(
 
     check_output(out, ".json")
     with progress_bar("height calibration") as progress:
-        cal = calibrate_height(hcal, progress)
+        cal = calibrate_height(hcal, progress=progress)
     save_json_model(out, cal)
     table = Table(title=f"height calibration → {out}", show_header=False)
     table.add_row("recording", cal.notes)

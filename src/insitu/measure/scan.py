@@ -9,7 +9,7 @@ from insitu.formats.pointcloud import PointCloud
 from insitu.geometry.camera import CameraModel
 from insitu.measure.heightcal import PaperHeightModel, SheetHeightModel, check_bracket
 from insitu.measure.plane import reconstruct_line
-from insitu.vision.centres import gray_centroid
+from insitu.vision.extract import CentreSettings, extract_centres
 
 
 class ScanReconstructor:
@@ -18,14 +18,15 @@ class ScanReconstructor:
     camera: the calibrated camera (for a height model: the one it was fitted through).
     pivot_height_mm, telecentric: the scan head's nominal geometry (formats.md ``scan_head``).
     height_model: None for Method 1 (light plane, Li et al. §2.1), else Method 2 with that
-    height calibration (Li et al. §2.2, or ours).
+    height calibration (Li et al. §2.2, or ours). settings: the centre extraction (with a
+    height model: the one it was calibrated with).
     """
 
     def __init__(self, camera: CameraModel, pivot_height_mm: float, telecentric: bool = False,
                  height_model: SheetHeightModel | PaperHeightModel | None = None,
-                 min_points: int = 5):
+                 settings: CentreSettings = CentreSettings(), min_points: int = 5):
         self.camera, self.H, self.telecentric = camera, pivot_height_mm, telecentric
-        self.model = height_model
+        self.model, self.settings = height_model, settings
         self.min_points = min_points
         self._chunks: list[tuple[np.ndarray, ...]] = []
         self.frames = 0
@@ -42,7 +43,7 @@ class ScanReconstructor:
                 f"frame {index}: {image.shape[1]}×{image.shape[0]} px, but the camera "
                 f"calibration is for {self.camera.width}×{self.camera.height} px")
         self.frames += 1
-        centres = gray_centroid(image)
+        centres = extract_centres(image, self.settings)
         if len(centres) < self.min_points:
             return 0
         if self.model is None:

@@ -136,11 +136,22 @@ class PaperModelSpec(BaseModel):
         return v
 
 
+class CentreSettingsSpec(BaseModel):
+    """How line centres were extracted (insitu.vision.extract.CentreSettings)."""
+
+    model_config = ConfigDict(allow_inf_nan=False)
+    k: float = Field(default=0.3, gt=0, lt=1)
+    smooth_half_window: int = Field(default=7, ge=0, le=50)
+    jump_px: Positive = 1.0
+
+
 class HeightCalibration(CalibrationEnvelope):
-    """Height calibration (Li et al. §2.2 and ours) with the camera it was fitted through."""
+    """Height calibration (Li et al. §2.2 and ours) with the camera it was fitted through and
+    the centre extraction it was made with (a scan must use the same)."""
 
     kind: Literal["height-calibration"] = "height-calibration"
     camera: CameraSpec
+    centres: CentreSettingsSpec = CentreSettingsSpec()
     model: Literal["sheet", "paper"] = "sheet"
     sheet: SheetModelSpec
     paper: PaperModelSpec | None = None

@@ -11,10 +11,11 @@ from insitu.measure.heightcal import (LineObservation, PaperHeightModel, SheetHe
                                       cross_validate_sheet, height_residuals)
 from insitu.rig.files import HeightCalibration, load_json_model
 from insitu.services.common import Progress, camera_model
-from insitu.vision.centres import gray_centroid
+from insitu.vision.extract import CentreSettings, extract_centres
 
 
-def observations(seq: Sequence, progress: Progress | None = None) -> list[LineObservation]:
+def observations(seq: Sequence, settings: CentreSettings = CentreSettings(),
+                 progress: Progress | None = None) -> list[LineObservation]:
     """Line centres of every frame of a height-calibration sequence, one frame at a time."""
     if seq.kind != "height-calibration":
         raise CalibrationError(f"{seq.folder}: a '{seq.kind}' sequence, not a height calibration")
@@ -24,7 +25,7 @@ def observations(seq: Sequence, progress: Progress | None = None) -> list[LineOb
         if abs(x0 - x1) > 1e-9:
             raise CalibrationError(f"{seq.folder}: frames[{i}].line: the height calibration needs "
                                    f"lines along y (constant x), got x {x0:g} → {x1:g}")
-        c = gray_centroid(image)
+        c = extract_centres(image, settings)
         if len(c) < 20:
             raise CalibrationError(f"{seq.folder}: {frame.file}: no laser line found "
                                    f"(offset {x0:g} mm, plate at {frame.plate_z_mm:g} mm)")
@@ -34,12 +35,13 @@ def observations(seq: Sequence, progress: Progress | None = None) -> list[LineOb
     return obs
 
 
-def calibrate_height(folder: str | Path, progress: Progress | None = None) -> HeightCalibration:
+def calibrate_height(folder: str | Path, settings: CentreSettings = CentreSettings(),
+                     progress: Progress | None = None) -> HeightCalibration:
     """Fit both height models from a recorded height-calibration folder; ours is the default."""
     seq = Sequence.open(folder)
     camera = camera_model(seq.camera)
     H = seq.scan_head.pivot_height_mm
-    obs = observations(seq, progress)
+    obs = observations(seq, settings, progress)
     sheet = SheetHeightModel.fit(obs, camera, H)
     residuals = {f"sheet_{k}": v for k, v in height_residuals(sheet, camera, obs).items()}
     residuals.update({f"sheet_{k}": v for k, v in cross_validate_sheet(obs, camera, H).items()})
@@ -50,7 +52,7 @@ def calibrate_height(folder: str | Path, progress: Progress | None = None) -> He
     heights = sorted({o.z_mm for o in obs})
     offsets = sorted({o.x_mm for o in obs})
     return HeightCalibration(
-        camera=seq.camera, model="sheet", sheet=sheet.to_dict(),
+        camera=seq.camera, centres=settings.to_dict(), model="sheet", sheet=sheet.to_dict(),
         paper=paper.to_dict() if paper else None, inputs=[str(Path(folder))],
         residuals=residuals,
         notes=f"{len(obs)} frames: plate at {heights[0]:g} … {heights[-1]:g} mm "
@@ -63,8 +65,13 @@ def load_height_calibration(path: str | Path, progress: Progress | None = None
     """A height calibration file, or a recorded height-calibration folder (fitted now)."""
     path = Path(path)
     if path.is_dir():
-        return calibrate_height(path, progress)
+        return calibrate_height(path, progress=progress)
     return load_json_model(path, HeightCalibration)
+
+
+def centre_settings(cal: HeightCalibration) -> CentreSettings:
+    """The centre extraction the calibration was made with."""
+    return CentreSettings(**cal.centres.model_dump())
 
 
 def height_model(cal: HeightCalibration, which: str | None = None

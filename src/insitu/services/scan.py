@@ -18,7 +18,7 @@ from insitu.geometry.camera import CameraModel
 from insitu.measure.scan import ScanReconstructor
 from insitu.rig.files import HeightCalibration
 from insitu.services.common import Progress, camera_model
-from insitu.services.height import check_same_camera, height_model
+from insitu.services.height import centre_settings, check_same_camera, height_model
 from insitu.sim.record import default_region, scan_lines
 from insitu.sim.rig import ScanHeadNominal, SimRig, default_rig
 from insitu.sim.workpieces import load_mesh_workpiece, make_workpiece
@@ -67,7 +67,8 @@ def reconstructor(camera: CameraModel, pivot_height_mm: float, telecentric: bool
         return ScanReconstructor(camera, pivot_height_mm, telecentric)
     check_same_camera(height_cal, camera.width, camera.height, where)
     cal_camera, hmodel = height_model(height_cal, model)
-    return ScanReconstructor(cal_camera, pivot_height_mm, telecentric, hmodel)
+    return ScanReconstructor(cal_camera, pivot_height_mm, telecentric, hmodel,
+                             centre_settings(height_cal))
 
 
 def scan_replay(folder: str | Path, height_cal: HeightCalibration | None = None,
