@@ -221,19 +221,23 @@ def gray_centroid(image: np.ndarray, k: float = 0.5, min_peak: float = 40.0,
     det = _detect(img, median, band, window, min_peak, min_contrast, snr, continuity)
     c, r, gmax = det.cols, det.row, det.gmax
     K = (k * gmax).astype(np.float32)
-    if window is None:
-        g = det.pre[:, c].astype(np.float32)                       # (H, n)
-        g[g <= K] = 0
-        rows = np.arange(img.shape[0], dtype=np.float32)[:, None] - r.astype(np.float32)
+    if window is None:                                             # whole columns, (n, H)
+        g = cv2.transpose(det.pre)[c].astype(np.float32)
+        g[g <= K[:, None]] = 0
+        width = (g > 0).sum(axis=1).astype(np.float64)
+        if subtract:
+            g = np.where(g > 0, g - K[:, None], 0)
+        total = g.sum(axis=1, dtype=np.float64)
+        v = (g @ np.arange(img.shape[0], dtype=np.float32)) / np.where(total > 0, total, 1)
     else:
         rows = np.arange(-window, window + 1)[:, None]
         g, inside = _gather(det.pre, r[None, :] + rows, c)
         g[(g <= K) | ~inside] = 0
-    width = (g > 0).sum(axis=0).astype(np.float64)
-    if subtract:
-        g = np.where(g > 0, g - K, 0)
-    total = g.sum(axis=0, dtype=np.float64)
-    v = r + (g * rows).sum(axis=0, dtype=np.float64) / np.where(total > 0, total, 1)
+        width = (g > 0).sum(axis=0).astype(np.float64)
+        if subtract:
+            g = np.where(g > 0, g - K, 0)
+        total = g.sum(axis=0, dtype=np.float64)
+        v = r + (g * rows).sum(axis=0, dtype=np.float64) / np.where(total > 0, total, 1)
     return LineCentres(c.astype(np.float64), v.astype(np.float64), gmax.astype(np.float64),
                        width, det.contrast.astype(np.float64),
                        _raw_saturated(img, det, _saturation(img, saturation)), det.ambiguous)
