@@ -1,14 +1,21 @@
 """Sub-pixel centres of a laser line: one crossing per scan column (rows mode) or per row.
 
-All methods share one detection stage (:func:`_detect`): median pre-filter, the peak row per
-column (optionally only inside a caller's ``band``), a validity test (absolute floor and
-contrast above the column's background, scaled to the frame's noise), and — where a column has
-two separated peaks (ghost, secondary reflection) — a choice by the line's continuity. Then:
+All methods share one detection stage: median pre-filter, the peak row per column, a validity
+test, and a choice between two separated peaks. Common keyword arguments:
 
-* :func:`gray_centroid` — Li et al. §2.3 (Eq. 7): K = k · g_max, intensity-weighted centroid.
-* :func:`gaussian_peak` — 3-point log-parabola; saturated plateaus from their flanks.
-* :func:`insitu.vision.steger.steger` — Hessian ridge detector (Steger 1998).
-* :func:`line_centres` — dispatcher; works out whether the line runs along rows or columns.
+* band: (v_lo, v_hi), each (W,) or scalar — rows allowed per column, e.g. the light plane's
+  expected band from the geometry; NaN: the column is not searched.
+* min_peak: absolute floor, gray values; min_contrast, snr: least peak − background, and least
+  multiple of the frame's noise sigma. A column gives a point only when its peak ≥ min_peak AND
+  its contrast ≥ max(min_contrast, snr · noise) — noise and edges of bright areas make none.
+* continuity: where a column has a second valid peak > window rows from the first (ghost,
+  secondary reflection), keep the one on the better supported chain of peaks across columns
+  (rows ≤ 4 px apart per column; support = summed contrast); such points are ``ambiguous``.
+* saturation: gray value counted as saturated (None: the dtype's maximum).
+
+Methods: :func:`gray_centroid` (Li et al. §2.3, Eq. 7) here; :func:`gaussian_peak` and
+:func:`steger` in :mod:`insitu.vision.steger` (re-exported); :func:`line_centres` dispatches
+and handles lines that run along the columns.
 """
 
 from __future__ import annotations
@@ -73,8 +80,8 @@ class _Det:
 
 def _as_image(image) -> np.ndarray:
     img = np.asarray(image)
-    if img.ndim != 2:
-        raise ValueError(f"expected a (H, W) gray image, got shape {img.shape}")
+    if img.ndim != 2 or img.size == 0:
+        raise ValueError(f"expected a non-empty (H, W) gray image, got shape {img.shape}")
     if img.dtype not in (np.uint8, np.uint16, np.float32):
         img = img.astype(np.uint8 if img.dtype == bool else np.float32)
     return np.ascontiguousarray(img)
@@ -109,10 +116,10 @@ def _stats(pre, row, w):
     mean of the medians of 3 px at each end of the ±w band; contrast: peak minus the brighter
     end's (an edge of a bright region is no line)."""
     cols = np.arange(pre.shape[1])
-    below, _ = _gather(pre, row[None, :] + np.arange(0, w + 1)[:, None], cols)
+    below, inside = _gather(pre, row[None, :] + np.arange(0, w + 1)[:, None], cols)
     gmax = below[0]
-    run = np.argmax(below != gmax, axis=0)                  # plateau length from the first max
-    run = np.where((below == gmax).all(axis=0), w + 1, run)
+    same = (below == gmax) & inside
+    run = np.where(same.all(axis=0), w + 1, np.argmin(same, axis=0))  # plateau from 1st max
     row = row + (run - 1) // 2
     above, _ = _gather(pre, row[None, :] + np.arange(-w, -w + 3)[:, None], cols)
     below, _ = _gather(pre, row[None, :] + np.arange(w - 2, w + 1)[:, None], cols)
@@ -147,9 +154,7 @@ def _continuity(v1, v2, ok1, ok2, weight1, weight2, max_jump):
 
 def _detect(image, median=3, band=None, window=12, min_peak=40.0, min_contrast=20.0,
             snr=6.0, continuity=True, max_jump=4.0) -> _Det:
-    """Peak row per column of a line running along the rows. band: (v_lo, v_hi), each (W,) or
-    scalar, rows allowed per column (NaN: column not searched). A column is kept when its peak
-    ≥ min_peak AND peak − background ≥ max(min_contrast, snr · noise)."""
+    """Peak row per valid column of a line running along the rows (module docstring)."""
     img = _as_image(image)
     pre = cv2.medianBlur(img, median) if median and median > 1 else img
     H, W = pre.shape
@@ -176,7 +181,7 @@ def _detect(image, median=3, band=None, window=12, min_peak=40.0, min_contrast=2
         row, gmax, bg, contrast = _stats(pre, lo + j, w)
         return row, gmax, bg, contrast, searched & (gmax >= min_peak) & (contrast >= thr)
 
-    j1 = np.argmax(search, axis=1) if H else np.zeros(W, np.int64)
+    j1 = np.argmax(search, axis=1)
     row, gmax, bg, contrast, ok = candidate(j1)
     ambiguous = np.zeros(W, bool)
     if continuity and W > 2 and search.shape[1] > 2 * w + 1:
@@ -211,8 +216,7 @@ def gray_centroid(image: np.ndarray, k: float = 0.5, min_peak: float = 40.0,
     image: (H, W) uint8/uint16/float32. k: threshold scale, K = k · g_max (0 < k < 1).
     min_peak: absolute floor of the filtered peak. window: only pixels within ±window rows of
     the peak (None: the whole column, as the paper). median: aperture of the median pre-filter
-    (0 or 1: none). band, min_contrast, snr, continuity: see :func:`_detect`. saturation:
-    gray value counted as saturated (None: the dtype's maximum). width: px above K.
+    (0 or 1: none). Keywords: see the module docstring. width: px above K.
     subtract: weights g_i − K instead of Eq. 7's g_i (not the paper; removes most of Eq. 7's
     phase-dependent bias of ≈ 0.15 px at k = 0.3, which comes from pixels entering the sum
     with weight K as the line moves).
@@ -243,76 +247,6 @@ def gray_centroid(image: np.ndarray, k: float = 0.5, min_peak: float = 40.0,
                        _raw_saturated(img, det, _saturation(img, saturation)), det.ambiguous)
 
 
-def _flank_fit(g, inside, x, sat_mask, floor):
-    """Vertex of a log-parabola fitted (weights ∝ value) to the unsaturated flank pixels of a
-    saturated plateau. g: (k, n) values minus background, x: (k, 1) offsets. NaN if degenerate."""
-    use = inside & ~sat_mask & (g >= floor)
-    k = len(x) // 2
-    above = inside & (g >= floor)                                  # contiguous with the peak
-    near = np.r_[np.cumprod(above[k::-1], axis=0)[::-1][:-1], np.cumprod(above[k:], axis=0)]
-    use &= near.astype(bool)
-    wgt = np.where(use, g, 0.0).astype(np.float64)
-    ly = np.log(np.maximum(g, 1.0)).astype(np.float64)
-    xs = x.astype(np.float64)
-    m = np.stack([(wgt * xs**p).sum(axis=0) for p in range(5)])   # moments (5, n)
-    A = np.stack([m[0:3], m[1:4], m[2:5]], axis=-1).transpose(1, 0, 2)    # (n, 3, 3)
-    b = np.stack([(wgt * ly * xs**p).sum(axis=0) for p in range(3)], axis=-1)
-    ok = (use[: k].any(axis=0) & use[k + 1:].any(axis=0) & (use.sum(axis=0) >= 3)
-          & (np.abs(np.linalg.det(A)) > 1e-9 * np.maximum(m[0], 1) ** 3))
-    coef = np.linalg.solve(np.where(ok[:, None, None], A, np.eye(3)), np.where(ok[:, None], b, 0)[..., None])[..., 0]
-    with np.errstate(divide="ignore", invalid="ignore"):
-        vertex = -coef[:, 1] / (2 * coef[:, 2])
-    ok &= (coef[:, 2] < 0) & (np.abs(vertex) <= k)
-    return np.where(ok, vertex, np.nan)
-
-
-def _plateau_centre(g, inside, x, sat_mask, noise):
-    """Offsets (n,) of saturated plateaus' centres: flank fit, else the centroid of the pixels
-    above half the maximum (weights: value minus half maximum). g: (k, n) minus background."""
-    vertex = _flank_fit(g, inside, x, sat_mask, max(3.0, 3.0 * noise))
-    top = g.max(axis=0) / 2
-    half = np.where(inside & (g > top), g - top, 0)
-    cen = (half * x).sum(axis=0) / np.maximum(half.sum(axis=0), 1e-9)
-    return np.where(np.isfinite(vertex), vertex, cen)
-
-
-def gaussian_peak(image: np.ndarray, min_peak: float = 40.0, window: int = 12, median: int = 3,
-                  *, band=None, min_contrast: float = 20.0, snr: float = 6.0,
-                  continuity: bool = True, saturation: float | None = None) -> LineCentres:
-    """Per-column Gaussian peak: 3-point log-parabola through the raw maximum and its two
-    neighbours (background subtracted). Saturated or degenerate columns: the plateau's centre
-    from a log-parabola fitted to its unsaturated flanks, else the centroid of the pixels above
-    half the maximum. Detection on the median-filtered image; the fit on the raw ``image``.
-    Arguments as :func:`gray_centroid`; width: FWHM px.
-    """
-    img = _as_image(image)
-    det = _detect(img, median, band, window, min_peak, min_contrast, snr, continuity)
-    c, r, bg, w = det.cols, det.row, det.bg, max(int(window), 3)
-    sat = _saturation(img, saturation)
-    x = np.arange(-w, w + 1)[:, None]
-    raw, inside = _gather(img, r[None, :] + x, c)
-    g = np.where(inside, raw - bg, 0)
-    j = w - 2 + np.argmax(g[w - 2:w + 3], axis=0)
-    a, b, d = (np.take_along_axis(g, (j + s)[None, :], 0)[0] for s in (-1, 0, 1))
-    peak = np.take_along_axis(raw, j[None, :], 0)[0]
-    saturated = peak >= sat
-    la, lb, ld = (np.log(np.maximum(t, 0.5)) for t in (a, b, d))
-    den = la - 2 * lb + ld
-    with np.errstate(divide="ignore", invalid="ignore"):
-        delta = 0.5 * (la - ld) / den
-        width = np.nan_to_num(FWHM_PER_SIGMA * np.sqrt(-1.0 / den))
-    fit = ~saturated & (den < 0) & (np.abs(delta) <= 1)
-    v = r + (j - w) + np.where(fit, delta, 0.0)
-    rest = ~fit
-    if rest.any():
-        gs, ins = g[:, rest], inside[:, rest]
-        v[rest] = r[rest] + _plateau_centre(gs, ins, x, raw[:, rest] >= sat, det.noise)
-        width[rest] = _fwhm(gs, ins, 0.0, gs.max(axis=0))
-    return LineCentres(c.astype(np.float64), v.astype(np.float64), peak.astype(np.float64),
-                       width.astype(np.float64), det.contrast.astype(np.float64), saturated,
-                       det.ambiguous)
-
-
 def line_direction(image: np.ndarray) -> str:
     """"rows" if the line runs mostly along the rows (crosses more columns than rows), else
     "cols": counts of columns and rows whose maximum is above half-way between the frame's
@@ -332,7 +266,7 @@ def line_centres(image: np.ndarray, method: str = "gray", direction: str | None 
     range of the cross coordinate per scan line (v per column, or u per row for "cols").
     kw: passed to the method.
     """
-    from insitu.vision.steger import steger
+    from insitu.vision.steger import gaussian_peak, steger
 
     fn = {"gray": gray_centroid, "gaussian": gaussian_peak, "steger": steger}[method]
     img = _as_image(image)
@@ -343,3 +277,14 @@ def line_centres(image: np.ndarray, method: str = "gray", direction: str | None 
         raise ValueError(f"direction must be 'rows', 'cols' or None, not {direction!r}")
     t = fn(cv2.transpose(img), band=band, **kw)
     return LineCentres(t.v, t.u, t.peak, t.width, t.contrast, t.saturated, t.ambiguous)
+
+
+
+def __getattr__(name: str):
+    """Re-export gaussian_peak and steger (they live in insitu.vision.steger, which imports
+    this module)."""
+    if name in ("gaussian_peak", "steger"):
+        from insitu.vision import steger as module
+
+        return getattr(module, name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
