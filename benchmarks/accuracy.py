@@ -4,7 +4,7 @@ Li et al. §3.2: the step block (heights 3, 5, 10, 15 mm; lines every 0.5 mm): m
 height per step and the height error against y (their Fig. 5) for
   plane — Method 1 (light plane), the paper's gray centroid (k = 0.5);
   paper — Method 2 as the paper does it (P = P1 + P2), the paper's gray centroid;
-  sheet — Method 2 with our light-sheet model, our centres (k = 0.3, smoothed along the line);
+  sheet — Method 2 with our light-sheet model, our centres (Steger, smoothed along the line);
 and the
 block's length from the first and last points of each line (paper: 79.900 ± 0.154 mm). Then
 the same error table for the arc surface, the insert (thickness, hole, sides: the paper's

@@ -3,12 +3,13 @@
 from __future__ import annotations
 
 import numpy as np
+import open3d as o3d
 
 from insitu.errors import MeasurementError
 from insitu.formats.pointcloud import PointCloud
 from insitu.geometry.camera import CameraModel
 from insitu.measure.heightcal import PaperHeightModel, SheetHeightModel, check_bracket
-from insitu.measure.plane import reconstruct_line
+from insitu.measure.plane import expected_band, reconstruct_line
 from insitu.vision.extract import CentreSettings, extract_centres
 
 
@@ -19,18 +20,22 @@ class ScanReconstructor:
     pivot_height_mm, telecentric: the scan head's nominal geometry (formats.md ``scan_head``).
     height_model: None for Method 1 (light plane, Li et al. §2.1), else Method 2 with that
     height calibration (Li et al. §2.2, or ours). settings: the centre extraction (with a
-    height model: the one it was calibrated with).
+    height model: the one it was calibrated with). z_range_mm: heights the surface can have
+    (the focus range); the line is only searched where its light plane can put it (ghosts
+    and reflections elsewhere are ignored). None: the whole column.
     """
 
     def __init__(self, camera: CameraModel, pivot_height_mm: float, telecentric: bool = False,
                  height_model: SheetHeightModel | PaperHeightModel | None = None,
-                 settings: CentreSettings = CentreSettings(), min_points: int = 5):
+                 settings: CentreSettings = CentreSettings(),
+                 z_range_mm: tuple[float, float] | None = None, min_points: int = 5):
         self.camera, self.H, self.telecentric = camera, pivot_height_mm, telecentric
-        self.model, self.settings = height_model, settings
+        self.model, self.settings, self.z_range = height_model, settings, z_range_mm
         self.min_points = min_points
         self._chunks: list[tuple[np.ndarray, ...]] = []
         self.frames = 0
         self.frames_with_line = 0
+        self.outliers_removed = 0
 
     @property
     def method(self) -> str:
@@ -43,7 +48,9 @@ class ScanReconstructor:
                 f"frame {index}: {image.shape[1]}×{image.shape[0]} px, but the camera "
                 f"calibration is for {self.camera.width}×{self.camera.height} px")
         self.frames += 1
-        centres = extract_centres(image, self.settings)
+        band = (expected_band(self.camera, start, end, self.H, self.z_range,
+                              telecentric=self.telecentric) if self.z_range else None)
+        centres = extract_centres(image, self.settings, band)
         if len(centres) < self.min_points:
             return 0
         if self.model is None:
@@ -61,13 +68,30 @@ class ScanReconstructor:
                              np.clip(centres.contrast[ok] / 255.0, 0, 1)))
         return int(ok.sum())
 
-    def cloud(self) -> PointCloud:
-        """All points so far. Raises MeasurementError when no frame showed a line or the
-        heights leave the calibrated range."""
+    def cloud(self, outlier_radius_mm: float = 1.5, outlier_neighbours: int = 8) -> PointCloud:
+        """All points so far, less isolated ones (fewer than ``outlier_neighbours`` others
+        within ``outlier_radius_mm``: spurious detections floating off the surface; 0 keeps
+        all). Raises MeasurementError when no frame showed a line or heights leave the
+        calibrated range."""
         if not self._chunks:
             raise MeasurementError(f"no laser line found in any of {self.frames} frames "
                                    "(laser off, exposure too low, or the part outside the view)")
         pts, line, inten, qual = (np.concatenate(c) for c in zip(*self._chunks))
+        keep = (density_inliers(pts, outlier_radius_mm, outlier_neighbours)
+                if outlier_neighbours else slice(None))
+        pts, line, inten, qual = pts[keep], line[keep], inten[keep], qual[keep]
+        self.outliers_removed = int(len(keep) - keep.sum()) if isinstance(keep, np.ndarray) else 0
         if self.model is not None:
             check_bracket(self.model, pts[:, 2], "scan")
         return PointCloud(pts, {"intensity": inten, "line": line, "quality": qual})
+
+
+def density_inliers(points: np.ndarray, radius_mm: float, neighbours: int) -> np.ndarray:
+    """(N,) bool: points with at least ``neighbours`` others within ``radius_mm`` (Open3D's
+    radius outlier test). Unlike the mean-distance test it keeps the ends of lines and the
+    edges of parts, where a line scan's density is lower but real."""
+    pcd = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(np.ascontiguousarray(points)))
+    _, idx = pcd.remove_radius_outlier(nb_points=neighbours, radius=radius_mm)
+    keep = np.zeros(len(points), bool)
+    keep[np.asarray(idx, dtype=np.int64)] = True
+    return keep

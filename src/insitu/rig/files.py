@@ -140,9 +140,12 @@ class CentreSettingsSpec(BaseModel):
     """How line centres were extracted (insitu.vision.extract.CentreSettings)."""
 
     model_config = ConfigDict(allow_inf_nan=False)
+    method: Literal["gray", "gaussian", "steger"] = "steger"
     k: float = Field(default=0.3, gt=0, lt=1)
+    subtract: bool = False
     smooth_half_window: int = Field(default=7, ge=0, le=50)
     jump_px: Positive = 1.0
+    end_fraction: float = Field(default=0.5, ge=0, lt=1)
 
 
 class HeightCalibration(CalibrationEnvelope):

@@ -7,6 +7,7 @@ from pathlib import Path
 from insitu.errors import CalibrationError, MeasurementError
 from insitu.formats.sequence import Sequence
 from insitu.geometry.camera import CameraModel
+from insitu.measure.plane import expected_band
 from insitu.measure.heightcal import (LineObservation, PaperHeightModel, SheetHeightModel,
                                       cross_validate_sheet, height_residuals)
 from insitu.rig.files import HeightCalibration, load_json_model
@@ -16,16 +17,20 @@ from insitu.vision.extract import CentreSettings, extract_centres
 
 def observations(seq: Sequence, settings: CentreSettings = CentreSettings(),
                  progress: Progress | None = None) -> list[LineObservation]:
-    """Line centres of every frame of a height-calibration sequence, one frame at a time."""
+    """Line centres of every frame of a height-calibration sequence, one frame at a time,
+    each searched where its light plane meets the plate (± 3 mm)."""
     if seq.kind != "height-calibration":
         raise CalibrationError(f"{seq.folder}: a '{seq.kind}' sequence, not a height calibration")
+    camera, H = camera_model(seq.camera), seq.scan_head.pivot_height_mm
     obs = []
     for i, frame, image in seq:
         (x0, _), (x1, _) = frame.line.start, frame.line.end
         if abs(x0 - x1) > 1e-9:
             raise CalibrationError(f"{seq.folder}: frames[{i}].line: the height calibration needs "
                                    f"lines along y (constant x), got x {x0:g} → {x1:g}")
-        c = extract_centres(image, settings)
+        band = expected_band(camera, frame.line.start, frame.line.end, H,
+                             (frame.plate_z_mm - 3.0, frame.plate_z_mm + 3.0))
+        c = extract_centres(image, settings, band)
         if len(c) < 20:
             raise CalibrationError(f"{seq.folder}: {frame.file}: no laser line found "
                                    f"(offset {x0:g} mm, plate at {frame.plate_z_mm:g} mm)")

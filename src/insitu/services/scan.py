@@ -34,6 +34,7 @@ class ScanSummary:
     seconds: float
     bounds_min: tuple[float, float, float]
     bounds_max: tuple[float, float, float]
+    outliers_removed: int = 0
 
     @property
     def coverage(self) -> float:
@@ -55,20 +56,22 @@ def _finish(rec: ScanReconstructor, t0: float) -> ScanResult:
     cloud = rec.cloud()
     lo, hi = cloud.points.min(axis=0), cloud.points.max(axis=0)
     return ScanResult(cloud, ScanSummary(len(cloud), rec.frames, rec.frames_with_line, rec.method,
-                                         time.perf_counter() - t0, tuple(lo), tuple(hi)))
+                                         time.perf_counter() - t0, tuple(lo), tuple(hi),
+                                         rec.outliers_removed))
 
 
 def reconstructor(camera: CameraModel, pivot_height_mm: float, telecentric: bool,
-                  height_cal: HeightCalibration | None, model: str | None,
-                  where: str) -> ScanReconstructor:
+                  z_range_mm: tuple[float, float], height_cal: HeightCalibration | None,
+                  model: str | None, where: str) -> ScanReconstructor:
     """Method 1 without a height calibration, else Method 2 with it (``model``: "sheet",
-    "paper" or None for the calibration's default)."""
+    "paper" or None for the calibration's default). The line is searched where the focus
+    range ``z_range_mm`` can put it."""
     if height_cal is None:
-        return ScanReconstructor(camera, pivot_height_mm, telecentric)
+        return ScanReconstructor(camera, pivot_height_mm, telecentric, z_range_mm=z_range_mm)
     check_same_camera(height_cal, camera.width, camera.height, where)
     cal_camera, hmodel = height_model(height_cal, model)
     return ScanReconstructor(cal_camera, pivot_height_mm, telecentric, hmodel,
-                             centre_settings(height_cal))
+                             centre_settings(height_cal), z_range_mm)
 
 
 def scan_replay(folder: str | Path, height_cal: HeightCalibration | None = None,
@@ -80,8 +83,10 @@ def scan_replay(folder: str | Path, height_cal: HeightCalibration | None = None,
     seq = Sequence.open(folder)
     if seq.kind != "scan":
         raise MeasurementError(f"{seq.folder}: a '{seq.kind}' sequence, not a scan")
-    rec = reconstructor(camera_model(seq.camera), seq.scan_head.pivot_height_mm,
-                        seq.scan_head.lens == "telecentric", height_cal, model, str(seq.folder))
+    head = seq.scan_head
+    rec = reconstructor(camera_model(seq.camera), head.pivot_height_mm,
+                        head.lens == "telecentric", tuple(head.z_range_mm), height_cal, model,
+                        str(seq.folder))
     for i, frame, image in seq:
         if cancel is not None and cancel.is_set():
             raise Cancelled(f"scan cancelled after {i} of {len(seq)} frames")
@@ -142,7 +147,8 @@ def scan_live(world: SimWorld, spacing: float = 0.5, region=None,
     lines = scan_lines(region, spacing)
     rig = world.rig
     rec = reconstructor(rig.operator_camera, rig.nominal.pivot_height_mm,
-                        rig.nominal.lens == "telecentric", height_cal, model, "live scan")
+                        rig.nominal.lens == "telecentric", rig.nominal.z_range_mm, height_cal,
+                        model, "live scan")
     camera, head = SimCamera(world), SimScanHead(world)
     try:
         for i, (a, b) in enumerate(lines):

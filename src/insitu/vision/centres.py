@@ -36,9 +36,10 @@ class LineCentres:
 
     u, v: (N,) float64 px (image x = column, y = row). peak: (N,) gray value of the peak.
     width: (N,) px — pixels above the threshold (gray centroid) or FWHM (other methods).
-    contrast: (N,) peak minus the local background, gray values. saturated: (N,) bool, the
-    peak reached the sensor's saturation. ambiguous: (N,) bool, the column had a second
-    separated peak and continuity (or the band) chose between them.
+    contrast: (N,) peak minus the local background on the brighter side (median of 3 px at
+    ±window rows from the peak, median-filtered image), gray values. saturated: (N,) bool, the
+    raw peak reached the sensor's saturation. ambiguous: (N,) bool, the column (inside the band,
+    if one was given) had a second valid peak more than window rows away; continuity chose.
     """
 
     u: np.ndarray
@@ -168,7 +169,8 @@ def _detect(image, median=3, band=None, window=12, min_peak=40.0, min_contrast=2
         blo, bhi = (np.broadcast_to(np.asarray(b, np.float64), (W,)) for b in band)
         with np.errstate(invalid="ignore"):
             flo, fhi = np.ceil(blo), np.floor(bhi)
-            searched = np.isfinite(flo) & np.isfinite(fhi) & (flo <= fhi) & (flo <= H - 1) & (fhi >= 0)
+            searched = (np.isfinite(flo) & np.isfinite(fhi) & (flo <= fhi) & (flo <= H - 1)
+                        & (fhi >= 0))
         lo = np.where(searched, np.clip(flo, 0, H - 1), 0).astype(np.int64)
         hi = np.where(searched, np.clip(fhi, 0, H - 1), 0).astype(np.int64)
         span = np.arange(int((hi - lo).max()) + 1 if W else 1)
@@ -191,8 +193,8 @@ def _detect(image, median=3, band=None, window=12, min_peak=40.0, min_contrast=2
         ambiguous = ok & ok2
         if ambiguous.any():
             second = ambiguous & _continuity(row, row2, ok, ok2, contrast, contrast2, max_jump)
-            row, gmax, bg, contrast = (np.where(second, b, a) for a, b in
-                                       ((row, row2), (gmax, gmax2), (bg, bg2), (contrast, contrast2)))
+            pairs = ((row, row2), (gmax, gmax2), (bg, bg2), (contrast, contrast2))
+            row, gmax, bg, contrast = (np.where(second, b, a) for a, b in pairs)
     cols = np.flatnonzero(ok)
     return _Det(cols, row[ok], gmax[ok], bg[ok], contrast[ok], ambiguous[ok], pre, noise)
 
@@ -215,8 +217,9 @@ def gray_centroid(image: np.ndarray, k: float = 0.5, min_peak: float = 40.0,
 
     image: (H, W) uint8/uint16/float32. k: threshold scale, K = k · g_max (0 < k < 1).
     min_peak: absolute floor of the filtered peak. window: only pixels within ±window rows of
-    the peak (None: the whole column, as the paper). median: aperture of the median pre-filter
-    (0 or 1: none). Keywords: see the module docstring. width: px above K.
+    the peak (None: the whole column as the paper, so a ghost above K counts too). median:
+    aperture of the median pre-filter (0 or 1: none). Keywords: see the module docstring.
+    width: px above K.
     subtract: weights g_i − K instead of Eq. 7's g_i (not the paper; removes most of Eq. 7's
     phase-dependent bias of ≈ 0.15 px at k = 0.3, which comes from pixels entering the sum
     with weight K as the line moves).

@@ -12,16 +12,19 @@ from dataclasses import asdict, dataclass, replace
 import numpy as np
 from scipy.signal import savgol_filter
 
-from insitu.vision.centres import LineCentres, gray_centroid
+from insitu.vision.centres import LineCentres, gray_centroid, line_centres
 
 
 @dataclass(frozen=True)
 class CentreSettings:
-    """How centres are extracted. The paper's: gray centroid, no smoothing. Ours (default):
-    a lower threshold (more of the profile in the centroid) and smoothing along the line.
-    A height calibration stores the settings it was made with; a scan uses the same."""
+    """How centres are extracted. The paper's: gray centroid (Eq. 7), no smoothing. Ours
+    (default): Steger's detector, then smoothing along the line (benchmarks/accuracy.py).
+    ``method``: "gray" (uses k, subtract), "gaussian" or "steger". A height calibration
+    stores the settings it was made with; a scan uses the same."""
 
+    method: str = "steger"
     k: float = 0.3
+    subtract: bool = False
     smooth_half_window: int = 7
     jump_px: float = 1.0
     end_fraction: float = 0.5
@@ -30,12 +33,17 @@ class CentreSettings:
         return asdict(self)
 
 
-PAPER_SETTINGS = CentreSettings(k=0.5, smooth_half_window=0)
+PAPER_SETTINGS = CentreSettings(method="gray", k=0.5, smooth_half_window=0)
 
 
-def extract_centres(image: np.ndarray, settings: CentreSettings = CentreSettings()) -> LineCentres:
-    """Centres (one per column at most) of the line in ``image`` (H, W)."""
-    c = gray_centroid(image, k=settings.k)
+def extract_centres(image: np.ndarray, settings: CentreSettings = CentreSettings(),
+                    band: tuple[np.ndarray, np.ndarray] | None = None) -> LineCentres:
+    """Centres (one per column at most) of the line in ``image`` (H, W); ``band``: rows
+    (v_lo, v_hi) per column where the line can be (ghosts outside it are ignored)."""
+    if settings.method == "gray":
+        c = gray_centroid(image, k=settings.k, band=band, subtract=settings.subtract)
+    else:
+        c = line_centres(image, settings.method, direction="rows", band=band)
     if settings.smooth_half_window:
         c = smooth_centres(c, settings.smooth_half_window, settings.jump_px, settings.end_fraction)
     return c

@@ -2,6 +2,9 @@
 ridge detector (Steger 1998, "An unbiased detector of curvilinear structures"). Both use the
 detection stage, band and continuity of :mod:`insitu.vision.centres` (keywords there).
 
+Gaussian: 3-point log-parabola through the column's raw maximum and its neighbours (exact for a
+sampled Gaussian; 8-bit quantisation gives ≈ 0.01–0.02 px). Steger: see :func:`steger`.
+
 Saturated columns (both methods): the clipped plateau's centre is the vertex of a
 log-parabola fitted to its unsaturated flanks (weights ∝ value), else the centroid of the
 pixels above half the maximum. Clipping breaks the Gaussian model, and for Steger the sampled
@@ -16,6 +19,10 @@ from scipy.special import ndtr
 
 from insitu.vision.centres import (FWHM_PER_SIGMA, LineCentres, _as_image, _detect, _fwhm,
                                    _gather, _saturation)
+
+_M = 3          # candidate rows: the detected peak ± _M
+_T_MAX = 0.6    # |t·n| ≤ 0.5 px, plus room for the Taylor step's overshoot near pixel borders
+
 
 def _flank_fit(g, inside, x, sat_mask, floor):
     """Vertex of a log-parabola fitted (weights ∝ value) to the unsaturated flank pixels of a
@@ -33,7 +40,8 @@ def _flank_fit(g, inside, x, sat_mask, floor):
     b = np.stack([(wgt * ly * xs**p).sum(axis=0) for p in range(3)], axis=-1)
     ok = (use[: k].any(axis=0) & use[k + 1:].any(axis=0) & (use.sum(axis=0) >= 3)
           & (np.abs(np.linalg.det(A)) > 1e-9 * np.maximum(m[0], 1) ** 3))
-    coef = np.linalg.solve(np.where(ok[:, None, None], A, np.eye(3)), np.where(ok[:, None], b, 0)[..., None])[..., 0]
+    A = np.where(ok[:, None, None], A, np.eye(3))
+    coef = np.linalg.solve(A, np.where(ok[:, None], b, 0)[..., None])[..., 0]
     with np.errstate(divide="ignore", invalid="ignore"):
         vertex = -coef[:, 1] / (2 * coef[:, 2])
     ok &= (coef[:, 2] < 0) & (np.abs(vertex) <= k)
@@ -87,10 +95,6 @@ def gaussian_peak(image: np.ndarray, min_peak: float = 40.0, window: int = 12, m
                        det.ambiguous)
 
 
-_M = 3          # candidate rows: the detected peak ± _M
-_T_MAX = 0.6    # |t·n| ≤ 0.5 px, plus room for the Taylor step's overshoot near pixel borders
-
-
 def gaussian_kernels(sigma: float, radius: int):
     """Correlation kernels (2·radius+1,) float32 of the pixel-integrated Gaussian and its first
     and second derivative, normalised so that they are exact on constants, ramps, parabolas."""
@@ -110,65 +114,85 @@ def gaussian_kernels(sigma: float, radius: int):
 
 
 def _hermite_root(y0, d0, y1, d1):
-    """Root s in [0, 1] of the cubic Hermite interpolant of (y0, d0) at 0 and (y1, d1) at 1."""
+    """Root s in [0, 1] of the cubic Hermite interpolant of (y0, d0) at 0 and (y1, d1) at 1:
+    Newton from the linear estimate, 4 steps."""
     s = np.clip(y0 / np.where(y0 != y1, y0 - y1, 1.0), 0.0, 1.0)
     for _ in range(4):
         s2, s3 = s * s, s * s * s
-        p = (2 * s3 - 3 * s2 + 1) * y0 + (s3 - 2 * s2 + s) * d0 + (3 * s2 - 2 * s3) * y1 + (s3 - s2) * d1
+        p = ((2 * s3 - 3 * s2 + 1) * y0 + (s3 - 2 * s2 + s) * d0 + (3 * s2 - 2 * s3) * y1
+             + (s3 - s2) * d1)
         dp = (6 * s2 - 6 * s) * (y0 - y1) + (3 * s2 - 4 * s + 1) * d0 + (3 * s2 - 2 * s) * d1
         s = np.clip(s - p / np.where(np.abs(dp) > 1e-12, dp, 1e-12), 0.0, 1.0)
     return s
+
+
+def _derivatives(img, r, c, sigma):
+    """Gaussian derivatives Iu, Iv, Iuu, Ivv, Iuv, each (n, 2M+1), at rows r-M..r+M of columns
+    c (M = _M + 1): a (n, 2M+2R+1, 2R+1) patch per column, separable kernels, borders clipped."""
+    H, W = img.shape
+    R, M = int(np.ceil(3.5 * sigma)), _M + 1
+    h0, h1, h2 = gaussian_kernels(sigma, R)
+    rows = np.clip(r[:, None, None] + np.arange(-M - R, M + R + 1)[None, :, None], 0, H - 1)
+    cols = np.clip(c[:, None, None] + np.arange(-R, R + 1)[None, None, :], 0, W - 1)
+    P = img[rows, cols].astype(np.float32)
+    A0, A1, A2 = P @ h0, P @ h1, P @ h2                           # along u: (n, 2M+2R+1)
+
+    def along_v(a, h):
+        return sliding_window_view(a, 2 * R + 1, axis=1) @ h
+
+    return (along_v(A1, h0), along_v(A0, h1), along_v(A2, h0), along_v(A0, h2),
+            along_v(A1, h1))
+
+
+def _normals(Iuu, Ivv, Iuv):
+    """Most negative Hessian eigenvalue λ and its unit eigenvector (nu, nv); all (n, k)."""
+    half = (Iuu + Ivv) / 2
+    root = np.sqrt(((Iuu - Ivv) / 2) ** 2 + Iuv**2)
+    lam = half - root
+    e1u, e1v, e2u, e2v = Iuv, lam - Iuu, lam - Ivv, Iuv
+    first = e1u**2 + e1v**2 >= e2u**2 + e2v**2
+    nu, nv = np.where(first, e1u, e2u), np.where(first, e1v, e2v)
+    norm = np.hypot(nu, nv)
+    flat = norm < 1e-12                                           # isotropic: take (0, 1)
+    norm = np.where(flat, 1.0, norm)
+    return lam, half + root, np.where(flat, 0.0, nu / norm), np.where(flat, 1.0, nv / norm)
 
 
 def steger(image: np.ndarray, sigma: float | None = None, min_peak: float = 40.0,
            window: int = 12, median: int = 3, *, band=None, min_contrast: float = 20.0,
            snr: float = 6.0, continuity: bool = True, saturation: float | None = None,
            min_curvature: float | None = None) -> LineCentres:
-    """Steger centres of a line running (roughly, tilts ≲ 60° fine) along the rows of ``image``.
+    """Steger centres of a line running along the rows of ``image`` (tilts to ≈ 60° work).
 
-    image: (H, W) uint8/uint16/float32. sigma: Gaussian scale, px (None: from the line's
-    median FWHM, σ = max(1, FWHM / (2√3)), Steger's σ ≥ w/√3 for a bar of half-width w).
-    min_curvature: least -λ, gray values/px² (None: 0.1 · min_contrast / σ²). Other arguments
-    as :func:`insitu.vision.centres.gray_centroid`; detection, band and continuity are shared.
-    u is the column for refined points, else c + t·n_u. width: FWHM px of the filtered column.
+    Per column: Gaussian derivatives at the 7 rows around the detected peak; the Hessian's
+    eigenvector of the most negative eigenvalue λ is the normal n; t = -(n·∇I)/λ. A line pixel
+    has |t·n_u|, |t·n_v| ≤ 0.5 px (0.6: room for the Taylor step's overshoot) and -λ ≥
+    min_curvature; the strongest is refined to the crossing of its own column: the root of
+    n·∇I along v from a cubic Hermite fit of n·∇I and n·H·e_v between two rows (removes the
+    Taylor step's O(t³/σ²) bias of up to 0.04 px), so u is the column (c + t·n_u if no root).
+
+    image: (H, W) uint8/uint16/float32. sigma: Gaussian scale, px (None: σ = max(1, FWHM/2√3)
+    from the median FWHM, Steger's σ ≥ w/√3 for a bar of half-width w). min_curvature: least
+    -λ, gray values/px² (None: 0.1 · min_contrast / σ²). Other keywords as gray_centroid.
+    width: FWHM px of the filtered column. Within ≈ 3.5σ of the frame's border the clipped
+    patch biases the centre.
     """
     img = _as_image(image)
     det = _detect(img, median, band, window, min_peak, min_contrast, snr, continuity)
-    c, r, n = det.cols, det.row, len(det.cols)
-    H, W = img.shape
-    w = max(int(window), 3)
-    g, inside = _gather(det.pre, r[None, :] + np.arange(-w, w + 1)[:, None], c)
+    c, r, n, w = det.cols, det.row, len(det.cols), max(int(window), 3)
+    x = np.arange(-w, w + 1)[:, None]
+    g, inside = _gather(det.pre, r[None, :] + x, c)
     width = _fwhm(g, inside, det.bg, det.gmax)
     if sigma is None:
         sigma = max(1.0, float(np.median(width)) / (2 * np.sqrt(3))) if n else 1.0
     if min_curvature is None:
         min_curvature = 0.1 * min_contrast / sigma**2
-    R = int(np.ceil(3.5 * sigma))
-    h0, h1, h2 = gaussian_kernels(sigma, R)
-    M = _M + 1
-    rows = np.clip(r[:, None, None] + np.arange(-M - R, M + R + 1)[None, :, None], 0, H - 1)
-    cols = np.clip(c[:, None, None] + np.arange(-R, R + 1)[None, None, :], 0, W - 1)
-    P = img[rows, cols].astype(np.float32)                        # (n, 2M+2R+1, 2R+1)
-    A0, A1, A2 = P @ h0, P @ h1, P @ h2                           # along u: (n, 2M+2R+1)
-
-    def along_v(a, h):                                            # → (n, 2M+1) rows r-M..r+M
-        return sliding_window_view(a, 2 * R + 1, axis=1) @ h
-
-    Iu, Iv = along_v(A1, h0), along_v(A0, h1)
-    Iuu, Ivv, Iuv = along_v(A2, h0), along_v(A0, h2), along_v(A1, h1)
-    half = (Iuu + Ivv) / 2
-    root = np.sqrt(((Iuu - Ivv) / 2) ** 2 + Iuv**2)
-    lam = half - root                                             # most negative eigenvalue
-    e1u, e1v, e2u, e2v = Iuv, lam - Iuu, lam - Ivv, Iuv
-    first = e1u**2 + e1v**2 >= e2u**2 + e2v**2
-    nu, nv = np.where(first, e1u, e2u), np.where(first, e1v, e2v)
-    norm = np.hypot(nu, nv)
-    flat = norm < 1e-12
-    nu, nv = np.where(flat, 0.0, nu / np.where(flat, 1, norm)), np.where(flat, 1.0, nv / np.where(flat, 1, norm))
+    Iu, Iv, Iuu, Ivv, Iuv = _derivatives(img, r, c, sigma)
+    lam, other, nu, nv = _normals(Iuu, Ivv, Iuv)
     with np.errstate(divide="ignore", invalid="ignore"):
         t = -(nu * Iu + nv * Iv) / lam
-    ok = ((lam <= -min_curvature) & (-lam >= np.abs(half + root))
-          & (np.abs(t * nu) <= _T_MAX) & (np.abs(t * nv) <= _T_MAX))
+        ok = ((lam <= -min_curvature) & (-lam >= np.abs(other))
+              & (np.abs(t * nu) <= _T_MAX) & (np.abs(t * nv) <= _T_MAX))
     ok[:, [0, -1]] = False                                        # outer rows: neighbours only
     k = np.argmax(np.where(ok, -lam, -np.inf), axis=1)            # strongest line pixel
     found = ok[np.arange(n), k]
@@ -179,22 +203,19 @@ def steger(image: np.ndarray, sigma: float | None = None, min_peak: float = 40.0
     bu, bv, bt = at(nu, k), at(nv, k), at(t, k)
     gcol = bu[:, None] * Iu + bv[:, None] * Iv                    # n·∇I down the column
     dcol = bu[:, None] * Iuv + bv[:, None] * Ivv                  # its v-derivative
-    y0, d0 = at(gcol, k), at(dcol, k)
-    yn, dn = at(gcol, k + 1), at(dcol, k + 1)
-    yp, dp = at(gcol, k - 1), at(dcol, k - 1)
+    (y0, d0), (yn, dn), (yp, dp) = ((at(gcol, k + i), at(dcol, k + i)) for i in (0, 1, -1))
     down = np.sign(y0) != np.sign(yn)
-    up = ~down & (np.sign(yp) != np.sign(y0))
+    refined = down | (np.sign(yp) != np.sign(y0))
     s = np.where(down, _hermite_root(y0, d0, yn, dn), _hermite_root(yp, dp, y0, d0) - 1.0)
-    refined = down | up
     u = np.where(refined, c, c + bt * bu)
-    v = r + (k - M) + np.where(refined, s, bt * bv)
-    raw, _ = _gather(img, r[None, :] + np.arange(-w, w + 1)[:, None], c)
-    sat = raw[w - 2:w + 3].max(axis=0) >= _saturation(img, saturation) if n else found
-    if sat.any():                                # clipped plateau: Hessian biased by aliasing
-        x = np.arange(-w, w + 1)[:, None]
+    v = r + (k - _M - 1) + np.where(refined, s, bt * bv)
+    raw, _ = _gather(img, r[None, :] + x, c)
+    level = _saturation(img, saturation)
+    sat = raw[w - 2:w + 3].max(axis=0) >= level
+    if sat.any():                                 # clipped plateau: the flank fit instead
         gs = np.where(inside[:, sat], raw[:, sat] - det.bg[sat], 0)
-        centre = _plateau_centre(gs, inside[:, sat], x, raw[:, sat] >= _saturation(img, saturation), det.noise)
-        u[sat], v[sat], found[sat] = c[sat], r[sat] + centre, True
+        v[sat] = r[sat] + _plateau_centre(gs, inside[:, sat], x, raw[:, sat] >= level, det.noise)
+        u[sat], found[sat] = c[sat], True
     keep = found & np.isfinite(u) & np.isfinite(v)
     return LineCentres(u[keep].astype(np.float64), v[keep].astype(np.float64),
                        det.gmax[keep].astype(np.float64), width[keep],

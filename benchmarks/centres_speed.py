@@ -1,0 +1,101 @@
+"""Speed of the line-centre methods on full-size (2448 × 2048, uint8) frames, one core.
+
+Frames: the simulated camera's line frames (speckle, ambient light, shot and read noise,
+saturation, secondary reflections) on the step block and the freeform part. Prints a table:
+method, frames/s, MPix/s, ms/frame (median over all frames and rounds). Target: the gray
+centroid ≥ 100 frames/s. "before" is the previous gray_centroid, kept here for comparison.
+Run: .venv/bin/python benchmarks/centres_speed.py
+"""
+
+from __future__ import annotations
+
+import os
+import time
+
+os.sched_setaffinity(0, {sorted(os.sched_getaffinity(0))[0]})  # one core, honestly
+
+import cv2  # noqa: E402
+import numpy as np  # noqa: E402
+from rich.console import Console  # noqa: E402
+from rich.table import Table  # noqa: E402
+
+from insitu.devices.sim import SimWorld  # noqa: E402
+from insitu.sim.rig import default_rig  # noqa: E402
+from insitu.sim.workpieces import make_workpiece  # noqa: E402
+from insitu.vision.centres import gray_centroid, line_centres  # noqa: E402
+from insitu.vision.steger import gaussian_peak, steger  # noqa: E402
+
+cv2.setNumThreads(1)
+
+
+def before_gray_centroid(image, k=0.5, min_peak=40.0, window=12, median=3):
+    """The gray_centroid this module replaced, verbatim but for returning a tuple."""
+    img = cv2.medianBlur(image, median) if median and median > 1 else image
+    H, W = img.shape
+    row = np.argmax(img, axis=0)
+    cols = np.arange(W)
+    gmax = img[row, cols].astype(np.float64)
+    keep = gmax >= min_peak
+    if window is None:
+        band = img[:, keep].astype(np.float64)
+        rows = np.arange(H, dtype=np.float64)[:, None]
+        background = np.median(band, axis=0)
+    else:
+        offs = np.arange(-window, window + 1)[:, None]
+        rows_i = np.clip(row[keep][None, :] + offs, 0, H - 1)
+        band = img[rows_i, cols[keep][None, :]].astype(np.float64)
+        rows = rows_i.astype(np.float64)
+        background = np.minimum(band[0], band[-1])
+    K = k * gmax[keep]
+    g = np.where(band > K, band, 0.0)
+    total = g.sum(axis=0)
+    v = (g * rows).sum(axis=0) / np.where(total > 0, total, 1.0)
+    width = (g > 0).sum(axis=0).astype(np.float64)
+    return cols[keep], v, gmax[keep], width, gmax[keep] - background
+
+
+def frames(n_per_part: int = 3) -> list[np.ndarray]:
+    out = []
+    for name in ("step-block", "freeform"):
+        r = SimWorld(default_rig(seed=0), parts=[make_workpiece(name)]).renderer()
+        for x in np.linspace(-8, 8, n_per_part):
+            out.append(r.line_frame([x, -45], [x, 45]))
+    return out
+
+
+METHODS = {
+    "gray_centroid (default, ±12 rows)": gray_centroid,
+    "gray_centroid, continuity=False": lambda f: gray_centroid(f, continuity=False),
+    "gray_centroid, window=None": lambda f: gray_centroid(f, window=None),
+    "before: gray_centroid": before_gray_centroid,
+    "before: gray_centroid, window=None": lambda f: before_gray_centroid(f, window=None),
+    "gaussian_peak": gaussian_peak,
+    "steger": steger,
+    "line_centres(gray, auto direction)": line_centres,
+    "line_centres(steger, auto direction)": lambda f: line_centres(f, "steger"),
+}
+
+
+def main(rounds: int = 10) -> None:
+    imgs = frames()
+    H, W = imgs[0].shape
+    table = Table(title=f"line centres, {W} × {H} uint8, one core, {len(imgs)} frames")
+    for col in ("method", "frames/s", "MPix/s", "ms/frame", "points/frame"):
+        table.add_column(col, justify="left" if col == "method" else "right")
+    for name, fn in METHODS.items():
+        times, points = [], []
+        n = rounds if "None" not in name else max(2, rounds // 4)
+        for _ in range(n):
+            for img in imgs:
+                t = time.perf_counter()
+                res = fn(img)
+                times.append(time.perf_counter() - t)
+                points.append(len(res[0]) if isinstance(res, tuple) else len(res))
+        dt = float(np.median(times))
+        table.add_row(name, f"{1 / dt:.0f}", f"{H * W / dt / 1e6:.0f}", f"{dt * 1e3:.2f}",
+                      f"{np.mean(points):.0f}")
+    Console(width=120).print(table)
+
+
+if __name__ == "__main__":
+    main()
