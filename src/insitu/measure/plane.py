@@ -30,40 +30,39 @@ def reconstruct_line(camera: CameraModel, uv: np.ndarray, start, end,
     return intersect_plane(camera, uv, light_plane(pivot_height_mm, start, end, telecentric))
 
 
+def line_runs_along_rows(camera: CameraModel, start, end) -> bool:
+    """True when the commanded line crosses more image columns than rows (seen on z = 0)."""
+    uv = camera.project(np.array([[start[0], start[1], 0.0], [end[0], end[1], 0.0]]))
+    du, dv = np.abs(uv[1] - uv[0])
+    return bool(du >= dv)
+
+
 def expected_band(camera: CameraModel, start, end, pivot_height_mm: float,
                   z_range_mm: tuple[float, float], margin_px: float = 25.0,
-                  telecentric: bool = False) -> tuple[np.ndarray, np.ndarray]:
-    """Rows (v_lo, v_hi), each (W,), where the line start → end can appear in the image for
-    surfaces within ``z_range_mm``: its light plane between the two heights, projected, plus a
-    margin for the head's distortion and calibration errors. NaN: columns it cannot reach."""
+                  telecentric: bool = False, along_rows: bool = True
+                  ) -> tuple[np.ndarray, np.ndarray]:
+    """Where the line start → end can appear in the image for surfaces within ``z_range_mm``:
+    its light plane between the two heights, projected, plus a margin for the head's
+    distortion and calibration errors. ``along_rows``: the line crosses the columns, and the
+    band is rows (lo, hi) per column, each (W,); else columns per row, each (H,). NaN where
+    the line cannot be."""
     plane = light_plane(pivot_height_mm, start, end, telecentric)
-    s = np.linspace(0.0, 1.0, 64)[:, None]
+    s = np.linspace(-0.05, 1.05, 96)[:, None]
     xy = (1 - s) * np.asarray(start, float) + s * np.asarray(end, float)
-    rows = []
+    axis = 0 if abs(plane[0]) >= abs(plane[1]) else 1      # solve the plane for x or for y
+    along, across = (0, 1) if along_rows else (1, 0)
+    n = camera.width if along_rows else camera.height
+    grid = np.arange(n, dtype=np.float64)
+    edges = []
     for z in z_range_mm:
-        # points of the plane at height z above the commanded segment: solve the plane for x
-        # (lines along y) or y (lines along x), whichever the plane's normal allows
         p = np.column_stack([xy, np.full(len(xy), float(z))])
-        axis = 0 if abs(plane[0]) >= abs(plane[1]) else 1
-        other = 1 - axis
-        p[:, axis] = -(plane[other] * p[:, other] + plane[2] * z + plane[3]) / plane[axis]
-        rows.append(camera.project(p))
-    uv = np.vstack(rows)
-    uv = uv[np.isfinite(uv).all(axis=1)]
-    W = camera.width
-    lo, hi = np.full(W, np.nan), np.full(W, np.nan)
-    if len(uv) < 4:
-        return lo, hi
-    a, b = rows[0], rows[1]
-    order_a, order_b = np.argsort(a[:, 0]), np.argsort(b[:, 0])
-    u = np.arange(W, dtype=np.float64)
-    va = np.interp(u, a[order_a, 0], a[order_a, 1], left=np.nan, right=np.nan)
-    vb = np.interp(u, b[order_b, 0], b[order_b, 1], left=np.nan, right=np.nan)
-    umin = min(a[:, 0].min(), b[:, 0].min()) - margin_px
-    umax = max(a[:, 0].max(), b[:, 0].max()) + margin_px
-    inside = (u >= umin) & (u <= umax)
-    va = np.interp(u, u[np.isfinite(va)], va[np.isfinite(va)]) if np.isfinite(va).any() else va
-    vb = np.interp(u, u[np.isfinite(vb)], vb[np.isfinite(vb)]) if np.isfinite(vb).any() else vb
-    lo = np.where(inside, np.minimum(va, vb) - margin_px, np.nan)
-    hi = np.where(inside, np.maximum(va, vb) + margin_px, np.nan)
+        p[:, axis] = -(plane[1 - axis] * p[:, 1 - axis] + plane[2] * z + plane[3]) / plane[axis]
+        uv = camera.project(p)
+        uv = uv[np.isfinite(uv).all(axis=1)]
+        if len(uv) < 2:
+            return np.full(n, np.nan), np.full(n, np.nan)
+        o = np.argsort(uv[:, along])
+        edges.append(np.interp(grid, uv[o, along], uv[o, across], left=np.nan, right=np.nan))
+    lo = np.fmin(*edges) - margin_px
+    hi = np.fmax(*edges) + margin_px
     return lo, hi

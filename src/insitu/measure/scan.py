@@ -9,7 +9,7 @@ from insitu.errors import MeasurementError
 from insitu.formats.pointcloud import PointCloud
 from insitu.geometry.camera import CameraModel
 from insitu.measure.heightcal import PaperHeightModel, SheetHeightModel, check_bracket
-from insitu.measure.plane import expected_band, reconstruct_line
+from insitu.measure.plane import expected_band, line_runs_along_rows, reconstruct_line
 from insitu.vision.extract import CentreSettings, extract_centres
 
 
@@ -48,9 +48,11 @@ class ScanReconstructor:
                 f"frame {index}: {image.shape[1]}×{image.shape[0]} px, but the camera "
                 f"calibration is for {self.camera.width}×{self.camera.height} px")
         self.frames += 1
+        rows = line_runs_along_rows(self.camera, start, end)
         band = (expected_band(self.camera, start, end, self.H, self.z_range,
-                              telecentric=self.telecentric) if self.z_range else None)
-        centres = extract_centres(image, self.settings, band)
+                              telecentric=self.telecentric, along_rows=rows)
+                if self.z_range else None)
+        centres = extract_centres(image, self.settings, band, rows)
         if len(centres) < self.min_points:
             return 0
         if self.model is None:

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 from dataclasses import asdict, dataclass, replace
 
+import cv2
 import numpy as np
 from scipy.signal import savgol_filter
 
@@ -37,16 +38,20 @@ PAPER_SETTINGS = CentreSettings(method="gray", k=0.5, smooth_half_window=0)
 
 
 def extract_centres(image: np.ndarray, settings: CentreSettings = CentreSettings(),
-                    band: tuple[np.ndarray, np.ndarray] | None = None) -> LineCentres:
-    """Centres (one per column at most) of the line in ``image`` (H, W); ``band``: rows
-    (v_lo, v_hi) per column where the line can be (ghosts outside it are ignored)."""
+                    band: tuple[np.ndarray, np.ndarray] | None = None,
+                    along_rows: bool = True) -> LineCentres:
+    """Centres of the line in ``image`` (H, W): one per column when the line runs along the
+    rows, else one per row (the image is searched across the line either way). ``band``:
+    (lo, hi) per column (rows) or per row (columns) where the line can be; ghosts outside it
+    are ignored. u, v are image coordinates in both cases."""
+    img = image if along_rows else cv2.transpose(image)
     if settings.method == "gray":
-        c = gray_centroid(image, k=settings.k, band=band, subtract=settings.subtract)
+        c = gray_centroid(img, k=settings.k, band=band, subtract=settings.subtract)
     else:
-        c = line_centres(image, settings.method, direction="rows", band=band)
+        c = line_centres(img, settings.method, direction="rows", band=band)
     if settings.smooth_half_window:
         c = smooth_centres(c, settings.smooth_half_window, settings.jump_px, settings.end_fraction)
-    return c
+    return c if along_rows else replace(c, u=c.v, v=c.u)
 
 
 def runs(u: np.ndarray, v: np.ndarray, jump_px: float) -> list[slice]:
