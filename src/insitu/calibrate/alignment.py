@@ -192,7 +192,7 @@ def find_board_line(frame: LineFrame, reference: np.ndarray | None, board: Board
     if len(uv):
         inside = mask[np.clip(np.round(uv[:, 1]).astype(int), 0, H - 1),
                       np.clip(np.round(uv[:, 0]).astype(int), 0, W - 1)]
-        uv = uv[inside & ~cen.saturated | inside]
+        uv = uv[inside]
     if len(uv) < MIN_LINE_POINTS:
         raise CalibrationError(f"{frame.name}: laser line too short on the board "
                                f"({len(uv)} centres, need {MIN_LINE_POINTS})")
