@@ -36,6 +36,7 @@ import numpy as np
 
 from insitu.calibrate.camera import BoardSpec
 from insitu.errors import CalibrationError
+from insitu.geometry.camera import CameraModel
 from insitu.vision.centres import line_centres
 
 MIN_LINE_POINTS = 30
@@ -84,6 +85,11 @@ class Alignment:
 
 
 # -- image → board ---------------------------------------------------------------------------
+def normalize(uv: np.ndarray, K: np.ndarray, dist: np.ndarray) -> np.ndarray:
+    """(N, 2) distorted pixels → (N, 2) undistorted normalised coordinates (x/z, y/z)."""
+    return CameraModel(1, 1, K, dist, np.eye(3), np.zeros(3)).normalize(uv)
+
+
 def board_to_image(xy: np.ndarray, K, dist, R_cb, t_cb) -> np.ndarray:
     """(N, 2) board points (z = 0), mm → (N, 2) distorted pixels."""
     pts = np.column_stack([np.asarray(xy, float).reshape(-1, 2), np.zeros(len(xy))])
@@ -93,9 +99,7 @@ def board_to_image(xy: np.ndarray, K, dist, R_cb, t_cb) -> np.ndarray:
 
 def image_to_board(uv: np.ndarray, K, dist, R_cb, t_cb) -> np.ndarray:
     """(N, 2) distorted pixels → (N, 2) points on the board plane z = 0, board frame, mm."""
-    xy = cv2.undistortPointsIter(np.asarray(uv, np.float64).reshape(-1, 1, 2), K, dist, None,
-                                 None, (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 50,
-                                        1e-14)).reshape(-1, 2)
+    xy = normalize(uv, K, dist)
     rays = np.column_stack([xy, np.ones(len(xy))])
     n = R_cb[:, 2]
     s = (n @ t_cb) / (rays @ n)
@@ -158,6 +162,15 @@ def find_board_line(frame: LineFrame, reference: np.ndarray | None, board: Board
                                                K, dist, R_cb, t_cb), axis=0))
     signal = laser_signal(img, reference, ridge_px=int(max(7, 0.15 * sq)))
     mask = _board_mask((H, W), board, K, dist, R_cb, t_cb, 0.1 * board.square_mm)
+    if reference is None:      # the ridge filter also answers at the squares' corners
+        x0, x1, y0, y1 = board.area_mm()
+        gx, gy = np.meshgrid(np.arange(x0, x1 + 1e-6, board.square_mm),
+                             np.arange(y0, y1 + 1e-6, board.square_mm))
+        corners = board_to_image(np.column_stack([gx.ravel(), gy.ravel()]), K, dist, R_cb, t_cb)
+        blots = np.zeros((H, W), np.uint8)
+        for u, v in np.round(corners).astype(int):
+            cv2.circle(blots, (int(u), int(v)), int(np.ceil(0.22 * sq)), 1, -1)
+        mask &= blots == 0
     signal[~mask] = 0
     vals = signal[mask]
     noise = 1.4826 * float(np.median(np.abs(vals - np.median(vals)))) if vals.size else 0.0
@@ -168,8 +181,7 @@ def find_board_line(frame: LineFrame, reference: np.ndarray | None, board: Board
         raise CalibrationError(f"{frame.name}: no laser line found on the board "
                                f"({len(uu)} bright pixels; brightest {peak:.0f} DN above the board)")
     # coarse straight line through the bright pixels, in undistorted pixel coordinates
-    und = cv2.undistortPoints(np.column_stack([uu, vv]).astype(np.float64).reshape(-1, 1, 2),
-                              K, dist, P=K).reshape(-1, 2)
+    und = normalize(np.column_stack([uu, vv]).astype(np.float64), K, dist) @ K[:2, :2].T + K[:2, 2]
     c, d, rms, keep = _fit_line(und)
     if keep.sum() < MIN_LINE_POINTS:
         raise CalibrationError(f"{frame.name}: no straight laser line found on the board")
@@ -265,7 +277,7 @@ def align_to_head(frames: list[LineFrame], reference: np.ndarray | None, board: 
             x_b = -x_b
         R_bw = np.column_stack([x_b, y_b, z_b])
         o_b = np.append(origin, 0.0) - plate_z * z_b
-        score = np.mean([_on_segment(((np.column_stack([lines[f.name].points,
+        score = min([_on_segment(((np.column_stack([lines[f.name].points,
                                                         np.zeros(len(lines[f.name].points))])
                                        - o_b) @ R_bw)[:, :2], f) for f in frames])
         best.append((score, R_bw, o_b))
@@ -276,7 +288,7 @@ def align_to_head(frames: list[LineFrame], reference: np.ndarray | None, board: 
                                "+x half-axis from (0, 0) to (L, 0))")
     if s1 < 0.8:
         raise CalibrationError(f"alignment frames: the lines seen do not lie where they were "
-                               f"commanded (only {100 * s1:.0f}% of the centres on their segments)")
+                               f"commanded (only {100 * s1:.0f}% of one frame's centres on its segment)")
     R = R_cb @ R_bw
     t = R_cb @ o_b + t_cb
     n = {k: len(v.points) for k, v in lines.items()}

@@ -104,7 +104,9 @@ class CVRow(BaseModel):
 class FieldCorrection(CalibrationEnvelope):
     """A scan-field correction (kind "field-correction"). ``region_mm`` [x0, x1, y0, y1]: the
     commands measured (the calibrated region); ``field_size_mm``: the head's usable field,
-    centred on the origin — no target or command may leave it."""
+    centred on the origin — no target or command may leave it. The measurements: commands Q
+    (``commands_mm``), landing points P (``landed_mm``) and the landing error expected after
+    correction at each, out of fold (``after_mm``, = δ − δ̂ of 5-fold CV), mm."""
 
     kind: Literal["field-correction"] = "field-correction"
     convention: str = CONVENTION
@@ -120,6 +122,7 @@ class FieldCorrection(CalibrationEnvelope):
     areas_after: list[AreaRow] = []
     commands_mm: list[Vec2] = []
     landed_mm: list[Vec2] = []
+    after_mm: list[Vec2] = []
 
     @model_validator(mode="after")
     def _has_its_model(self) -> "FieldCorrection":
@@ -143,13 +146,14 @@ class FieldCorrection(CalibrationEnvelope):
 
     def correct(self, targets: np.ndarray, where: str = "target") -> np.ndarray:
         """Commands K (N, 2) that land on ``targets`` (N, 2), mm. SafetyError naming the first
-        target (0-based index) outside the field, or whose command would leave it."""
+        target (``where`` and its 1-based number) outside the field, or whose command would
+        leave it."""
         Q = np.asarray(targets, np.float64).reshape(-1, 2)
         half = np.asarray(self.field_size_mm) / 2
         out = ~np.isfinite(Q).all(1) | (np.abs(Q) > half + 1e-9).any(1)
         if out.any():
             i = int(np.argmax(out))
-            raise SafetyError(f"{where} {i}: {_xy(Q[i])} mm is outside the scan field "
+            raise SafetyError(f"{where} {i + 1}: {_xy(Q[i])} mm is outside the scan field "
                               f"±{half[0]:g} × ±{half[1]:g} mm")
         if not len(Q):
             return Q.copy()
@@ -157,7 +161,7 @@ class FieldCorrection(CalibrationEnvelope):
         out = (np.abs(K) > half + 1e-9).any(1)
         if out.any():
             i = int(np.argmax(out))
-            raise SafetyError(f"{where} {i}: {_xy(Q[i])} mm needs the command {_xy(K[i])} mm, "
+            raise SafetyError(f"{where} {i + 1}: {_xy(Q[i])} mm needs the command {_xy(K[i])} mm, "
                               f"outside the scan field ±{half[0]:g} × ±{half[1]:g} mm")
         return K
 

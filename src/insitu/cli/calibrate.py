@@ -10,7 +10,8 @@ from rich.table import Table
 
 from insitu.cli.common import check_output, console, one_line_errors, progress_bar
 
-app = typer.Typer(help="Calibrations from recorded sequences.", no_args_is_help=True)
+app = typer.Typer(help="Calibrations from recorded sequences.", no_args_is_help=True,
+                 rich_markup_mode="markdown")
 
 
 @app.command("height")

@@ -11,7 +11,8 @@ from insitu.cli.common import check_output, console, fail, one_line_errors, prog
 from insitu.sim import record
 from insitu.sim.workpieces import WORKPIECES
 
-app = typer.Typer(help="The simulated rig.", no_args_is_help=True)
+app = typer.Typer(help="The simulated rig.", no_args_is_help=True,
+                 rich_markup_mode="markdown")
 
 
 @app.command("record")

@@ -20,14 +20,21 @@ def board_corners(cols: int, rows: int, square_mm: float) -> np.ndarray:
 
 
 def random_board_poses(camera: CameraModel, cols: int, rows: int, square_mm: float, n: int,
-                       rng: np.random.Generator, max_tilt_deg: float = 35.0
+                       rng: np.random.Generator, max_tilt_deg: float = 35.0,
+                       depth_mm: float | None = None, max_tries: int = 10000
                        ) -> list[tuple[np.ndarray, np.ndarray]]:
-    """``n`` board poses (R, t: board → camera) with all corners well inside the image."""
+    """``n`` board poses (R, t: board → camera) with all corners well inside the image, at
+    about ``depth_mm`` from the camera (default: the camera's distance from the world origin).
+    ValueError when ``max_tries`` random poses do not give ``n``."""
     poses: list[tuple[np.ndarray, np.ndarray]] = []
     centre = (np.array([cols - 1, rows - 1, 0]) * square_mm) / 2
     margin = 0.06 * min(camera.width, camera.height)
-    depth0 = float(np.linalg.norm(camera.centre_world))
-    while len(poses) < n:
+    depth0 = float(np.linalg.norm(camera.centre_world)) if depth_mm is None else float(depth_mm)
+    if not depth0 > 0:
+        raise ValueError("random_board_poses: the board needs a positive depth_mm")
+    for _ in range(max_tries):
+        if len(poses) == n:
+            break
         tilt = rotation_about(np.append(rng.normal(size=2), 0.0), np.deg2rad(rng.uniform(5, max_tilt_deg)))
         spin = rotation_about([0, 0, 1], rng.uniform(-np.pi, np.pi))
         R = tilt @ spin
@@ -39,6 +46,9 @@ def random_board_poses(camera: CameraModel, cols: int, rows: int, square_mm: flo
         uv = ident.project(pts)
         if np.isfinite(uv).all() and ident.in_image(uv, margin).all():
             poses.append((R, t))
+    if len(poses) < n:
+        raise ValueError(f"random_board_poses: only {len(poses)} of {n} poses keep the board "
+                         "in the image")
     return poses
 
 

@@ -82,7 +82,8 @@ def find_spot(image: np.ndarray, settings: SpotSettings = SpotSettings(),
     """The centre of the one laser spot in ``image`` ((H, W) uint8/uint16 or float).
 
     Raises CalibrationError (naming ``where``) if there is no spot (peak too low above the
-    background), several spots, or a spot saturated over more than ``max_saturated_px``.
+    background), several spots, a spot saturated over more than ``max_saturated_px`` or one
+    cut off by the image border.
     """
     s = settings
     img = np.asarray(image)
@@ -127,7 +128,8 @@ def find_spot(image: np.ndarray, settings: SpotSettings = SpotSettings(),
         raise CalibrationError(f"{where}: spot saturated over {saturated} px (at most "
                                f"{s.max_saturated_px}): reduce the exposure or laser power")
     if s.method == "ellipse":
-        u, v = _ellipse_centre(froi, bg_local + s.ellipse_level * amp, cv_, cu, where)
+        u, v = _ellipse_centre(froi, bg_local + s.ellipse_level * amp, cv_, cu, where,
+                               (v0, v1, u0, u1), (H, W))
     else:
         if s.region == "threshold":
             region = core
@@ -136,6 +138,7 @@ def find_spot(image: np.ndarray, settings: SpotSettings = SpotSettings(),
             low = max(s.window_level * amp, 3.0 * noise_local)
             region = _component_at(froi > bg_local + low, cv_, cu)
             region = cv2.dilate(region.astype(np.uint8), np.ones((5, 5), np.uint8)) > 0
+        _check_inside(region, (v0, v1, u0, u1), (H, W), pu, pv, where)
         w = np.where(region, np.maximum(froi - bg_local, 0.0), 0.0)
         total = w.sum()
         vv, uu = np.mgrid[0:w.shape[0], 0:w.shape[1]]
@@ -143,11 +146,25 @@ def find_spot(image: np.ndarray, settings: SpotSettings = SpotSettings(),
     return Spot(u + u0, v + v0, float(froi[cv_, cu]), bg_local, int(core.sum()), saturated)
 
 
-def _ellipse_centre(f: np.ndarray, level: float, cv_: int, cu: int, where: str
+def _check_inside(region: np.ndarray, box: tuple[int, int, int, int], shape: tuple[int, int],
+                  pu: int, pv: int, where: str) -> None:
+    """CalibrationError if ``region`` (of the window ``box`` = v0, v1, u0, u1 of an image of
+    ``shape``) reaches the image border: the spot is cut off and its centre biased."""
+    v0, v1, u0, u1 = box
+    H, W = shape
+    if ((v0 == 0 and region[0].any()) or (v1 == H and region[-1].any())
+            or (u0 == 0 and region[:, 0].any()) or (u1 == W and region[:, -1].any())):
+        raise CalibrationError(f"{where}: the spot at ({pu}, {pv}) px is cut off by the image "
+                               "border")
+
+
+def _ellipse_centre(f: np.ndarray, level: float, cv_: int, cu: int, where: str,
+                    box: tuple[int, int, int, int], shape: tuple[int, int]
                     ) -> tuple[float, float]:
     """Centre of the ellipse fitted to the sub-pixel iso-contour ``f == level`` around
     (cv_, cu): crossings interpolated linearly between neighbouring pixels."""
     inside = _component_at(f > level, cv_, cu)
+    _check_inside(inside, box, shape, cu + box[2], cv_ + box[0], where)
     near = cv2.dilate(inside.astype(np.uint8), np.ones((3, 3), np.uint8)) > 0
     pts = []
     for axis in (0, 1):

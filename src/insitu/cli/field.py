@@ -1,0 +1,89 @@
+"""``insitu calibrate field`` and ``insitu galvo correct``: the scan-field correction.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated
+
+import typer
+from rich.table import Table
+
+from insitu.cli.common import (check_output, console, err_console, fail, one_line_errors,
+                               progress_bar)
+
+
+@one_line_errors
+def field(
+    rec: Annotated[Path, typer.Argument(metavar="REC", help="Recorded field-calibration "
+                                                           "folder (spots on the plate).")],
+    out: Annotated[Path, typer.Option("-o", "--output", help="Field correction file (.json); "
+                                      "the report is written beside it (.png).")],
+    method: Annotated[str, typer.Option(help="rbf: RBF network trained by orthogonal least "
+                                             "squares (Mikkelstrup et al.); table: correction "
+                                             "table on a grid, spline-interpolated.")] = "rbf",
+    sigma: Annotated[float | None, typer.Option(
+        help="RBF spread σ, mm (default: chosen by 5-fold CV over 0.15…0.75 × the half "
+             "field).")] = None,
+    mse_goal: Annotated[float | None, typer.Option(
+        help="RBF MSE goal, mm² (default: chosen by 5-fold CV over 1e-5…1e-3).")] = None,
+    smoothing: Annotated[float | None, typer.Option(
+        help="Table smoothing (default: chosen by 5-fold CV over 1e-4…1).")] = None,
+) -> None:
+    """Fit a scan-field correction from a recorded field calibration: find each spot, intersect
+    its camera ray with the plate, model the deviations (spread / MSE goal or smoothing by
+    5-fold cross-validation), and write FIELD.json and the quiver report FIELD.png."""
+    from insitu.calibrate.report import format_area_rows
+    from insitu.services.field import calibrate_and_report
+
+    check_output(out, ".json")
+    if method not in ("rbf", "table"):
+        fail(f"--method {method!r}: expected 'rbf' or 'table'")
+    for name, value in (("--sigma", sigma), ("--mse-goal", mse_goal), ("--smoothing", smoothing)):
+        if value is not None and not (value > 0 or (value == 0 and name != "--sigma")):
+            fail(f"{name} {value:g}: expected a positive number")
+    options = {k: [v] for k, v in (("sigmas", sigma), ("goals", mse_goal),
+                                   ("smoothing", smoothing)) if v is not None}
+    with progress_bar("field calibration") as progress:
+        cal = calibrate_and_report(rec, out, method, progress, **options)
+    r = cal.residuals
+    table = Table(title=f"field correction → {out}, {out.with_suffix('.png').name}",
+                  show_header=False)
+    table.add_row("recording", cal.notes)
+    table.add_row("before, |δ| mm", f"RMS {r['before_rms_mm']:.4f}  max {r['before_max_mm']:.4f}")
+    table.add_row("fit residual, mm", f"RMS {r['fit_rms_mm']:.4f}  max {r['fit_max_mm']:.4f}")
+    table.add_row("after (5-fold CV), mm",
+                  f"RMS {r['cv_rms_mm']:.4f}  max {r['cv_max_mm']:.4f}  (fold RMS "
+                  f"{r['cv_fold_rms_mean_mm']:.4f} ± {r['cv_fold_rms_std_mm']:.4f})")
+    console.print(table)
+    console.print("\n".join(format_area_rows(cal.areas_before, cal.areas_after)),
+                  highlight=False, soft_wrap=True)
+
+
+@one_line_errors
+def correct(
+    field_file: Annotated[Path, typer.Argument(metavar="FIELD.json",
+                                               help="Field correction file.")],
+    targets: Annotated[Path, typer.Argument(metavar="TARGETS.csv",
+                                            help="Targets: header x,y, mm on z = 0.")],
+    out: Annotated[Path, typer.Option("-o", "--output", help="Corrected commands (.csv).")],
+) -> None:
+    """Corrected commands for targets: COMMANDS.csv (header x,y, same order) holds, for each
+    target, the command K with K + δ(K) = target, so that the spot lands on the target."""
+    from insitu.calibrate.field_file import load_field_correction
+    from insitu.services.field import correct_targets, read_targets_csv, write_commands_csv
+
+    check_output(out, ".csv")
+    cal = load_field_correction(field_file)
+    Q = read_targets_csv(targets)
+    K = correct_targets(cal, Q, where=f"{targets}: target")
+    write_commands_csv(out, K)
+    outside = cal.outside_region(Q)
+    if outside.any():
+        x0, x1, y0, y1 = cal.region_mm
+        err_console.print(f"[yellow]warning:[/] {int(outside.sum())} of {len(Q)} targets lie "
+                          f"outside the calibrated region x {x0:g}…{x1:g}, y {y0:g}…{y1:g} mm: "
+                          "their correction is extrapolated", highlight=False, soft_wrap=True)
+    shift = (K - Q)
+    console.print(f"wrote {out}: {len(K)} commands (correction up to "
+                  f"{float(abs(shift).max()) if len(K) else 0.0:.3f} mm)", highlight=False)

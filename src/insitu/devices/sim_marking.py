@@ -1,0 +1,158 @@
+"""A galvo controller on the simulated rig: marks burn into the simulated workpiece.
+
+Mirror angles are what the driver computed with the operator's *nominal* kinematics; the head
+then does what the *true* head does with them: the angles become a command on z = 0 through
+the nominal forward model, and the true beam for that command (true mirror geometry plus the
+true field distortion, ``rig.beams``) is ray-cast into the true scene. Where it hits, with the
+laser on, the surface is burnt: a :class:`~insitu.sim.marks.Burn` polyline whose width is the
+1/e² spot diameter at the hit, growing with the distance from the dynamic focus along the true
+beam. The laser burns on any move while it is on (a jump with the laser on would show).
+
+Burns are kept on the world (:func:`world_burns`, an attribute set on the SimWorld until it
+gets a ``burns`` field of its own), so a resumed job on a new controller adds to the same
+marks and :class:`SimInspectionCamera` sees them all.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+
+from insitu.devices.galvo import Command, focus_points, nominal_commands
+from insitu.devices.sim import LaserState, SimCamera, SimWorld
+from insitu.errors import DeviceError
+from insitu.geometry.beams import TwoMirrorHead
+from insitu.sim.marks import Burn, render_inspection
+from insitu.sim.render import NOMINAL_EXPOSURE_MS
+from insitu.sim.scene import Scene
+
+
+def world_burns(world: SimWorld) -> list[Burn]:
+    """The marks burnt into ``world``'s parts so far (kept on the world, so that every
+    controller and camera of it shares them; world frame, they stay where they were burnt)."""
+    burns = getattr(world, "burns", None)
+    if burns is None:
+        burns = []
+        world.burns = burns          # SimWorld has no field for it yet: see the module notes
+    return burns
+
+
+class SimController:
+    """Executes :class:`Command` lists on ``world``'s rig. ``burns``: the marks this
+    controller made (also added to :func:`world_burns`); ``elapsed_s``: simulated time
+    (moves at the set speeds between nominal focus points, plus delays); ``sample_mm``:
+    spacing of burn samples along a move."""
+
+    def __init__(self, world: SimWorld, sample_mm: float = 0.02, scene: Scene | None = None):
+        self.world = world
+        rig = world.rig
+        self.nominal = TwoMirrorHead(rig.nominal.mirror_distance_mm,
+                                     rig.nominal.mirror_separation_mm)
+        self.scene = scene or world.renderer().scene
+        self.sample_mm = float(sample_mm)
+        self.burns: list[Burn] = []
+        self.pilot_trace: list[np.ndarray] = []
+        self.laser_is_on = self.pilot_is_on = False
+        self.joint = np.zeros(3)
+        self.power_pct = 0.0
+        self.frequency_khz = 20.0
+        self.speed = {"mark": 500.0, "jump": 3000.0}
+        self.elapsed_s = 0.0
+        self._open: list[tuple[np.ndarray, np.ndarray]] = []
+
+    # -- Controller --------------------------------------------------------------------------
+    def execute(self, commands: Sequence[Command]) -> None:
+        for c in commands:
+            self._do(c)
+
+    def laser_off(self) -> None:
+        self._close_burn()
+        self.laser_is_on = self.pilot_is_on = False
+        self.world.laser = LaserState()
+
+    # -- execution ---------------------------------------------------------------------------
+    def _do(self, c: Command) -> None:
+        op = c.op
+        if op in ("jump_abs_3d", "mark_abs_3d"):
+            self._move(np.asarray(c.args, float), "jump" if op == "jump_abs_3d" else "mark")
+        elif op == "laser_on":
+            self.laser_is_on = True
+        elif op == "laser_off":
+            self._close_burn()
+            self.laser_is_on = False
+        elif op in ("pilot_on", "pilot_off"):
+            self.pilot_is_on = op == "pilot_on"
+        elif op == "set_power":
+            self.power_pct = float(c.args[0])
+        elif op == "set_frequency":
+            self.frequency_khz = float(c.args[0])
+        elif op in ("set_mark_speed", "set_jump_speed"):
+            self.speed[op[4:8]] = float(c.args[0])
+        elif op.endswith("_delay"):
+            self.elapsed_s += float(c.args[0]) * 1e-6
+        else:
+            raise DeviceError(f"sim scan head: unknown command {op!r}")
+
+    def _move(self, target: np.ndarray, kind: str) -> None:
+        a, b = focus_points(self.nominal, np.vstack([self.joint, target]))
+        length = float(np.linalg.norm(b - a))
+        self.elapsed_s += length / self.speed[kind]
+        if self.laser_is_on:
+            # the head interpolates straight in command space (like an RTC's micro-vectors)
+            n = max(int(np.ceil(length / self.sample_mm)), 1)
+            t = np.linspace(0.0, 1.0, n + 1)[:, None]
+            c0, c1 = nominal_commands(self.nominal, np.vstack([self.joint, target]))
+            cmd = c0 + t * (c1 - c0)
+            focus = self.joint[2] + t[:, 0] * (target[2] - self.joint[2])
+            if self._open:
+                cmd, focus = cmd[1:], focus[1:]     # the start was burnt by the previous move
+            self._open.append(self.burn_at(cmd, focus))
+        elif self.pilot_is_on:
+            self.pilot_trace.append(np.vstack([a, b]))
+        self.joint = target
+
+    def burn_at(self, cmd: np.ndarray, focus_mm: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(N, 2) commands on z = 0 and (N,) focus shifts → where the true beam meets the
+        true surface (N, 3) and the 1/e² spot diameter there (N,), mm; NaN where it meets
+        nothing."""
+        rig, head = self.world.rig, self.world.rig.head
+        origins, dirs = rig.beams.rays(cmd)
+        hits = self.scene.cast(origins, dirs)
+        # true path length of the focus: the DFM's zero focuses the true field centre
+        landing = rig.beams.landing(cmd)
+        _, ay, _ = head.inverse(landing[:, 0], landing[:, 1], 0.0)
+        e, d = head.mirror_separation_mm, head.mirror_distance_mm
+        s_focus = e + d + focus_mm - e / np.cos(2 * ay)
+        s_hit = np.einsum("ij,ij->i", hits.points - origins, dirs)
+        width = 2.0 * rig.optics.beam_radius_mm(s_hit - s_focus)
+        pts = np.where(hits.hit[:, None], hits.points, np.nan)
+        return pts, np.where(hits.hit, width, np.nan)
+
+    def _close_burn(self) -> None:
+        if self._open:
+            pts = np.vstack([p for p, _ in self._open])
+            w = np.concatenate([w for _, w in self._open])
+            burn = Burn(pts, w, self.power_pct)
+            self.burns.append(burn)
+            world_burns(self.world).append(burn)
+        self._open = []
+
+
+class SimInspectionCamera(SimCamera):
+    """The sim camera that also sees the marks: with the laser off, a frame of the marked
+    part under room light (:func:`~insitu.sim.marks.render_inspection`; the default exposure
+    is longer than for laser lines, room light being dim). Laser frames are SimCamera's."""
+
+    def __init__(self, world: SimWorld, exposure_ms: float = 12 * NOMINAL_EXPOSURE_MS):
+        super().__init__(world)
+        self.inspection_exposure_ms = float(exposure_ms)
+        self._frames = 0
+
+    def grab(self, timeout_s: float = 5.0) -> np.ndarray:
+        if self.world.laser.kind != "off":
+            return super().grab(timeout_s)
+        self._frames += 1
+        return render_inspection(self.world.rig, self.world.renderer().scene,
+                                 list(world_burns(self.world)), self.inspection_exposure_ms,
+                                 seed=self.world.seed + self._frames)

@@ -1,0 +1,25 @@
+"""Marking: project placed patterns onto the measured surface, check them, make the mark job
+(formats.md §3) and drive the scan head with it.
+
+    job, proj = plan_job(polylines, cloud, Limits.of(head_config), mode="planar")
+    write_job("job.json", job)
+    run_job(job, GalvoDriver.from_config(head_config), controller, progress_path_for("job.json"))
+"""
+
+from insitu.marking.checks import Limits, check_projection, check_targets
+from insitu.marking.driver import GalvoDriver, preview_outlines
+from insitu.marking.job import (LaserOverride, LaserParams, MarkJob, MarkPath, TimeEstimate,
+                                Timing, estimate_time, make_job, read_job, write_job)
+from insitu.marking.plan import plan_job
+from insitu.marking.project import Projection, densify, project, project_planar, project_wrap
+from insitu.marking.run import (RunResult, progress_path_for, read_progress, resume_point,
+                                run_job, run_preview)
+from insitu.marking.surface import Surface, SurfaceSample
+
+__all__ = [
+    "GalvoDriver", "LaserOverride", "LaserParams", "Limits", "MarkJob", "MarkPath", "Projection",
+    "RunResult", "Surface", "SurfaceSample", "TimeEstimate", "Timing", "check_projection",
+    "check_targets", "densify", "estimate_time", "make_job", "plan_job", "preview_outlines",
+    "progress_path_for", "project", "project_planar", "project_wrap", "read_job",
+    "read_progress", "resume_point", "run_job", "run_preview", "write_job",
+]

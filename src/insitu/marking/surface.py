@@ -1,0 +1,184 @@
+"""The measured surface seen from above: robust local height and slope at any (x, y).
+
+A :class:`Surface` wraps a point cloud (world frame, mm) in a 2-D KD-tree over x, y. At a query
+point it takes the k nearest cloud points within the hole radius and fits a plane robustly:
+points far from the neighbourhood's median (more than 3 MADs, a second level across a step)
+are rejected if they are also farther than a 60° slope could reach across the neighbourhood,
+a plane is fitted to the rest (a small ridge keeps its slope near 0 across a direction the
+neighbours do not span, e.g. all on one scan line), points more than 3 RMS off that plane are
+rejected once more, and the plane is refitted. The plane's value at the query point is the
+height (exact on planes, tilted or not); its gradient gives the slope. Where the
+neighbourhood straddles two levels (a step), the slope is that of a plane through all
+neighbours: the wall the pattern would be marked over.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from insitu.errors import MeasurementError
+from insitu.formats.pointcloud import PointCloud
+
+_Z_FLOOR_MM = 0.02          # never reject points closer than this to the robust estimate
+_RIDGE = 0.02               # ridge on the slope terms: as if spread ± this × radius
+_LEVEL_SLOPE = np.tan(np.radians(60.0))   # steeper jumps within a neighbourhood: two levels
+_STEP_FRACTION = 0.2        # rejected share of neighbours that marks a second level
+
+
+@dataclass(frozen=True)
+class SurfaceSample:
+    """Per query point (M,): height z (mm, NaN where no cloud point within the hole radius),
+    gradient (M, 2) dz/dx, dz/dy of the robust plane, slope_deg of the local surface (walls
+    included), gap_mm to the nearest cloud point (inf when none within the hole radius) and
+    the number of neighbours used."""
+
+    z: np.ndarray
+    grad: np.ndarray
+    slope_deg: np.ndarray
+    gap_mm: np.ndarray
+    n_used: np.ndarray
+
+
+class Surface:
+    """``points``: (N, 3) mm or a PointCloud; ``region`` (x0, x1, y0, y1) keeps only points
+    inside (speed on big clouds); ``k`` neighbours per query; ``hole_radius_mm``: no cloud point
+    within this distance (in x, y) means a hole (default: 4 × the coverage spacing, at least
+    3 × the point spacing)."""
+
+    def __init__(self, points: np.ndarray | PointCloud, region=None, k: int = 16,
+                 hole_radius_mm: float | None = None):
+        pts = np.asarray(points.points if isinstance(points, PointCloud) else points, np.float64)
+        pts = pts.reshape(-1, 3)
+        pts = pts[np.isfinite(pts).all(1)]
+        if region is not None:
+            x0, x1, y0, y1 = region
+            pts = pts[(pts[:, 0] >= x0) & (pts[:, 0] <= x1) & (pts[:, 1] >= y0) & (pts[:, 1] <= y1)]
+        if len(pts) < 3:
+            raise MeasurementError("the point cloud has fewer than 3 points under the pattern; "
+                                   "scan the region where the pattern goes")
+        self.points = pts
+        self.k = int(k)
+        self.tree = cKDTree(pts[:, :2], balanced_tree=False, compact_nodes=False)
+        self.spacing_mm, self.coverage_mm = _spacing(self.tree, pts)
+        self.hole_radius_mm = float(hole_radius_mm if hole_radius_mm is not None
+                                    else max(4 * self.coverage_mm, 3 * self.spacing_mm))
+        self._padded = tuple(np.append(pts[:, i], 0.0) for i in range(3))
+
+    def sample(self, xy: np.ndarray, k: int | None = None, chunk: int = 8192) -> SurfaceSample:
+        """Robust local plane at each (M, 2) point, mm. See the module docstring. Works in
+        chunks of ``chunk`` points (cache-sized)."""
+        xy = np.asarray(xy, np.float64).reshape(-1, 2)
+        k = min(int(k or self.k), len(self.points))
+        parts = [self._sample(xy[i:i + chunk], k) for i in range(0, len(xy), chunk)]
+        if not parts:
+            e = np.zeros(0)
+            return SurfaceSample(e, np.zeros((0, 2)), e, e, e.astype(int))
+        return SurfaceSample(*(np.concatenate([getattr(p, f) for p in parts])
+                               for f in SurfaceSample.__dataclass_fields__))
+
+    def _sample(self, xy: np.ndarray, k: int) -> SurfaceSample:
+        d, idx = self.tree.query(xy, k=k, distance_upper_bound=self.hole_radius_mm, workers=1)
+        d, idx = d.reshape(len(xy), k), idx.reshape(len(xy), k)
+        valid = np.isfinite(d)
+        px, py, pz = self._padded                              # 0 at the missing index
+        dx = np.where(valid, px[idx] - xy[:, :1], 0.0)
+        dy = np.where(valid, py[idx] - xy[:, 1:], 0.0)
+        z = pz[idx]
+        r_k = np.where(valid, d, 0.0).max(1)                   # neighbourhood radius
+        n_valid = valid.sum(1)
+        fit = _PlaneFit(dx, dy, z, ridge=n_valid * (_RIDGE * r_k) ** 2 + 1e-12)
+        # 1: reject a second level: farther from the median than 3 MADs and than a surface
+        #    of slope _LEVEL_SLOPE could reach across the neighbourhood
+        med = _masked_median(z, valid)
+        dev = np.abs(z - med[:, None])
+        mad = _masked_median(dev, valid)
+        thr = np.maximum(4.45 * mad, _Z_FLOOR_MM + _LEVEL_SLOPE * 2 * r_k)
+        keep = valid & (dev <= thr[:, None])
+        coef = fit(keep)
+        # 2: reject points more than 3 RMS off that plane; refit the rows that changed
+        res = np.abs(z - (coef[:, :1] + coef[:, 1:2] * dx + coef[:, 2:] * dy))
+        n_keep = keep.sum(1)
+        rms = np.sqrt(np.einsum("ij,ij->i", keep, res * res) / np.maximum(n_keep, 1))
+        keep2 = keep & (res <= np.maximum(3.0 * rms, _Z_FLOOR_MM)[:, None])
+        redo = (keep2.sum(1) != n_keep) & (keep2.sum(1) >= 3)
+        if redo.any():
+            coef[redo] = fit(keep2, rows=redo)
+            keep[redo] = keep2[redo]
+        n_keep = keep.sum(1)
+        grad = coef[:, 1:]
+        slope = np.degrees(np.arctan(np.hypot(grad[:, 0], grad[:, 1])))
+        step = n_valid - n_keep > _STEP_FRACTION * n_valid
+        if step.any():                                           # a wall: all neighbours
+            c_all = fit(valid, rows=step)
+            slope[step] = np.degrees(np.arctan(np.hypot(c_all[:, 1], c_all[:, 2])))
+        zq = np.where(n_valid > 0, coef[:, 0], np.nan)
+        grad[n_valid == 0] = np.nan
+        slope[n_valid == 0] = np.nan
+        return SurfaceSample(zq, grad, slope, d[:, 0], n_keep)
+
+    def quadric(self, centre: np.ndarray, radius_mm: float, max_points: int = 20000
+                ) -> np.ndarray | None:
+        """Least-squares z = c0 + c1 dx + c2 dy + c3 dx² + c4 dx dy + c5 dy² about ``centre``
+        (2,) over the cloud within ``radius_mm``; (6,) or None when too few points."""
+        ids = np.asarray(self.tree.query_ball_point(np.asarray(centre, float), radius_mm))
+        if len(ids) < 12:
+            return None
+        if len(ids) > max_points:
+            ids = np.random.default_rng(0).choice(ids, max_points, replace=False)
+        p = self.points[ids]
+        dx, dy = p[:, 0] - centre[0], p[:, 1] - centre[1]
+        A = np.column_stack([np.ones_like(dx), dx, dy, dx * dx, dx * dy, dy * dy])
+        coef, *_ = np.linalg.lstsq(A, p[:, 2], rcond=None)
+        return coef
+
+
+def _spacing(tree: cKDTree, pts: np.ndarray) -> tuple[float, float]:
+    """Point spacing (median nearest-neighbour distance, x-y) and coverage spacing
+    (1/√density from the 8th neighbour: how far apart scan lines are), mm."""
+    rng = np.random.default_rng(0)
+    sub = pts[rng.choice(len(pts), min(len(pts), 20000), replace=False), :2]
+    k = min(9, len(pts))
+    d, _ = tree.query(sub, k=k, workers=-1)
+    d1 = d[:, 1]
+    pos = d1[d1 > 0]
+    spacing = float(np.median(pos)) if len(pos) else 1e-3
+    coverage = float(np.median(d[:, -1]) * np.sqrt(np.pi / (k - 1)))
+    return max(spacing, 1e-3), max(coverage, spacing, 1e-3)
+
+
+def _masked_median(a: np.ndarray, mask: np.ndarray) -> np.ndarray:
+    """Row medians (M,) of (M, k) ``a`` over ``mask`` (NaN for empty rows)."""
+    s = np.sort(np.where(mask, a, np.inf), axis=1)
+    n = mask.sum(1)
+    lo, hi = np.maximum((n - 1) // 2, 0), np.maximum(n // 2, 0)
+    rows = np.arange(len(a))
+    m = 0.5 * (s[rows, lo] + s[rows, hi])
+    return np.where(n > 0, m, np.nan)
+
+
+class _PlaneFit:
+    """Per row of (M, k) offsets dx, dy and heights z (0 where unused): z ≈ c0 + c1 dx + c2 dy
+    over the points a weight mask selects; (M, 3). Ridge (M,) on c1, c2."""
+
+    def __init__(self, dx, dy, z, ridge):
+        self.cols = [dx, dy, z, dx * dx, dx * dy, dy * dy, dx * z, dy * z]
+        self.ridge = ridge
+
+    def __call__(self, w: np.ndarray, rows: np.ndarray | None = None) -> np.ndarray:
+        cols, ridge = self.cols, self.ridge
+        if rows is not None:
+            cols, ridge, w = [c[rows] for c in cols], ridge[rows], w[rows]
+        w = w.astype(np.float64)
+        sx, sy, sz, sxx, sxy, syy, sxz, syz = (np.einsum("ij,ij->i", w, c) for c in cols)
+        A = np.empty((len(w), 3, 3))
+        A[:, 0, 0] = np.maximum(w.sum(1), 1e-12)
+        A[:, 0, 1] = A[:, 1, 0] = sx
+        A[:, 0, 2] = A[:, 2, 0] = sy
+        A[:, 1, 1] = sxx + ridge
+        A[:, 1, 2] = A[:, 2, 1] = sxy
+        A[:, 2, 2] = syy + ridge
+        b = np.column_stack([sz, sxz, syz])
+        return np.linalg.solve(A, b[..., None])[..., 0]

@@ -1,0 +1,210 @@
+"""Projection of placed polylines onto a measured cloud, and the safety checks before a job."""
+
+import numpy as np
+import pytest
+
+from insitu.errors import SafetyError
+from insitu.geometry.beams import TwoMirrorHead
+from insitu.marking import Limits, Surface, check_projection, check_targets, densify, project
+from insitu.marking.project import project_planar, project_wrap
+
+R_ARC, APEX = 42.5, 11.5           # the arc workpiece's cylinder (axis along y)
+
+
+def grid_cloud(f, x0=-30, x1=30, y0=-30, y1=30, step=0.25, jitter=0.0, seed=0):
+    rng = np.random.default_rng(seed)
+    X, Y = np.meshgrid(np.arange(x0, x1 + 1e-9, step), np.arange(y0, y1 + 1e-9, step))
+    x = X.ravel() + rng.uniform(-jitter, jitter, X.size)
+    y = Y.ravel() + rng.uniform(-jitter, jitter, X.size)
+    return np.column_stack([x, y, f(x, y)])
+
+
+def tilted(x, y):
+    return 5.0 + np.tan(np.radians(15)) * x - 0.1 * y
+
+
+def cylinder(x, y):
+    return APEX - R_ARC + np.sqrt(R_ARC**2 - x**2)
+
+
+def length3d(p):
+    return float(np.linalg.norm(np.diff(p, axis=0), axis=1).sum())
+
+
+def test_planar_on_tilted_plane_is_exact():
+    cloud = grid_cloud(tilted, jitter=0.08)
+    lines = [np.array([[-10.0, -5.0], [12.0, 7.0]]), np.array([[0, 0], [3.3, -9.1], [-4, 2.0]])]
+    proj = project(lines, cloud, "planar")
+    assert len(proj.paths) == 2
+    for src, out in zip(lines, proj.paths):
+        assert out.shape[1] == 3
+        np.testing.assert_allclose(out[[0, -1], :2], src[[0, -1]])      # x, y kept
+        assert np.abs(out[:, 2] - tilted(out[:, 0], out[:, 1])).max() < 0.01
+        seg = np.linalg.norm(np.diff(out[:, :2], axis=0), axis=1)
+        assert seg.max() <= proj.step_mm + 1e-9
+    assert proj.step_mm <= Surface(cloud).spacing_mm + 1e-9
+    assert proj.max_stretch == 0.0
+
+
+def test_planar_rejects_outliers():
+    cloud = grid_cloud(lambda x, y: np.full_like(x, 2.0), step=0.2)
+    rng = np.random.default_rng(3)
+    spikes = rng.choice(len(cloud), len(cloud) // 30, replace=False)
+    cloud[spikes, 2] += rng.choice([-3.0, 4.0], len(spikes))
+    proj = project([np.array([[-20.0, -20], [20, 20]])], cloud)
+    assert np.abs(proj.points[:, 2] - 2.0).max() < 0.01
+
+
+def test_densification_follows_a_step():
+    cloud = grid_cloud(lambda x, y: np.where(y > 0.0, 5.0, 0.0), step=0.2)
+    proj = project_planar([np.array([[1.0, -4.0], [1.0, 4.0]])], cloud)
+    p = proj.paths[0]
+    assert len(p) > 30                                        # densified, not 2 points
+    assert np.diff(p[:, 1]).max() <= proj.step_mm + 1e-9
+    far = np.abs(p[:, 1]) > 2 * proj.step_mm
+    np.testing.assert_allclose(p[far, 2], np.where(p[far, 1] > 0, 5.0, 0.0), atol=1e-6)
+    # the jump happens within one step of the wall, and is flagged as steep there
+    jumps = np.flatnonzero(np.abs(np.diff(p[:, 2])) > 1.0)
+    assert len(jumps) == 1 and abs(p[jumps[0], 1]) <= 2 * proj.step_mm
+    assert proj.slope_deg.max() > 60
+
+
+def test_densify_keeps_vertices_and_short_segments():
+    poly = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 0.05], [3.0, 2.0]])
+    (out,) = densify([poly], 0.1)
+    for v in poly:
+        assert np.min(np.linalg.norm(out - v, axis=1)) < 1e-12
+    assert np.linalg.norm(np.diff(out, axis=0), axis=1).max() <= 0.1 + 1e-12
+    single = densify([np.array([[2.0, 3.0]])], 0.1)[0]
+    assert single.shape == (1, 2)
+
+
+@pytest.mark.parametrize("line", [
+    [[-15.0, 0.0], [15.0, 0.0]],          # across the axis: the arc unrolls
+    [[0.0, -15.0], [0.0, 15.0]],          # along the axis
+    [[-12.0, -8.0], [13.0, 9.0]],         # diagonal, off centre
+])
+def test_wrap_keeps_arc_length_on_a_cylinder(line):
+    cloud = grid_cloud(cylinder, -20, 20, -20, 20, step=0.15, jitter=0.03)
+    line = np.array(line) + [1.5, -2.0]
+    proj = project_wrap([line], cloud)
+    L = length3d(proj.paths[0])
+    L0 = float(np.linalg.norm(line[1] - line[0]))
+    assert abs(L - L0) / L0 < 0.005
+    assert proj.mode == "wrap" and proj.max_stretch < 0.005
+    np.testing.assert_allclose(proj.paths[0][:, 2], cylinder(*proj.paths[0][:, :2].T), atol=0.01)
+
+
+def test_wrap_30mm_line_differs_from_planar():
+    cloud = grid_cloud(cylinder, -20, 20, -20, 20, step=0.15)
+    line = [np.array([[-15.0, 0.0], [15.0, 0.0]])]
+    wrap, planar = project(line, cloud, "wrap"), project(line, cloud, "planar")
+    assert abs(length3d(wrap.paths[0]) - 30.0) < 0.15
+    assert length3d(planar.paths[0]) > 30.6                  # planar stretches it on the arc
+    assert np.ptp(wrap.paths[0][:, 0]) < 29.5                # wrap pulls the ends in
+
+
+def test_wrap_square_on_cylinder_keeps_sides():
+    cloud = grid_cloud(cylinder, -20, 20, -20, 20, step=0.15)
+    sq = np.array([[-12.0, -12], [12, -12], [12, 12], [-12, 12], [-12, -12]])
+    sides = [sq[i:i + 2] for i in range(4)]
+    proj = project_wrap(sides, cloud, anchor=(0.0, 0.0))
+    for p in proj.paths:
+        assert abs(length3d(p) - 24.0) / 24.0 < 0.005
+    # the sides still meet at the corners
+    for i in range(4):
+        np.testing.assert_allclose(proj.paths[i][-1], proj.paths[(i + 1) % 4][0], atol=1e-9)
+
+
+def test_wrap_reports_stretch_on_a_sphere():
+    R = 40.0
+    cloud = grid_cloud(lambda x, y: np.sqrt(R**2 - x**2 - y**2) - 30, -25, 25, -25, 25, 0.2)
+    proj = project_wrap([np.array([[-15.0, -15], [15, -15], [15, 15], [-15, 15.0]])], cloud)
+    assert 0.01 < proj.max_stretch < 0.5                       # not developable: reported
+
+
+def test_wrap_on_tilted_plane_is_an_isometry():
+    cloud = grid_cloud(tilted, step=0.25)
+    sq = np.array([[-10.0, -10], [10, -10], [10, 10], [-10, 10], [-10, -10]])
+    proj = project_wrap([sq], cloud)
+    assert proj.max_stretch < 1e-3
+    assert abs(length3d(proj.paths[0]) - 80.0) < 0.08
+
+
+# ------------------------------------------------------------------------------ checks
+LIMITS = Limits((200.0, 200.0), (-25.0, 25.0), 60.0)
+
+
+def test_checks_pass_a_good_pattern():
+    cloud = grid_cloud(cylinder, -20, 20, -20, 20, step=0.2)
+    for mode in ("planar", "wrap"):
+        check_projection(project([np.array([[-10.0, -3], [10, 4]])], cloud, mode), LIMITS)
+
+
+def test_check_outside_field():
+    cloud = grid_cloud(lambda x, y: np.full_like(x, 1.0), 90, 110, -5, 5, 0.2)
+    proj = project([np.array([[95.0, 0.0], [104.0, 0.0]])], cloud)
+    with pytest.raises(SafetyError, match=r"\(x, y\) = \(100\.\d+, 0\.000\) mm is outside the "
+                                          r"scan field ±100"):
+        check_projection(proj, LIMITS)
+
+
+def test_check_outside_field_at_height_through_the_head():
+    head = TwoMirrorHead(350.0, 12.0)
+    ok = np.array([[97.0, 0.0, 0.0]])
+    check_targets(ok, Limits(head=head))
+    with pytest.raises(SafetyError, match=r"outside the scan field .* on z = 0"):
+        check_targets(np.array([[97.0, 0.0, 20.0]]), Limits(head=head))   # beam at 102.9
+
+
+def test_check_outside_focus_range():
+    cloud = grid_cloud(lambda x, y: 20 + 0.5 * x, -10, 10, -10, 10, 0.2)   # 15 … 25 mm
+    proj = project([np.array([[0.0, 0.0], [9.0, 0.0]])], cloud)
+    with pytest.raises(SafetyError, match=r"\(9\.000, 0\.000\) mm at height z = 24\.500 mm is "
+                                          r"outside the focus range -25 … 24 mm"):
+        check_projection(proj, Limits(z_range_mm=(-25.0, 24.0)))
+
+
+def test_check_over_a_hole():
+    cloud = grid_cloud(lambda x, y: np.full_like(x, 3.0), -15, 15, -15, 15, 0.2)
+    cloud = cloud[np.hypot(cloud[:, 0] - 4.0, cloud[:, 1] - 2.0) > 2.5]      # a 5 mm hole
+    proj = project([np.array([[-10.0, 2.0], [10.0, 2.0]])], cloud)
+    with pytest.raises(SafetyError, match=r"at \(x, y\) = \(\d\.\d+, 2\.000\) mm is over a hole"
+                                          r" in the point cloud") as e:
+        check_projection(proj, LIMITS)
+    x = float(str(e.value).split("(x, y) = (")[1].split(",")[0])
+    assert 1.5 - proj.step_mm <= x <= 6.5
+    check_projection(project([np.array([[-10.0, -5.0], [10.0, -5.0]])], cloud), LIMITS)
+
+
+def test_check_outside_the_scanned_area():
+    cloud = grid_cloud(lambda x, y: np.full_like(x, 3.0), -10, 10, -10, 10, 0.2)
+    proj = project([np.array([[0.0, 0.0], [14.0, 0.0]])], cloud)
+    with pytest.raises(SafetyError, match="over a hole"):
+        check_projection(proj, LIMITS)
+
+
+def test_check_over_a_steep_wall():
+    cloud = grid_cloud(lambda x, y: np.where(y > 0.0, 10.0, 5.0), -10, 10, -10, 10, 0.2)
+    proj = project([np.array([[3.0, -5.0], [3.0, 5.0]])], cloud)
+    with pytest.raises(SafetyError, match=r"\(3\.000, -?0\.\d+\) mm is over a wall steeper than "
+                                          r"60° \(local surface slope \d+\.\d°\)"):
+        check_projection(proj, LIMITS)
+    # the same wall is fine with a limit beyond its slope, and a line beside it is fine
+    check_projection(project([np.array([[3.0, 1.0], [3.0, 5.0]])], cloud), LIMITS)
+
+
+def test_moderate_slope_is_not_a_wall():
+    cloud = grid_cloud(lambda x, y: np.tan(np.radians(40)) * x, -10, 10, -10, 10, 0.2)
+    proj = project([np.array([[-5.0, 0.0], [5.0, 3.0]])], cloud)
+    assert np.allclose(proj.slope_deg, 40.0, atol=0.5)
+    check_projection(proj, LIMITS)
+    with pytest.raises(SafetyError, match="steeper than 30°"):
+        check_projection(proj, Limits(max_slope_deg=30.0))
+
+
+def test_pattern_entirely_off_the_cloud_is_refused():
+    cloud = grid_cloud(lambda x, y: np.full_like(x, 3.0), -10, 10, -10, 10, 0.2)
+    with pytest.raises(SafetyError, match=r"\(x, y\) = \(50\.000, 0\.000\) mm is outside the "
+                                          "scanned area"):
+        project([np.array([[45.0, 0.0], [55.0, 0.0]])], cloud)
