@@ -274,14 +274,14 @@ def test_inspection_image_shows_the_marks(rig):
 
 
 def test_burns_stay_on_the_world_and_the_inspection_camera_sees_them(rig):
-    from insitu.devices.sim_marking import SimInspectionCamera, world_burns
+    from insitu.devices.sim_marking import SimInspectionCamera
     world = plate_world(rig, z=4.0)
     cam = SimInspectionCamera(world)
     before = cam.grab().astype(float)
     for y in (-5.0, 5.0):                                   # two jobs, two controllers
         targets = np.array([[-10.0, y, 4.0], [10.0, y, 4.0]])
         run_job(make_job([targets]), GalvoDriver.from_config(rig.nominal), SimController(world))
-    assert len(world_burns(world)) == 2
+    assert len(world.burns) == 2
     after = cam.grab().astype(float)
     u, v = np.rint(rig.camera.project(np.array([[0.0, 5.0, 4.0]]))[0]).astype(int)
     assert after[v - 1:v + 2, u - 1:u + 2].min() < 0.6 * before[v - 1:v + 2, u - 1:u + 2].mean()

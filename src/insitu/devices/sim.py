@@ -30,13 +30,15 @@ class LaserState:
 class SimWorld:
     """The virtual station. ``parts``: what stands on the table; ``plate_z``: height of the
     calibration plate's top on the Z stage (which then stands in for the table), None when no
-    plate is mounted."""
+    plate is mounted; ``burns``: the marks burnt into the parts so far
+    (:class:`insitu.sim.marks.Burn`, world frame), shared by every controller and camera."""
 
     rig: SimRig
     parts: list[Workpiece] = field(default_factory=list)
     plate_z: float | None = None
     seed: int = 0
     laser: LaserState = field(default_factory=LaserState)
+    burns: list = field(default_factory=list)
     _renderer: Renderer | None = field(default=None, repr=False)
 
     def scene_parts(self) -> list[Workpiece]:

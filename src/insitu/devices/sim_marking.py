@@ -8,9 +8,8 @@ laser on, the surface is burnt: a :class:`~insitu.sim.marks.Burn` polyline whose
 1/e² spot diameter at the hit, growing with the distance from the dynamic focus along the true
 beam. The laser burns on any move while it is on (a jump with the laser on would show).
 
-Burns are kept on the world (:func:`world_burns`, an attribute set on the SimWorld until it
-gets a ``burns`` field of its own), so a resumed job on a new controller adds to the same
-marks and :class:`SimInspectionCamera` sees them all.
+Burns are kept on the world (``SimWorld.burns``), so a resumed job on a new controller adds to
+the same marks and :class:`SimInspectionCamera` sees them all.
 """
 
 from __future__ import annotations
@@ -28,19 +27,9 @@ from insitu.sim.render import NOMINAL_EXPOSURE_MS
 from insitu.sim.scene import Scene
 
 
-def world_burns(world: SimWorld) -> list[Burn]:
-    """The marks burnt into ``world``'s parts so far (kept on the world, so that every
-    controller and camera of it shares them; world frame, they stay where they were burnt)."""
-    burns = getattr(world, "burns", None)
-    if burns is None:
-        burns = []
-        world.burns = burns          # SimWorld has no field for it yet: see the module notes
-    return burns
-
-
 class SimController:
     """Executes :class:`Command` lists on ``world``'s rig. ``burns``: the marks this
-    controller made (also added to :func:`world_burns`); ``elapsed_s``: simulated time
+    controller made (also added to ``world.burns``); ``elapsed_s``: simulated time
     (moves at the set speeds between nominal focus points, plus delays); ``sample_mm``:
     spacing of burn samples along a move."""
 
@@ -135,7 +124,7 @@ class SimController:
             w = np.concatenate([w for _, w in self._open])
             burn = Burn(pts, w, self.power_pct)
             self.burns.append(burn)
-            world_burns(self.world).append(burn)
+            self.world.burns.append(burn)
         self._open = []
 
 
@@ -154,5 +143,5 @@ class SimInspectionCamera(SimCamera):
             return super().grab(timeout_s)
         self._frames += 1
         return render_inspection(self.world.rig, self.world.renderer().scene,
-                                 list(world_burns(self.world)), self.inspection_exposure_ms,
+                                 list(self.world.burns), self.inspection_exposure_ms,
                                  seed=self.world.seed + self._frames)

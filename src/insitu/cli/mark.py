@@ -1,0 +1,116 @@
+"""``insitu mark``: place a pattern on a measured cloud, write the mark job, optionally mark it."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated
+
+import typer
+from rich.table import Table
+
+from insitu.cli.common import check_output, console, fail, one_line_errors, progress_bar
+
+
+@one_line_errors
+def mark(
+    cloud: Annotated[Path, typer.Option(help="Measured point cloud (.ply) of the part.")],
+    pattern: Annotated[str, typer.Option(help='SVG, DXF or image file, text:"...", qr:"..." or '
+                                              'fiducials:COLSxROWS.')],
+    at: Annotated[tuple[float, float], typer.Option(help="Centre of the pattern X Y, mm, "
+                                                         "world frame.")],
+    width: Annotated[float, typer.Option(help="Width of the pattern, mm (before --rotate).")],
+    out: Annotated[Path, typer.Option("-o", "--output", help="Mark job to write (.json).")],
+    rotate: Annotated[float, typer.Option(help="Rotation, degrees CCW about +z.")] = 0.0,
+    mode: Annotated[str, typer.Option(help="planar: keep x, y, take z from the surface; wrap: "
+                                           "keep lengths along the surface.")] = "planar",
+    hatch: Annotated[float | None, typer.Option(help="Fill filled regions with hatch lines this "
+                                                     "far apart, mm (default: outlines "
+                                                     "only).")] = None,
+    hatch_angle: Annotated[float, typer.Option(help="Hatch direction, degrees from +x.")] = 0.0,
+    cross: Annotated[bool, typer.Option(help="Cross-hatch (a second hatch at +90°).")] = False,
+    power: Annotated[float, typer.Option(help="Laser power, % of full.")] = 30.0,
+    frequency: Annotated[float, typer.Option(help="Pulse frequency, kHz.")] = 20.0,
+    speed: Annotated[float, typer.Option(help="Mark speed, mm/s.")] = 500.0,
+    jump_speed: Annotated[float, typer.Option(help="Jump speed, mm/s.")] = 3000.0,
+    run: Annotated[bool, typer.Option(help="Also mark the job on the rig.")] = False,
+    preview: Annotated[bool, typer.Option(help="With --run: first draw the outline with the "
+                                               "pilot laser.")] = False,
+    resume: Annotated[bool, typer.Option(help="With --run: continue an interrupted job after "
+                                              "its last completed path.")] = False,
+    inspect: Annotated[Path | None, typer.Option(help="With --run: write the camera's image of "
+                                                      "the marked part (.png).")] = None,
+    rig: Annotated[Path | None, typer.Option(help="Rig file (default: the simulated rig).")] = None,
+    field: Annotated[Path | None, typer.Option(help="Field correction (FIELD.json) to apply "
+                                                    "(default: the rig file's).")] = None,
+    workpiece: Annotated[str, typer.Option(help="Simulated rig: the part on the table.")] = "step-block",
+    seed: Annotated[int, typer.Option(help="Simulated rig: seed.")] = 0,
+) -> None:
+    """Place a pattern with its centre at X Y, WIDTH mm wide, turned by --rotate; project it
+    onto the measured surface (planar or wrap) and write the mark job. The job is refused,
+    and nothing is written, when any point lies outside the scan field or the focus range, over
+    a hole in the cloud or over a steep wall. --run then marks it: the laser is on only while
+    marking, off at once on any fault, and an interrupted job resumes with --resume."""
+    from insitu.marking import LaserParams
+    from insitu.services import mark as svc
+    from insitu.services.scan import sim_world, sim_world_from_rig_file
+
+    check_output(out, ".json")
+    if inspect is not None:
+        check_output(inspect, ".png")
+    if (preview or resume or inspect is not None) and not run:
+        fail("--preview, --resume and --inspect go with --run")
+    if not 0 <= power <= 100:
+        fail(f"--power {power:g}: expected 0 … 100 %")
+    for name, value in (("--frequency", frequency), ("--speed", speed),
+                        ("--jump-speed", jump_speed)):
+        if not value > 0:
+            fail(f"{name} {value:g}: expected a positive number")
+    placement = svc.Placement(pattern, at, width, rotate, mode, hatch, hatch_angle, cross)
+    world = (sim_world_from_rig_file(rig, workpiece) if rig is not None
+             else sim_world(workpiece, seed=seed))
+    field = field if field is not None else (svc.rig_field_correction(rig) if rig else None)
+    driver = svc.sim_driver(world, field)
+    laser = LaserParams(power_pct=power, frequency_khz=frequency, mark_speed_mm_s=speed,
+                        jump_speed_mm_s=jump_speed)
+    with progress_bar("projecting") as progress:
+        progress(0, 1)
+        plan = svc.plan_mark(cloud, placement, driver, laser)
+    if resume:
+        from insitu.marking import read_job
+        if not out.exists() or read_job(out).digest() != plan.job.digest():
+            fail(f"--resume: {out} does not hold this job; run without --resume to start it")
+        ppath = svc.progress_path_for(out)
+    else:
+        ppath = svc.save_job(out, plan.job)
+    _summary(out, placement, plan, field)
+    if not run:
+        return
+    from insitu.devices.sim_marking import SimController, SimInspectionCamera
+    with progress_bar("marking") as progress:
+        result = svc.mark(plan.job, driver, SimController(world), ppath, resume, preview,
+                          progress=progress)
+    console.print(f"marked paths {result.start_path + 1}…{result.completed} of {result.total} "
+                  f"({result.state}); progress in {ppath}", highlight=False)
+    if inspect is not None:
+        svc.save_image(inspect, SimInspectionCamera(world).grab())
+        console.print(f"wrote {inspect}", highlight=False)
+
+
+def _summary(out: Path, placement, plan, field: Path | None) -> None:
+    pts = plan.projection.points
+    (cx, cy), (w, h) = plan.pattern.centre, plan.pattern.size
+    e = plan.estimate
+    table = Table(title=f"mark job → {out}", show_header=False)
+    table.add_row("pattern", f"{plan.pattern.name}: {w:.3f} × {h:.3f} mm, centre "
+                             f"({cx:.3f}, {cy:.3f})")
+    fill = (f"hatch {placement.hatch_mm:g} mm at {placement.hatch_angle_deg:g}°"
+            + (" crossed" if placement.cross else "")) if placement.hatch_mm else "outlines"
+    table.add_row("marks", f"{len(plan.job.paths):,} paths, {len(pts):,} points ({fill})")
+    mode = placement.mode + (f", worst stretch {plan.projection.max_stretch:.2%}"
+                             if placement.mode == "wrap" else "")
+    table.add_row("projection", mode)
+    table.add_row("z on the surface, mm", f"{pts[:, 2].min():.3f} … {pts[:, 2].max():.3f}")
+    table.add_row("field correction", str(field) if field else "none")
+    table.add_row("estimated time", f"{e.total_s:.1f} s (mark {e.mark_mm:.0f} mm, jump "
+                                    f"{e.jump_mm:.0f} mm)")
+    console.print(table)

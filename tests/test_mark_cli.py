@@ -1,0 +1,128 @@
+"""``insitu mark`` end to end: placement as asked, refusals that write nothing, marking on the
+simulated rig with a progress record, resume and inspection."""
+
+import json
+import re
+
+import numpy as np
+import pytest
+from typer.testing import CliRunner
+
+from insitu.cli.main import app
+from insitu.formats.pointcloud import PointCloud, write_ply
+from insitu.marking import read_job
+
+runner = CliRunner()
+SQUARE = ('<svg xmlns="http://www.w3.org/2000/svg" width="20mm" height="10mm" '
+          'viewBox="0 0 20 10"><rect x="0" y="0" width="20" height="10" fill="black"/></svg>')
+
+
+def _run(*args):
+    return runner.invoke(app, [str(a) for a in args])
+
+
+def _cloud(path, x0, x1, y0, y1, z, step=0.2, hole=None):
+    """A measured-looking flat patch at height z (mm), with a round hole (cx, cy, r) if given."""
+    g = np.meshgrid(np.arange(x0, x1 + 1e-9, step), np.arange(y0, y1 + 1e-9, step))
+    xy = np.column_stack([g[0].ravel(), g[1].ravel()])
+    if hole is not None:
+        xy = xy[np.hypot(xy[:, 0] - hole[0], xy[:, 1] - hole[1]) > hole[2]]
+    z = z + np.random.default_rng(0).normal(0, 0.005, len(xy))
+    write_ply(path, PointCloud(np.column_stack([xy, z])))
+    return path
+
+
+@pytest.fixture(scope="module")
+def files(tmp_path_factory):
+    d = tmp_path_factory.mktemp("mark")
+    (d / "rect.svg").write_text(SQUARE)
+    # the top of the step block's 3 mm step (x ±10, y −40…−20 on the simulated rig)
+    _cloud(d / "step3.ply", -10, 10, -40, -20, 3.0)
+    return d
+
+
+def _points(job_path):
+    return np.vstack([p.points for p in read_job(job_path).paths])
+
+
+def test_job_is_placed_scaled_and_turned_as_asked(files, tmp_path):
+    out = tmp_path / "job.json"
+    res = _run("mark", "--cloud", files / "step3.ply", "--pattern", files / "rect.svg",
+               "--at", 1.0, -30.0, "--width", 8, "--hatch", 0.25, "-o", out)
+    assert res.exit_code == 0, res.output
+    p = _points(out)
+    lo, hi = p[:, :2].min(0), p[:, :2].max(0)
+    assert np.allclose(0.5 * (lo + hi), [1.0, -30.0], atol=0.02)
+    assert np.allclose(hi - lo, [8.0, 4.0], atol=0.02)
+    assert np.all(np.abs(p[:, 2] - 3.0) < 0.02)
+    assert "hatch 0.25 mm" in res.output and "estimated time" in res.output
+    assert len(read_job(out).paths) > 10                  # outline + ~16 hatch lines
+
+    turned = tmp_path / "turned.json"
+    res = _run("mark", "--cloud", files / "step3.ply", "--pattern", files / "rect.svg",
+               "--at", 1.0, -30.0, "--width", 8, "--rotate", 90, "-o", turned)
+    assert res.exit_code == 0, res.output
+    q = _points(turned)
+    assert np.allclose(q[:, :2].max(0) - q[:, :2].min(0), [4.0, 8.0], atol=0.02)
+
+
+@pytest.mark.parametrize("args, message", [
+    (("--at", 1.0, -30.0, "--width", 30), "over a hole in the point cloud"),
+    (("--at", 1.0, -30.0, "--width", 8, "--mode", "cone"), "--mode 'cone'"),
+    (("--at", 1.0, -30.0, "--width", -2), "width must be > 0 mm"),
+    (("--at", 1.0, -30.0, "--width", 8, "--preview"), "go with --run"),
+    (("--at", 1.0, -30.0, "--width", 8, "--power", 120), "--power 120"),
+])
+def test_refusals_name_the_problem_and_keep_the_old_job(files, tmp_path, args, message):
+    out = tmp_path / "job.json"
+    out.write_text("the previous job")
+    res = _run("mark", "--cloud", files / "step3.ply", "--pattern", files / "rect.svg", *args,
+               "-o", out)
+    assert res.exit_code == 1
+    lines = [ln for ln in res.output.splitlines() if ln.strip()]
+    assert len(lines) == 1 and message in lines[0], res.output
+    assert out.read_text() == "the previous job"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["job.json"]
+
+
+def test_pattern_outside_the_field_and_over_a_hole(tmp_path):
+    (tmp_path / "rect.svg").write_text(SQUARE)
+    edge = _cloud(tmp_path / "edge.ply", 90, 110, -10, 10, 0.0)
+    res = _run("mark", "--cloud", edge, "--pattern", tmp_path / "rect.svg", "--at", 98, 0,
+               "--width", 8, "-o", tmp_path / "a.json")
+    assert res.exit_code == 1 and "outside the scan field ±100 × ±100 mm" in res.output
+    holed = _cloud(tmp_path / "holed.ply", -10, 10, -10, 10, 0.0, hole=(2.0, 1.0, 1.5))
+    res = _run("mark", "--cloud", holed, "--pattern", tmp_path / "rect.svg", "--at", 0, 0,
+               "--width", 8, "--hatch", 0.2, "-o", tmp_path / "b.json")
+    assert res.exit_code == 1 and "over a hole" in res.output
+    where = re.search(r"\(x, y\) = \(([-\d.]+), ([-\d.]+)\) mm", res.output)
+    assert np.hypot(float(where[1]) - 2.0, float(where[2]) - 1.0) < 1.6   # it names the place
+    assert not (tmp_path / "a.json").exists() and not (tmp_path / "b.json").exists()
+
+
+def test_bad_inputs(files, tmp_path):
+    out = tmp_path / "job.json"
+    for cloud, pattern, message in (
+            (tmp_path / "none.ply", files / "rect.svg", "no such point cloud file"),
+            (files / "step3.ply", tmp_path / "none.svg", "no such pattern file"),
+            (files / "step3.ply", "text:", "empty")):
+        res = _run("mark", "--cloud", cloud, "--pattern", pattern, "--at", 0, -30, "--width", 5,
+                   "-o", out)
+        assert res.exit_code == 1 and message in res.output, res.output
+        assert "Traceback" not in res.output and not out.exists()
+
+
+def test_run_marks_the_part_records_progress_resumes_and_inspects(files, tmp_path):
+    out, img = tmp_path / "job.json", tmp_path / "inspect.png"
+    args = ("mark", "--cloud", files / "step3.ply", "--pattern", files / "rect.svg", "--at",
+            0.0, -30.0, "--width", 6, "-o", out, "--run")
+    res = _run(*args, "--preview", "--inspect", img)
+    assert res.exit_code == 0, res.output
+    progress = json.loads((tmp_path / "job.progress.json").read_text())
+    assert progress["state"] == "done" and progress["completed"] == len(read_job(out).paths)
+    assert img.stat().st_size > 10_000
+    res = _run(*args, "--resume")
+    assert res.exit_code == 0 and "(done)" in res.output, res.output
+    # a job that no longer matches the file cannot be resumed
+    res = _run(*args[:-5], "--width", 5, "-o", out, "--run", "--resume")
+    assert res.exit_code == 1 and "does not hold this job" in res.output
