@@ -3,7 +3,9 @@
 The default rig's head lands ~0.8 mm RMS / ~2.5 mm max off over ±90 mm. A 21 × 21 = 441-spot
 field calibration is recorded (full-size frames unless --binning), and fitted by
 ``calibrate_field`` (timed: reading frames, finding spots, training with 5-fold CV) with the
-RBF network and with the correction table. Validation on other positions (a 20 × 20 grid
+RBF network and with the correction table; and the marked-fiducial variant: 2 mm circles
+marked uncorrected on the plate at the same commands, imaged once, fitted with the RBF network.
+Validation on other positions (a 20 × 20 grid
 offset by half a pitch): the corrected commands are sent to the simulated head, each spot frame
 is rendered through the sim camera and detected, and its landing point measured with the
 operator's camera (the rig's own frame) — and, from the truth, where the beam really landed
@@ -28,7 +30,7 @@ from insitu.devices.sim import SimCamera, SimScanHead, SimStage, SimWorld
 from insitu.errors import CalibrationError
 from insitu.formats.sequence import Sequence
 from insitu.services.field import calibrate_field, measure_spots, report_png
-from insitu.sim.record import record_field_calibration
+from insitu.sim.record import record_field_calibration, record_marked_field_calibration
 from insitu.sim.rig import default_rig
 from insitu.vision.spots import find_spot
 
@@ -88,6 +90,13 @@ def main() -> None:
                   f"(binning {args.binning}), seed {args.seed}: {time.perf_counter() - t0:.1f} s "
                   f"→ {rec}")
 
+    marked = tmp / "field-marked"
+    t0 = time.perf_counter()
+    if not (args.reuse and (marked / "sequence.json").is_file()):
+        record_marked_field_calibration(SimWorld(rig, seed=args.seed), marked, n=args.n,
+                                        half_mm=args.half)
+    console.print(f"marked and imaged {args.n}×{args.n} circles: {time.perf_counter() - t0:.1f} s")
+
     pitch = 2 * args.half / (args.n - 1)
     g = np.arange(-args.half + pitch / 2, args.half, pitch)
     Q = np.array([(x, y) for y in g for x in g])
@@ -104,21 +113,22 @@ def main() -> None:
                                        f"{t_measure:.1f} s)")
     for c in ("method", "time s", "spots", "model", "CV RMS |δ| mm", "CV fold RMS mm"):
         summary.add_column(c)
-    for method in ("rbf", "table"):
+    for name, method, folder in (("rbf", "rbf", rec), ("table", "table", rec),
+                                 ("rbf, marked circles", "rbf", marked)):
         t0 = time.perf_counter()
-        cal = calibrate_field(rec, method)
+        cal = calibrate_field(folder, method)
         dt = time.perf_counter() - t0
-        report_png(cal, tmp / f"field-{method}.png")
+        report_png(cal, tmp / f"field-{name.replace(', ', '-').replace(' ', '-')}.png")
         r = cal.residuals
         model = (f"σ {cal.rbf.sigma_mm:g} mm, goal {cal.rbf.mse_goal_mm2:g} mm², "
                  f"{len(cal.rbf.centres_mm)} neurons" if method == "rbf" else
                  f"{len(cal.table.x_nodes_mm)}×{len(cal.table.y_nodes_mm)} nodes, "
                  f"smoothing {cal.table.smoothing:g}")
-        summary.add_row(method, f"{dt:.1f}", f"{int(r['points'])} ({int(r['spots_skipped'])} "
+        summary.add_row(name, f"{dt:.1f}", f"{int(r['points'])} ({int(r['spots_skipped'])} "
                         "not seen)", model, f"{r['cv_rms_mm']:.4f}",
                         f"{r['cv_fold_rms_mean_mm']:.4f} ± {r['cv_fold_rms_std_mm']:.4f}")
         K = cal.correct(Q)
-        results[method] = (cal, rig.beams.landing(K) - Q, measure(world, K) - Q)
+        results[name] = (cal, rig.beams.landing(K) - Q, measure(world, K) - Q)
     console.print(summary)
 
     x0, x1, y0, y1 = results["rbf"][0].region_mm

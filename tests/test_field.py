@@ -13,6 +13,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from typer.testing import CliRunner
 
+from insitu.calibrate.fiducials import find_circles
 from insitu.calibrate.field import (CorrectionTable, RBFNetwork, area_table, fit_rbf, fit_table,
                                     folds, invert, ols_order, select_rbf, select_table,
                                     table_nodes)
@@ -21,11 +22,11 @@ from insitu.calibrate.field_file import (FieldCorrection, correction_from_file,
                                          save_field_correction)
 from insitu.cli.field import correct, field
 from insitu.devices.sim import SimWorld
-from insitu.errors import CalibrationError, ConfigError, SafetyError
+from insitu.errors import CalibrationError, ConfigError, FormatError, SafetyError
 from insitu.formats.sequence import Sequence, SequenceWriter
 from insitu.geometry.distortion import PolynomialFieldDistortion
 from insitu.services.field import calibrate_field, check_drift, measure_spots
-from insitu.sim.record import record_field_calibration
+from insitu.sim.record import record_field_calibration, record_marked_field_calibration
 from insitu.sim.rig import default_rig
 
 FIELD = PolynomialFieldDistortion.random(np.random.default_rng(4), rms_mm=0.8)
@@ -368,3 +369,50 @@ def test_cli_bad_input(rec, tmp_path):
     targets.write_text("x,y\n0,0\n")
     _one_line_error(_run("galvo", "correct", wrong, targets, "-o", commands), "kind")
     assert not commands.exists() and not list(tmp_path.glob(".*"))
+
+
+# -- the marked-fiducial variant (Mikkelstrup et al. §2.4) -----------------------------------
+@pytest.fixture(scope="module")
+def marked(tmp_path_factory):
+    """Circles of 2 mm marked uncorrected on a 9 × 9 grid over ±80 mm, imaged (binning 2)."""
+    out = tmp_path_factory.mktemp("marked") / "rec"
+    record_marked_field_calibration(SimWorld(default_rig(3, binning=2), seed=3), out, n=9,
+                                    half_mm=80.0)
+    return out
+
+
+def test_marked_circles_are_found_where_the_beam_landed(marked):
+    seq = Sequence.open(marked)
+    assert len(seq) == 1 and len(seq.frames[0].fiducials) == 81
+    rig = default_rig(3, binning=2)
+    Q = np.asarray(seq.frames[0].fiducials)
+    # with the true camera, the circle fit finds the true landing points (0.1 px at binning 2)
+    centres, why = find_circles(seq.read_frame(0), rig.camera, 0.0, Q, 2.0)
+    ok = np.array([w is None for w in why])
+    assert ok.sum() >= 60 and all(w is None or "outside" in w or "border" in w for w in why)
+    assert rms(centres[ok] - rig.beams.landing(Q[ok])) < 0.02
+    # through the sequence (operator camera): the deviations and the camera's own error
+    m = measure_spots(seq)
+    assert len(m.commands) == ok.sum() and rms(m.deviations) > 0.5
+    assert rms(m.landed - rig.beams.landing(m.commands)) < 0.2
+
+
+def test_marked_circles_calibrate_the_field(marked):
+    cal = calibrate_field(marked, "rbf")
+    assert cal.residuals["cv_rms_mm"] < 0.03 and cal.residuals["before_rms_mm"] > 0.5
+
+
+def test_a_frame_without_marks_is_refused(marked, tmp_path):
+    seq = Sequence.open(marked)
+    blank = tmp_path / "blank"
+    with SequenceWriter(blank, "field-calibration", seq.scan_head.model_dump(),
+                        camera=seq.camera.model_dump()) as w:
+        w.add(np.full_like(seq.read_frame(0), 90), fiducials=seq.frames[0].fiducials,
+              fiducial_diameter_mm=2.0, plate_z_mm=0.0)
+    with pytest.raises(CalibrationError, match=r"no usable circle in \d+ of \d+ circles"):
+        calibrate_field(blank)
+    with pytest.raises(FormatError, match="fiducial_diameter_mm: missing"):
+        with SequenceWriter(tmp_path / "nodiam", "field-calibration", seq.scan_head.model_dump(),
+                            camera=seq.camera.model_dump()) as w:
+            w.add(seq.read_frame(0), fiducials=[[0.0, 0.0]], plate_z_mm=0.0)
+    assert not (tmp_path / "nodiam").exists()

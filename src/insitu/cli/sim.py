@@ -30,6 +30,8 @@ def record_cmd(
     binning: Annotated[int, typer.Option(help="Divide the 2448×2048 image by this (1, 2, 4).")] = 1,
     views: Annotated[int, typer.Option(help="Camera calibration: checkerboard views.")] = 15,
     grid: Annotated[int, typer.Option(help="Field calibration: spots per side.")] = 21,
+    marked: Annotated[bool, typer.Option(help="Field calibration: mark circles on the plate "
+                                              "and image them instead of pilot spots.")] = False,
 ) -> None:
     """Write a recorded sequence (formats.md) from the simulated rig, with truth.json."""
     from insitu.services import sim_world
@@ -45,6 +47,8 @@ def record_cmd(
             record.record_scan(world, out, spacing=spacing, region=region, progress=progress)
         elif kind == "height-calibration":
             record.record_height_calibration(world, out, progress=progress)
+        elif kind == "field-calibration" and marked:
+            record.record_marked_field_calibration(world, out, n=grid, progress=progress)
         elif kind == "field-calibration":
             record.record_field_calibration(world, out, n=grid, progress=progress)
         else:

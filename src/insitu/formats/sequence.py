@@ -99,6 +99,8 @@ class FrameSpec(BaseModel):
     file: str
     line: LineSpec | None = None
     spot: Vec2 | None = None
+    fiducials: Annotated[list[Vec2], Field(min_length=1)] | None = None
+    fiducial_diameter_mm: Positive | None = None
     plate_z_mm: Finite | None = None
     exposure_ms: Positive | None = None
 
@@ -124,6 +126,8 @@ def frame_problems(kind: str, frame: FrameSpec) -> list[tuple[str, str]]:
     """(field, message) for each per-kind rule of formats.md that ``frame`` breaks."""
     need = {"scan": ("line",), "height-calibration": ("line", "plate_z_mm"),
             "field-calibration": ("spot", "plate_z_mm")}.get(kind, ())
+    if kind == "field-calibration" and frame.fiducials is not None:    # marked circles
+        need = ("fiducials", "fiducial_diameter_mm", "plate_z_mm")
     return [(name, f"missing (required in a '{kind}' sequence)") for name in need
             if getattr(frame, name) is None]
 

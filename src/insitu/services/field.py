@@ -1,9 +1,10 @@
-"""Field calibration use cases: measure where the spots of a recorded field calibration landed,
-fit the correction, correct targets, check for drift.
+"""Field calibration use cases: measure where the spots (or marked circles) of a recorded field
+calibration landed, fit the correction, correct targets, check for drift.
 
 A spot's landing point: the camera ray of its centre (the sequence's camera, i.e. the
 operator's calibration) meets the plate z = plate_z_mm; a plate not at z = 0 is carried to
-z = 0 along the nominal beam (through the pivot, or vertical for a telecentric lens).
+z = 0 along the nominal beam (through the pivot, or vertical for a telecentric lens). Marked
+circles (Mikkelstrup et al. §2.4): see :mod:`insitu.calibrate.fiducials`.
 """
 
 from __future__ import annotations
@@ -19,6 +20,7 @@ import numpy as np
 
 from insitu.calibrate.field import (DEFAULT_GOALS, DEFAULT_SMOOTHING, MIN_POINTS, Selection,
                                     area_table, select_rbf, select_table, stats)
+from insitu.calibrate.fiducials import CircleSettings, find_circles
 from insitu.calibrate.field_file import (AreaRow, CVRow, FieldCorrection, model_spec,
                                          save_field_correction)
 from insitu.calibrate.report import report_image, write_report_png
@@ -63,28 +65,12 @@ def _plate_height(seq: Sequence) -> float:
     return float(zs[0])
 
 
-def measure_spots(seq: Sequence, settings: SpotSettings = SpotSettings(),
-                  progress: Progress | None = None, max_deviation_mm: float = 10.0,
-                  strict: bool = True) -> SpotMeasurements:
-    """Find the spot in every frame (frames are read and searched on a few threads) and
-    intersect its camera ray with the plate. Frames whose spot is outside the camera's view,
-    not found, or more than ``max_deviation_mm`` from its command are skipped; with
-    ``strict``, CalibrationError if more than 10 % of the frames in view fail or fewer than
-    10 spots remain."""
-    if seq.kind != "field-calibration":
-        raise CalibrationError(f"{seq.folder}: a '{seq.kind}' sequence, not a field calibration")
-    z = _plate_height(seq)
-    cam, head = camera_model(seq.camera), seq.scan_head
-    H, tele = head.pivot_height_mm, head.lens == "telecentric"
-    Q = np.array([f.spot for f in seq.frames], np.float64)
-    scale = 1.0 if tele else (H - z) / H                  # z = 0 → plate, along the beam
-    expected = cam.project(np.column_stack([Q * scale, np.full(len(Q), z)]))
-    in_view = cam.in_image(np.nan_to_num(expected, nan=-1e9))
-
+def _spot_pixels(seq: Sequence, settings: SpotSettings, progress: Progress | None):
+    """Per frame: the spot centre (2,) px, or why there is none (frames are read and searched
+    on a few threads)."""
     def one(i: int):
-        where = f"{seq.folder / seq.frames[i].file}"
         try:
-            return find_spot(seq.read_frame(i), settings, where).uv
+            return find_spot(seq.read_frame(i), settings, f"{seq.folder / seq.frames[i].file}").uv
         except CalibrationError as e:
             return str(e)
 
@@ -94,33 +80,92 @@ def measure_spots(seq: Sequence, settings: SpotSettings = SpotSettings(),
             results.append(r)
             if progress:
                 progress(k + 1, len(seq))
-    ok = np.array([not isinstance(r, str) for r in results])
-    uv = np.array([r if not isinstance(r, str) else (np.nan, np.nan) for r in results])
-    landed = np.full_like(Q, np.nan)
+    return results
+
+
+def _circle_centres(seq: Sequence, cam, z: float, settings: CircleSettings,
+                    progress: Progress | None):
+    """Marked-fiducial frames: per circle its frame, command (2,) mm and centre on the plate
+    (2,) mm or why there is none."""
+    frames, Q, found = [], [], []
+    for i, f in enumerate(seq.frames):
+        if f.fiducials is None:
+            raise CalibrationError(f"{seq.folder}: frames[{i}]: a spot frame among marked-"
+                                   "circle frames (record one kind per sequence)")
+        q = np.asarray(f.fiducials, np.float64)
+        c, why = find_circles(seq.read_frame(i), cam, z, q, f.fiducial_diameter_mm, settings)
+        where = f"{seq.folder / f.file}"
+        found += [c[j] if r is None else f"{where}: circle at {q[j].tolist()}: {r}"
+                  for j, r in enumerate(why)]
+        frames += [i] * len(q)
+        Q.append(q)
+        if progress:
+            progress(i + 1, len(seq))
+    return np.array(frames, int), np.vstack(Q), found
+
+
+def measure_spots(seq: Sequence, settings: SpotSettings = SpotSettings(),
+                  progress: Progress | None = None, max_deviation_mm: float = 10.0,
+                  strict: bool = True, circles: CircleSettings = CircleSettings()
+                  ) -> SpotMeasurements:
+    """Where the head's spots landed: in spot frames (``spot``) the pilot spot's centre, in
+    marked-fiducial frames (``fiducials``: the commanded centres of circles marked on the
+    plate, ``fiducial_diameter_mm``) each circle's fitted centre; each intersected with the
+    plate through the camera. Spots outside the camera's view, not found, or more than
+    ``max_deviation_mm`` from their command are skipped; with ``strict``, CalibrationError if
+    more than 10 % of those in view fail or fewer than 10 remain."""
+    if seq.kind != "field-calibration":
+        raise CalibrationError(f"{seq.folder}: a '{seq.kind}' sequence, not a field calibration")
+    z = _plate_height(seq)
+    cam, head = camera_model(seq.camera), seq.scan_head
+    H, tele = head.pivot_height_mm, head.lens == "telecentric"
+    scale = 1.0 if tele else (H - z) / H                  # z = 0 → plate, along the beam
+    marked = any(f.spot is None for f in seq.frames)
+    if marked:
+        frames, Q, found = _circle_centres(seq, cam, z, circles, progress)
+        Q_plate = Q * scale
+    else:
+        frames = np.arange(len(seq))
+        Q = np.array([f.spot for f in seq.frames], np.float64)
+        Q_plate = Q * scale
+        found = _spot_pixels(seq, settings, progress)
+    expected = cam.project(np.column_stack([Q_plate, np.full(len(Q), z)]))
+    in_view = cam.in_image(np.nan_to_num(expected, nan=-1e9))
+    ok = np.array([not isinstance(r, str) for r in found], bool)
+    on_plate = np.full_like(Q, np.nan)
+    uv = np.full_like(Q, np.nan)
     if ok.any():
-        o, d = cam.rays(uv[ok])
-        s = (z - o[2]) / d[:, 2]
-        landed[ok] = (o[:2] + s[:, None] * d[:, :2]) / scale
+        got = np.array([r for r in found if not isinstance(r, str)], np.float64)
+        if marked:
+            on_plate[ok] = got
+            uv[ok] = cam.project(np.column_stack([got, np.full(len(got), z)]))
+        else:
+            uv[ok] = got
+            o, d = cam.rays(got)
+            s = (z - o[2]) / d[:, 2]
+            on_plate[ok] = o[:2] + s[:, None] * d[:, :2]
+    landed = on_plate / scale
     far = ok & (np.linalg.norm(landed - Q, axis=1) > max_deviation_mm)
+    what = "circle" if marked else "spot"
     skipped = []
     for i in np.nonzero(~ok | far)[0]:
-        reason = results[i] if not ok[i] else (
-            f"{seq.folder / seq.frames[i].file}: the spot is "
+        reason = found[i] if not ok[i] else (
+            f"{seq.folder / seq.frames[frames[i]].file}: the {what} is "
             f"{np.linalg.norm(landed[i] - Q[i]):.1f} mm from its command (more than "
             f"{max_deviation_mm:g} mm: a reflection?)")
-        skipped.append((int(i), reason if in_view[i] else "outside the camera's view"))
+        skipped.append((int(frames[i]), reason if in_view[i] else "outside the camera's view"))
     good = ok & ~far
-    m = SpotMeasurements(np.nonzero(good)[0], Q[good], uv[good], landed[good], z, skipped,
+    m = SpotMeasurements(frames[good], Q[good], uv[good], landed[good], z, skipped,
                          int(np.sum(~good & ~in_view)))
     if strict:
-        failed = [(i, r) for i, r in skipped if in_view[i]]
+        failed = [r for (_, r), i in zip(skipped, np.nonzero(~good)[0]) if in_view[i]]
         if len(failed) > MAX_FAILED_FRACTION * max(int(in_view.sum()), 1):
-            raise CalibrationError(f"{seq.folder}: no usable spot in {len(failed)} of "
-                                   f"{int(in_view.sum())} frames in the camera's view, e.g. "
-                                   f"{failed[0][1]}")
+            raise CalibrationError(f"{seq.folder}: no usable {what} in {len(failed)} of "
+                                   f"{int(in_view.sum())} {what + 's' if marked else 'frames'} "
+                                   f"in the camera's view, e.g. {failed[0]}")
         if good.sum() < MIN_POINTS:
             first = f": {skipped[0][1]}" if skipped else ""
-            raise CalibrationError(f"{seq.folder}: only {int(good.sum())} spots measured (need "
+            raise CalibrationError(f"{seq.folder}: only {int(good.sum())} {what}s measured (need "
                                    f"at least {MIN_POINTS} for a field correction){first}")
     return m
 

@@ -112,6 +112,30 @@ def record_field_calibration(world: SimWorld, out: Path, n: int = 21, half_mm: f
     return out
 
 
+def record_marked_field_calibration(world: SimWorld, out: Path, n: int = 21,
+                                    half_mm: float = 90.0, diameter_mm: float = 2.0,
+                                    progress: Progress | None = None) -> Path:
+    """The marked-fiducial variant (Mikkelstrup et al. §2.4): circles of ``diameter_mm`` are
+    marked, uncorrected, at an n × n grid of commands over ±half_mm on the plate at z = 0,
+    then imaged under room light: one frame with the commanded centres (``fiducials``)."""
+    from insitu.devices.sim_marking import SimController, SimInspectionCamera
+    from insitu.marking import GalvoDriver, make_job, run_job
+
+    world.parts = []
+    SimStage(world).move_z(0.0)
+    grid = np.linspace(-half_mm, half_mm, n)
+    Q = np.array([(x, y) for y in grid for x in grid])
+    t = np.linspace(0.0, 2 * np.pi, 97)
+    ring = 0.5 * diameter_mm * np.column_stack([np.cos(t), np.sin(t), np.zeros_like(t)])
+    job = make_job([ring + [q[0], q[1], 0.0] for q in Q])
+    run_job(job, GalvoDriver.from_config(world.rig.nominal), SimController(world),
+            progress=progress)
+    with _writer(world, out, "field-calibration", truth=_truth(world)) as w:
+        w.add(SimInspectionCamera(world).grab(), fiducials=Q.tolist(),
+              fiducial_diameter_mm=float(diameter_mm), plate_z_mm=0.0)
+    return out
+
+
 def record_camera_calibration(world: SimWorld, out: Path, views: int = 15, cols: int = 9,
                               rows: int = 6, square_mm: float = 10.0,
                               progress: Progress | None = None) -> Path:
