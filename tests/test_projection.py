@@ -58,15 +58,15 @@ def test_planar_rejects_outliers():
 def test_densification_follows_a_step():
     cloud = grid_cloud(lambda x, y: np.where(y > 0.0, 5.0, 0.0), step=0.2)
     proj = project_planar([np.array([[1.0, -4.0], [1.0, 4.0]])], cloud)
-    p = proj.paths[0]
+    p = np.vstack(proj.paths)
     assert len(p) > 30                                        # densified, not 2 points
     assert np.diff(p[:, 1]).max() <= proj.step_mm + 1e-9
     far = np.abs(p[:, 1]) > 2 * proj.step_mm
     np.testing.assert_allclose(p[far, 2], np.where(p[far, 1] > 0, 5.0, 0.0), atol=1e-6)
-    # the jump happens within one step of the wall, and is flagged as steep there
-    jumps = np.flatnonzero(np.abs(np.diff(p[:, 2])) > 1.0)
-    assert len(jumps) == 1 and abs(p[jumps[0], 1]) <= 2 * proj.step_mm
-    assert proj.slope_deg.max() > 60
+    # the path is cut where it drops, within one step of the wall; each level is flat
+    low, high = proj.paths
+    assert abs(low[-1, 1]) <= 2 * proj.step_mm and high[0, 1] - low[-1, 1] <= proj.step_mm + 1e-9
+    assert np.ptp(low[:, 2]) < 1e-6 and np.ptp(high[:, 2]) < 1e-6
 
 
 def test_densify_keeps_vertices_and_short_segments():
@@ -184,14 +184,25 @@ def test_check_outside_the_scanned_area():
         check_projection(proj, LIMITS)
 
 
-def test_check_over_a_steep_wall():
+def test_a_line_across_a_step_is_split_at_the_edge():
     cloud = grid_cloud(lambda x, y: np.where(y > 0.0, 10.0, 5.0), -10, 10, -10, 10, 0.2)
     proj = project([np.array([[3.0, -5.0], [3.0, 5.0]])], cloud)
-    with pytest.raises(SafetyError, match=r"\(3\.000, -?0\.\d+\) mm is over a wall steeper than "
+    check_projection(proj, LIMITS)                 # a vertical step has nothing to mark on
+    low, high = proj.paths
+    assert np.allclose(low[:, 2], 5.0, atol=1e-6) and np.allclose(high[:, 2], 10.0, atol=1e-6)
+    assert abs(low[-1, 1]) <= 0.2 + 1e-9 and abs(high[0, 1]) <= 0.2 + 1e-9 and high[0, 1] > low[-1, 1]
+    assert np.allclose(proj.slope_deg, 0.0, atol=1.0)
+
+
+def test_check_over_a_steep_chamfer():
+    chamfer = lambda x, y: np.clip(np.tan(np.radians(70)) * y, 0.0, 5.0)   # 70° from y = 0
+    cloud = grid_cloud(chamfer, -10, 10, -10, 10, 0.1)
+    proj = project([np.array([[3.0, -5.0], [3.0, 5.0]])], cloud)
+    with pytest.raises(SafetyError, match=r"\(3\.000, \d\.\d+\) mm is over a wall steeper than "
                                           r"60° \(local surface slope \d+\.\d°\)"):
         check_projection(proj, LIMITS)
-    # the same wall is fine with a limit beyond its slope, and a line beside it is fine
-    check_projection(project([np.array([[3.0, 1.0], [3.0, 5.0]])], cloud), LIMITS)
+    check_projection(proj, Limits(max_slope_deg=75.0))   # fine with a limit beyond its slope
+    check_projection(project([np.array([[3.0, 3.0], [3.0, 5.0]])], cloud), LIMITS)  # beside it
 
 
 def test_moderate_slope_is_not_a_wall():

@@ -26,7 +26,7 @@ from scipy.ndimage import map_coordinates
 
 from insitu.errors import MeasurementError, SafetyError
 from insitu.formats.pointcloud import PointCloud
-from insitu.marking.surface import Surface
+from insitu.marking.surface import Surface, level_jumps
 
 _MARGIN_MM = 5.0
 _MAX_GRID = 200
@@ -121,14 +121,19 @@ def _split(arr: np.ndarray, off: np.ndarray) -> list[np.ndarray]:
 
 def project_planar(polylines, cloud: PointCloud | np.ndarray | Surface,
                    step_mm: float | None = None) -> Projection:
-    """Keep x, y; z from the surface. Polylines: list of (N, 2) world mm."""
+    """Keep x, y; z from the surface. Polylines: list of (N, 2) world mm. A polyline that
+    crosses a step is split where it drops from one level to the other (the laser is off
+    across the wall), so there may be more paths than polylines."""
     pts, off = _pack(polylines)
     surf = cloud if isinstance(cloud, Surface) else surface_for(polylines, cloud)
     step = float(step_mm or surf.spacing_mm)
     dense, doff = densify_packed(pts, off, step)
     s = surf.sample(dense)
     xyz = np.column_stack([dense, s.z])
-    return Projection(_split(xyz, doff), "planar", step, surf.hole_radius_mm, s.gap_mm,
+    jump = level_jumps(xyz)
+    jump[doff[1:-1] - 1] = False                     # between two polylines: not a jump
+    cuts = np.union1d(doff, np.flatnonzero(jump) + 1)
+    return Projection(_split(xyz, cuts), "planar", step, surf.hole_radius_mm, s.gap_mm,
                       s.slope_deg)
 
 

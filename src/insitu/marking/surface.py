@@ -8,8 +8,10 @@ a plane is fitted to the rest (a small ridge keeps its slope near 0 across a dir
 neighbours do not span, e.g. all on one scan line), points more than 3 RMS off that plane are
 rejected once more, and the plane is refitted. The plane's value at the query point is the
 height (exact on planes, tilted or not); its gradient gives the slope. Where the
-neighbourhood straddles two levels (a step), the slope is that of a plane through all
-neighbours: the wall the pattern would be marked over.
+neighbourhood straddles two levels (a step), the point takes the level of the majority of its
+neighbours and that level's slope: a vertical step has no surface to mark on, the projection
+splits paths where they drop from one level to the other (:func:`level_jumps`), while a
+steep surface (a chamfer, the flank of a curved part) keeps its steep slope.
 """
 
 from __future__ import annotations
@@ -25,7 +27,6 @@ from insitu.formats.pointcloud import PointCloud
 _Z_FLOOR_MM = 0.02          # never reject points closer than this to the robust estimate
 _RIDGE = 0.02               # ridge on the slope terms: as if spread ± this × radius
 _LEVEL_SLOPE = np.tan(np.radians(60.0))   # steeper jumps within a neighbourhood: two levels
-_STEP_FRACTION = 0.2        # rejected share of neighbours that marks a second level
 
 
 @dataclass(frozen=True)
@@ -40,6 +41,13 @@ class SurfaceSample:
     slope_deg: np.ndarray
     gap_mm: np.ndarray
     n_used: np.ndarray
+
+
+def level_jumps(xyz: np.ndarray) -> np.ndarray:
+    """(N - 1,) bool: between consecutive points (N, 3) of a path the surface drops or rises
+    more steeply than a surface could and still be one level (a step's wall)."""
+    d = np.diff(np.asarray(xyz, np.float64), axis=0)
+    return np.abs(d[:, 2]) > _Z_FLOOR_MM + _LEVEL_SLOPE * np.hypot(d[:, 0], d[:, 1])
 
 
 class Surface:
@@ -110,10 +118,6 @@ class Surface:
         n_keep = keep.sum(1)
         grad = coef[:, 1:]
         slope = np.degrees(np.arctan(np.hypot(grad[:, 0], grad[:, 1])))
-        step = n_valid - n_keep > _STEP_FRACTION * n_valid
-        if step.any():                                           # a wall: all neighbours
-            c_all = fit(valid, rows=step)
-            slope[step] = np.degrees(np.arctan(np.hypot(c_all[:, 1], c_all[:, 2])))
         zq = np.where(n_valid > 0, coef[:, 0], np.nan)
         grad[n_valid == 0] = np.nan
         slope[n_valid == 0] = np.nan
