@@ -68,17 +68,6 @@ def scan_clouds(seed: int, binning: int):
     return rig, worlds, clouds
 
 
-def ideal_correction(rig):
-    """The perfect field correction (inverse of the true distortion): a stand-in for the
-    field-calibration file another part of insitu writes."""
-    def correct(q):
-        k = np.array(q, float)
-        for _ in range(30):
-            k = q - rig.distortion(k)
-        return k
-    return correct
-
-
 def measure_square(xy: np.ndarray, centre, width, band=2.0):
     """Centre x, y and width, height of a marked square from points on its sides (mark
     pixels or burn samples): each side's median position."""
@@ -115,7 +104,7 @@ def placement_table(title, rig, world, cloud, cases, inspect: bool) -> None:
         lo, hi = pts[:, :2].min(0), pts[:, :2].max(0)
         dc = 0.5 * (lo + hi) - centre
         row = [label, f"({dc[0]:+.4f}, {dc[1]:+.4f})", f"{(hi[0] - lo[0]) - width:+.4f}"]
-        for corr in (None, ideal_correction(rig)):
+        for corr in (None, rig.ideal_correction()):
             sc = SimController(world)
             run_job(job, GalvoDriver.from_config(rig.nominal, corr), sc)
             burnt = np.vstack([b.points for b in sc.burns])[:, :2]

@@ -122,7 +122,25 @@ def test_run_marks_the_part_records_progress_resumes_and_inspects(files, tmp_pat
     assert progress["state"] == "done" and progress["completed"] == len(read_job(out).paths)
     assert img.stat().st_size > 10_000
     res = _run(*args, "--resume")
-    assert res.exit_code == 0 and "(done)" in res.output, res.output
+    assert res.exit_code == 0 and "nothing left to mark: " in res.output, res.output
     # a job that no longer matches the file cannot be resumed
     res = _run(*args[:-5], "--width", 5, "-o", out, "--run", "--resume")
     assert res.exit_code == 1 and "does not hold this job" in res.output
+
+
+def test_job_show_and_run(files, tmp_path):
+    out = tmp_path / "job.json"
+    res = _run("mark", "--cloud", files / "step3.ply", "--pattern", files / "rect.svg", "--at",
+               0.0, -30.0, "--width", 6, "--hatch", 0.5, "-o", out)
+    assert res.exit_code == 0, res.output
+    n = len(read_job(out).paths)
+    res = _run("job", "show", out)
+    assert res.exit_code == 0 and f"{n} (" in res.output and "estimated time" in res.output
+    assert "last run" not in res.output
+    res = _run("job", "run", out)
+    assert res.exit_code == 0 and f"marked paths 1…{n} of {n} (done)" in res.output, res.output
+    assert f"done: {n} of {n} paths" in _run("job", "show", out).output
+    (tmp_path / "bad.json").write_text('{"format": "insitu-job/1", "paths": []}')
+    res = _run("job", "run", tmp_path / "bad.json")
+    assert res.exit_code == 1 and "bad.json" in res.output and "Traceback" not in res.output
+    assert not (tmp_path / "bad.progress.json").exists()

@@ -3,16 +3,19 @@
 from __future__ import annotations
 
 import sys
+from pathlib import Path
+from typing import Annotated
 
 import typer
 
 from insitu.cli import calibrate as calibrate_cmd
 from insitu.cli import camera as camera_cmd
 from insitu.cli import field as field_cmd
+from insitu.cli import job as job_cmd
 from insitu.cli import mark as mark_cmd
 from insitu.cli import scan as scan_cmd
 from insitu.cli import sim as sim_cmd
-from insitu.cli.common import err_console
+from insitu.cli.common import err_console, fail
 
 app = typer.Typer(help=__doc__.split("\n")[0] if __doc__ else None, no_args_is_help=True,
                   pretty_exceptions_enable=False, add_completion=False,
@@ -22,11 +25,32 @@ app.command("mark")(mark_cmd.mark)
 calibrate_cmd.app.command("camera")(camera_cmd.camera)
 calibrate_cmd.app.command("field")(field_cmd.field)
 app.add_typer(calibrate_cmd.app, name="calibrate")
-galvo_app = typer.Typer(help="The scan head: field correction of commands.", no_args_is_help=True,
-                        rich_markup_mode="markdown")
+galvo_app = typer.Typer(help="The scan head: field correction of commands, and its drift check.",
+                        no_args_is_help=True, rich_markup_mode="markdown")
 galvo_app.command("correct")(field_cmd.correct)
+galvo_app.command("check")(field_cmd.check)
 app.add_typer(galvo_app, name="galvo")
+app.add_typer(job_cmd.app, name="job")
 app.add_typer(sim_cmd.app, name="sim")
+
+
+@app.command("gui")
+def gui(
+    project: Annotated[Path | None, typer.Argument(help="Project file to open "
+                                                        "(.insitu.json).")] = None,
+    rig: Annotated[Path | None, typer.Option(help="Rig file (default: the simulated rig).")] = None,
+    workpiece: Annotated[str, typer.Option(help="Simulated rig: the part on the table.")] = "step-block",
+    binning: Annotated[int, typer.Option(help="Simulated rig: divide the image size by this.")] = 2,
+) -> None:
+    """Open the operator's application: connect the rig, scan, place patterns on the cloud,
+    preview and mark, calibrate; projects save the whole session."""
+    if project is not None and not project.is_file():
+        fail(f"{project}: project file not found")
+    try:
+        from insitu.ui.app import run       # Qt is imported only for this command
+    except ImportError as e:
+        fail(f"the GUI cannot start: {e} (Qt/OpenGL libraries missing? see scripts/setup.sh)")
+    raise typer.Exit(run(project, rig, workpiece, binning))
 
 
 def main() -> None:

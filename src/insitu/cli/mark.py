@@ -50,9 +50,9 @@ def mark(
     and nothing is written, when any point lies outside the scan field or the focus range, over
     a hole in the cloud or over a steep wall. --run then marks it: the laser is on only while
     marking, off at once on any fault, and an interrupted job resumes with --resume."""
-    from insitu.marking import LaserParams
+    from insitu.cli.job import open_station, run_on_station
+    from insitu.marking import LaserParams, read_job
     from insitu.services import mark as svc
-    from insitu.services.scan import sim_world, sim_world_from_rig_file
 
     check_output(out, ".json")
     if inspect is not None:
@@ -66,34 +66,19 @@ def mark(
         if not value > 0:
             fail(f"{name} {value:g}: expected a positive number")
     placement = svc.Placement(pattern, at, width, rotate, mode, hatch, hatch_angle, cross)
-    world = (sim_world_from_rig_file(rig, workpiece) if rig is not None
-             else sim_world(workpiece, seed=seed))
-    field = field if field is not None else (svc.rig_field_correction(rig) if rig else None)
-    driver = svc.sim_driver(world, field)
+    station = open_station(rig, field, workpiece, seed)
     laser = LaserParams(power_pct=power, frequency_khz=frequency, mark_speed_mm_s=speed,
                         jump_speed_mm_s=jump_speed)
     with progress_bar("projecting") as progress:
         progress(0, 1)
-        plan = svc.plan_mark(cloud, placement, driver, laser)
-    if resume:
-        from insitu.marking import read_job
-        if not out.exists() or read_job(out).digest() != plan.job.digest():
-            fail(f"--resume: {out} does not hold this job; run without --resume to start it")
-        ppath = svc.progress_path_for(out)
-    else:
-        ppath = svc.save_job(out, plan.job)
-    _summary(out, placement, plan, field)
-    if not run:
-        return
-    from insitu.devices.sim_marking import SimController, SimInspectionCamera
-    with progress_bar("marking") as progress:
-        result = svc.mark(plan.job, driver, SimController(world), ppath, resume, preview,
-                          progress=progress)
-    console.print(f"marked paths {result.start_path + 1}…{result.completed} of {result.total} "
-                  f"({result.state}); progress in {ppath}", highlight=False)
-    if inspect is not None:
-        svc.save_image(inspect, SimInspectionCamera(world).grab())
-        console.print(f"wrote {inspect}", highlight=False)
+        plan = svc.plan_mark(cloud, placement, station.driver, laser)
+    if resume and (not out.exists() or read_job(out).digest() != plan.job.digest()):
+        fail(f"--resume: {out} does not hold this job; run without --resume to start it")
+    if not resume:
+        svc.save_job(out, plan.job)
+    _summary(out, placement, plan, station.field)
+    if run:
+        run_on_station(station, plan.job, out, resume, preview, inspect)
 
 
 def _summary(out: Path, placement, plan, field: Path | None) -> None:

@@ -116,7 +116,7 @@ class MarkJob(_Model):
     units: Literal["mm"] = "mm"
     laser: LaserParams = LaserParams()
     timing: Timing | None = None
-    paths: list[MarkPath]
+    paths: Annotated[list[MarkPath], Field(min_length=1)]
 
     def path_laser(self, i: int) -> LaserParams:
         """The laser parameters path ``i`` is marked with (job's, overridden by the path's)."""

@@ -57,8 +57,9 @@ class Projection:
 
 
 def _pack(polylines) -> tuple[np.ndarray, np.ndarray]:
-    """list of (N_i, 2) → (ΣN, 2) and offsets (P + 1,)."""
-    arrs = [np.asarray(p, np.float64).reshape(-1, 2) for p in polylines]
+    """list of (N_i, D) → (ΣN, D) and offsets (P + 1,); a flat list of numbers is (N, 2)."""
+    arrs = [np.asarray(p, np.float64) for p in polylines]
+    arrs = [a if a.ndim == 2 else a.reshape(-1, 2) for a in arrs]
     if any(len(a) == 0 for a in arrs):
         raise ValueError("project: a polyline has no points")
     off = np.concatenate([[0], np.cumsum([len(a) for a in arrs])]).astype(np.int64)

@@ -2,14 +2,14 @@
 
 A :class:`Surface` wraps a point cloud (world frame, mm) in a 2-D KD-tree over x, y. At a query
 point it takes the k nearest cloud points within the hole radius and fits a plane robustly:
-points far from the neighbourhood's median (more than 3 MADs, a second level across a step)
-are rejected if they are also farther than a 60° slope could reach across the neighbourhood,
-a plane is fitted to the rest (a small ridge keeps its slope near 0 across a direction the
-neighbours do not span, e.g. all on one scan line), points more than 3 RMS off that plane are
-rejected once more, and the plane is refitted. The plane's value at the query point is the
-height (exact on planes, tilted or not); its gradient gives the slope. Where the
-neighbourhood straddles two levels (a step), the point takes the level of the majority of its
-neighbours and that level's slope: a vertical step has no surface to mark on, the projection
+the query point's level is that of its 6 nearest neighbours; points that a surface of 60°
+slope could not reach from them (a second level across a step) are rejected, a plane is
+fitted to the rest (a small ridge keeps its slope near 0 across a direction the neighbours do
+not span, e.g. all on one scan line), points more than 3 RMS off that plane are rejected once
+more, and the plane is refitted. The plane's value at the query point is the height (exact on
+planes, tilted or not); its gradient gives the slope. Where the neighbourhood straddles two
+levels (a step), the point takes its nearest neighbours' level and that level's slope: a
+vertical step has no surface to mark on, the projection
 splits paths where they drop from one level to the other (:func:`level_jumps`), while a
 steep surface (a chamfer, the flank of a curved part) keeps its steep slope.
 """
@@ -27,6 +27,7 @@ from insitu.formats.pointcloud import PointCloud
 _Z_FLOOR_MM = 0.02          # never reject points closer than this to the robust estimate
 _RIDGE = 0.02               # ridge on the slope terms: as if spread ± this × radius
 _LEVEL_SLOPE = np.tan(np.radians(60.0))   # steeper jumps within a neighbourhood: two levels
+_NEAR = 6                   # nearest neighbours that tell a query point's level
 
 
 @dataclass(frozen=True)
@@ -98,13 +99,15 @@ class Surface:
         r_k = np.where(valid, d, 0.0).max(1)                   # neighbourhood radius
         n_valid = valid.sum(1)
         fit = _PlaneFit(dx, dy, z, ridge=n_valid * (_RIDGE * r_k) ** 2 + 1e-12)
-        # 1: reject a second level: farther from the median than 3 MADs and than a surface
-        #    of slope _LEVEL_SLOPE could reach across the neighbourhood
-        med = _masked_median(z, valid)
-        dev = np.abs(z - med[:, None])
-        mad = _masked_median(dev, valid)
-        thr = np.maximum(4.45 * mad, _Z_FLOOR_MM + _LEVEL_SLOPE * 2 * r_k)
-        keep = valid & (dev <= thr[:, None])
+        # 1: the query point's level (_level_of its nearest neighbours): across a step, the
+        #    neighbours on its side of the gap; elsewhere those a surface of slope
+        #    _LEVEL_SLOPE can reach from the level's height
+        r_near = np.where(valid[:, :_NEAR], d[:, :_NEAR], 0.0).max(1)
+        ref, cut, upper = _level_of(z, valid, r_near)
+        reach = np.abs(z - ref[:, None]) <= _Z_FLOOR_MM + _LEVEL_SLOPE * (
+            np.where(valid, d, 0.0) + r_near[:, None])
+        same_side = (z > cut[:, None]) == upper[:, None]
+        keep = valid & np.where(np.isfinite(cut)[:, None], same_side, reach)
         coef = fit(keep)
         # 2: reject points more than 3 RMS off that plane; refit the rows that changed
         res = np.abs(z - (coef[:, :1] + coef[:, 1:2] * dx + coef[:, 2:] * dy))
@@ -151,6 +154,30 @@ def _spacing(tree: cKDTree, pts: np.ndarray) -> tuple[float, float]:
     spacing = float(np.median(pos)) if len(pos) else 1e-3
     coverage = float(np.median(d[:, -1]) * np.sqrt(np.pi / (k - 1)))
     return max(spacing, 1e-3), max(coverage, spacing, 1e-3)
+
+
+def _level_of(z: np.ndarray, valid: np.ndarray, r_near: np.ndarray
+              ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The level a query point is on, from its _NEAR nearest neighbours (rows of (M, k) ``z``
+    sorted by distance). Where they split into two levels (a gap in z larger than a
+    _LEVEL_SLOPE surface spans across them), the level is the nearest neighbour's, unless that
+    one stands alone (an outlier). Returns per row: its height (median), the ``cut`` between
+    the levels (NaN: one level) and whether the point's level is the ``upper`` one."""
+    rows = np.arange(len(z))
+    near = valid[:, :_NEAR]
+    zn = np.where(near, z[:, :_NEAR], np.nan)
+    zs = np.sort(zn, axis=1)                                  # NaN last
+    gaps = np.nan_to_num(np.diff(zs, axis=1), nan=-np.inf)
+    j = np.argmax(gaps, axis=1)
+    split = gaps[rows, j] > _Z_FLOOR_MM + _LEVEL_SLOPE * 2 * r_near
+    cut = np.where(split, 0.5 * (zs[rows, j] + zs[rows, j + 1]), np.nan)
+    upper = zn[:, 0] > cut
+    mine = near & ((zn > cut[:, None]) == upper[:, None])
+    alone = split & (mine.sum(1) < 2)
+    upper[alone] = ~upper[alone]
+    mine[alone] = (near & ~mine)[alone]
+    ref = _masked_median(z[:, :_NEAR], np.where(split[:, None], mine, near))
+    return ref, cut, upper
 
 
 def _masked_median(a: np.ndarray, mask: np.ndarray) -> np.ndarray:

@@ -87,6 +87,18 @@ class SimRig:
         """The true beams: where the laser really goes for a command."""
         return ScanHeadOptics(self.head, self.distortion)
 
+    def ideal_correction(self, iterations: int = 30):
+        """The flawless field correction, from the truth: (N, 2) targets Q on z = 0, mm →
+        commands K with K + δ(K) = Q. What a perfect field calibration would give (for
+        benchmarks that separate the calibration's error from the rest)."""
+        def correct(q: np.ndarray) -> np.ndarray:
+            q = np.asarray(q, np.float64)
+            k = q.copy()
+            for _ in range(iterations):
+                k = q - self.distortion(k)
+            return k
+        return correct
+
     def truth_dict(self) -> dict:
         dist = self.distortion
         return {
@@ -149,3 +161,15 @@ def operator_calibration(camera: CameraModel, rng: np.random.Generator) -> Camer
     R = dR @ camera.R
     centre = camera.centre_world + rng.normal(0, 0.08, 3)
     return replace(camera, K=K, dist=dist, R=R, t=-R @ centre)
+
+
+def move_camera(rig: SimRig, angle_deg: float, shift_mm: float, seed: int = 0) -> SimRig:
+    """The rig after its camera was knocked: the true camera turned by ``angle_deg`` about a
+    random axis through its centre and its centre moved by ``shift_mm`` in a random direction
+    (both drawn from ``seed``). The operator's calibration still describes the old pose."""
+    rng = np.random.default_rng([seed, 404])
+    cam = rig.camera
+    R = rotation_about(rng.normal(size=3), np.deg2rad(angle_deg)) @ cam.R
+    shift = rng.normal(size=3)
+    centre = cam.centre_world + shift_mm * shift / np.linalg.norm(shift)
+    return replace(rig, camera=replace(cam, R=R, t=-R @ centre))

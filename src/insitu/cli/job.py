@@ -1,0 +1,115 @@
+"""``insitu job``: show or run a mark job file (formats.md §3) on the rig."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Annotated
+
+import numpy as np
+import typer
+from rich.table import Table
+
+from insitu.cli.common import check_output, console, one_line_errors, progress_bar
+
+app = typer.Typer(help="Mark jobs: show one, or mark it on the rig.", no_args_is_help=True,
+                  rich_markup_mode="markdown")
+
+
+@dataclass
+class Station:
+    """The rig a job runs on: the simulated world, the scan-head driver (with the field
+    correction file ``field`` when one applies)."""
+
+    world: object
+    driver: object
+    field: Path | None
+
+
+def open_station(rig: Path | None, field: Path | None, workpiece: str, seed: int) -> Station:
+    """The rig file's station (or the default simulated rig) with its field correction, or
+    ``field`` when given."""
+    from insitu.services import mark as svc
+    from insitu.services.scan import sim_world, sim_world_from_rig_file
+
+    world = (sim_world_from_rig_file(rig, workpiece) if rig is not None
+             else sim_world(workpiece, seed=seed))
+    if field is None and rig is not None:
+        field = svc.rig_field_correction(rig)
+    return Station(world, svc.sim_driver(world, field), field)
+
+
+def run_on_station(station: Station, job, job_path: Path, resume: bool, preview: bool,
+                   inspect: Path | None) -> None:
+    """Mark ``job`` (pilot preview first with ``preview``; after the last completed path with
+    ``resume``), report how far it got, and write the camera's image of the result."""
+    from insitu.devices.sim_marking import SimController, SimInspectionCamera
+    from insitu.services import mark as svc
+
+    ppath = svc.progress_path_for(job_path)
+    with progress_bar("marking") as progress:
+        result = svc.mark(job, station.driver, SimController(station.world), ppath, resume,
+                          preview, progress=progress)
+    done = (f"marked paths {result.start_path + 1}…{result.completed} of {result.total}"
+            if result.completed > result.start_path else
+            f"nothing left to mark: {result.completed} of {result.total} paths were marked")
+    console.print(f"{done} ({result.state}); progress in {ppath}", highlight=False)
+    if inspect is not None:
+        svc.save_image(inspect, SimInspectionCamera(station.world).grab())
+        console.print(f"wrote {inspect}", highlight=False)
+
+
+@app.command("show")
+@one_line_errors
+def show(job_path: Annotated[Path, typer.Argument(metavar="JOB.json", help="Mark job.")]) -> None:
+    """What a job holds: paths, extent, heights, laser, estimated time, and how far an earlier
+    run got."""
+    from insitu.marking import estimate_time, read_job, read_progress
+    from insitu.services.mark import progress_path_for
+
+    job = read_job(job_path)
+    pts = np.vstack([p.points for p in job.paths])
+    lo, hi = pts.min(0), pts.max(0)
+    e = estimate_time(job)
+    table = Table(title=str(job_path), show_header=False)
+    table.add_row("paths", f"{len(job.paths):,} ({len(pts):,} points)")
+    for axis, i in (("x", 0), ("y", 1), ("z", 2)):
+        table.add_row(f"{axis} range, mm", f"{lo[i]:.3f} … {hi[i]:.3f}")
+    las = job.laser
+    table.add_row("laser", f"{las.power_pct:g} %, {las.frequency_khz:g} kHz, mark "
+                           f"{las.mark_speed_mm_s:g} mm/s, jump {las.jump_speed_mm_s:g} mm/s")
+    table.add_row("estimated time", f"{e.total_s:.1f} s (mark {e.mark_mm:.0f} mm, jump "
+                                    f"{e.jump_mm:.0f} mm)")
+    rec = read_progress(progress_path_for(job_path))
+    if rec is not None:
+        table.add_row("last run", f"{rec['state']}: {rec['completed']} of {rec['paths_total']} "
+                                  f"paths ({rec['updated']})")
+    console.print(table)
+
+
+@app.command("run")
+@one_line_errors
+def run(
+    job_path: Annotated[Path, typer.Argument(metavar="JOB.json", help="Mark job.")],
+    resume: Annotated[bool, typer.Option(help="Continue after the last completed path.")] = False,
+    preview: Annotated[bool, typer.Option(help="First draw the outline with the pilot "
+                                               "laser.")] = False,
+    inspect: Annotated[Path | None, typer.Option(help="Write the camera's image of the "
+                                                      "marked part (.png).")] = None,
+    rig: Annotated[Path | None, typer.Option(help="Rig file (default: the simulated rig).")] = None,
+    field: Annotated[Path | None, typer.Option(help="Field correction (FIELD.json) to apply "
+                                                    "(default: the rig file's).")] = None,
+    workpiece: Annotated[str, typer.Option(help="Simulated rig: the part on the table.")] = "step-block",
+    seed: Annotated[int, typer.Option(help="Simulated rig: seed.")] = 0,
+) -> None:
+    """Mark a job file on the rig. Every target is checked against the scan field and the focus
+    range (after the field correction) before the first command; the laser is on only while
+    marking and off at once on any fault; the progress file beside the job records the last
+    completed path, so --resume continues an interrupted job."""
+    from insitu.marking import read_job
+
+    if inspect is not None:
+        check_output(inspect, ".png")
+    job = read_job(job_path)
+    run_on_station(open_station(rig, field, workpiece, seed), job, job_path, resume, preview,
+                   inspect)
