@@ -15,6 +15,18 @@ from insitu.cli.common import check_output, console, one_line_errors, progress_b
 app = typer.Typer(help="Mark jobs: show one, or mark it on the rig.", no_args_is_help=True,
                   rich_markup_mode="markdown")
 
+# options of every command that marks on the rig (``insitu job run``, ``insitu mark --run``)
+Resume = Annotated[bool, typer.Option(help="Continue an interrupted job after its last "
+                                           "completed path.")]
+Preview = Annotated[bool, typer.Option(help="First draw the outline with the pilot laser.")]
+Inspect = Annotated[Path | None, typer.Option(help="Write the camera's image of the marked "
+                                                   "part (.png).")]
+Rig = Annotated[Path | None, typer.Option(help="Rig file (default: the simulated rig).")]
+Field = Annotated[Path | None, typer.Option(help="Field correction (FIELD.json) to apply "
+                                                 "(default: the rig file's).")]
+Workpiece = Annotated[str, typer.Option(help="Simulated rig: the part on the table.")]
+Seed = Annotated[int, typer.Option(help="Simulated rig: seed.")]
+
 
 @dataclass
 class Station:
@@ -91,16 +103,8 @@ def show(job_path: Annotated[Path, typer.Argument(metavar="JOB.json", help="Mark
 @one_line_errors
 def run(
     job_path: Annotated[Path, typer.Argument(metavar="JOB.json", help="Mark job.")],
-    resume: Annotated[bool, typer.Option(help="Continue after the last completed path.")] = False,
-    preview: Annotated[bool, typer.Option(help="First draw the outline with the pilot "
-                                               "laser.")] = False,
-    inspect: Annotated[Path | None, typer.Option(help="Write the camera's image of the "
-                                                      "marked part (.png).")] = None,
-    rig: Annotated[Path | None, typer.Option(help="Rig file (default: the simulated rig).")] = None,
-    field: Annotated[Path | None, typer.Option(help="Field correction (FIELD.json) to apply "
-                                                    "(default: the rig file's).")] = None,
-    workpiece: Annotated[str, typer.Option(help="Simulated rig: the part on the table.")] = "step-block",
-    seed: Annotated[int, typer.Option(help="Simulated rig: seed.")] = 0,
+    resume: Resume = False, preview: Preview = False, inspect: Inspect = None, rig: Rig = None,
+    field: Field = None, workpiece: Workpiece = "step-block", seed: Seed = 0,
 ) -> None:
     """Mark a job file on the rig. Every target is checked against the scan field and the focus
     range (after the field correction) before the first command; the laser is on only while

@@ -9,6 +9,8 @@ import typer
 from rich.table import Table
 
 from insitu.cli.common import check_output, console, fail, one_line_errors, progress_bar
+from insitu.cli.job import (Field, Inspect, Preview, Resume, Rig, Seed, Workpiece, open_station,
+                            run_on_station)
 
 
 @one_line_errors
@@ -32,25 +34,16 @@ def mark(
     frequency: Annotated[float, typer.Option(help="Pulse frequency, kHz.")] = 20.0,
     speed: Annotated[float, typer.Option(help="Mark speed, mm/s.")] = 500.0,
     jump_speed: Annotated[float, typer.Option(help="Jump speed, mm/s.")] = 3000.0,
-    run: Annotated[bool, typer.Option(help="Also mark the job on the rig.")] = False,
-    preview: Annotated[bool, typer.Option(help="With --run: first draw the outline with the "
-                                               "pilot laser.")] = False,
-    resume: Annotated[bool, typer.Option(help="With --run: continue an interrupted job after "
-                                              "its last completed path.")] = False,
-    inspect: Annotated[Path | None, typer.Option(help="With --run: write the camera's image of "
-                                                      "the marked part (.png).")] = None,
-    rig: Annotated[Path | None, typer.Option(help="Rig file (default: the simulated rig).")] = None,
-    field: Annotated[Path | None, typer.Option(help="Field correction (FIELD.json) to apply "
-                                                    "(default: the rig file's).")] = None,
-    workpiece: Annotated[str, typer.Option(help="Simulated rig: the part on the table.")] = "step-block",
-    seed: Annotated[int, typer.Option(help="Simulated rig: seed.")] = 0,
+    run: Annotated[bool, typer.Option(help="Also mark the job on the rig (with --preview, "
+                                           "--resume, --inspect).")] = False,
+    preview: Preview = False, resume: Resume = False, inspect: Inspect = None, rig: Rig = None,
+    field: Field = None, workpiece: Workpiece = "step-block", seed: Seed = 0,
 ) -> None:
     """Place a pattern with its centre at X Y, WIDTH mm wide, turned by --rotate; project it
     onto the measured surface (planar or wrap) and write the mark job. The job is refused,
     and nothing is written, when any point lies outside the scan field or the focus range, over
     a hole in the cloud or over a steep wall. --run then marks it: the laser is on only while
     marking, off at once on any fault, and an interrupted job resumes with --resume."""
-    from insitu.cli.job import open_station, run_on_station
     from insitu.marking import LaserParams, read_job
     from insitu.services import mark as svc
 
