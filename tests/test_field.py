@@ -241,7 +241,7 @@ def test_measure_spots_on_the_plate(rec):
 def test_plate_above_z0_is_carried_to_z0_along_the_beam(tmp_path):
     rig = default_rig(3, binning=4)
     out = tmp_path / "raised"
-    record_field_calibration(SimWorld(rig, seed=3), out, n=5, half_mm=70, plate_z=5.0)
+    record_field_calibration(SimWorld(rig, seed=3), out, n=5, half_mm=70, heights=(5.0,))
     m = measure_spots(Sequence.open(out))
     err = m.landed - rig.beams.landing(m.commands)
     assert m.plate_z_mm == 5.0 and len(m.commands) >= 15

@@ -177,6 +177,8 @@ def pose_from_spots(obs: SpotObservations, camera: CameraModel, beams: BeamModel
     """T_cam_world from the spots (module docstring). ``camera``: intrinsics (its pose is not
     used); ``beams``: the head's beam model in the world frame."""
     obs = SpotObservations(obs.cmd, obs.plate_z, obs.uv)
+    if not len(obs.uv):
+        raise CalibrationError("no spots to estimate the pose from")
     if not np.isfinite(obs.uv).all():
         raise CalibrationError("spot pixels contain NaN or inf")
     R0, t0 = linear_pose(obs, camera, beams)

@@ -1,4 +1,5 @@
-"""``insitu calibrate field`` and ``insitu galvo correct``: the scan-field correction.
+"""``insitu calibrate field``, ``insitu galvo correct`` and ``insitu galvo check``: the
+scan-field correction, applied to targets and checked for drift.
 """
 
 from __future__ import annotations
@@ -6,6 +7,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Annotated
 
+import numpy as np
 import typer
 from rich.table import Table
 
@@ -87,3 +89,45 @@ def correct(
     shift = (K - Q)
     console.print(f"wrote {out}: {len(K)} commands (correction up to "
                   f"{float(abs(shift).max()) if len(K) else 0.0:.3f} mm)", highlight=False)
+
+
+@one_line_errors
+def check(
+    field_file: Annotated[Path, typer.Argument(metavar="FIELD.json",
+                                               help="Field correction file.")],
+    rec: Annotated[Path, typer.Argument(metavar="REC", help="Recorded field-calibration folder: "
+                                        "a few spots on the plate, raw or corrected commands.")],
+    tolerance: Annotated[float | None, typer.Option(
+        help="Largest landing error allowed, mm (default: 3 × the correction's CV RMS, at "
+             "least 0.03 mm).")] = None,
+) -> None:
+    """Check that a field correction still holds (drift): measure where the recorded spots
+    landed and compare with where FIELD.json predicts they land. Prints every point; exits 0
+    if all are within the tolerance, 1 with a line naming the worst point if not."""
+    from insitu.calibrate.field_file import load_field_correction
+    from insitu.services.field import check_drift
+
+    if tolerance is not None and not tolerance > 0:
+        fail(f"--tolerance {tolerance:g}: expected a positive number of mm")
+    cal = load_field_correction(field_file)
+    with progress_bar("drift check") as progress:
+        d = check_drift(cal, rec, tolerance_mm=tolerance, progress=progress)
+    err = np.linalg.norm(d.residuals, axis=1)
+    table = Table(title=f"{rec} against {field_file}: landing points, mm")
+    for c in ("#", "command x, y", "predicted x, y", "measured x, y", "error"):
+        table.add_column(c, justify="right")
+    for k, (c, p, m, e) in enumerate(zip(d.commands, d.predicted, d.measured, err), start=1):
+        style = "red" if e > d.tolerance_mm else None
+        table.add_row(str(k), *(f"{a[0]:.3f}, {a[1]:.3f}" for a in (c, p, m)), f"{e:.4f}",
+                      style=style)
+    console.print(table)
+    worst = int(np.argmax(err))
+    if not d.holds:
+        c = d.commands[worst]
+        fail(f"{field_file} no longer holds: point {worst + 1} (command [{c[0]:g}, {c[1]:g}] mm) "
+             f"landed {err[worst]:.3f} mm from its prediction, over the tolerance of "
+             f"{d.tolerance_mm:.3f} mm (RMS {d.rms_mm:.3f} mm over {len(err)} points); "
+             "recalibrate the field")
+    console.print(f"{field_file} holds: RMS {d.rms_mm:.4f} mm, max {d.max_mm:.4f} mm (point "
+                  f"{worst + 1}), tolerance {d.tolerance_mm:.4f} mm, {len(err)} points",
+                  highlight=False, soft_wrap=True)

@@ -32,16 +32,40 @@ def record_cmd(
     grid: Annotated[int, typer.Option(help="Field calibration: spots per side.")] = 21,
     marked: Annotated[bool, typer.Option(help="Field calibration: mark circles on the plate "
                                               "and image them instead of pilot spots.")] = False,
+    heights: Annotated[str, typer.Option(
+        metavar="Z1,Z2,...",
+        help="Field calibration: plate heights, mm, comma-separated. Two or more (e.g. 0,20) "
+             "record the spots `insitu calibrate camera` needs to re-estimate the camera's "
+             "pose after it moved.")] = "0",
+    camera_moved_deg: Annotated[float, typer.Option(
+        help="Knock the camera after its calibration: turn it by this angle, degrees, about a "
+             "random axis (from --seed). sequence.json keeps the operator's calibration of the "
+             "old pose; truth.json holds the moved camera.")] = 0.0,
+    camera_moved_mm: Annotated[float, typer.Option(
+        help="Knock the camera after its calibration: move it by this distance, mm, in a "
+             "random direction (from --seed).")] = 0.0,
 ) -> None:
-    """Write a recorded sequence (formats.md) from the simulated rig, with truth.json."""
+    """Write a recorded sequence (formats.md) from the simulated rig, with truth.json.
+
+    To try the recalibration after a camera move: record and fit a field calibration
+    (`insitu calibrate field`), then record spots at two heights with the camera moved
+    (`--heights 0,20 --grid 7 --camera-moved-deg 0.5 --camera-moved-mm 2`) and run
+    `insitu calibrate camera SPOTS --field FIELD.json -o CAMERA.json`."""
     from insitu.services import sim_world
+    from insitu.sim.rig import default_rig, move_camera
 
     if kind not in record.KINDS:
         fail(f"KIND {kind!r}: expected one of {', '.join(record.KINDS)}")
     if binning not in (1, 2, 4, 8):
         fail(f"--binning {binning}: expected 1, 2, 4 or 8")
+    plate_z = _heights(heights)
+    if plate_z != [0.0] and (kind != "field-calibration" or marked):
+        fail(f"--heights {heights}: plate heights are for spot field calibrations only")
     check_output(out)
-    world = sim_world(workpiece if kind == "scan" else "step-block", seed=seed, binning=binning)
+    rig = default_rig(seed, binning)
+    if camera_moved_deg or camera_moved_mm:
+        rig = move_camera(rig, camera_moved_deg, camera_moved_mm, seed)
+    world = sim_world(workpiece if kind == "scan" else "step-block", rig=rig, seed=seed)
     with progress_bar(f"recording {kind}") as progress:
         if kind == "scan":
             record.record_scan(world, out, spacing=spacing, region=region, progress=progress)
@@ -50,10 +74,23 @@ def record_cmd(
         elif kind == "field-calibration" and marked:
             record.record_marked_field_calibration(world, out, n=grid, progress=progress)
         elif kind == "field-calibration":
-            record.record_field_calibration(world, out, n=grid, progress=progress)
+            record.record_field_calibration(world, out, n=grid, heights=plate_z,
+                                            progress=progress)
         else:
             record.record_camera_calibration(world, out, views=views, progress=progress)
     console.print(f"wrote {out}")
+
+
+def _heights(text: str) -> list[float]:
+    """``--heights`` "Z1,Z2,..." → distinct finite heights, mm (fails with one line)."""
+    try:
+        zs = [float(z) for z in text.split(",")]
+    except ValueError:
+        zs = []
+    if not zs or not all(abs(z) < 1e3 for z in zs) or len(set(zs)) != len(zs):
+        fail(f"--heights {text!r}: expected distinct plate heights in mm separated by commas, "
+             "e.g. 0,20")
+    return zs
 
 
 @app.command("calib")

@@ -173,7 +173,7 @@ def head_beams(seq: Sequence, scan_head: str | Path | None = None,
     if field is not None:
         from insitu.calibrate.field_file import load_field_correction
 
-        beams = ScanHeadOptics(beams, load_field_correction(field).delta)
+        beams = ScanHeadOptics(beams, load_field_correction(field).delta())
         what += f", field distortion of {field}"
     return beams, what
 
@@ -207,6 +207,13 @@ def spot_observations(seq: Sequence, progress: Progress | None = None
     return SpotObservations(np.array(cmd), np.array(z), np.array(uv)), skipped
 
 
+def pose_change(a: CameraModel, b: CameraModel) -> tuple[float, float]:
+    """How far camera ``b`` is from camera ``a``: rotation angle, degrees, and distance of
+    the centres, mm."""
+    c = np.clip((np.trace(b.R @ a.R.T) - 1) / 2, -1.0, 1.0)
+    return float(np.degrees(np.arccos(c))), float(np.linalg.norm(b.centre_world - a.centre_world))
+
+
 def recalibrate_camera_pose(folder: str | Path, intrinsics: str | Path | None = None,
                             scan_head: str | Path | None = None, field: str | Path | None = None,
                             progress: Progress | None = None) -> CameraCalibration:
@@ -223,6 +230,13 @@ def recalibrate_camera_pose(folder: str | Path, intrinsics: str | Path | None = 
     else:
         raise CalibrationError(f"{folder}: no camera intrinsics (give a camera calibration file)")
     camera = camera_model(spec)
+    first = next((i for i, f in enumerate(seq.frames) if f.spot is not None), None)
+    if first is not None:
+        h, w = seq.read_frame(first).shape[:2]
+        if (w, h) != (camera.width, camera.height):
+            raise CalibrationError(f"{seq.folder / seq.frames[first].file}: image is {w}x{h} "
+                                   f"pixels, the camera of {source} is "
+                                   f"{camera.width}x{camera.height}")
     beams, what = head_beams(seq, scan_head, field)
     obs, skipped = spot_observations(seq, progress)
     try:
@@ -230,11 +244,13 @@ def recalibrate_camera_pose(folder: str | Path, intrinsics: str | Path | None = 
     except CalibrationError as e:
         raise _prefixed(folder, e) from None
     heights = sorted(set(obs.plate_z.tolist()))
+    cam = CameraModel(camera.width, camera.height, camera.K, camera.dist, res.R, res.t)
+    turned, moved = pose_change(camera, cam)
     notes = (f"pose from {len(obs.uv)} spots on the plate at {', '.join(f'{h:g}' for h in heights)}"
-             f" mm (beams: {what}); intrinsics of {source}")
+             f" mm (beams: {what}); intrinsics of {source}; the camera turned {turned:.3f}° and "
+             f"moved {moved:.2f} mm from the pose there")
     if skipped:
         notes += f"; {len(skipped)} frames without a usable spot skipped"
-    cam = CameraModel(camera.width, camera.height, camera.K, camera.dist, res.R, res.t)
     kept = ({"rms_px": cal.rms_px, "per_view_rms_px": cal.per_view_rms_px,
              "std_intrinsics": cal.std_intrinsics} if intrinsics is not None else {})
     return CameraCalibration(
@@ -245,7 +261,8 @@ def recalibrate_camera_pose(folder: str | Path, intrinsics: str | Path | None = 
                    "pose_std_rotation_deg": float(np.linalg.norm(res.std_rot_deg)),
                    "pose_std_translation_mm": float(np.linalg.norm(res.std_t_mm))},
         notes=notes, pose_std_rotvec_deg=res.std_rot_deg.tolist(),
-        pose_std_t_mm=res.std_t_mm.tolist(), **kept)
+        pose_std_t_mm=res.std_t_mm.tolist(), pose_change={"rotation_deg": turned,
+                                                          "centre_mm": moved}, **kept)
 
 
 def calibrate_camera_recording(folder: str | Path, intrinsics: str | Path | None = None,

@@ -307,14 +307,14 @@ class DriftResult:
 
 
 def check_drift(correction: FieldCorrection, sequence: Sequence | str | Path,
-                settings: SpotSettings = SpotSettings(), tolerance_mm: float | None = None
-                ) -> DriftResult:
+                settings: SpotSettings = SpotSettings(), tolerance_mm: float | None = None,
+                progress: Progress | None = None) -> DriftResult:
     """Does the correction still hold? ``sequence``: a field-calibration recording of a few
     spots, commanded anywhere (raw or corrected commands alike): each spot must land where the
     correction predicts, C + δ(C). ``tolerance_mm`` defaults to 3 × the correction's CV RMS
     (at least 0.03 mm)."""
     seq = sequence if isinstance(sequence, Sequence) else Sequence.open(sequence)
-    m = measure_spots(seq, settings, strict=False)
+    m = measure_spots(seq, settings, progress, strict=False)
     if not len(m.commands):
         raise CalibrationError(f"{seq.folder}: no spot measured, cannot check the drift")
     failed = [r for i, r in m.skipped if r != "outside the camera's view"]

@@ -18,10 +18,6 @@ the alignment frames, which carry ``plate_z_mm``:
 
 ``truth.json`` adds ``alignment``: the board's pose in the world (``R_world_board``,
 ``t_world_board``: board → world) and the lines drawn.
-
-:func:`record_pose_spots` records what the recalibration after a camera move uses: spots on a
-grid on the plate at two heights (a "field-calibration" sequence with ``spot`` and
-``plate_z_mm`` per frame and the operator's camera).
 """
 
 from __future__ import annotations
@@ -32,7 +28,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from insitu.devices.sim import SimCamera, SimScanHead, SimStage, SimWorld
+from insitu.devices.sim import SimWorld
 from insitu.formats.sequence import SequenceWriter
 from insitu.geometry.camera import rotation_about
 from insitu.sim.checkerboard import random_board_poses, render_checkerboard
@@ -124,29 +120,3 @@ def record_camera_calibration_with_alignment(
                 progress(len(w), total)
     return out
 
-
-def record_pose_spots(world: SimWorld, out: Path, heights=(0.0, 20.0), n: int = 7,
-                      half_mm: float = 60.0, progress: Progress | None = None) -> Path:
-    """Spots on an n × n grid over ±half_mm on the plate at each height (focused there),
-    as a "field-calibration" sequence carrying the operator's camera and, in ``scan_head``,
-    the nominal mirror distance and separation; with truth.json."""
-    rig = world.rig
-    world.parts = []
-    cam, head, stage = SimCamera(world), SimScanHead(world), SimStage(world)
-    grid = np.linspace(-half_mm, half_mm, n)
-    spots = [(float(x), float(y)) for y in grid for x in grid]
-    truth = {"rig": rig.truth_dict(), "workpieces": []}
-    total = len(spots) * len(heights)
-    head_spec = {**rig.nominal.to_dict(), "mirror_distance_mm": rig.nominal.mirror_distance_mm,
-                 "mirror_separation_mm": rig.nominal.mirror_separation_mm}
-    with SequenceWriter(out, "field-calibration", head_spec,
-                        camera=rig.operator_camera.to_dict(), truth=truth) as w:
-        for z in heights:
-            stage.move_z(float(z))
-            for xy in spots:
-                head.show_spot(np.array(xy), focus_z=float(z))
-                w.add(cam.grab(), spot=list(xy), plate_z_mm=float(z))
-                if progress:
-                    progress(len(w), total)
-        head.off()
-    return out

@@ -92,22 +92,31 @@ def record_height_calibration(world: SimWorld, out: Path,
 
 
 def record_field_calibration(world: SimWorld, out: Path, n: int = 21, half_mm: float = 90.0,
-                             plate_z: float = 0.0, exposure_ms: float = NOMINAL_EXPOSURE_MS,
+                             heights: Seq[float] = (0.0,),
+                             exposure_ms: float = NOMINAL_EXPOSURE_MS,
                              progress: Progress | None = None) -> Path:
-    """The pilot spot on an n × n grid over ±half_mm on the plate at ``plate_z``."""
+    """The pilot spot on an n × n grid over ±half_mm on the plate at each of ``heights``
+    (world mm; focused there). One height is a field calibration; two or more are what the
+    camera's pose recalibration after a move uses (:mod:`insitu.calibrate.pose_from_spots`).
+    ``scan_head`` also carries the nominal mirror distance and separation."""
     world.parts = []
+    rig = world.rig
     cam, head, stage = SimCamera(world), SimScanHead(world), SimStage(world)
     cam.set_exposure(exposure_ms)
-    stage.move_z(plate_z)
     grid = np.linspace(-half_mm, half_mm, n)
-    spots = [(x, y) for y in grid for x in grid]
-    with _writer(world, out, "field-calibration", truth=_truth(world)) as w:
-        for i, xy in enumerate(spots):
-            head.show_spot(np.array(xy))
-            w.add(cam.grab(), spot=[float(xy[0]), float(xy[1])], plate_z_mm=plate_z,
-                  exposure_ms=exposure_ms)
-            if progress:
-                progress(i + 1, len(spots))
+    spots = [(float(x), float(y)) for y in grid for x in grid]
+    head_spec = {**rig.nominal.to_dict(), "mirror_distance_mm": rig.nominal.mirror_distance_mm,
+                 "mirror_separation_mm": rig.nominal.mirror_separation_mm}
+    total = len(spots) * len(heights)
+    with SequenceWriter(out, "field-calibration", head_spec,
+                        camera=rig.operator_camera.to_dict(), truth=_truth(world)) as w:
+        for z in map(float, heights):
+            stage.move_z(z)
+            for xy in spots:
+                head.show_spot(np.array(xy), focus_z=z)
+                w.add(cam.grab(), spot=list(xy), plate_z_mm=z, exposure_ms=exposure_ms)
+                if progress:
+                    progress(len(w), total)
         head.off()
     return out
 
