@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
-import open3d as o3d
+from scipy.spatial import cKDTree
 
 from insitu.errors import MeasurementError
 from insitu.formats.pointcloud import PointCloud
@@ -36,13 +36,17 @@ class ScanReconstructor:
         self.frames = 0
         self.frames_with_line = 0
         self.outliers_removed = 0
+        self.last_centres = np.zeros((0, 2))
+        self.last_points = np.zeros((0, 3))
 
     @property
     def method(self) -> str:
         return "plane" if self.model is None else f"height ({self.model.name})"
 
     def add(self, index: int, image: np.ndarray, start, end) -> int:
-        """Process frame ``index`` of the line start → end (mm); returns the points it gave."""
+        """Process frame ``index`` of the line start → end (mm); returns the points it gave.
+        ``last_centres`` (M, 2) px and ``last_points`` (K, 3) mm then hold this frame's line
+        centres and points (before outlier removal), for live display."""
         if image.shape != (self.camera.height, self.camera.width):
             raise MeasurementError(
                 f"frame {index}: {image.shape[1]}×{image.shape[0]} px, but the camera "
@@ -53,6 +57,7 @@ class ScanReconstructor:
                               telecentric=self.telecentric, along_rows=rows)
                 if self.z_range else None)
         centres = extract_centres(image, self.settings, band, rows)
+        self.last_centres, self.last_points = centres.uv, np.zeros((0, 3))
         if len(centres) < self.min_points:
             return 0
         if self.model is None:
@@ -66,6 +71,7 @@ class ScanReconstructor:
         if ok.sum() < self.min_points:
             return 0
         self.frames_with_line += 1
+        self.last_points = pts[ok]
         self._chunks.append((pts[ok], np.full(ok.sum(), index, np.int32), centres.peak[ok],
                              np.clip(centres.contrast[ok] / 255.0, 0, 1)))
         return int(ok.sum())
@@ -89,11 +95,9 @@ class ScanReconstructor:
 
 
 def density_inliers(points: np.ndarray, radius_mm: float, neighbours: int) -> np.ndarray:
-    """(N,) bool: points with at least ``neighbours`` others within ``radius_mm`` (Open3D's
-    radius outlier test). Unlike the mean-distance test it keeps the ends of lines and the
-    edges of parts, where a line scan's density is lower but real."""
-    pcd = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(np.ascontiguousarray(points)))
-    _, idx = pcd.remove_radius_outlier(nb_points=neighbours, radius=radius_mm)
-    keep = np.zeros(len(points), bool)
-    keep[np.asarray(idx, dtype=np.int64)] = True
-    return keep
+    """(N,) bool: points with at least ``neighbours`` others within ``radius_mm`` (a radius
+    outlier test, by the distance to the ``neighbours``-th nearest other point). Unlike the
+    mean-distance test it keeps the ends of lines and the edges of parts, where a line scan's
+    density is lower but real."""
+    d, _ = cKDTree(points).query(points, k=neighbours + 1, distance_upper_bound=radius_mm)
+    return np.isfinite(d[:, -1])
