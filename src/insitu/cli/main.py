@@ -39,8 +39,10 @@ def gui(
     project: Annotated[Path | None, typer.Argument(help="Project file to open "
                                                         "(.insitu.json).")] = None,
     rig: Annotated[Path | None, typer.Option(help="Rig file (default: the simulated rig).")] = None,
-    workpiece: Annotated[str, typer.Option(help="Simulated rig: the part on the table.")] = "step-block",
-    binning: Annotated[int, typer.Option(help="Simulated rig: divide the image size by this.")] = 2,
+    workpiece: Annotated[str, typer.Option(
+        help="Simulated rig: the part on the table.")] = "step-block",
+    binning: Annotated[int, typer.Option(
+        help="Simulated rig: divide the image size by this.")] = 2,
 ) -> None:
     """Open the operator's application: connect the rig, scan, place patterns on the cloud,
     preview and mark, calibrate; projects save the whole session."""

@@ -56,9 +56,22 @@ def read_ply(path: str | Path) -> PointCloud:
     path = Path(path)
     if not path.is_file():
         raise FormatError(f"{path}: no such point cloud file")
+    _check_header(path)
     pcd = o3d.t.io.read_point_cloud(str(path))
     if "positions" not in pcd.point or pcd.point.positions.shape[0] == 0:
         raise FormatError(f"{path}: no points (not a PLY point cloud, or empty)")
     pts = pcd.point.positions.numpy().astype(np.float64)
     attrs = {n: pcd.point[n].numpy().ravel() for n in _ATTRIBUTES if n in pcd.point}
     return PointCloud(pts, attrs)
+
+
+def _check_header(path: Path) -> None:
+    """FormatError unless the file starts with a complete PLY header (Open3D's reader
+    crashes the process on some incomplete ones, e.g. one ending in ``comment``)."""
+    with open(path, "rb") as f:
+        head = f.read(65536)
+    lines = head.split(b"\n")
+    if lines[0].rstrip(b"\r") != b"ply":
+        raise FormatError(f"{path}: not a PLY file (it does not start with 'ply')")
+    if not any(line.rstrip(b"\r") == b"end_header" for line in lines[1:-1]):
+        raise FormatError(f"{path}: incomplete PLY header (no 'end_header' line)")

@@ -5,13 +5,15 @@ from __future__ import annotations
 
 import threading
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
 
+from insitu.devices.protocols import Camera, ScanHead
 from insitu.devices.sim import SimCamera, SimScanHead, SimWorld
-from insitu.errors import ConfigError, InsituError, MeasurementError
+from insitu.errors import ConfigError, DeviceError, InsituError, MeasurementError
 from insitu.formats.pointcloud import PointCloud, write_ply
 from insitu.formats.sequence import Sequence
 from insitu.geometry.camera import CameraModel
@@ -48,8 +50,40 @@ class ScanResult:
     summary: ScanSummary
 
 
+@dataclass(frozen=True)
+class ScanFrame:
+    """One frame as the scan streams it, for live display: ``index``, the camera ``image``
+    (H, W), the line ``centres`` (M, 2) px (u, v) and the ``points`` (K, 3) mm, world frame,
+    it gave (before outlier removal)."""
+
+    index: int
+    total: int
+    image: np.ndarray
+    centres: np.ndarray
+    points: np.ndarray
+
+
+FrameCallback = Callable[[ScanFrame], None]
+
+
 class Cancelled(InsituError):
     """The operator cancelled; what was measured so far is kept in ``partial``."""
+
+
+class ScanInterrupted(DeviceError):
+    """A device failed mid-scan; the laser is off. ``partial``: the result of the lines
+    measured before the fault (None when none gave points)."""
+
+    def __init__(self, message: str, partial: ScanResult | None):
+        super().__init__(message)
+        self.partial = partial
+
+
+def _partial(rec: ScanReconstructor, t0: float) -> ScanResult | None:
+    try:
+        return _finish(rec, t0)
+    except MeasurementError:
+        return None
 
 
 def _finish(rec: ScanReconstructor, t0: float) -> ScanResult:
@@ -76,9 +110,10 @@ def reconstructor(camera: CameraModel, pivot_height_mm: float, telecentric: bool
 
 def scan_replay(folder: str | Path, height_cal: HeightCalibration | None = None,
                 model: str | None = None, progress: Progress | None = None,
-                cancel: threading.Event | None = None) -> ScanResult:
+                cancel: threading.Event | None = None,
+                on_frame: FrameCallback | None = None) -> ScanResult:
     """Reconstruct a recorded scan sequence (formats.md §1): Method 1, or Method 2 when a
-    height calibration is given."""
+    height calibration is given. ``on_frame`` sees every frame as it is reconstructed."""
     t0 = time.perf_counter()
     seq = Sequence.open(folder)
     if seq.kind != "scan":
@@ -91,6 +126,8 @@ def scan_replay(folder: str | Path, height_cal: HeightCalibration | None = None,
         if cancel is not None and cancel.is_set():
             raise Cancelled(f"scan cancelled after {i} of {len(seq)} frames")
         rec.add(i, image, frame.line.start, frame.line.end)
+        if on_frame:
+            on_frame(ScanFrame(i, len(seq), image, rec.last_centres, rec.last_points))
         if progress:
             progress(i + 1, len(seq))
     return _finish(rec, t0)
@@ -105,24 +142,33 @@ def sim_world(workpiece: str = "step-block", seed: int = 0, binning: int = 1,
 
 
 def sim_world_from_rig_file(path: str | Path, workpiece: str = "step-block",
-                            binning: int = 1) -> SimWorld:
+                            binning: int = 1, allow_real: bool = False) -> SimWorld:
     """The simulated station a rig file describes, measuring with the calibration files it
-    names (the simulator's truth stays; only the operator's knowledge comes from the files)."""
+    names (the simulator's truth stays; only the operator's knowledge comes from the files).
+    A rig with real devices is refused unless ``allow_real`` (the caller then opens them with
+    :func:`insitu.devices.backends.open_station`); the world carries just the operator's
+    knowledge, so a real camera or head needs its calibration file."""
     from insitu.rig.files import CameraCalibration, RigConfig, ScanHeadConfig, load_json_model
 
     cfg = load_json_model(path, RigConfig)
-    real = {k: v for k, v in (("camera", cfg.camera), ("scan_head", cfg.scan_head),
-                              ("stage", cfg.stage)) if v not in ("sim", "none")}
-    if real:
-        k, v = next(iter(real.items()))
-        raise ConfigError(f"{path}: {k}: the '{v}' backend is not available in this version "
-                          "(only 'sim')")
+    real = [(k, v) for k, v in (("camera", cfg.camera), ("scan_head", cfg.scan_head),
+                                ("stage", cfg.stage)) if v not in ("sim", "none", "replay")]
+    if real and not allow_real:
+        raise ConfigError(f"{path}: {real[0][0]}: the '{real[0][1]}' backend drives a real "
+                          "device; this command runs on the simulated rig only")
+    for device, backend, calib, name in (
+            ("camera", cfg.camera, cfg.camera_calibration, "camera_calibration"),
+            ("scan_head", cfg.scan_head, cfg.scan_head_config, "scan_head_config")):
+        if backend not in ("sim", "replay") and not calib:
+            raise ConfigError(f"{path}: {name}: required with a real {device} ('{backend}'): "
+                              "the measurement needs its calibration")
     world = sim_world(workpiece, seed=cfg.sim_seed, binning=binning)
     rig = world.rig
     if cfg.camera_calibration:
         model = camera_model(
             load_json_model(cfg.resolve(cfg.camera_calibration), CameraCalibration).camera)
-        if (model.width, model.height) != (rig.camera.width, rig.camera.height):
+        size, sim_size = (model.width, model.height), (rig.camera.width, rig.camera.height)
+        if cfg.camera in ("sim", "replay") and size != sim_size:
             raise ConfigError(f"{cfg.camera_calibration}: camera is {model.width}×{model.height} "
                               f"px, the rig's is {rig.camera.width}×{rig.camera.height} px")
         rig = replace(rig, operator_camera=model)
@@ -137,10 +183,14 @@ def sim_world_from_rig_file(path: str | Path, workpiece: str = "step-block",
 
 def scan_live(world: SimWorld, spacing: float = 0.5, region=None,
               height_cal: HeightCalibration | None = None, model: str | None = None,
-              progress: Progress | None = None, cancel: threading.Event | None = None
-              ) -> ScanResult:
-    """Drive the (simulated) rig: step the line over ``region`` (x0, x1, y0, y1) mm and
-    reconstruct each frame as it arrives. The laser is off when this returns or raises."""
+              progress: Progress | None = None, cancel: threading.Event | None = None,
+              on_frame: FrameCallback | None = None, exposure_ms: float | None = None,
+              camera: Camera | None = None, head: ScanHead | None = None) -> ScanResult:
+    """Drive the rig: step the line over ``region`` (x0, x1, y0, y1) mm and reconstruct each
+    frame as it arrives (``on_frame`` sees each; ``exposure_ms``: the camera's, default its
+    own). ``camera``, ``head``: real devices (default: the world's simulated ones). The laser
+    is off when this returns or raises; a device fault raises :class:`ScanInterrupted` with
+    what was measured before it."""
     t0 = time.perf_counter()
     region = tuple(region) if region is not None else default_region(world)
     _check_region(region, world)
@@ -149,13 +199,24 @@ def scan_live(world: SimWorld, spacing: float = 0.5, region=None,
     rec = reconstructor(rig.operator_camera, rig.nominal.pivot_height_mm,
                         rig.nominal.lens == "telecentric", rig.nominal.z_range_mm, height_cal,
                         model, "live scan")
-    camera, head = SimCamera(world), SimScanHead(world)
+    camera = camera if camera is not None else SimCamera(world)
+    head = head if head is not None else SimScanHead(world)
+    if exposure_ms is not None:
+        camera.set_exposure(exposure_ms)
     try:
         for i, (a, b) in enumerate(lines):
             if cancel is not None and cancel.is_set():
                 raise Cancelled(f"scan cancelled after {i} of {len(lines)} lines")
-            head.show_line(a, b)
-            rec.add(i, camera.grab(), a, b)
+            try:
+                head.show_line(a, b)
+                image = camera.grab()
+            except DeviceError as e:
+                head.off()
+                raise ScanInterrupted(f"scan stopped at line {i + 1} of {len(lines)}, laser "
+                                      f"off: {e}", _partial(rec, t0)) from e
+            rec.add(i, image, a, b)
+            if on_frame:
+                on_frame(ScanFrame(i, len(lines), image, rec.last_centres, rec.last_points))
             if progress:
                 progress(i + 1, len(lines))
     finally:

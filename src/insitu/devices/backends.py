@@ -1,0 +1,162 @@
+"""Opening the devices a rig file names (configuration chooses the backend, never probing).
+
+Each real backend reads its block of the rig file's ``options`` (unknown keys are refused,
+naming ``options.<block>.<key>``); relative paths in them are relative to the rig file:
+
+- camera ``opencv``: ``options.camera`` = {source (device index, path or URL), resolution,
+  exposure_ms, gain, timeout_s}
+- camera ``genicam``: ``options.camera`` = {producer, serial, pixel_format, trigger,
+  trigger_line, exposure_ms, gain_db, num_buffers, timeout_s}
+- scan head ``rtc``: ``options.rtc`` = :class:`~.rtc.RtcSettings` fields
+- scan head ``lmc``: ``options.lmc`` = :class:`~.lmc.LmcSettings` fields
+- line projection on a real head: ``options.projection`` = {source, speed_mm_s, sweeps,
+  power_pct, frequency_khz}
+- stage ``grbl``: ``options.stage`` = {port, baudrate, axis, sign, offset_mm, feed_mm_min,
+  z_range_mm, timeout_s, home_on_open}
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import inspect
+from contextlib import suppress
+from dataclasses import dataclass, field
+from typing import Any
+
+from insitu.devices.galvo import Controller, FieldCorrection
+from insitu.devices.protocols import Camera, ScanHead, Stage
+from insitu.errors import ConfigError
+from insitu.geometry.beams import TwoMirrorHead
+
+PATH_KEYS = {"producer", "library", "correction_file", "program_dir"}
+
+
+@dataclass
+class Station:
+    """The opened devices. ``controller`` executes mark jobs; ``head`` projects scan lines
+    (on the same scan head); ``stage`` is None without one."""
+
+    camera: Camera
+    head: ScanHead
+    controller: Controller
+    stage: Stage | None = None
+    _closers: list = field(default_factory=list, repr=False)
+
+    def close(self) -> None:
+        """Laser off, then every device closed (never raises)."""
+        with suppress(Exception):
+            self.head.off()
+        for close in reversed(self._closers):
+            with suppress(Exception):
+                close()
+
+
+def _options(cfg, block: str, target) -> dict[str, Any]:
+    """``options[block]`` checked against ``target``'s parameters; paths resolved."""
+    if not isinstance(cfg.options.get(block, {}), dict):
+        raise ConfigError(f"{cfg.path}: options.{block}: expected an object")
+    opts = dict(cfg.options.get(block, {}))
+    names = ({f.name for f in dataclasses.fields(target)} if dataclasses.is_dataclass(target)
+             else set(inspect.signature(target).parameters))
+    for key in opts:
+        if key not in names:
+            raise ConfigError(f"{cfg.path}: options.{block}.{key}: unknown; expected one of "
+                              f"{', '.join(sorted(names))}")
+        if key in PATH_KEYS and opts[key] is not None:
+            opts[key] = cfg.resolve(opts[key])
+    return opts
+
+
+def _build(cfg, block: str, target, **fixed):
+    opts = _options(cfg, block, target)
+    try:
+        return target(**opts, **fixed)
+    except TypeError as e:
+        raise ConfigError(f"{cfg.path}: options.{block}: {e}") from None
+
+
+def open_camera(cfg, world=None) -> Camera:
+    if cfg.camera == "opencv":
+        from insitu.devices.camera_opencv import OpenCVCamera
+        opts = _options(cfg, "camera", OpenCVCamera)
+        if "source" not in opts:
+            raise ConfigError(f"{cfg.path}: options.camera.source: required for an OpenCV "
+                              "camera (a device index such as 0, or a path)")
+        if isinstance(opts["source"], str) and "://" not in opts["source"]:
+            opts["source"] = str(cfg.resolve(opts["source"]))      # file, sequence, device
+        return OpenCVCamera(**opts)
+    if cfg.camera == "genicam":
+        from insitu.devices.camera_genicam import GenICamCamera
+        if "producer" not in cfg.options.get("camera", {}):
+            raise ConfigError(f"{cfg.path}: options.camera.producer: required (the GenTL "
+                              "producer .cti of the camera maker)")
+        return _build(cfg, "camera", GenICamCamera)
+    if cfg.camera == "sim":
+        from insitu.devices.sim_marking import SimInspectionCamera
+        return SimInspectionCamera(_need_world(world, "camera"))
+    raise ConfigError(f"{cfg.path}: camera: '{cfg.camera}' is for recorded sequences "
+                      "(insitu scan replay), not a live station")
+
+
+def open_controller(cfg, head: TwoMirrorHead, world=None) -> Controller:
+    if cfg.scan_head == "rtc":
+        from insitu.devices.rtc import RtcController, RtcSettings
+        return RtcController(head, _build(cfg, "rtc", RtcSettings))
+    if cfg.scan_head == "lmc":
+        from insitu.devices.lmc import LmcController, LmcSettings
+        return LmcController(head, _build(cfg, "lmc", LmcSettings))
+    from insitu.devices.sim_marking import SimController
+    return SimController(_need_world(world, "scan_head"))
+
+
+def open_stage(cfg, world=None) -> Stage | None:
+    if cfg.stage == "grbl":
+        from insitu.devices.stage_grbl import GrblStage
+        if "port" not in cfg.options.get("stage", {}):
+            raise ConfigError(f"{cfg.path}: options.stage.port: required (e.g. /dev/ttyUSB0)")
+        return _build(cfg, "stage", GrblStage)
+    if cfg.stage == "sim":
+        from insitu.devices.sim import SimStage
+        return SimStage(_need_world(world, "stage"))
+    return None
+
+
+def _need_world(world, what: str):
+    if world is None:
+        raise ConfigError(f"{what}: 'sim' needs the simulated world (open it with a SimWorld)")
+    return world
+
+
+def open_station(cfg, head_config, world=None,
+                 correction: FieldCorrection | None = None) -> Station:
+    """The devices of ``cfg`` (a :class:`~insitu.rig.files.RigConfig`). ``head_config``:
+    the scan head's nominal geometry (mirror_distance_mm, mirror_separation_mm,
+    field_size_mm, z_range_mm); ``world``: the SimWorld for 'sim' devices; ``correction``:
+    the field correction for line projection. On failure, what was opened is closed again."""
+    from insitu.devices.projection import GalvoLineProjector
+    from insitu.devices.sim import SimScanHead
+
+    head = TwoMirrorHead(head_config.mirror_distance_mm, head_config.mirror_separation_mm)
+    closers: list = []
+
+    def opened(dev):
+        if hasattr(dev, "close"):
+            closers.append(dev.close)
+        return dev
+
+    try:
+        controller = opened(open_controller(cfg, head, world))
+        if cfg.scan_head == "sim":
+            projector = SimScanHead(world)
+        else:
+            projector = _build(cfg, "projection", GalvoLineProjector, controller=controller,
+                               head=head, field_size_mm=tuple(head_config.field_size_mm),
+                               z_range_mm=tuple(head_config.z_range_mm), correction=correction)
+        camera = opened(open_camera(cfg, world))
+        stage = opened(open_stage(cfg, world))
+    except BaseException:
+        for close in reversed(closers):
+            with suppress(Exception):
+                close()
+        raise
+    return Station(camera, projector, controller, stage, closers)

@@ -1,0 +1,138 @@
+"""Line projection for scanning on a real scan head: a :class:`~.protocols.ScanHead` over any
+galvo :class:`~.galvo.Controller` (RTC, LMC).
+
+The line is swept back and forth at pilot power — the red pilot laser (``source="pilot"``)
+or the marking laser at ``power_pct`` — by a background thread that re-sends the sweep list
+until the line changes, so that the camera exposes while it is drawn. Each sweep list starts
+by switching the source on: that output's rising edge, wired to the camera's trigger input
+(GenICam ``trigger="hardware"``), synchronises the exposure with the projection.
+:meth:`show_line` returns once the new line has been drawn at least once. A controller fault
+stops the thread with the laser off; the next call raises it as DeviceError.
+"""
+
+from __future__ import annotations
+
+import threading
+
+import numpy as np
+
+from insitu.devices.galvo import Command, FieldCorrection, joint_from_targets
+from insitu.errors import DeviceError, SafetyError
+from insitu.geometry.beams import TwoMirrorHead
+
+
+class GalvoLineProjector:
+    """``head``: nominal kinematics; ``correction``: the field correction, as for marking;
+    ``speed_mm_s``: sweep speed; ``sweeps``: back-and-forth passes per list."""
+
+    def __init__(self, controller, head: TwoMirrorHead, field_size_mm: tuple[float, float],
+                 z_range_mm: tuple[float, float], correction: FieldCorrection | None = None,
+                 speed_mm_s: float = 2000.0, sweeps: int = 4, source: str = "pilot",
+                 power_pct: float = 1.0, frequency_khz: float = 20.0,
+                 first_draw_timeout_s: float = 5.0):
+        if source not in ("pilot", "laser"):
+            raise DeviceError(f"line projection: source must be 'pilot' or 'laser', got {source!r}")
+        self.controller, self.head, self.correction = controller, head, correction
+        self.field_size_mm, self.z_range_mm = tuple(field_size_mm), tuple(z_range_mm)
+        self.speed, self.sweeps, self.source = float(speed_mm_s), int(sweeps), source
+        self.power_pct, self.frequency_khz = float(power_pct), float(frequency_khz)
+        self.first_draw_timeout_s = first_draw_timeout_s
+        self._lock = threading.Condition()
+        self._list: list[Command] | None = None
+        self._generation = self._drawn = 0
+        self._error: BaseException | None = None
+        self._thread: threading.Thread | None = None
+
+    # -- lists --------------------------------------------------------------------------------
+    def joint(self, xy, focus_z: float) -> tuple[float, float, float]:
+        """Command (x, y) on z = 0, mm → joint with the focus at height ``focus_z`` on its beam."""
+        j = joint_from_targets(self.head, np.array([[xy[0], xy[1], 0.0]]), self.correction)[0]
+        tx, ty = 2 * np.radians(j[0]), 2 * np.radians(j[1])
+        x, y = self.head.forward(tx, ty, focus_z)
+        df = float(self.head.focus_shift(np.atleast_1d(x), np.atleast_1d(y),
+                                         np.atleast_1d(float(focus_z)))[0])
+        return float(j[0]), float(j[1]), df
+
+    def sweep_list(self, start, end, focus_z: float = 0.0) -> list[Command]:
+        a, b = self.joint(start, focus_z), self.joint(end, focus_z)
+        on, off = (("pilot_on", "pilot_off") if self.source == "pilot" else
+                   ("laser_on", "laser_off"))
+        cmds = [Command("set_mark_speed", (self.speed,)), Command("jump_abs_3d", a)]
+        if self.source == "laser":
+            cmds += [Command("set_power", (self.power_pct,)),
+                     Command("set_frequency", (self.frequency_khz,))]
+        cmds.append(Command(on))
+        for _ in range(self.sweeps):
+            cmds += [Command("mark_abs_3d", b), Command("mark_abs_3d", a)]
+        return cmds + [Command(off)]
+
+    def _check(self, *points) -> None:
+        half = np.asarray(self.field_size_mm) / 2
+        for p in points:
+            if np.any(np.abs(np.asarray(p, float)) > half + 1e-9):
+                raise SafetyError(f"scan head: point {list(map(float, p))} mm is outside the "
+                                  f"field ±{half[0]:g} × ±{half[1]:g} mm")
+
+    # -- ScanHead -----------------------------------------------------------------------------
+    def show_line(self, start, end, focus_z: float = 0.0) -> None:
+        self._check(start, end)
+        self._show(self.sweep_list(start, end, focus_z))
+
+    def show_spot(self, xy, focus_z: float = 0.0) -> None:
+        self._check(xy)
+        j = self.joint(xy, focus_z)
+        on, off = ("pilot_on", "pilot_off") if self.source == "pilot" else ("laser_on", "laser_off")
+        self._show([Command("jump_abs_3d", j), Command(on), Command("mark_delay", (20000.0,)),
+                    Command(off)])
+
+    def _show(self, cmds: list[Command]) -> None:
+        with self._lock:
+            self._raise_error()
+            self._list = cmds
+            self._generation += 1
+            want = self._generation
+            if self._thread is None:
+                self._thread = threading.Thread(target=self._run, name="line projection",
+                                                daemon=True)
+                self._thread.start()
+            ok = self._lock.wait_for(lambda: self._drawn >= want or self._error is not None,
+                                     self.first_draw_timeout_s)
+            self._raise_error()
+        if not ok:
+            self.off()
+            raise DeviceError(f"line projection: the scan head did not draw the line "
+                              f"within {self.first_draw_timeout_s:g} s")
+
+    def _raise_error(self) -> None:
+        if self._error is not None:
+            raise DeviceError(f"line projection stopped: {self._error}") from self._error
+
+    def _run(self) -> None:
+        while True:
+            with self._lock:
+                cmds, gen = self._list, self._generation
+            if cmds is None:
+                return
+            try:
+                self.controller.execute(cmds)
+            except BaseException as e:                 # noqa: BLE001 — handed to the caller
+                self.controller.laser_off()
+                with self._lock:
+                    self._error, self._list, self._thread = e, None, None
+                    self._lock.notify_all()
+                return
+            with self._lock:
+                self._drawn = max(self._drawn, gen)
+                self._lock.notify_all()
+
+    def off(self) -> None:
+        """Stop projecting; laser and pilot off at once. Never raises."""
+        with self._lock:
+            self._list, self._error = None, None
+            thread, self._thread = self._thread, None
+        try:
+            self.controller.laser_off()
+        finally:
+            if thread is not None and thread is not threading.current_thread():
+                thread.join(timeout=5.0)
+            self.controller.laser_off()        # after the last sweep list ended

@@ -1,0 +1,1 @@
+"""Fakes of real devices at their own interface (a C library, a USB backend, a serial peer)."""

@@ -1,0 +1,127 @@
+"""A whole station from a rig file — OpenCV camera (a recorded scan's frames as an image
+sequence), RTC head (the fake library), GRBL stage (a pty peer) — and scans that meet a
+device fault: the laser goes off, the scan stops with a clear message and keeps what it
+measured."""
+
+import json
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+from fakes.grbl import GrblPeer
+from fakes.rtc import FakeBoard, build
+
+from insitu.devices.backends import open_station
+from insitu.errors import ConfigError
+from insitu.formats.sequence import Sequence
+from insitu.rig.files import (CameraCalibration, RigConfig, ScanHeadConfig, load_json_model,
+                              save_json_model)
+from insitu.services.scan import ScanInterrupted, scan_live, sim_world_from_rig_file
+
+RECORDED = Path(__file__).parent / "data" / "scan-step-block-b4"
+REGION = tuple(json.loads((RECORDED / "truth.json").read_text())["region"])
+
+
+@pytest.fixture(scope="module")
+def rtc_lib(tmp_path_factory):
+    return build(tmp_path_factory.mktemp("rtc"))
+
+
+@pytest.fixture
+def peer():
+    p = GrblPeer()
+    yield p
+    p.close()
+
+
+def write_rig(folder: Path, lib: Path, port: str, frames: int, **options) -> Path:
+    seq = Sequence.open(RECORDED)
+    save_json_model(folder / "camera.json", CameraCalibration(camera=seq.camera))
+    save_json_model(folder / "head.json", ScanHeadConfig(
+        pivot_height_mm=350.0, mirror_distance_mm=350.0, mirror_separation_mm=12.0,
+        field_size_mm=(200.0, 200.0), z_range_mm=(-25.0, 25.0)))
+    (folder / "frames").mkdir()
+    for f in sorted((RECORDED / "frames").glob("*.png"))[:frames]:
+        shutil.copy(f, folder / "frames" / f.name)
+    (folder / "head3d.ct5").write_bytes(b"\0" * 16)
+    opts = {"camera": {"source": "frames/%05d.png", "timeout_s": 2.0},
+            "rtc": {"library": str(lib), "correction_file": "head3d.ct5",
+                    "k_bits_per_mm": 2000.0, "heartbeat_s": 30.0},
+            "projection": {"sweeps": 2},
+            "stage": {"port": port, "reply_timeout_s": 0.5, "timeout_s": 3.0}}
+    for block, extra in options.items():
+        opts[block] = {**opts.get(block, {}), **extra}
+    rig = folder / "rig.json"
+    rig.write_text(json.dumps({"kind": "rig", "camera": "opencv", "scan_head": "rtc",
+                               "stage": "grbl", "camera_calibration": "camera.json",
+                               "scan_head_config": "head.json", "options": opts}))
+    return rig
+
+
+def open_rig(rig: Path):
+    cfg = load_json_model(rig, RigConfig)
+    head = load_json_model(cfg.resolve(cfg.scan_head_config), ScanHeadConfig)
+    world = sim_world_from_rig_file(rig, binning=4, allow_real=True)
+    return world, open_station(cfg, head, world)
+
+
+def test_station_scan_stops_when_the_camera_stops_delivering(tmp_path, rtc_lib, peer):
+    board = FakeBoard(rtc_lib)
+    board.reset()
+    world, station = open_rig(write_rig(tmp_path, rtc_lib, peer.port, frames=15))
+    try:
+        station.stage.move_z(4.0)
+        assert station.stage.position_z() == pytest.approx(4.0)
+        with pytest.raises(ScanInterrupted, match=r"scan stopped at line 16 of 27, laser off: "
+                                                  r".*gave no frame") as err:
+            scan_live(world, spacing=1.0, region=REGION, camera=station.camera,
+                      head=station.head)
+        partial = err.value.partial
+        assert partial is not None and partial.summary.frames == 15
+        assert partial.summary.points > 1000
+        assert partial.cloud.points[:, 0].max() < REGION[0] + 14 * 1.0 + 1.0
+        # the head swept 16 lines with the pilot, and everything is off now
+        calls = board.calls()
+        assert calls.count("write_io_port_mask_list 1 1") >= 16
+        assert "enable_laser" not in calls
+        assert not board.laser_enabled and board.port == 0
+    finally:
+        station.close()
+
+
+def test_station_scan_stops_when_the_scan_head_stops_answering(tmp_path, rtc_lib, peer):
+    board = FakeBoard(rtc_lib)
+    board.reset()
+    world, station = open_rig(write_rig(tmp_path, rtc_lib, peer.port, frames=27))
+    try:
+        board.fail_after(400)
+        with pytest.raises(ScanInterrupted, match="board does not respond") as err:
+            scan_live(world, spacing=1.0, region=REGION, camera=station.camera,
+                      head=station.head)
+        assert 0 < err.value.partial.summary.frames < 27
+        assert board.dead and not board.laser_enabled
+        assert board.calls()[-1] == "!write_io_port_mask 0 1"
+    finally:
+        station.close()
+
+
+def test_rig_file_mistakes_are_clear(tmp_path, rtc_lib, peer):
+    FakeBoard(rtc_lib).reset()
+    rig = write_rig(tmp_path, rtc_lib, peer.port, frames=1, rtc={"k_bits": 1})
+    with pytest.raises(ConfigError, match=r"options.rtc.k_bits: unknown; expected one of "):
+        open_rig(rig)
+    data = json.loads(rig.read_text())
+    del data["camera_calibration"]
+    rig.write_text(json.dumps(data))
+    with pytest.raises(ConfigError, match="camera: the 'opencv' backend drives a real device"):
+        sim_world_from_rig_file(rig)
+    with pytest.raises(ConfigError, match="camera_calibration: required with a real camera"):
+        sim_world_from_rig_file(rig, allow_real=True)
+    data["camera_calibration"] = "camera.json"
+    data["options"]["rtc"].pop("k_bits")
+    data["options"]["camera"] = {}
+    rig.write_text(json.dumps(data))
+    with pytest.raises(ConfigError, match="options.camera.source: required"):
+        open_rig(rig)
+    assert np.isfinite(load_json_model(rig, RigConfig).options["rtc"]["k_bits_per_mm"])
