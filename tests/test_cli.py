@@ -83,10 +83,11 @@ def test_rig_file_drives_the_simulated_rig_with_its_calibration(tmp_path):
     # a calibration for another camera size is refused, naming the file
     res = _run("scan", "-o", tmp_path / "d.ply", "--rig", rig, "--binning", 4)
     assert res.exit_code == 1 and "camera.json" in res.output
-    # real backends are refused clearly (not probed)
+    # a real camera is opened as the rig file says (never probed): without its options, the
+    # missing field is named
     rig.write_text(rig.read_text().replace('"camera": "sim"', '"camera": "genicam"'))
     res = _run("scan", "-o", tmp_path / "d.ply", "--rig", rig)
-    assert res.exit_code == 1 and "genicam" in res.output
+    assert res.exit_code == 1 and "options.camera.producer: required" in res.output
     assert not (tmp_path / "d.ply").exists()
 
 

@@ -125,3 +125,23 @@ def test_rig_file_mistakes_are_clear(tmp_path, rtc_lib, peer):
     with pytest.raises(ConfigError, match="options.camera.source: required"):
         open_rig(rig)
     assert np.isfinite(load_json_model(rig, RigConfig).options["rtc"]["k_bits_per_mm"])
+
+
+def test_the_scan_command_keeps_what_it_measured_when_the_camera_stops(tmp_path, rtc_lib, peer):
+    from typer.testing import CliRunner
+
+    from insitu.cli.main import app
+    from insitu.formats.pointcloud import read_ply
+
+    FakeBoard(rtc_lib).reset()
+    rig = write_rig(tmp_path, rtc_lib, peer.port, frames=15)
+    out = tmp_path / "c.ply"
+    res = CliRunner().invoke(app, ["scan", "-o", str(out), "--rig", str(rig), "--spacing", "1",
+                                   "--region", *map(str, REGION)])
+    assert res.exit_code == 1
+    line = [ln for ln in res.output.splitlines() if ln.strip()]
+    assert len(line) == 1 and "scan stopped at line 16 of 27, laser off" in line[0], res.output
+    partial = tmp_path / "c.partial.ply"
+    assert not out.exists() and str(partial) in res.output.replace("\n", "")
+    assert len(read_ply(partial)) > 1000
+    assert not FakeBoard(rtc_lib).laser_enabled

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Annotated
 
@@ -28,46 +27,23 @@ Workpiece = Annotated[str, typer.Option(help="Simulated rig: the part on the tab
 Seed = Annotated[int, typer.Option(help="Simulated rig: seed.")]
 
 
-@dataclass
-class Station:
-    """The rig a job runs on: the simulated world, the scan-head driver (with the field
-    correction file ``field`` when one applies)."""
-
-    world: object
-    driver: object
-    field: Path | None
-
-
-def open_station(rig: Path | None, field: Path | None, workpiece: str, seed: int) -> Station:
-    """The rig file's station (or the default simulated rig) with its field correction, or
-    ``field`` when given."""
-    from insitu.services import mark as svc
-    from insitu.services.scan import sim_world, sim_world_from_rig_file
-
-    world = (sim_world_from_rig_file(rig, workpiece) if rig is not None
-             else sim_world(workpiece, seed=seed))
-    if field is None and rig is not None:
-        field = svc.rig_field_correction(rig)
-    return Station(world, svc.sim_driver(world, field), field)
-
-
-def run_on_station(station: Station, job, job_path: Path, resume: bool, preview: bool,
+def run_on_station(station, job, job_path: Path, resume: bool, preview: bool,
                    inspect: Path | None) -> None:
-    """Mark ``job`` (pilot preview first with ``preview``; after the last completed path with
-    ``resume``), report how far it got, and write the camera's image of the result."""
-    from insitu.devices.sim_marking import SimController, SimInspectionCamera
+    """Mark ``job`` on ``station`` (a :class:`insitu.services.station.Station`; pilot preview
+    first with ``preview``; after the last completed path with ``resume``), report how far it
+    got, and write the camera's image of the result."""
     from insitu.services import mark as svc
 
     ppath = svc.progress_path_for(job_path)
     with progress_bar("marking") as progress:
-        result = svc.mark(job, station.driver, SimController(station.world), ppath, resume,
+        result = svc.mark(job, station.driver, station.devices.controller, ppath, resume,
                           preview, progress=progress)
     done = (f"marked paths {result.start_path + 1}…{result.completed} of {result.total}"
             if result.completed > result.start_path else
             f"nothing left to mark: {result.completed} of {result.total} paths were marked")
     console.print(f"{done} ({result.state}); progress in {ppath}", highlight=False)
     if inspect is not None:
-        svc.save_image(inspect, SimInspectionCamera(station.world).grab())
+        svc.save_image(inspect, station.devices.camera.grab())
         console.print(f"wrote {inspect}", highlight=False)
 
 
@@ -111,9 +87,10 @@ def run(
     marking and off at once on any fault; the progress file beside the job records the last
     completed path, so --resume continues an interrupted job."""
     from insitu.marking import read_job
+    from insitu.services.station import connect
 
     if inspect is not None:
         check_output(inspect, ".png")
     job = read_job(job_path)
-    run_on_station(open_station(rig, field, workpiece, seed), job, job_path, resume, preview,
-                   inspect)
+    with connect(rig, workpiece, seed, field=field) as station:
+        run_on_station(station, job, job_path, resume, preview, inspect)

@@ -9,7 +9,7 @@ import typer
 from rich.table import Table
 
 from insitu.cli.common import check_output, console, fail, one_line_errors, progress_bar
-from insitu.cli.job import (Field, Inspect, Preview, Resume, Rig, Seed, Workpiece, open_station,
+from insitu.cli.job import (Field, Inspect, Preview, Resume, Rig, Seed, Workpiece,
                             run_on_station)
 
 
@@ -46,6 +46,7 @@ def mark(
     marking, off at once on any fault, and an interrupted job resumes with --resume."""
     from insitu.marking import LaserParams, read_job
     from insitu.services import mark as svc
+    from insitu.services.station import connect
 
     check_output(out, ".json")
     if inspect is not None:
@@ -59,19 +60,19 @@ def mark(
         if not value > 0:
             fail(f"{name} {value:g}: expected a positive number")
     placement = svc.Placement(pattern, at, width, rotate, mode, hatch, hatch_angle, cross)
-    station = open_station(rig, field, workpiece, seed)
     laser = LaserParams(power_pct=power, frequency_khz=frequency, mark_speed_mm_s=speed,
                         jump_speed_mm_s=jump_speed)
-    with progress_bar("projecting") as progress:
-        progress(0, 1)
-        plan = svc.plan_mark(cloud, placement, station.driver, laser)
-    if resume and (not out.exists() or read_job(out).digest() != plan.job.digest()):
-        fail(f"--resume: {out} does not hold this job; run without --resume to start it")
-    if not resume:
-        svc.save_job(out, plan.job)
-    _summary(out, placement, plan, station.field)
-    if run:
-        run_on_station(station, plan.job, out, resume, preview, inspect)
+    with connect(rig, workpiece, seed, field=field) as station:
+        with progress_bar("projecting") as progress:
+            progress(0, 1)
+            plan = svc.plan_mark(cloud, placement, station.driver, laser)
+        if resume and (not out.exists() or read_job(out).digest() != plan.job.digest()):
+            fail(f"--resume: {out} does not hold this job; run without --resume to start it")
+        if not resume:
+            svc.save_job(out, plan.job)
+        _summary(out, placement, plan, station.field)
+        if run:
+            run_on_station(station, plan.job, out, resume, preview, inspect)
 
 
 def _summary(out: Path, placement, plan, field: Path | None) -> None:

@@ -34,6 +34,7 @@ def scan(
 ) -> None:
     """Scan a part (or replay a recorded scan) and write its point cloud."""
     from insitu import services
+    from insitu.services.station import connect
 
     check_output(out, ".ply")
     method = method or ("height" if height_cal is not None else "plane")
@@ -53,10 +54,9 @@ def scan(
         if replay is not None:
             result = services.scan_replay(replay, cal, height_model, progress=progress)
         else:
-            world = (services.sim_world_from_rig_file(rig, workpiece, binning) if rig is not None
-                     else services.sim_world(workpiece, seed=seed, binning=binning))
-            result = services.scan_live(world, spacing=spacing, region=region, height_cal=cal,
-                                        model=height_model, progress=progress)
+            with connect(rig, workpiece, seed, binning) as station:
+                result = _live(station, out, spacing=spacing, region=region, height_cal=cal,
+                               model=height_model, progress=progress)
     services.save_cloud(result, out)
     if preview is not None:
         from insitu.measure.preview import save_cloud_picture
@@ -71,3 +71,19 @@ def scan(
     table.add_row("z range, mm", f"{s.bounds_min[2]:.2f} … {s.bounds_max[2]:.2f}")
     table.add_row("time", f"{s.seconds:.1f} s")
     console.print(table)
+
+
+def _live(station, out: Path, **kw):
+    """Scan on the station's devices. A device that stops answering ends the scan with the
+    laser off; what was measured until then is written beside ``out`` (``*.partial.ply``)."""
+    from insitu import services
+
+    dev = station.devices
+    try:
+        return services.scan_live(station.world, camera=dev.camera, head=dev.head, **kw)
+    except services.ScanInterrupted as e:
+        if e.partial is None:
+            raise
+        partial = out.with_name(out.stem + ".partial.ply")
+        services.save_cloud(e.partial, partial)
+        fail(f"{e}; the {len(e.partial.cloud):,} points measured before it are in {partial}")

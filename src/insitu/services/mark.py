@@ -10,7 +10,6 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from insitu.devices.sim import SimWorld
 from insitu.errors import FormatError
 from insitu.formats.atomic import atomic_write_bytes
 from insitu.formats.pointcloud import PointCloud, read_ply
@@ -103,27 +102,9 @@ def mark(job: MarkJob, driver: GalvoDriver, controller, progress_path: str | Pat
     return run_job(job, driver, controller, progress_path, resume, cancel, progress)
 
 
-def rig_field_correction(rig_file: str | Path) -> Path | None:
-    """The field correction file a rig file names, or None."""
-    from insitu.rig.files import RigConfig, load_json_model
-    cfg = load_json_model(rig_file, RigConfig)
-    return cfg.resolve(cfg.field_correction)
-
-
 def save_image(path: str | Path, image: np.ndarray) -> None:
     """Write a camera image as PNG, atomically."""
     ok, buf = cv2.imencode(".png", image)
     if not ok:
         raise FormatError(f"{path}: OpenCV could not encode the image")
     atomic_write_bytes(path, buf.tobytes())
-
-
-def sim_driver(world: SimWorld, field: str | Path | None = None) -> GalvoDriver:
-    """The driver of the simulated head as its operator knows it (nominal kinematics), with
-    the field correction of the file ``field`` when given."""
-    correction = None
-    if field is not None:
-        from insitu.calibrate.field_file import correction_from_file
-        correction = correction_from_file(field)
-    return GalvoDriver.from_config(world.rig.nominal, correction)
-

@@ -13,7 +13,6 @@ from PySide6.QtWidgets import QDockWidget, QFileDialog, QLabel, QMainWindow
 
 from insitu.errors import InsituError
 from insitu.services import load_height_calibration
-from insitu.services.mark import sim_driver
 from insitu.ui import operations as ops
 from insitu.ui.calibrate_panel import CalibratePanel
 from insitu.ui.camera_image import CameraImage
@@ -168,12 +167,15 @@ class MainWindow(QMainWindow):
     def connect_rig(self, choice: RigChoice | None = None) -> None:
         choice = choice or self.session.rig_choice
         field = self.session.field_path
-        self.runner.start("connect", lambda p, c, f: ops.connect(choice, field),
+        self.runner.start("connect", lambda p, c, f: (choice, ops.connect(choice, field)),
                           self._connected, lambda m, _c: self.show_error(m))
 
-    def _connected(self, station: ops.Station) -> None:
+    def _connected(self, result) -> None:
+        choice, station = result
+        if self.station is not None:
+            self.station.close()
         self.station = station
-        self.session.rig_choice = station.choice
+        self.session.rig_choice = choice
         cam, head = station.describe()
         self.camera_label.setText(cam)
         self.head_label.setText(head)
@@ -213,7 +215,7 @@ class MainWindow(QMainWindow):
         elif kind == "field":
             self.session.field_path = path
             if self.station is not None:
-                self.station.driver = sim_driver(self.station.world, path)
+                self.station.use_field(path)
                 self._plan_timer.start()
         else:
             self.session.camera_cal_path = path
@@ -371,4 +373,6 @@ class MainWindow(QMainWindow):
 
     def closeEvent(self, e) -> None:
         self.runner.wait_all()
+        if self.station is not None:
+            self.station.close()            # laser off, devices released
         super().closeEvent(e)

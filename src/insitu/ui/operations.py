@@ -13,47 +13,29 @@ import cv2
 import numpy as np
 
 from insitu import services
-from insitu.devices.sim import SimCamera, SimWorld
 from insitu.errors import InsituError, SafetyError
 from insitu.formats.pointcloud import PointCloud, read_ply, write_ply
 from insitu.marking import GalvoDriver, LaserParams, MarkJob, RunResult
 from insitu.services import mark as mark_svc
 from insitu.services.common import Progress
+from insitu.services.station import Station
+from insitu.services.station import connect as connect_station
 from insitu.ui.project_file import SUFFIX, Project, read_project, write_project
 from insitu.ui.session import PlanOutcome, RigChoice, ScanSettings
 
 _WHERE = re.compile(r"\(x, y\) = \((-?[\d.]+), (-?[\d.]+)\) mm")
 
 
-@dataclass
-class Station:
-    """A connected rig: the simulated ``world`` and the ``driver`` of its head."""
-
-    world: SimWorld
-    driver: GalvoDriver
-    choice: RigChoice
-
-    def describe(self) -> tuple[str, str]:
-        """(camera, scan head) one-liners for the status bar."""
-        rig = self.world.rig
-        cam = self.world.rig.operator_camera
-        head = rig.nominal
-        kind = "sim" if self.choice.rig_file is None else f"rig {self.choice.rig_file.name}"
-        return (f"camera {cam.width}×{cam.height} px ({kind})",
-                f"head {head.lens}, field {head.field_size_mm[0]:g}×{head.field_size_mm[1]:g} "
-                f"mm, z {head.z_range_mm[0]:g}…{head.z_range_mm[1]:g} mm")
-
-
 def connect(choice: RigChoice, field: Path | None = None) -> Station:
-    """The simulated rig of ``choice`` (or of its rig file) with the head's driver."""
-    if choice.rig_file is not None:
-        world = services.sim_world_from_rig_file(choice.rig_file, choice.workpiece,
-                                                 choice.binning)
-        field = field or mark_svc.rig_field_correction(choice.rig_file)
-    else:
-        world = services.sim_world(choice.workpiece, seed=choice.seed, binning=choice.binning)
-    SimCamera(world).grab()         # the camera answers (and the simulator builds its scene)
-    return Station(world, mark_svc.sim_driver(world, field), choice)
+    """The station of ``choice`` (its rig file, or the simulated rig), its camera answering."""
+    station = connect_station(choice.rig_file, choice.workpiece, choice.seed, choice.binning,
+                              field)
+    try:
+        station.devices.camera.grab()   # the camera answers (the simulator builds its scene)
+    except BaseException:
+        station.close()
+        raise
+    return station
 
 
 def scan(station: Station | None, settings: ScanSettings, height_cal, progress: Progress,
@@ -67,7 +49,8 @@ def scan(station: Station | None, settings: ScanSettings, height_cal, progress: 
         raise InsituError("connect the rig first (Rig ▸ Connect)")
     return services.scan_live(station.world, settings.spacing_mm, settings.region, height_cal,
                               progress=progress, cancel=cancel, on_frame=on_frame,
-                              exposure_ms=settings.exposure_ms)
+                              exposure_ms=settings.exposure_ms,
+                              camera=station.devices.camera, head=station.devices.head)
 
 
 def where(error: SafetyError) -> tuple[float, float] | None:
@@ -118,26 +101,22 @@ class MarkOutcome:
 
 
 def preview(job: MarkJob, station: Station) -> list[np.ndarray]:
-    """Draw the job's outline with the pilot laser; returns the pilot's (2, 3) mm segments."""
-    from insitu.devices.sim_marking import SimController
-    from insitu.marking import run_preview
+    """Draw the job's outline with the pilot laser; returns the outline's (2, 3) mm segments."""
+    from insitu.marking import preview_outlines, run_preview
 
-    controller = SimController(station.world)
-    run_preview(job, station.driver, controller)
-    return controller.pilot_trace
+    run_preview(job, station.driver, station.devices.controller)
+    return [seg for loop in preview_outlines(job) for seg in np.stack([loop[:-1], loop[1:]], 1)]
 
 
 def mark(job: MarkJob, station: Station, job_path: Path | None, progress: Progress,
          cancel: threading.Event) -> MarkOutcome:
     """Mark ``job`` (progress recorded beside ``job_path`` when given), then image the part.
     Setting ``cancel`` stops the laser before the next command (Cancelled is raised)."""
-    from insitu.devices.sim_marking import SimController, SimInspectionCamera
-
-    controller = AbortableController(SimController(station.world), cancel)
+    controller = AbortableController(station.devices.controller, cancel)
     ppath = mark_svc.save_job(job_path, job) if job_path is not None else None
     result = mark_svc.mark(job, station.driver, controller, ppath, cancel=cancel,
                            progress=progress)
-    return MarkOutcome(result, SimInspectionCamera(station.world).grab())
+    return MarkOutcome(result, station.devices.camera.grab())
 
 
 def load_cloud(path: Path) -> PointCloud:
