@@ -432,3 +432,16 @@ def test_random_bytes_only_ever_raise_format_error(data, suffix, prefix):
             assert "\n" not in str(e) and f.name in str(e)
         else:
             assert not p.is_empty
+
+
+def test_dxf_entity_of_absurd_size_is_refused_quickly(tmp_path):
+    import time
+
+    import ezdxf
+    doc = ezdxf.new()
+    doc.modelspace().add_circle((0, 0), 1e300)
+    doc.saveas(tmp_path / "huge.dxf")
+    t = time.perf_counter()
+    with pytest.raises(FormatError, match=r"huge\.dxf: a CIRCLE entity reaches beyond ±100000 mm"):
+        load_pattern(tmp_path / "huge.dxf")
+    assert time.perf_counter() - t < 2.0

@@ -20,6 +20,7 @@ MM_PER_PX = 25.4 / 96.0  # CSS pixel, the SVG user unit
 # svgelements turns mm and cm into px with 0.0393701 in/mm; this ppi makes those exact
 # (px, pt and pc do not depend on it; inches are then off by 5e-7)
 _SVG_PPI = 96.0 / (25.4 * 0.0393701)
+MAX_MM = 1e5      # 100 m: coordinates beyond this are a broken file, not a pattern
 
 
 def bezier_points(ctrl, tol: float) -> np.ndarray:
@@ -264,6 +265,10 @@ def load_dxf(path: str | Path, tol_mm: float = TOL_MM, join_mm: float = 1e-3) ->
                 except (TypeError, ValueError):
                     continue  # an entity with no outline (POINT, DIMENSION, ...)
             for p in paths:
+                cv = np.array([(v.x, v.y) for v in p.control_vertices()], np.float64) * k
+                if len(cv) and not (np.isfinite(cv).all() and np.abs(cv).max() <= MAX_MM):
+                    raise FormatError(f"{path}: a {kind} entity reaches beyond ±{MAX_MM:g} mm "
+                                      "(or its coordinates are not numbers)")
                 for sub in p.sub_paths():
                     pts = np.array([(v.x, v.y) for v in sub.flattening(tol_mm / k)]) * k
                     if len(pts) < 2:
