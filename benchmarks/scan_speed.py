@@ -65,7 +65,6 @@ def main(n_frames: int = 200) -> None:
                                          settings=centre_settings(cal), z_range_mm=zr))):
         def step(i, rec=rec):
             rec.add(i, frames[i % 20], *lines[i % 20])
-        t = time.perf_counter()
         timed(name, step)
         t1 = time.perf_counter()
         cloud = rec.cloud()

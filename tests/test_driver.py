@@ -1,6 +1,5 @@
 """The scan-head driver: command stream, laser safety, resume, and marking on the sim rig."""
 
-import json
 import os
 from dataclasses import replace
 from pathlib import Path
@@ -8,7 +7,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from insitu.devices.galvo import (Command, Controller, RecordingController, focus_points,
+from insitu.devices.galvo import (Controller, RecordingController, focus_points,
                                   joint_from_targets, nominal_commands)
 from insitu.devices.sim import SimWorld
 from insitu.devices.sim_marking import SimController

@@ -132,7 +132,7 @@ def test_exception_in_writer_leaves_no_folder(tmp_path):
 def test_exception_in_writer_keeps_the_old_sequence(rec):
     before = (rec / "sequence.json").read_text()
     with pytest.raises(KeyboardInterrupt):
-        with SequenceWriter(rec, "scan", HEAD, camera=CAMERA) as w:
+        with SequenceWriter(rec, "scan", HEAD, camera=CAMERA):
             raise KeyboardInterrupt
     assert (rec / "sequence.json").read_text() == before
     assert [p.name for p in rec.parent.iterdir()] == ["rec"]

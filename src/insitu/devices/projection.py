@@ -17,7 +17,8 @@ import threading
 import numpy as np
 
 from insitu.devices.galvo import Command, FieldCorrection, joint_from_targets
-from insitu.errors import DeviceError, SafetyError
+from insitu.devices.protocols import check_in_field
+from insitu.errors import DeviceError
 from insitu.geometry.beams import TwoMirrorHead
 
 
@@ -67,13 +68,8 @@ class GalvoLineProjector:
         return cmds + [Command(off)]
 
     def _check(self, *points) -> None:
-        half = np.asarray(self.field_size_mm) / 2
-        for p in points:
-            if np.any(np.abs(np.asarray(p, float)) > half + 1e-9):
-                raise SafetyError(f"scan head: point {list(map(float, p))} mm is outside the "
-                                  f"field ±{half[0]:g} × ±{half[1]:g} mm")
+        check_in_field(self.field_size_mm, *points)
 
-    # -- ScanHead -----------------------------------------------------------------------------
     def show_line(self, start, end, focus_z: float = 0.0) -> None:
         self._check(start, end)
         self._show(self.sweep_list(start, end, focus_z))

@@ -9,6 +9,8 @@ from typing import Protocol, runtime_checkable
 
 import numpy as np
 
+from insitu.errors import SafetyError
+
 
 @runtime_checkable
 class Camera(Protocol):
@@ -20,6 +22,16 @@ class Camera(Protocol):
     def grab(self, timeout_s: float = 5.0) -> np.ndarray:
         """One frame, (height, width) uint8 or uint16. Raises DeviceError on timeout."""
         ...
+
+
+def check_in_field(field_size_mm, *points) -> None:
+    """SafetyError naming the first point (x, y mm on z = 0) outside the field, centred on
+    the origin, of ``field_size_mm`` (width, height)."""
+    half = np.asarray(field_size_mm, float) / 2
+    for p in points:
+        if np.any(np.abs(np.asarray(p, float)) > half + 1e-9):
+            raise SafetyError(f"scan head: point {list(map(float, p))} mm is outside the "
+                              f"field ±{half[0]:g} × ±{half[1]:g} mm")
 
 
 @runtime_checkable

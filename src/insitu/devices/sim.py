@@ -11,7 +11,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from insitu.errors import SafetyError
+from insitu.devices.protocols import check_in_field
 from insitu.sim.render import NOMINAL_EXPOSURE_MS, Renderer
 from insitu.sim.rig import SimRig
 from insitu.sim.scene import Scene
@@ -85,12 +85,8 @@ class SimScanHead:
         self.field_size_mm = tuple(nominal.field_size_mm)
         self.z_range_mm = tuple(nominal.z_range_mm)
 
-    def _check(self, *points: np.ndarray) -> None:
-        half = np.asarray(self.field_size_mm) / 2
-        for p in points:
-            if np.any(np.abs(np.asarray(p, float)) > half + 1e-9):
-                raise SafetyError(f"scan head: point {list(map(float, p))} mm is outside the "
-                                  f"field ±{half[0]:g} × ±{half[1]:g} mm")
+    def _check(self, *points) -> None:
+        check_in_field(self.field_size_mm, *points)
 
     def show_line(self, start, end, focus_z: float = 0.0) -> None:
         self._check(start, end)
