@@ -1,7 +1,8 @@
 """The 3-D view in a real OpenGL window (Xvfb + Mesa, the xcb platform, in a child process
 because the test session's Qt runs offscreen): the step block's cloud coloured by height
-and the projected pattern must be where the camera puts them. Saves docs/gui.png, the
-README's screenshot. Fails, never skips, without a display: CI must render."""
+and the projected pattern must be where the camera puts them. (The README's docs/gui.png is
+made by the same module: see its docstring.) Fails, never skips, without a display: CI must
+render."""
 
 import json
 import os
@@ -16,7 +17,6 @@ import pytest
 from insitu.ui import scene_data as sd
 from insitu.ui.orbit_camera import OrbitCamera
 
-ROOT = Path(__file__).parents[1]
 DATA = Path(__file__).parent / "data"
 BACKGROUND = np.array([0.14, 0.12, 0.11]) * 255        # BGR of the view's clear colour
 
@@ -25,7 +25,7 @@ def _render(tmp_path) -> tuple[dict, np.ndarray, np.ndarray]:
     if not os.environ.get("DISPLAY"):
         pytest.fail("no X display: the OpenGL test needs Xvfb + Mesa (run scripts/test.sh)")
     view_png = tmp_path / "view.png"
-    cmd = [sys.executable, "-m", "insitu.ui.screenshot", str(ROOT / "docs" / "gui.png"),
+    cmd = [sys.executable, "-m", "insitu.ui.screenshot", str(tmp_path / "gui.png"),
            "--replay", str(DATA / "scan-step-block-b4"), "--height-cal",
            str(DATA / "height-cal-b4"), "--pattern", 'text:"insitu"', "--at", "0", "28",
            "--width", "16", "--view", "iso", "--view-png", str(view_png)]
@@ -34,7 +34,7 @@ def _render(tmp_path) -> tuple[dict, np.ndarray, np.ndarray]:
     assert r.returncode == 0, r.stderr[-2000:]
     info = json.loads(view_png.with_suffix(".json").read_text())
     view = cv2.imread(str(view_png), cv2.IMREAD_COLOR)
-    window = cv2.imread(str(ROOT / "docs" / "gui.png"), cv2.IMREAD_COLOR)
+    window = cv2.imread(str(tmp_path / "gui.png"), cv2.IMREAD_COLOR)
     return info, view, window
 
 
@@ -69,11 +69,11 @@ def test_the_view_draws_the_cloud_by_height_and_the_projected_pattern(tmp_path):
         d = expect - BACKGROUND
         a = float((got - BACKGROUND) @ d / (d @ d))
         assert a > 0.5 and np.linalg.norm(got - BACKGROUND - a * d) < 15, (lo, hi, got, expect)
-    # the projected pattern: green within a pixel of where its points project
+    # the projected pattern: magenta within a pixel of where its points project
     pattern = np.array(info["pattern_points"])
     assert len(pattern) > 50
-    green = np.array(sd.PROJECTED_COLOUR[2::-1]) * 255
+    colour = np.array(sd.PROJECTED_COLOUR[2::-1]) * 255
     px = np.round(cam.project(pattern, w, h)).astype(int)
-    near = [np.min(np.linalg.norm(img[y - 1:y + 2, x - 1:x + 2].reshape(-1, 3) - green,
+    near = [np.min(np.linalg.norm(img[y - 1:y + 2, x - 1:x + 2].reshape(-1, 3) - colour,
                                   axis=1)) < 60 for x, y in px]
     assert np.mean(near) > 0.7

@@ -45,7 +45,10 @@ void main() { frag = vec4(colour, 1.0); }
 LINE_VS = """#version 330 core
 layout(location = 0) in vec3 position;
 uniform mat4 mvp;
-void main() { gl_Position = mvp * vec4(position, 1.0); }
+void main() {
+  gl_Position = mvp * vec4(position, 1.0);
+  gl_Position.z -= 0.0005 * gl_Position.w;   // lines on the surface win over its points
+}
 """
 LINE_FS = """#version 330 core
 uniform vec4 colour;

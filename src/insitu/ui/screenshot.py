@@ -1,9 +1,13 @@
 """Render the application on a recorded scan with a placed pattern and save pictures (the
 README's docs/gui.png, the OpenGL test, the benchmark). Needs a display with OpenGL 3.3
 (on a headless machine: ``QT_QPA_PLATFORM=xcb xvfb-run -a python -m insitu.ui.screenshot``).
+docs/gui.png is the step block recorded at binning 2 with the logo across a step edge::
 
-    python -m insitu.ui.screenshot docs/gui.png --replay tests/data/scan-step-block-b4 \\
-        --height-cal tests/data/height-cal-b4 --pattern 'text:"insitu"' --at 0 28 --width 16
+    insitu sim record scan --binning 2 -o rec2
+    insitu sim record height-calibration --binning 2 -o hcal2
+    insitu calibrate height hcal2 -o h2.json
+    python -m insitu.ui.screenshot docs/gui.png --replay rec2 --height-cal h2.json \\
+        --pattern patterns/logo.svg --at 0 0 --width 18
 
 ``--view-png V.png`` also saves the 3-D view's own framebuffer and ``V.json`` beside it: the
 camera (centre, distance, angles, field of view), the image size, the colour scale's z range,
