@@ -84,7 +84,11 @@ def test_cancel_a_live_scan(qtbot, window):
     qtbot.waitUntil(lambda: not window.runner.running("scan"), timeout=WAIT_MS)
     assert "cancelled" in ui.summaryLabel.text()
     assert ui.progressBar.value() < ui.progressBar.maximum()
-    assert window.session.cloud is None and window.station.world.laser.kind == "off"
+    assert window.station.world.laser.kind == "off"
+    # the lines measured before the cancel are kept
+    cloud = window.session.cloud
+    assert cloud is not None and len(cloud) > 0 and "kept" in ui.summaryLabel.text()
+    assert len(np.unique(cloud.attributes["line"])) < ui.progressBar.maximum()
 
 
 def _drag(view, a, b, steps=5):

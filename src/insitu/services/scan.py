@@ -67,7 +67,12 @@ FrameCallback = Callable[[ScanFrame], None]
 
 
 class Cancelled(InsituError):
-    """The operator cancelled; what was measured so far is kept in ``partial``."""
+    """The operator cancelled. ``partial``: for a scan, the result of the lines measured
+    before (None when none gave points, or for other work)."""
+
+    def __init__(self, message: str, partial: ScanResult | None = None):
+        super().__init__(message)
+        self.partial = partial
 
 
 class ScanInterrupted(DeviceError):
@@ -124,7 +129,7 @@ def scan_replay(folder: str | Path, height_cal: HeightCalibration | None = None,
                         str(seq.folder))
     for i, frame, image in seq:
         if cancel is not None and cancel.is_set():
-            raise Cancelled(f"scan cancelled after {i} of {len(seq)} frames")
+            raise Cancelled(f"scan cancelled after {i} of {len(seq)} frames", _partial(rec, t0))
         rec.add(i, image, frame.line.start, frame.line.end)
         if on_frame:
             on_frame(ScanFrame(i, len(seq), image, rec.last_centres, rec.last_points))
@@ -206,7 +211,8 @@ def scan_live(world: SimWorld, spacing: float = 0.5, region=None,
     try:
         for i, (a, b) in enumerate(lines):
             if cancel is not None and cancel.is_set():
-                raise Cancelled(f"scan cancelled after {i} of {len(lines)} lines")
+                raise Cancelled(f"scan cancelled after {i} of {len(lines)} lines",
+                                _partial(rec, t0))
             try:
                 head.show_line(a, b)
                 image = camera.grab()

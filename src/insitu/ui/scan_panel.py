@@ -125,7 +125,7 @@ class ScanPanel(QWidget):
         self.window_.show_message(f"scan done: {s.points:,} points")
 
     def _failed(self, message: str, cancelled: bool) -> None:
-        """Show why; a device fault keeps the lines measured before it."""
+        """Show why; a cancel or a device fault keeps the lines measured before it."""
         task = self.window_.runner.tasks.get("scan")
         partial = getattr(task.error, "partial", None) if task is not None else None
         if partial is not None:
