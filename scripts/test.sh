@@ -5,6 +5,6 @@ ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 source "$ROOT/scripts/setup.sh"
 cd "$ROOT"
 export QT_QPA_PLATFORM="${QT_QPA_PLATFORM:-offscreen}"
-lint-imports --config pyproject.toml
+lint-imports pyproject.toml
 python -m pyflakes src tests benchmarks patterns
 exec xvfb-run -a -s "-screen 0 1280x1024x24" python -m pytest "$@"

@@ -146,6 +146,10 @@ def load_svg(path: str | Path, tol_mm: float = TOL_MM) -> Pattern:
             subs = _svg_subpaths(el, se, tol_px)
             if not subs:
                 continue
+            if not all(np.isfinite(q).all() and np.abs(q).max() * MM_PER_PX <= MAX_MM
+                       for q, _ in subs if len(q)):
+                raise FormatError(f"{path}: a <{el.values.get('tag', 'shape')}> reaches beyond "
+                                  f"±{MAX_MM:g} mm (or its coordinates are not numbers)")
             if el.fill is not None and el.fill.value is not None and el.fill.alpha != 0:
                 rule = "evenodd" if el.values.get("fill-rule") == "evenodd" else "nonzero"
                 rings = [p[:-1] if c else p for p, c in subs if len(p) >= 3]
