@@ -2,6 +2,7 @@
 
 from pathlib import Path
 
+import cv2
 import numpy as np
 import pytest
 from typer.testing import CliRunner
@@ -87,6 +88,15 @@ def test_cli_calibrate_then_scan_with_the_file(tmp_path):
     assert res.exit_code == 0, res.output
     cal = load_json_model(hjson, HeightCalibration)
     assert cal.residuals["sheet_rms_mm"] > 0 and cal.centres.method == "steger"
+    # the residual grid: one cell per plate height × line offset, its RMS consistent with the
+    # overall one, and drawn beside the file
+    g = cal.residual_grid
+    rms = np.array([[np.nan if v is None else v for v in row] for row in g.rms_mm])
+    assert rms.shape == (len(g.heights_mm), len(g.offsets_mm)) and len(g.heights_mm) >= 3
+    assert np.nanmin(rms) > 0 and np.nanmax(rms) <= cal.residuals["sheet_max_mm"]
+    assert np.nanmax(rms) >= cal.residuals["sheet_rms_mm"] * 0.9
+    picture = cv2.imread(str(hjson.with_suffix(".png")))
+    assert picture is not None and picture.shape[1] >= 500
     out = tmp_path / "c.ply"
     res = runner.invoke(app, ["scan", "--replay", str(DATA / "scan-step-block-b4"),
                               "--height-cal", str(hjson), "-o", str(out)])

@@ -1,5 +1,6 @@
-"""The field calibration report: a quiver plot of the deviations before and after correction
-(Mikkelstrup et al. Fig. 7) and their max / RMS per area (their Table 1), drawn with OpenCV.
+"""Calibration reports drawn with OpenCV: the field correction's quiver plot of the deviations
+before and after correction (Mikkelstrup et al. Fig. 7) with their max / RMS per area (their
+Table 1), and the height calibration's residual grid (plate height × line offset).
 """
 
 from __future__ import annotations
@@ -116,6 +117,37 @@ def report_image(points: np.ndarray, before: np.ndarray, after: np.ndarray, half
             cv2.line(table, (MARGIN, y + 6), (top.shape[1] - MARGIN, y + 6), _GRID, 1)
         y += 22
     return np.vstack([top, table])
+
+
+def grid_image(heights: np.ndarray, offsets: np.ndarray, rms_mm: np.ndarray, title: str,
+               full_scale_mm: float = 0.05) -> np.ndarray:
+    """(H, W, 3) BGR image of a residual grid: one cell per plate height (rows, highest on
+    top) and line offset (columns), coloured by its RMS (turbo, 0 … ``full_scale_mm``) and
+    labelled in µm; empty cells (NaN) grey."""
+    cw, ch, left, top = 64, 30, 90, 70
+    nh, nx = rms_mm.shape
+    img = np.full((top + nh * ch + 40, max(left + nx * cw + 20, 520), 3), 255, np.uint8)
+    for k, line in enumerate(textwrap.wrap(title, 90)[:2]):
+        cv2.putText(img, line, (10, 22 + 20 * k), _FONT, 0.5, _INK, 1, cv2.LINE_AA)
+    level = np.clip(np.nan_to_num(rms_mm, nan=0.0) / full_scale_mm * 255, 0, 255)
+    colours = cv2.applyColorMap(level.astype(np.uint8), cv2.COLORMAP_TURBO)
+    for r in range(nh):
+        i = nh - 1 - r                                        # highest plate on top
+        y = top + r * ch
+        cv2.putText(img, f"z {heights[i]:+g}", (10, y + 20), _FONT, 0.45, _INK, 1, cv2.LINE_AA)
+        for j in range(nx):
+            x = left + j * cw
+            empty = not np.isfinite(rms_mm[i, j])
+            colour = _GRID if empty else tuple(int(c) for c in colours[i, j])
+            cv2.rectangle(img, (x, y), (x + cw - 2, y + ch - 2), colour, -1)
+            if not empty:
+                ink = _WHITE if level[i, j] < 60 or level[i, j] > 200 else _INK
+                cv2.putText(img, f"{1000 * rms_mm[i, j]:.0f}", (x + 14, y + 20), _FONT, 0.45,
+                            ink, 1, cv2.LINE_AA)
+    for j in range(nx):
+        cv2.putText(img, f"x {offsets[j]:+g}", (left + j * cw + 4, top + nh * ch + 18), _FONT,
+                    0.4, _INK, 1, cv2.LINE_AA)
+    return img
 
 
 def write_report_png(path: str | Path, image: np.ndarray) -> None:

@@ -18,18 +18,18 @@ app = typer.Typer(help="Calibrations from recorded sequences.", no_args_is_help=
 @one_line_errors
 def height_cmd(
     hcal: Annotated[Path, typer.Argument(help="Recorded height-calibration folder.")],
-    out: Annotated[Path, typer.Option("-o", "--output", help="Height calibration file (.json).")],
+    out: Annotated[Path, typer.Option("-o", "--output", help="Height calibration file (.json); "
+                                      "the residual grid is drawn beside it (.png).")],
 ) -> None:
     """Fit the height calibration (Li et al. §2.2, and ours, the default) and write it with its
-    residuals."""
-    from insitu.rig.files import save_json_model
-    from insitu.services import calibrate_height
+    residuals, per plate height and line offset, and their picture."""
+    from insitu.services.height import calibrate_height_and_report
 
     check_output(out, ".json")
     with progress_bar("height calibration") as progress:
-        cal = calibrate_height(hcal, progress=progress)
-    save_json_model(out, cal)
-    table = Table(title=f"height calibration → {out}", show_header=False)
+        cal = calibrate_height_and_report(hcal, out, progress)
+    table = Table(title=f"height calibration → {out}, {out.with_suffix('.png').name}",
+                  show_header=False)
     table.add_row("recording", cal.notes)
     table.add_row("default model", cal.model)
     for key, value in cal.residuals.items():

@@ -232,6 +232,24 @@ def height_residuals(model, camera: CameraModel, obs: list[LineObservation]) -> 
             "points": float(len(err))}
 
 
+def residual_grid(model, camera: CameraModel, obs: list[LineObservation]
+                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Where the calibration is good: plate heights (H,) and line offsets (X,), mm, and the
+    RMS of |Z − plate height| (H, X), mm, of the frame at each (NaN where there is none)."""
+    heights = np.unique([o.z_mm for o in obs])
+    offsets = np.unique([o.x_mm for o in obs])
+    sq = np.zeros((len(heights), len(offsets)))
+    n = np.zeros_like(sq)
+    for o in obs:
+        e = model.points(camera, o.x_mm, o.u, o.v)[:, 2] - o.z_mm
+        e = e[np.isfinite(e)]
+        i, j = np.searchsorted(heights, o.z_mm), np.searchsorted(offsets, o.x_mm)
+        sq[i, j] += float(np.sum(e * e))
+        n[i, j] += len(e)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return heights, offsets, np.where(n > 0, np.sqrt(sq / n), np.nan)
+
+
 def cross_validate_sheet(obs: list[LineObservation], camera: CameraModel,
                          pivot_height_mm: float) -> dict[str, float]:
     """Leave-one-height-out: fit without each plate height, test on it (needs ≥ 3 heights)."""

@@ -148,6 +148,24 @@ class CentreSettingsSpec(BaseModel):
     end_fraction: float = Field(default=0.5, ge=0, lt=1)
 
 
+class ResidualGridSpec(BaseModel):
+    """RMS height error of the default model per plate height (rows) and line offset
+    (columns), mm; null where the recording had no frame."""
+
+    model_config = ConfigDict(allow_inf_nan=False)
+    heights_mm: list[float] = Field(min_length=1)
+    offsets_mm: list[float] = Field(min_length=1)
+    rms_mm: list[list[float | None]]
+
+    @field_validator("rms_mm")
+    @classmethod
+    def _grid(cls, v: list[list[float | None]], info) -> list[list[float | None]]:
+        h, x = len(info.data.get("heights_mm", [])), len(info.data.get("offsets_mm", []))
+        if h and x and (len(v) != h or any(len(r) != x for r in v)):
+            raise bad(f"expected a {h} × {x} grid (heights × offsets)", f"{len(v)} rows")
+        return v
+
+
 class HeightCalibration(CalibrationEnvelope):
     """Height calibration (Li et al. §2.2 and ours) with the camera it was fitted through and
     the centre extraction it was made with (a scan must use the same)."""
@@ -158,6 +176,7 @@ class HeightCalibration(CalibrationEnvelope):
     model: Literal["sheet", "paper"] = "sheet"
     sheet: SheetModelSpec
     paper: PaperModelSpec | None = None
+    residual_grid: ResidualGridSpec | None = None
 
 
 class RigConfig(JsonFile):

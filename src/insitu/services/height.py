@@ -4,13 +4,15 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import numpy as np
+
 from insitu.errors import CalibrationError, MeasurementError
 from insitu.formats.sequence import Sequence
 from insitu.geometry.camera import CameraModel
 from insitu.measure.plane import expected_band
 from insitu.measure.heightcal import (LineObservation, PaperHeightModel, SheetHeightModel,
-                                      cross_validate_sheet, height_residuals)
-from insitu.rig.files import HeightCalibration, load_json_model
+                                      cross_validate_sheet, height_residuals, residual_grid)
+from insitu.rig.files import HeightCalibration, ResidualGridSpec, load_json_model
 from insitu.services.common import Progress, camera_model
 from insitu.vision.extract import CentreSettings, extract_centres
 
@@ -54,15 +56,50 @@ def calibrate_height(folder: str | Path, settings: CentreSettings = CentreSettin
     if any(o.x_mm == 0.0 and o.z_mm == 0.0 for o in obs):
         paper = PaperHeightModel.fit(obs)
         residuals.update({f"paper_{k}": v for k, v in height_residuals(paper, camera, obs).items()})
-    heights = sorted({o.z_mm for o in obs})
-    offsets = sorted({o.x_mm for o in obs})
+    heights, offsets, rms = residual_grid(sheet, camera, obs)
+    grid = ResidualGridSpec(heights_mm=heights.tolist(), offsets_mm=offsets.tolist(),
+                            rms_mm=[[float(v) if np.isfinite(v) else None for v in row]
+                                    for row in rms])
     return HeightCalibration(
         camera=seq.camera, centres=settings.to_dict(), model="sheet", sheet=sheet.to_dict(),
         paper=paper.to_dict() if paper else None, inputs=[str(Path(folder))],
-        residuals=residuals,
+        residuals=residuals, residual_grid=grid,
         notes=f"{len(obs)} frames: plate at {heights[0]:g} … {heights[-1]:g} mm "
               f"({len(heights)} heights), lines at {offsets[0]:g} … {offsets[-1]:g} mm "
               f"({len(offsets)} offsets)")
+
+
+def height_report_png(cal: HeightCalibration, path: str | Path) -> None:
+    """Write the picture of the calibration's residual grid (plate height × line offset)."""
+    from insitu.calibrate.report import grid_image, write_report_png
+
+    g = cal.residual_grid
+    if g is None:
+        raise CalibrationError(f"{path}: the height calibration has no residual grid to draw")
+    rms = np.array([[np.nan if v is None else v for v in row] for row in g.rms_mm], float)
+    r = cal.residuals
+    title = (f"height calibration ({cal.model}): RMS {r.get('sheet_rms_mm', np.nan):.4f} mm, "
+             f"max {r.get('sheet_max_mm', np.nan):.4f} mm; per frame RMS in µm")
+    write_report_png(path, grid_image(np.array(g.heights_mm), np.array(g.offsets_mm), rms,
+                                      title))
+
+
+def calibrate_height_and_report(folder: str | Path, out: str | Path,
+                                progress: Progress | None = None) -> HeightCalibration:
+    """:func:`calibrate_height`, then write ``out`` (JSON) and the residual grid's picture
+    beside it (.png); nothing is left behind if either fails."""
+    from insitu.rig.files import save_json_model
+
+    out = Path(out)
+    cal = calibrate_height(folder, progress=progress)
+    png = out.with_suffix(".png")
+    height_report_png(cal, png)
+    try:
+        save_json_model(out, cal)
+    except BaseException:
+        png.unlink(missing_ok=True)
+        raise
+    return cal
 
 
 def load_height_calibration(path: str | Path, progress: Progress | None = None

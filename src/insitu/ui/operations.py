@@ -196,9 +196,9 @@ def calibrate(kind: str, folder: Path, out: Path, progress: Progress) -> Calibra
         save_json_model(out, cal)
         picture = _middle_frame(folder)
     elif kind == "height":
-        cal = services.calibrate_height(folder, progress=progress)
-        save_json_model(out, cal)
-        picture = _middle_frame(folder)
+        from insitu.services.height import calibrate_height_and_report
+        cal = calibrate_height_and_report(folder, out, progress)
+        picture = cv2.imread(str(out.with_suffix(".png")), cv2.IMREAD_COLOR)
     else:
         raise ValueError(kind)
     return CalibrationOutcome(dict(cal.residuals), cal.notes or "", picture, out)
