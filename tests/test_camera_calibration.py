@@ -181,3 +181,19 @@ def test_cli_bad_input_one_line_error_and_no_file(rec, tmp_path, case, message):
     assert len(lines) == 1 and message in lines[0], res.output
     assert "Traceback" not in res.output
     assert not out.exists() and not list(tmp_path.glob(".*camera*"))
+
+
+def test_the_application_camera_page_pictures_the_per_view_residuals(rec, tmp_path):
+    from insitu.ui import operations
+
+    folder, _ = rec
+    out = tmp_path / "camera.json"
+    outcome = operations.calibrate("camera", folder, out, lambda done, total: None)
+    cal = load_json_model(out, CameraCalibration)
+    assert outcome.residuals == cal.residuals and len(cal.per_view_rms_px) >= 4
+    pic = outcome.picture
+    assert pic.ndim == 3 and pic.shape[2] == 3 and pic.shape[1] >= 500
+    # one bar per view: the bars' colour appears in as many columns of blocks as there are views
+    bar = np.all(pic == (200, 140, 60), axis=2).any(axis=0)
+    starts = np.flatnonzero(bar[1:] & ~bar[:-1])
+    assert len(starts) == len(cal.per_view_rms_px)

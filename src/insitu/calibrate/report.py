@@ -150,6 +150,35 @@ def grid_image(heights: np.ndarray, offsets: np.ndarray, rms_mm: np.ndarray, tit
     return img
 
 
+def bars_image(values: Sequence[float], title: str, unit: str = "px") -> np.ndarray:
+    """(H, W, 3) BGR bar chart of ``values`` (one bar per view, numbered from 1) with the
+    median as a line: which views fit worse than the others."""
+    v = np.asarray(values, float)
+    bw, left, top, height = 28, 70, 60, 220
+    img = np.full((top + height + 50, max(left + len(v) * bw + 30, 520), 3), 255, np.uint8)
+    for k, line in enumerate(textwrap.wrap(title, 90)[:2]):
+        cv2.putText(img, line, (10, 22 + 20 * k), _FONT, 0.5, _INK, 1, cv2.LINE_AA)
+    full = _nice(max(float(np.nanmax(v)) if len(v) else 1.0, 1e-6)) * 2
+
+    def y(value: float) -> int:
+        return int(top + height - height * min(value / full, 1.0))
+
+    for t in np.linspace(0, full, 5):
+        cv2.line(img, (left, y(t)), (img.shape[1] - 20, y(t)), _GRID, 1)
+        cv2.putText(img, f"{t:.3g}", (10, y(t) + 5), _FONT, 0.4, _INK, 1, cv2.LINE_AA)
+    for i, value in enumerate(v):
+        x = left + i * bw
+        cv2.rectangle(img, (x + 3, y(value)), (x + bw - 3, y(0)), (200, 140, 60), -1)
+        cv2.putText(img, str(i + 1), (x + 6, top + height + 18), _FONT, 0.4, _INK, 1,
+                    cv2.LINE_AA)
+    if len(v):
+        m = float(np.median(v))
+        cv2.line(img, (left, y(m)), (img.shape[1] - 20, y(m)), (60, 60, 220), 1)
+        cv2.putText(img, f"median {m:.3g} {unit}", (left, top + height + 40), _FONT, 0.45,
+                    (60, 60, 220), 1, cv2.LINE_AA)
+    return img
+
+
 def write_report_png(path: str | Path, image: np.ndarray) -> None:
     """Encode as PNG and write atomically."""
     ok, buf = cv2.imencode(".png", image)

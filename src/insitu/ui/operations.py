@@ -191,10 +191,13 @@ def calibrate(kind: str, folder: Path, out: Path, progress: Progress) -> Calibra
         cal = calibrate_and_report(folder, out, progress=progress)
         picture = cv2.imread(str(out.with_suffix(".png")), cv2.IMREAD_COLOR)
     elif kind == "camera":
+        from insitu.calibrate.report import bars_image
         from insitu.services.camera import calibrate_camera_recording
         cal = calibrate_camera_recording(folder, progress=progress)
         save_json_model(out, cal)
-        picture = _middle_frame(folder)
+        picture = (bars_image(cal.per_view_rms_px, f"reprojection RMS per view, px (all: "
+                              f"{cal.rms_px:.3f} px)") if cal.per_view_rms_px
+                   else _middle_frame(folder))
     elif kind == "height":
         from insitu.services.height import calibrate_height_and_report
         cal = calibrate_height_and_report(folder, out, progress)
