@@ -53,6 +53,8 @@ class CameraSpec(BaseModel):
     @classmethod
     def _rotation(cls, R: list[list[float]]) -> list[list[float]]:
         a = np.asarray(R, np.float64)
+        if np.abs(a).max() > 1.0 + 1e-6:                # a rotation's entries are within ±1
+            raise bad("expected a rotation matrix (entries within ±1)", R)
         err, det = float(np.abs(a @ a.T - np.eye(3)).max()), float(np.linalg.det(a))
         if err > 1e-6 or det <= 0:
             raise bad("expected a rotation matrix (R @ R.T = I within 1e-6, det +1), got "
