@@ -65,6 +65,16 @@ def test_marking_laser_at_pilot_power(board):
     head.controller.close()
 
 
+def test_line_speed_sets_the_sweep_speed(board):
+    head = projector(board, sweeps=1)
+    head.set_line_speed(750.0)
+    assert [c.args for c in head.sweep_list(np.array([0.0, -5.0]), np.array([0.0, 5.0]))
+            if c.op == "set_mark_speed"] == [(750.0,)]
+    with pytest.raises(SafetyError, match="line speed 0 mm/s"):
+        head.set_line_speed(0.0)
+    head.controller.close()
+
+
 def test_outside_the_field_is_refused(board):
     head = projector(board)
     with pytest.raises(SafetyError, match="outside the field"):

@@ -97,7 +97,7 @@ def test_project_round_trip_with_relative_paths(tmp_path):
     (tmp_path / "logo.svg").write_text("<svg/>")
     (tmp_path / "part.cloud.ply").write_text("ply")
     pr = Project(RigChoice("step-block", 3, 4), tmp_path / "calib" / "height.json",
-                 scan=ScanSettings((-10.0, 10.0, -40.0, 40.0), 0.25, 8.0),
+                 scan=ScanSettings((-10.0, 10.0, -40.0, 40.0), 0.25, 8.0, speed_mm_s=1500.0),
                  cloud=tmp_path / "part.cloud.ply",
                  placements=(Placement(str(tmp_path / "logo.svg"), (1.0, 2.0), 12.0, 15.0,
                                        "wrap", 0.1, 45.0, True),

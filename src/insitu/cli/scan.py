@@ -30,6 +30,8 @@ def scan(
                       typer.Option(help="Region X0 X1 Y0 Y1, mm (default: the whole part).")] = None,
     seed: Annotated[int, typer.Option(help="Simulated rig: seed.")] = 0,
     binning: Annotated[int, typer.Option(help="Simulated rig: divide the image size by this.")] = 1,
+    line_speed: Annotated[float | None, typer.Option(
+        help="How fast the head sweeps each line, mm/s (default: the rig file's).")] = None,
     preview: Annotated[Path | None, typer.Option(help="Also write a picture of the cloud (.png).")] = None,
 ) -> None:
     """Scan a part (or replay a recorded scan) and write its point cloud."""
@@ -56,7 +58,7 @@ def scan(
         else:
             with connect(rig, workpiece, seed, binning) as station:
                 result = _live(station, out, spacing=spacing, region=region, height_cal=cal,
-                               model=height_model, progress=progress)
+                               model=height_model, progress=progress, speed_mm_s=line_speed)
     services.save_cloud(result, out)
     if preview is not None:
         from insitu.measure.preview import save_cloud_picture

@@ -18,7 +18,7 @@ import numpy as np
 
 from insitu.devices.galvo import Command, FieldCorrection, joint_from_targets
 from insitu.devices.protocols import check_in_field
-from insitu.errors import DeviceError
+from insitu.errors import DeviceError, SafetyError
 from insitu.geometry.beams import TwoMirrorHead
 
 
@@ -69,6 +69,12 @@ class GalvoLineProjector:
 
     def _check(self, *points) -> None:
         check_in_field(self.field_size_mm, *points)
+
+    def set_line_speed(self, speed_mm_s: float) -> None:
+        """Sweep speed of the lines drawn from now on, mm/s."""
+        if not speed_mm_s > 0:
+            raise SafetyError(f"scan head: line speed {speed_mm_s:g} mm/s: expected > 0")
+        self.speed = float(speed_mm_s)
 
     def show_line(self, start, end, focus_z: float = 0.0) -> None:
         self._check(start, end)

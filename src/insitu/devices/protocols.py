@@ -39,6 +39,10 @@ class ScanHead(Protocol):
     field_size_mm: tuple[float, float]
     z_range_mm: tuple[float, float]
 
+    def set_line_speed(self, speed_mm_s: float) -> None:
+        """How fast :meth:`show_line` sweeps the line, mm/s."""
+        ...
+
     def show_line(self, start: np.ndarray, end: np.ndarray, focus_z: float = 0.0) -> None:
         """Draw the line start → end (mm on z = 0) repeatedly at pilot power until changed."""
         ...

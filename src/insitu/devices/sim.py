@@ -12,6 +12,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from insitu.devices.protocols import check_in_field
+from insitu.errors import SafetyError
 from insitu.sim.render import NOMINAL_EXPOSURE_MS, Renderer
 from insitu.sim.rig import SimRig
 from insitu.sim.scene import Scene
@@ -87,6 +88,13 @@ class SimScanHead:
 
     def _check(self, *points) -> None:
         check_in_field(self.field_size_mm, *points)
+
+    def set_line_speed(self, speed_mm_s: float) -> None:
+        """Accepted and checked; the simulated head draws the whole line within every
+        exposure, whatever its speed."""
+        if not speed_mm_s > 0:
+            raise SafetyError(f"scan head: line speed {speed_mm_s:g} mm/s: expected > 0")
+        self.speed_mm_s = float(speed_mm_s)
 
     def show_line(self, start, end, focus_z: float = 0.0) -> None:
         self._check(start, end)

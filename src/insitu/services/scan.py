@@ -190,10 +190,11 @@ def scan_live(world: SimWorld, spacing: float = 0.5, region=None,
               height_cal: HeightCalibration | None = None, model: str | None = None,
               progress: Progress | None = None, cancel: threading.Event | None = None,
               on_frame: FrameCallback | None = None, exposure_ms: float | None = None,
-              camera: Camera | None = None, head: ScanHead | None = None) -> ScanResult:
+              camera: Camera | None = None, head: ScanHead | None = None,
+              speed_mm_s: float | None = None) -> ScanResult:
     """Drive the rig: step the line over ``region`` (x0, x1, y0, y1) mm and reconstruct each
     frame as it arrives (``on_frame`` sees each; ``exposure_ms``: the camera's, default its
-    own). ``camera``, ``head``: real devices (default: the world's simulated ones). The laser
+    own; ``speed_mm_s``: the head's line sweep speed, default its own). ``camera``, ``head``: real devices (default: the world's simulated ones). The laser
     is off when this returns or raises; a device fault raises :class:`ScanInterrupted` with
     what was measured before it."""
     t0 = time.perf_counter()
@@ -208,6 +209,8 @@ def scan_live(world: SimWorld, spacing: float = 0.5, region=None,
     head = head if head is not None else SimScanHead(world)
     if exposure_ms is not None:
         camera.set_exposure(exposure_ms)
+    if speed_mm_s is not None:
+        head.set_line_speed(speed_mm_s)
     try:
         for i, (a, b) in enumerate(lines):
             if cancel is not None and cancel.is_set():

@@ -58,6 +58,7 @@ class _Scan(_Strict):
     spacing_mm: float = Field(0.5, gt=0)
     exposure_ms: float = Field(10.0, gt=0)
     replay: str | None = None
+    speed_mm_s: float = Field(2000.0, gt=0)
 
 
 class _Placement(_Strict):
@@ -139,7 +140,8 @@ def project_json(project: Project, path: Path) -> str:
                                  field=_rel(project.field_correction, folder),
                                  camera=_rel(project.camera_cal, folder)),
         scan=_Scan(region=scan.region, spacing_mm=scan.spacing_mm,
-                   exposure_ms=scan.exposure_ms, replay=_rel(scan.replay, folder)),
+                   exposure_ms=scan.exposure_ms, replay=_rel(scan.replay, folder),
+                   speed_mm_s=scan.speed_mm_s),
         cloud=_rel(project.cloud, folder), placements=placements,
         selected=project.selected, job=_rel(project.job, folder))
     return dump_json(data.model_dump(mode="json")) + "\n"
@@ -180,7 +182,7 @@ def read_project(path: str | Path) -> Project:
         field_correction=_abs(d.calibration.field, folder, "calibration.field", path),
         camera_cal=_abs(d.calibration.camera, folder, "calibration.camera", path),
         scan=ScanSettings(d.scan.region, d.scan.spacing_mm, d.scan.exposure_ms,
-                          _abs(d.scan.replay, folder, "scan.replay", path)),
+                          _abs(d.scan.replay, folder, "scan.replay", path), d.scan.speed_mm_s),
         cloud=_abs(d.cloud, folder, "cloud", path),
         placements=tuple(placements),
         selected=d.selected if -1 <= d.selected < len(placements) else -1,

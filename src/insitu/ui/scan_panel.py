@@ -44,7 +44,8 @@ class ScanPanel(QWidget):
         region = None if ui.wholePartCheck.isChecked() else (
             ui.x0Spin.value(), ui.x1Spin.value(), ui.y0Spin.value(), ui.y1Spin.value())
         replay = self._path(ui.replayEdit.text()) if ui.sourceCombo.currentIndex() == 1 else None
-        return ScanSettings(region, ui.spacingSpin.value(), ui.exposureSpin.value(), replay)
+        return ScanSettings(region, ui.spacingSpin.value(), ui.exposureSpin.value(), replay,
+                            ui.speedSpin.value())
 
     def show_settings(self, s: ScanSettings) -> None:
         ui = self.ui
@@ -55,6 +56,7 @@ class ScanPanel(QWidget):
             self.set_region(s.region)
         ui.spacingSpin.setValue(s.spacing_mm)
         ui.exposureSpin.setValue(s.exposure_ms)
+        ui.speedSpin.setValue(s.speed_mm_s)
 
     def set_region(self, region) -> None:
         """Show ``region`` (x0, x1, y0, y1) mm, e.g. drawn in the 3-D view."""

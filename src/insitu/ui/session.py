@@ -30,12 +30,13 @@ class RigChoice:
 class ScanSettings:
     """``region``: (x0, x1, y0, y1) mm, None for the part's footprint; ``spacing_mm``
     between lines; ``exposure_ms`` of the camera; ``replay``: a recorded scan folder to
-    reconstruct instead of driving the rig."""
+    reconstruct instead of driving the rig; ``speed_mm_s``: how fast the head sweeps a line."""
 
     region: tuple[float, float, float, float] | None = None
     spacing_mm: float = 0.5
     exposure_ms: float = 10.0
     replay: Path | None = None
+    speed_mm_s: float = 2000.0
 
 
 class PlacementHistory:
