@@ -21,13 +21,12 @@ import numpy as np
 from insitu.calibrate.field import (DEFAULT_GOALS, DEFAULT_SMOOTHING, MIN_POINTS, Selection,
                                     area_table, select_rbf, select_table, stats)
 from insitu.calibrate.fiducials import CircleSettings, find_circles
-from insitu.calibrate.field_file import (AreaRow, CVRow, FieldCorrection, model_spec,
-                                         save_field_correction)
+from insitu.calibrate.field_file import AreaRow, CVRow, FieldCorrection, model_spec
 from insitu.calibrate.report import report_image, write_report_png
-from insitu.errors import CalibrationError, FormatError, InsituError
+from insitu.errors import CalibrationError, FormatError
 from insitu.formats.atomic import atomic_write_text
 from insitu.formats.sequence import Sequence
-from insitu.services.common import Progress, camera_model
+from insitu.services.common import Progress, camera_model, save_with_picture
 from insitu.vision.spots import SpotSettings, find_spot
 
 MAX_FAILED_FRACTION = 0.1
@@ -330,13 +329,6 @@ def calibrate_and_report(folder: str | Path, out: str | Path, method: str = "rbf
                          progress: Progress | None = None, **options) -> FieldCorrection:
     """:func:`calibrate_field` (``options``: its sigmas, goals, smoothing), then write ``out``
     (JSON) and the report beside it (.png); nothing is left behind if either fails."""
-    out = Path(out)
     correction = calibrate_field(folder, method, progress=progress, **options)
-    png = out.with_suffix(".png")
-    report_png(correction, png)
-    try:
-        save_field_correction(out, correction)
-    except InsituError:
-        png.unlink(missing_ok=True)
-        raise
+    save_with_picture(out, correction, lambda png: report_png(correction, png))
     return correction

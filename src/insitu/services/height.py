@@ -13,7 +13,7 @@ from insitu.measure.plane import expected_band
 from insitu.measure.heightcal import (LineObservation, PaperHeightModel, SheetHeightModel,
                                       cross_validate_sheet, height_residuals, residual_grid)
 from insitu.rig.files import HeightCalibration, ResidualGridSpec, load_json_model
-from insitu.services.common import Progress, camera_model
+from insitu.services.common import Progress, camera_model, save_with_picture
 from insitu.vision.extract import CentreSettings, extract_centres
 
 
@@ -88,17 +88,8 @@ def calibrate_height_and_report(folder: str | Path, out: str | Path,
                                 progress: Progress | None = None) -> HeightCalibration:
     """:func:`calibrate_height`, then write ``out`` (JSON) and the residual grid's picture
     beside it (.png); nothing is left behind if either fails."""
-    from insitu.rig.files import save_json_model
-
-    out = Path(out)
     cal = calibrate_height(folder, progress=progress)
-    png = out.with_suffix(".png")
-    height_report_png(cal, png)
-    try:
-        save_json_model(out, cal)
-    except BaseException:
-        png.unlink(missing_ok=True)
-        raise
+    save_with_picture(out, cal, lambda png: height_report_png(cal, png))
     return cal
 
 
