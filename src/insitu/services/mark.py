@@ -65,10 +65,6 @@ class MarkPlan:
     estimate: TimeEstimate
 
 
-def load_cloud(cloud: PointCloud | str | Path) -> PointCloud:
-    return cloud if isinstance(cloud, PointCloud) else read_ply(cloud)
-
-
 def plan_mark(cloud: PointCloud | str | Path, placement: Placement, driver: GalvoDriver,
               laser: LaserParams | None = None) -> MarkPlan:
     """Place, project and check: SafetyError (naming the place) for a pattern outside the
@@ -76,7 +72,9 @@ def plan_mark(cloud: PointCloud | str | Path, placement: Placement, driver: Galv
     FormatError for a bad pattern. Nothing is written or fired."""
     pattern = placement.placed()
     polylines = placement.polylines(pattern)
-    job, proj = plan_job(polylines, load_cloud(cloud), driver.limits, placement.mode, laser,
+    if not isinstance(cloud, PointCloud):
+        cloud = read_ply(cloud)
+    job, proj = plan_job(polylines, cloud, driver.limits, placement.mode, laser,
                          anchor=placement.at_mm)
     driver.check(job)
     return MarkPlan(job, pattern, proj, estimate_time(job, driver.timing))

@@ -119,13 +119,6 @@ def mark(job: MarkJob, station: Station, job_path: Path | None, progress: Progre
     return MarkOutcome(result, station.devices.camera.grab())
 
 
-def load_cloud(path: Path) -> PointCloud:
-    cloud = read_ply(path)
-    if len(cloud) == 0:
-        raise InsituError(f"{path}: the point cloud is empty")
-    return cloud
-
-
 @dataclass(frozen=True)
 class OpenedProject:
     project: Project
@@ -136,7 +129,7 @@ class OpenedProject:
 def open_project(path: Path, progress: Progress | None = None) -> OpenedProject:
     """Read a project and what it names (cloud, height calibration)."""
     project = read_project(path)
-    cloud = load_cloud(project.cloud) if project.cloud is not None else None
+    cloud = read_ply(project.cloud) if project.cloud is not None else None
     cal = (services.load_height_calibration(project.height_cal, progress)
            if project.height_cal is not None else None)
     return OpenedProject(project, cloud, cal)
