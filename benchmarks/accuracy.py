@@ -25,10 +25,14 @@ import numpy as np
 from rich.console import Console
 from rich.table import Table
 
-from insitu.devices.sim import SimCamera, SimScanHead, SimWorld
+from insitu.sim.world import SimWorld
+from insitu.services.station import simulated
+
+from insitu.sim.devices import SimCamera, SimScanHead
 from insitu.measure.scan import ScanReconstructor
 from insitu.services import calibrate_height, centre_settings, height_model
-from insitu.sim.record import record_height_calibration, scan_lines
+from insitu.measure.plan import scan_lines
+from insitu.services.record import record_height_calibration
 from insitu.sim.rig import default_rig
 from insitu.sim.workpieces import make_workpiece
 from insitu.vision.extract import PAPER_SETTINGS, CentreSettings
@@ -41,8 +45,8 @@ WALL_MARGIN_MM = 1.0
 def reconstruct(world: SimWorld, cals, region, spacing=0.5):
     """One pass over the scan; every frame goes to the three reconstructors."""
     rig = world.rig
-    H = rig.nominal.pivot_height_mm
-    recs = {"plane": ScanReconstructor(rig.operator_camera, H, settings=PAPER_SETTINGS)}
+    H = rig.operator.head.pivot_height_mm
+    recs = {"plane": ScanReconstructor(rig.operator.camera, H, settings=PAPER_SETTINGS)}
     for name in ("paper", "sheet"):
         cam, model = height_model(cals[name], name)
         recs[name] = ScanReconstructor(cam, H, height_model=model,
@@ -184,7 +188,7 @@ def main() -> None:
     with tempfile.TemporaryDirectory() as tmp:
         t0 = time.perf_counter()
         hcal = Path(tmp) / "hcal"
-        record_height_calibration(SimWorld(rig, seed=args.seed), hcal)
+        record_height_calibration(simulated(SimWorld(rig, seed=args.seed)), hcal)
         t1 = time.perf_counter()
         cals = {"paper": calibrate_height(hcal, PAPER_SETTINGS)}
         t2 = time.perf_counter()

@@ -1,8 +1,8 @@
 """Camera calibration, alignment to the scan head, and pose recalibration after a camera move,
 on the simulated rig (full-size frames unless --binning), scored against truth.json.
 
-(a) Intrinsics: checkerboard views of the true camera (``record_camera_calibration_with_
-    alignment``: the views of ``record_camera_calibration`` plus the alignment frames),
+(a) Intrinsics: checkerboard views of the true camera (``record_camera_calibration`` with
+    the simulated board: the checkerboard views plus the alignment frames),
     calibrated by ``calibrate_camera``: fx, fy, cx, cy and distortion against the truth, the
     focal error in % (target 0.1 %), what the intrinsic error is in pixels over the image, the
     reprojection RMS and the time.
@@ -36,7 +36,7 @@ from rich.table import Table
 from insitu.calibrate.camera import INTRINSIC_NAMES
 from insitu.calibrate.field_file import save_field_correction
 from insitu.calibrate.pose_from_spots import pose_from_spots
-from insitu.devices.sim import SimWorld
+from insitu.sim.world import SimWorld
 from insitu.formats.sequence import Sequence
 from insitu.geometry.camera import CameraModel
 from insitu.rig.files import CameraCalibration
@@ -44,8 +44,9 @@ from insitu.services.camera import (calibrate_camera, pose_change, recalibrate_c
                                     spot_observations)
 from insitu.services.common import camera_model
 from insitu.services.field import calibrate_field
-from insitu.sim.alignment_frames import record_camera_calibration_with_alignment
-from insitu.sim.record import record_field_calibration
+from insitu.services.record import record_camera_calibration, record_field_calibration
+from insitu.services.station import simulated
+from insitu.sim.board import BoardViews, axis_lines
 from insitu.sim.rig import default_rig, move_camera
 
 console = Console(width=150)
@@ -144,8 +145,10 @@ def main() -> None:
                   f" → {tmp}")
 
     # (a) intrinsics and (b) alignment, from one recording
-    _, t_rec = timed(record_camera_calibration_with_alignment, SimWorld(rig, seed=args.seed),
-                     tmp / "camera-cal", views=args.views)
+    world = SimWorld(rig, seed=args.seed)
+    board = BoardViews(world, args.views, lines=axis_lines())
+    _, t_rec = timed(record_camera_calibration, simulated(world), tmp / "camera-cal", board,
+                     args.views, axis_lines=axis_lines(), truth=board.truth)
     cal, t_cal = timed(calibrate_camera, tmp / "camera-cal")
     console.print(intrinsics_table(true, cal, t_rec, t_cal))
     K = np.array(cal.camera.K)
@@ -160,17 +163,17 @@ def main() -> None:
                                  "error over ±90 mm on z = 0"))
     b.add_row(*pose_row("this calibration (intrinsics + alignment)", true, est))
     b.add_row(*pose_row("the simulated operator's calibration (reference)", true,
-                        rig.operator_camera))
+                        rig.operator.camera))
     console.print(b)
 
     # (c) recalibration after a move
     heights = [float(z) for z in args.heights.split(",")]
-    _, t_field_rec = timed(record_field_calibration, SimWorld(rig, seed=args.seed),
+    _, t_field_rec = timed(record_field_calibration, simulated(SimWorld(rig, seed=args.seed)),
                            tmp / "field-cal", n=args.field_grid)
     field, t_field = timed(calibrate_field, tmp / "field-cal")
     save_field_correction(tmp / "field.json", field)
     moved = move_camera(rig, args.move_deg, args.move_mm, args.seed)
-    _, t_spots = timed(record_field_calibration, SimWorld(moved, seed=args.seed + 1),
+    _, t_spots = timed(record_field_calibration, simulated(SimWorld(moved, seed=args.seed + 1)),
                        tmp / "spots", n=args.grid, heights=heights)
     c = Table(title=f"(c) recalibration after the camera turned {args.move_deg:g}° and moved "
                     f"{args.move_mm:g} mm: {args.grid}×{args.grid} spots at "
@@ -182,8 +185,8 @@ def main() -> None:
     for col in ("pt-beam RMS mm", "1σ rot °", "1σ t mm", "time s"):
         c.add_column(col, justify="right")
     blank = ("", "", "", "")
-    c.add_row(*pose_row("before the move (operator's)", true, rig.operator_camera), *blank)
-    c.add_row(*pose_row("after the move, old pose", moved.camera, rig.operator_camera), *blank)
+    c.add_row(*pose_row("before the move (operator's)", true, rig.operator.camera), *blank)
+    c.add_row(*pose_row("after the move, old pose", moved.camera, rig.operator.camera), *blank)
     for name, field_file in (("recalibrated, nominal beams", None),
                              ("recalibrated, field-corrected", tmp / "field.json")):
         new, dt = timed(recalibrate_camera_pose, tmp / "spots", field=field_file)

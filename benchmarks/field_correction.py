@@ -26,11 +26,13 @@ from rich.console import Console
 from rich.table import Table
 
 from insitu.calibrate.field import area_table, stats
-from insitu.devices.sim import SimCamera, SimScanHead, SimStage, SimWorld
+from insitu.services.station import simulated
+from insitu.sim.world import SimWorld
+from insitu.sim.devices import SimCamera, SimScanHead, SimStage
 from insitu.errors import CalibrationError
 from insitu.formats.sequence import Sequence
 from insitu.services.field import calibrate_field, measure_spots, report_png
-from insitu.sim.record import record_field_calibration, record_marked_field_calibration
+from insitu.services.record import record_field_calibration, record_marked_field_calibration
 from insitu.sim.rig import default_rig
 from insitu.vision.spots import find_spot
 
@@ -41,7 +43,7 @@ def measure(world: SimWorld, commands: np.ndarray) -> np.ndarray:
     """Where each command's spot lands as the operator's camera sees it, (N, 2) mm on z = 0
     (NaN where the spot is not seen)."""
     cam, head = SimCamera(world), SimScanHead(world)
-    op = world.rig.operator_camera
+    op = world.rig.operator.camera
     out = np.full_like(commands, np.nan)
     for i, c in enumerate(commands):
         head.show_spot(c)
@@ -85,7 +87,7 @@ def main() -> None:
     rec = tmp / "field-rec"
     t0 = time.perf_counter()
     if not (args.reuse and (rec / "sequence.json").is_file()):
-        record_field_calibration(world, rec, n=args.n, half_mm=args.half)
+        record_field_calibration(simulated(world), rec, n=args.n, half_mm=args.half)
     console.print(f"recorded {args.n}×{args.n} spots, {rig.camera.width}×{rig.camera.height} px "
                   f"(binning {args.binning}), seed {args.seed}: {time.perf_counter() - t0:.1f} s "
                   f"→ {rec}")
@@ -93,7 +95,7 @@ def main() -> None:
     marked = tmp / "field-marked"
     t0 = time.perf_counter()
     if not (args.reuse and (marked / "sequence.json").is_file()):
-        record_marked_field_calibration(SimWorld(rig, seed=args.seed), marked, n=args.n,
+        record_marked_field_calibration(simulated(SimWorld(rig, seed=args.seed)), marked, n=args.n,
                                         half_mm=args.half)
     console.print(f"marked and imaged {args.n}×{args.n} circles: {time.perf_counter() - t0:.1f} s")
 

@@ -32,17 +32,19 @@ from rich.console import Console
 from rich.table import Table
 from scipy.spatial import cKDTree
 
-from insitu.devices.sim import SimWorld
-from insitu.devices.sim_marking import SimController, SimInspectionCamera
+from insitu.sim.world import SimWorld
+from insitu.services.station import simulated
+from insitu.sim.devices import SimController, SimInspectionCamera
 from insitu.marking import GalvoDriver, run_job
 from insitu.marking.project import densify
 from insitu.marking.surface import Surface
 from insitu.services import calibrate_height
 from insitu.services.field import calibrate_field
 from insitu.services.mark import Placement, plan_mark
-from insitu.services.scan import scan_live, sim_world
+from insitu.services.scan import scan_live
+from insitu.sim.world import sim_world
 from insitu.sim.marks import find_marks
-from insitu.sim.record import record_height_calibration, record_marked_field_calibration
+from insitu.services.record import record_height_calibration, record_marked_field_calibration
 from insitu.sim.rig import default_rig
 
 console = Console(width=150)
@@ -74,13 +76,13 @@ def inspected_errors(world, job, cloud) -> tuple[np.ndarray, np.ndarray]:
     img = SimInspectionCamera(world).grab()
     design = np.vstack([np.vstack(densify([p.points], 0.005)) for p in job.paths])
     z0 = float(np.median(design[:, 2]))
-    xy, _ = find_marks(img, world.rig.operator_camera, z0, kernel_px=9)
+    xy, _ = find_marks(img, world.rig.operator.camera, z0, kernel_px=9)
     lo, hi = design[:, :2].min(0) - 1.0, design[:, :2].max(0) + 1.0
     xy = xy[((xy >= lo) & (xy <= hi)).all(1)]
     surf = Surface(cloud, region=(lo[0] - 3, hi[0] + 3, lo[1] - 3, hi[1] + 3))
     # the pixels' rays meet the measured surface: iterate plane height → surface height
-    uv = world.rig.operator_camera.project(np.column_stack([xy, np.full(len(xy), z0)]))
-    o, d = world.rig.operator_camera.rays(uv)
+    uv = world.rig.operator.camera.project(np.column_stack([xy, np.full(len(xy), z0)]))
+    o, d = world.rig.operator.camera.rays(uv)
     z = np.full(len(xy), z0)
     for _ in range(4):
         p = o[:2] + ((z - o[2]) / d[:, 2])[:, None] * d[:, :2]
@@ -109,9 +111,9 @@ def main() -> None:
     rig = default_rig(seed=args.seed, binning=args.binning)
     with tempfile.TemporaryDirectory() as tmp:
         t = time.perf_counter()
-        record_marked_field_calibration(SimWorld(rig, seed=args.seed), Path(tmp) / "field")
+        record_marked_field_calibration(simulated(SimWorld(rig, seed=args.seed)), Path(tmp) / "field")
         field = calibrate_field(Path(tmp) / "field", "rbf")
-        record_height_calibration(SimWorld(rig, seed=args.seed), Path(tmp) / "hcal")
+        record_height_calibration(simulated(SimWorld(rig, seed=args.seed)), Path(tmp) / "hcal")
         height = calibrate_height(Path(tmp) / "hcal")
     console.print(f"field (marked circles, CV RMS {field.residuals['cv_rms_mm']:.4f} mm) and "
                   f"height calibrations recorded and fitted in {time.perf_counter() - t:.1f} s")
@@ -125,10 +127,10 @@ def main() -> None:
         tab.add_column(c)
     for part, label, placement in CASES:
         world = sim_world(part, seed=args.seed, rig=rig)
-        cloud = scan_live(world, height_cal=height).cloud
+        cloud = scan_live(simulated(world), height_cal=height).cloud
         for name, corr in corrections:
             world.burns.clear()
-            driver = GalvoDriver.from_config(rig.nominal, corr)
+            driver = GalvoDriver.from_config(rig.operator.head, corr)
             plan = plan_mark(cloud, placement, driver)
             run_job(plan.job, driver, SimController(world))
             tab.add_row(label, name, *row("burnt", *burnt_errors(plan.job, world.burns)))

@@ -25,16 +25,18 @@ import numpy as np
 from rich.console import Console
 from rich.table import Table
 
-from insitu.devices.sim_marking import SimController
+from insitu.sim.devices import SimController
+from insitu.services.station import simulated
 from insitu.errors import SafetyError
 from insitu.marking import (GalvoDriver, Limits, check_projection, estimate_time, make_job,
                             plan_job, project, run_job, write_job)
 from insitu.marking.project import densify
 from insitu.services import calibrate_height
-from insitu.services.scan import scan_live, sim_world
+from insitu.services.scan import scan_live
+from insitu.sim.world import sim_world
 from insitu.sim.marks import find_marks, render_inspection
-from insitu.sim.record import record_height_calibration
-from insitu.devices.sim import SimWorld
+from insitu.services.record import record_height_calibration
+from insitu.sim.world import SimWorld
 from insitu.sim.rig import default_rig
 
 console = Console(width=150)
@@ -55,7 +57,7 @@ def scan_clouds(seed: int, binning: int):
     rig = default_rig(seed=seed, binning=binning)
     with tempfile.TemporaryDirectory() as tmp:
         t = time.perf_counter()
-        record_height_calibration(SimWorld(rig, seed=seed), Path(tmp) / "hcal")
+        record_height_calibration(simulated(SimWorld(rig, seed=seed)), Path(tmp) / "hcal")
         cal = calibrate_height(Path(tmp) / "hcal")
         console.print(f"height calibration recorded and fitted in {time.perf_counter() - t:.1f} s")
     worlds, clouds = {}, {}
@@ -91,7 +93,7 @@ def _fmt(m, centre, width) -> list[str]:
 
 def placement_table(title, rig, world, cloud, cases, inspect: bool) -> None:
     """cases: (label, centre (2,), width). Job, burnt (sim truth) and inspected (camera)."""
-    limits = Limits.of(rig.nominal)
+    limits = Limits.of(rig.operator.head)
     tab = Table(title=title)
     for col in ("where", "job Δcentre", "job Δwidth", "burnt Δcentre uncorrected", "Δwidth x / y",
                 "burnt Δcentre corrected", "Δwidth x / y", "inspected Δcentre corrected",
@@ -106,12 +108,12 @@ def placement_table(title, rig, world, cloud, cases, inspect: bool) -> None:
         row = [label, f"({dc[0]:+.4f}, {dc[1]:+.4f})", f"{(hi[0] - lo[0]) - width:+.4f}"]
         for corr in (None, rig.ideal_correction()):
             sc = SimController(world)
-            run_job(job, GalvoDriver.from_config(rig.nominal, corr), sc)
+            run_job(job, GalvoDriver.from_config(rig.operator.head, corr), sc)
             burnt = np.vstack([b.points for b in sc.burns])[:, :2]
             row += _fmt(measure_square(burnt, centre, width), centre, width)
         if inspect:
             img = render_inspection(rig, sc.scene, sc.burns, seed=1)
-            xy, _ = find_marks(img, rig.operator_camera, float(np.median(pts[:, 2])),
+            xy, _ = find_marks(img, rig.operator.camera, float(np.median(pts[:, 2])),
                                kernel_px=11)
             row += _fmt(measure_square(xy, centre, width), centre, width)
         else:
@@ -135,7 +137,7 @@ def placement(rig, world, cloud, inspect: bool) -> None:
 
 
 def focus(worlds, clouds, rig) -> None:
-    limits = Limits.of(rig.nominal)
+    limits = Limits.of(rig.operator.head)
     tab = Table(title="focus: job z − true surface z at the job's x, y, mm (limit 0.1)")
     for col in ("surface", "pattern", "mode", "points", "mean", "RMS", "max |e|", "ok"):
         tab.add_column(col)
@@ -167,7 +169,7 @@ def true_length(part, xyz: np.ndarray) -> float:
 
 def wrap(worlds, clouds, rig) -> None:
     part, cloud = worlds["arc"].parts[0], clouds["arc"]
-    limits = Limits.of(rig.nominal)
+    limits = Limits.of(rig.operator.head)
     tab = Table(title="wrap on the measured arc: length along the true surface vs the "
                       "pattern's (limit 0.5 %)")
     for col in ("pattern", "length", "true-surface length", "error", "job polyline length",
@@ -217,7 +219,7 @@ def speed(rig, repeats=3) -> None:
     Z = 6 + 2.5 * np.sin(2 * np.pi * X / 50) * np.cos(2 * np.pi * Y / 60)
     cloud = np.column_stack([X.ravel(), Y.ravel(), Z.ravel() + rng.normal(0, 0.01, X.size)])
     lines = qr_hatch()
-    limits = Limits.of(rig.nominal)
+    limits = Limits.of(rig.operator.head)
     tab = Table(title=f"speed: QR-like 30 × 30 mm, hatched at 0.04 mm ({len(lines)} lines, "
                       f"{sum(np.linalg.norm(line[1] - line[0]) for line in lines):.0f} mm) "
                       f"on a {len(cloud) / 1e6:.1f}-million-point cloud, s")
@@ -237,7 +239,7 @@ def speed(rig, repeats=3) -> None:
         with tempfile.TemporaryDirectory() as tmp:
             write_job(Path(tmp) / "job.json", job)
         t5 = time.perf_counter()
-        GalvoDriver.from_config(rig.nominal).compile(job)
+        GalvoDriver.from_config(rig.operator.head).compile(job)
         t6 = time.perf_counter()
         total = t3 - t0
         tab.add_row(str(r + 1), f"{t1 - t0:.3f}", f"{t2 - t1:.3f}", f"{t3 - t2:.3f}",

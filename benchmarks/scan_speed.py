@@ -19,10 +19,13 @@ import numpy as np  # noqa: E402
 from rich.console import Console  # noqa: E402
 from rich.table import Table  # noqa: E402
 
-from insitu.devices.sim import SimCamera, SimScanHead, SimWorld  # noqa: E402
+from insitu.sim.world import SimWorld  # noqa: E402
+from insitu.services.station import simulated
+
+from insitu.sim.devices import SimCamera, SimScanHead  # noqa: E402
 from insitu.measure.scan import ScanReconstructor  # noqa: E402
 from insitu.services import calibrate_height, centre_settings, height_model  # noqa: E402
-from insitu.sim.record import record_height_calibration  # noqa: E402
+from insitu.services.record import record_height_calibration  # noqa: E402
 from insitu.sim.rig import default_rig  # noqa: E402
 from insitu.sim.workpieces import make_workpiece  # noqa: E402
 from insitu.vision.extract import CentreSettings, extract_centres  # noqa: E402
@@ -31,7 +34,7 @@ from insitu.vision.extract import CentreSettings, extract_centres  # noqa: E402
 def main(n_frames: int = 200) -> None:
     rig = default_rig(seed=0)
     with tempfile.TemporaryDirectory() as tmp:
-        record_height_calibration(SimWorld(rig), Path(tmp) / "h", heights=(-15.0, 0.0, 15.0),
+        record_height_calibration(simulated(SimWorld(rig)), Path(tmp) / "h", heights=(-15.0, 0.0, 15.0),
                                   offsets=(-20.0, -10.0, 0.0, 10.0, 20.0))
         cal = calibrate_height(Path(tmp) / "h")
     world = SimWorld(rig, parts=[make_workpiece("step-block")], seed=1)
@@ -42,7 +45,7 @@ def main(n_frames: int = 200) -> None:
         head.show_line(a, b)
         lines.append((a, b))
         frames.append(cam.grab())
-    H, zr = rig.nominal.pivot_height_mm, rig.nominal.z_range_mm
+    H, zr = rig.operator.head.pivot_height_mm, rig.operator.head.z_range_mm
     cal_cam, model = height_model(cal)
     table = Table(title=f"{n_frames} frames of 2448 × 2048, one core (target < 4 s)")
     for col in ("stage", "total (s)", "per frame (ms)", "frames/s"):
@@ -59,7 +62,7 @@ def main(n_frames: int = 200) -> None:
           lambda i: extract_centres(frames[i % 20], CentreSettings(k=0.5, smooth_half_window=0)))
     timed("our centres (k = 0.3, smoothing)", lambda i: extract_centres(frames[i % 20]))
     for name, rec in (("Method 1 (plane), whole scan",
-                       ScanReconstructor(rig.operator_camera, H, z_range_mm=zr)),
+                       ScanReconstructor(rig.operator.camera, H, z_range_mm=zr)),
                       ("Method 2 (ours), whole scan",
                        ScanReconstructor(cal_cam, H, height_model=model,
                                          settings=centre_settings(cal), z_range_mm=zr))):

@@ -13,12 +13,14 @@ from typer.testing import CliRunner
 from insitu.calibrate.camera import (BoardSpec, Detection, board_pose, calibrate_intrinsics,
                                      detect_board)
 from insitu.cli.camera import camera as camera_cmd
-from insitu.devices.sim import SimWorld
+from insitu.sim.world import SimWorld
 from insitu.errors import CalibrationError
 from insitu.formats.sequence import SequenceWriter
 from insitu.geometry.camera import CameraModel
 from insitu.rig.files import CameraCalibration, load_json_model
-from insitu.sim.alignment_frames import record_camera_calibration_with_alignment
+from insitu.services.record import record_camera_calibration
+from insitu.services.station import simulated
+from insitu.sim.board import BoardViews, axis_lines
 from insitu.sim.checkerboard import board_corners, random_board_poses
 from insitu.sim.rig import default_rig
 
@@ -109,7 +111,10 @@ def test_charuco_views_are_detected_and_calibrate():
 def rec(tmp_path_factory):
     out = tmp_path_factory.mktemp("cam") / "camcal"
     rig = default_rig(seed=2, binning=2)
-    record_camera_calibration_with_alignment(SimWorld(rig, seed=2), out, views=4)
+    world = SimWorld(rig, seed=2)
+    board = BoardViews(world, 4, lines=axis_lines())
+    record_camera_calibration(simulated(world), out, board, 4, axis_lines=axis_lines(),
+                              truth=board.truth)
     return out, rig
 
 
@@ -139,7 +144,7 @@ def _copy(folder, dst, edit):
 
 
 def _blank_sequence(dst):
-    with SequenceWriter(dst, "camera-calibration", default_rig().nominal.to_dict(),
+    with SequenceWriter(dst, "camera-calibration", default_rig().operator.head.spec(),
                         checkerboard={"cols": 9, "rows": 6, "square_mm": 10.0}) as w:
         for i in range(5):
             w.add(np.full((96, 128), 40 + i, np.uint8))

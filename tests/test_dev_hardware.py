@@ -7,8 +7,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from insitu.devices.backends import open_station
-from insitu.rig.files import RigConfig, ScanHeadConfig, load_json_model
+from insitu.services.station import connect
 
 RIG = os.environ.get("INSITU_RIG")
 pytestmark = pytest.mark.hardware
@@ -17,11 +16,8 @@ pytestmark = pytest.mark.hardware
 @pytest.fixture(scope="module")
 def station():
     assert RIG, "set INSITU_RIG to a real station's rig file"
-    cfg = load_json_model(Path(RIG), RigConfig)
-    head = load_json_model(cfg.resolve(cfg.scan_head_config), ScanHeadConfig)
-    s = open_station(cfg, head)
-    yield s
-    s.close()
+    with connect(Path(RIG)) as s:
+        yield s.devices
 
 
 def test_camera_sees_the_pilot_line(station):

@@ -12,12 +12,12 @@ import pytest
 from fakes.grbl import GrblPeer
 from fakes.rtc import FakeBoard, build
 
-from insitu.devices.backends import open_station
 from insitu.errors import ConfigError
 from insitu.formats.sequence import Sequence
 from insitu.rig.files import (CameraCalibration, RigConfig, ScanHeadConfig, load_json_model,
                               save_json_model)
-from insitu.services.scan import ScanInterrupted, scan_live, sim_world_from_rig_file
+from insitu.services.scan import ScanInterrupted, scan_live
+from insitu.services.station import connect
 
 RECORDED = Path(__file__).parent / "data" / "scan-step-block-b4"
 REGION = tuple(json.loads((RECORDED / "truth.json").read_text())["region"])
@@ -60,23 +60,24 @@ def write_rig(folder: Path, lib: Path, port: str, frames: int, **options) -> Pat
 
 
 def open_rig(rig: Path):
-    cfg = load_json_model(rig, RigConfig)
-    head = load_json_model(cfg.resolve(cfg.scan_head_config), ScanHeadConfig)
-    world = sim_world_from_rig_file(rig, binning=4, allow_real=True)
-    return world, open_station(cfg, head, world)
+    """The station of ``rig``, its devices opened."""
+    station = connect(rig)
+    station.devices
+    return station
 
 
 def test_station_scan_stops_when_the_camera_stops_delivering(tmp_path, rtc_lib, peer):
     board = FakeBoard(rtc_lib)
     board.reset()
-    world, station = open_rig(write_rig(tmp_path, rtc_lib, peer.port, frames=15))
+    station = open_rig(write_rig(tmp_path, rtc_lib, peer.port, frames=15))
     try:
-        station.stage.move_z(4.0)
-        assert station.stage.position_z() == pytest.approx(4.0)
+        assert station.world is None            # a real rig: nothing is simulated
+        stage = station.devices.stage
+        stage.move_z(4.0)
+        assert stage.position_z() == pytest.approx(4.0)
         with pytest.raises(ScanInterrupted, match=r"scan stopped at line 16 of 27, laser off: "
                                                   r".*gave no frame") as err:
-            scan_live(world, spacing=1.0, region=REGION, camera=station.camera,
-                      head=station.head)
+            scan_live(station, spacing=1.0, region=REGION)
         partial = err.value.partial
         assert partial is not None and partial.summary.frames == 15
         assert partial.summary.points > 1000
@@ -93,12 +94,11 @@ def test_station_scan_stops_when_the_camera_stops_delivering(tmp_path, rtc_lib, 
 def test_station_scan_stops_when_the_scan_head_stops_answering(tmp_path, rtc_lib, peer):
     board = FakeBoard(rtc_lib)
     board.reset()
-    world, station = open_rig(write_rig(tmp_path, rtc_lib, peer.port, frames=27))
+    station = open_rig(write_rig(tmp_path, rtc_lib, peer.port, frames=27))
     try:
         board.fail_after(400)
         with pytest.raises(ScanInterrupted, match="board does not respond") as err:
-            scan_live(world, spacing=1.0, region=REGION, camera=station.camera,
-                      head=station.head)
+            scan_live(station, spacing=1.0, region=REGION)
         assert 0 < err.value.partial.summary.frames < 27
         assert board.dead and not board.laser_enabled
         assert board.calls()[-1] == "!write_io_port_mask 0 1"
@@ -114,10 +114,8 @@ def test_rig_file_mistakes_are_clear(tmp_path, rtc_lib, peer):
     data = json.loads(rig.read_text())
     del data["camera_calibration"]
     rig.write_text(json.dumps(data))
-    with pytest.raises(ConfigError, match="camera: the 'opencv' backend drives a real device"):
-        sim_world_from_rig_file(rig)
     with pytest.raises(ConfigError, match="camera_calibration: required with a real camera"):
-        sim_world_from_rig_file(rig, allow_real=True)
+        connect(rig)
     data["camera_calibration"] = "camera.json"
     data["options"]["rtc"].pop("k_bits")
     data["options"]["camera"] = {}
@@ -145,3 +143,28 @@ def test_the_scan_command_keeps_what_it_measured_when_the_camera_stops(tmp_path,
     assert not out.exists() and str(partial) in res.output.replace("\n", "")
     assert len(read_ply(partial)) > 1000
     assert not FakeBoard(rtc_lib).laser_enabled
+
+
+def test_a_real_rig_never_simulates_and_scans_only_where_it_is_told(tmp_path, rtc_lib, peer,
+                                                                     monkeypatch):
+    from typer.testing import CliRunner
+
+    import insitu.services.station as station_module
+    from insitu.cli.main import app
+
+    def no_world(*a, **k):
+        raise AssertionError("a real rig built a simulated world")
+
+    monkeypatch.setattr(station_module, "sim_world", no_world)
+    FakeBoard(rtc_lib).reset()
+    rig = write_rig(tmp_path, rtc_lib, peer.port, frames=3)
+    with connect(rig) as station:
+        assert station.world is None and station.truth() is None
+        result = scan_live(station, spacing=1.0, region=(REGION[0], REGION[0] + 2) + REGION[2:])
+        assert result.summary.frames == 3
+    out = tmp_path / "c.ply"
+    res = CliRunner().invoke(app, ["scan", "-o", str(out), "--rig", str(rig)])
+    lines = [ln for ln in res.output.splitlines() if ln.strip()]
+    assert res.exit_code == 1 and len(lines) == 1, res.output
+    assert "a scan on a real rig needs a region (--region X0 X1 Y0 Y1, mm)" in lines[0]
+    assert not out.exists() and not FakeBoard(rtc_lib).laser_enabled

@@ -11,10 +11,11 @@ import pytest
 from typer.testing import CliRunner
 
 from insitu.calibrate.field_file import load_field_correction, save_field_correction
+from insitu.services.station import simulated
 from insitu.cli.main import app
-from insitu.devices.sim import SimWorld
+from insitu.sim.world import SimWorld
 from insitu.services.field import calibrate_field, check_drift
-from insitu.sim.record import record_field_calibration
+from insitu.services.record import record_field_calibration
 from insitu.sim.rig import default_rig
 
 runner = CliRunner()
@@ -30,7 +31,7 @@ def field(tmp_path_factory):
     """A field correction from 9 × 9 spots (binning 4), and the rig it was made on."""
     d = tmp_path_factory.mktemp("drift")
     rig = default_rig(SEED, binning=4)
-    record_field_calibration(SimWorld(rig, seed=SEED), d / "fcal", n=9)
+    record_field_calibration(simulated(SimWorld(rig, seed=SEED)), d / "fcal", n=9)
     out = d / "field.json"
     save_field_correction(out, calibrate_field(d / "fcal"))
     return out, rig
@@ -38,7 +39,7 @@ def field(tmp_path_factory):
 
 def _spots(rig, out):
     """3 × 3 spots over ±60 mm, another noise seed than the calibration's."""
-    return record_field_calibration(SimWorld(rig, seed=8), out, n=3, half_mm=60.0)
+    return record_field_calibration(simulated(SimWorld(rig, seed=8)), out, n=3, half_mm=60.0)
 
 
 def test_the_correction_holds_on_the_same_head(field, tmp_path):

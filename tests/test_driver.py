@@ -9,8 +9,8 @@ import pytest
 
 from insitu.devices.galvo import (Controller, RecordingController, focus_points,
                                   joint_from_targets, nominal_commands)
-from insitu.devices.sim import SimWorld
-from insitu.devices.sim_marking import SimController
+from insitu.sim.world import SimWorld
+from insitu.sim.devices import SimController
 from insitu.errors import DeviceError, FormatError, SafetyError
 from insitu.geometry.beams import TwoMirrorHead
 from insitu.geometry.distortion import NoDistortion
@@ -212,14 +212,14 @@ def rig():
 
 
 def test_sim_marks_land_on_target_without_distortion(rig):
-    ideal = replace(rig, head=TwoMirrorHead(rig.nominal.mirror_distance_mm,
-                                            rig.nominal.mirror_separation_mm),
+    ideal = replace(rig, head=TwoMirrorHead(rig.operator.head.mirror_distance_mm,
+                                            rig.operator.head.mirror_separation_mm),
                     distortion=NoDistortion())
     world = plate_world(ideal, z=6.0)
     targets = np.array([[-60.0, -40.0, 6.0], [55.0, 35.0, 6.0], [55.0, -50.0, 6.0]])
     job = make_job([targets])
     sc = SimController(world)
-    run_job(job, GalvoDriver.from_config(ideal.nominal), sc)
+    run_job(job, GalvoDriver.from_config(ideal.operator.head), sc)
     err, pts = landing_error(sc, targets)
     assert err.max() < 0.02
     np.testing.assert_allclose(pts[0], targets[0], atol=0.02)
@@ -235,7 +235,7 @@ def test_sim_marks_are_off_by_the_distortion_when_uncorrected(rig):
     world = plate_world(rig)                                # marking on the table, z = 0
     targets = np.array([[-70.0, 60.0, 0.0], [70.0, 60.0, 0.0]])
     sc = SimController(world)
-    run_job(make_job([targets]), GalvoDriver.from_config(rig.nominal), sc)
+    run_job(make_job([targets]), GalvoDriver.from_config(rig.operator.head), sc)
     pts = np.vstack([b.points for b in sc.burns])
     offset = pts[[0, -1], :2] - targets[:, :2]
     assert np.linalg.norm(offset, axis=1).min() > 0.1       # visibly off target …
@@ -247,7 +247,7 @@ def test_sim_marks_are_off_by_the_distortion_when_uncorrected(rig):
             k = q - rig.distortion(k)
         return k
     sc2 = SimController(plate_world(rig))
-    run_job(make_job([targets]), GalvoDriver.from_config(rig.nominal, inverse_distortion), sc2)
+    run_job(make_job([targets]), GalvoDriver.from_config(rig.operator.head, inverse_distortion), sc2)
     pts2 = np.vstack([b.points for b in sc2.burns])
     np.testing.assert_allclose(pts2[[0, -1], :2], targets[:, :2], atol=0.02)
 
@@ -257,7 +257,7 @@ def test_inspection_image_shows_the_marks(rig):
     sq = np.array([[-15.0, -15], [15, -15], [15, 15], [-15, 15], [-15, -15]])
     targets = np.column_stack([sq, np.full(5, 4.0)])
     sc = SimController(world)
-    run_job(make_job([targets]), GalvoDriver.from_config(rig.nominal), sc)
+    run_job(make_job([targets]), GalvoDriver.from_config(rig.operator.head), sc)
     clean = render_inspection(rig, sc.scene, [], ideal=True)
     marked = render_inspection(rig, sc.scene, sc.burns, ideal=True)
     uv = rig.camera.project(np.array([[0.0, -15.0, 4.0], [0.0, 0.0, 4.0]]))
@@ -266,20 +266,20 @@ def test_inspection_image_shows_the_marks(rig):
     assert marked[v1, u1] == pytest.approx(clean[v1, u1])    # inside the square: untouched
     noisy = render_inspection(rig, sc.scene, sc.burns, seed=1)
     assert noisy.dtype == np.uint8
-    xy, w = find_marks(noisy, rig.operator_camera, 4.0, kernel_px=9)
+    xy, w = find_marks(noisy, rig.operator.camera, 4.0, kernel_px=9)
     assert len(xy) > 100
     d_side = np.min(np.abs(np.column_stack([np.abs(xy[:, 0]) - 15, np.abs(xy[:, 1]) - 15])), 1)
     assert np.median(d_side) < 0.4                          # found on the square's sides
 
 
 def test_burns_stay_on_the_world_and_the_inspection_camera_sees_them(rig):
-    from insitu.devices.sim_marking import SimInspectionCamera
+    from insitu.sim.devices import SimInspectionCamera
     world = plate_world(rig, z=4.0)
     cam = SimInspectionCamera(world)
     before = cam.grab().astype(float)
     for y in (-5.0, 5.0):                                   # two jobs, two controllers
         targets = np.array([[-10.0, y, 4.0], [10.0, y, 4.0]])
-        run_job(make_job([targets]), GalvoDriver.from_config(rig.nominal), SimController(world))
+        run_job(make_job([targets]), GalvoDriver.from_config(rig.operator.head), SimController(world))
     assert len(world.burns) == 2
     after = cam.grab().astype(float)
     u, v = np.rint(rig.camera.project(np.array([[0.0, 5.0, 4.0]]))[0]).astype(int)

@@ -14,6 +14,7 @@ from hypothesis import strategies as st
 from typer.testing import CliRunner
 
 from insitu.calibrate.fiducials import find_circles
+from insitu.services.station import simulated
 from insitu.calibrate.field import (CorrectionTable, RBFNetwork, area_table, fit_rbf, fit_table,
                                     folds, invert, ols_order, select_rbf, select_table,
                                     table_nodes)
@@ -21,12 +22,12 @@ from insitu.calibrate.field_file import (FieldCorrection, correction_from_file,
                                          load_field_correction, model_spec,
                                          save_field_correction)
 from insitu.cli.field import correct, field
-from insitu.devices.sim import SimWorld
+from insitu.sim.world import SimWorld
 from insitu.errors import CalibrationError, ConfigError, FormatError, SafetyError
 from insitu.formats.sequence import Sequence, SequenceWriter
 from insitu.geometry.distortion import PolynomialFieldDistortion
 from insitu.services.field import calibrate_field, check_drift, measure_spots
-from insitu.sim.record import record_field_calibration, record_marked_field_calibration
+from insitu.services.record import record_field_calibration, record_marked_field_calibration
 from insitu.sim.rig import default_rig
 
 FIELD = PolynomialFieldDistortion.random(np.random.default_rng(4), rms_mm=0.8)
@@ -217,7 +218,7 @@ def test_targets_and_commands_must_stay_in_the_field():
 def rec(tmp_path_factory):
     """7 × 7 spots, binning 4 (a few of them outside the camera's view)."""
     out = tmp_path_factory.mktemp("field") / "rec"
-    record_field_calibration(SimWorld(default_rig(3, binning=4), seed=3), out, n=7)
+    record_field_calibration(simulated(SimWorld(default_rig(3, binning=4), seed=3)), out, n=7)
     return out
 
 
@@ -241,7 +242,7 @@ def test_measure_spots_on_the_plate(rec):
 def test_plate_above_z0_is_carried_to_z0_along_the_beam(tmp_path):
     rig = default_rig(3, binning=4)
     out = tmp_path / "raised"
-    record_field_calibration(SimWorld(rig, seed=3), out, n=5, half_mm=70, heights=(5.0,))
+    record_field_calibration(simulated(SimWorld(rig, seed=3)), out, n=5, half_mm=70, heights=(5.0,))
     m = measure_spots(Sequence.open(out))
     err = m.landed - rig.beams.landing(m.commands)
     assert m.plate_z_mm == 5.0 and len(m.commands) >= 15
@@ -274,13 +275,13 @@ def test_plate_not_flat_is_refused(rec, tmp_path):
 
 def test_too_few_spots_and_no_spots(tmp_path):
     few = tmp_path / "few"
-    record_field_calibration(SimWorld(default_rig(3, binning=4), seed=3), few, n=3, half_mm=50)
+    record_field_calibration(simulated(SimWorld(default_rig(3, binning=4), seed=3)), few, n=3, half_mm=50)
     with pytest.raises(CalibrationError, match="only 9 spots measured"):
         calibrate_field(few)
     rig = default_rig(3, binning=4)
     dark = tmp_path / "dark"
-    with SequenceWriter(dark, "field-calibration", rig.nominal.to_dict(),
-                        camera=rig.operator_camera.to_dict()) as w:
+    with SequenceWriter(dark, "field-calibration", rig.operator.head.spec(),
+                        camera=rig.operator.camera.to_dict()) as w:
         for xy in grid(4, 30.0):
             w.add(np.full((rig.camera.height, rig.camera.width), 11, np.uint8),
                   spot=xy.tolist(), plate_z_mm=0.0)
@@ -291,12 +292,12 @@ def test_too_few_spots_and_no_spots(tmp_path):
 def test_check_drift(correction, tmp_path):
     rig = default_rig(3, binning=4)
     few = tmp_path / "few"
-    record_field_calibration(SimWorld(rig, seed=8), few, n=3, half_mm=60)
+    record_field_calibration(simulated(SimWorld(rig, seed=8)), few, n=3, half_mm=60)
     same = check_drift(correction, few)
     assert len(same.commands) >= 6 and same.holds, same.max_mm
     moved = replace(rig, distortion=lambda c: rig.distortion(c) + np.array([0.8, -0.3]))
     drifted = tmp_path / "drifted"
-    record_field_calibration(SimWorld(moved, seed=8), drifted, n=3, half_mm=60)
+    record_field_calibration(simulated(SimWorld(moved, seed=8)), drifted, n=3, half_mm=60)
     d = check_drift(correction, drifted)
     assert not d.holds
     assert np.allclose(np.median(d.residuals, axis=0), [0.8, -0.3], atol=0.15)
@@ -376,7 +377,7 @@ def test_cli_bad_input(rec, tmp_path):
 def marked(tmp_path_factory):
     """Circles of 2 mm marked uncorrected on a 9 × 9 grid over ±80 mm, imaged (binning 2)."""
     out = tmp_path_factory.mktemp("marked") / "rec"
-    record_marked_field_calibration(SimWorld(default_rig(3, binning=2), seed=3), out, n=9,
+    record_marked_field_calibration(simulated(SimWorld(default_rig(3, binning=2), seed=3)), out, n=9,
                                     half_mm=80.0)
     return out
 

@@ -239,7 +239,7 @@ def test_the_height_calibration_page_shows_residuals_and_a_picture(qtbot, window
 
 
 def test_a_device_fault_mid_scan_keeps_what_was_measured(qtbot, window, monkeypatch):
-    from insitu.devices.sim import SimCamera
+    from insitu.sim.devices import SimCamera
     from insitu.errors import DeviceError
 
     grab, calls = SimCamera.grab, []

@@ -54,7 +54,7 @@ def test_method2_beats_method1_on_the_step_block(cal):
 def test_sheet_model_recovers_a_synthetic_distorted_sheet():
     """Observations made from a known curved sheet family are fitted and inverted exactly."""
     from insitu.sim.rig import default_rig
-    cam = default_rig(seed=1, binning=4).operator_camera
+    cam = default_rig(seed=1, binning=4).operator.camera
     H = 350.0
 
     def true_x(x, Y, Z):          # pivot model plus a smooth bend, like a distorted field

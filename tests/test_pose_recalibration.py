@@ -176,8 +176,8 @@ def _edited(src, dst, keep):
 
 def _dark(dst):
     rig = default_rig(SEED, binning=4)
-    with SequenceWriter(dst, "field-calibration", rig.nominal.to_dict(),
-                        camera=rig.operator_camera.to_dict()) as w:
+    with SequenceWriter(dst, "field-calibration", rig.operator.head.spec(),
+                        camera=rig.operator.camera.to_dict()) as w:
         for z in (0.0, 20.0):
             for xy in _grid(3, 30.0):
                 w.add(np.full((rig.camera.height, rig.camera.width), 11, np.uint8),

@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 from insitu.devices.replay import ReplayCamera
+from insitu.services.station import simulated
 from insitu.errors import DeviceError
 from insitu.formats.sequence import Sequence
 from insitu.services import scan_replay
@@ -63,7 +64,8 @@ def test_lines_running_down_the_image_are_searched_across():
     from dataclasses import replace
 
     from insitu.geometry.camera import CameraModel, rotation_about
-    from insitu.services import scan_live, sim_world
+    from insitu.services import scan_live
+    from insitu.sim.world import sim_world
 
     world = sim_world("step-block", seed=2, binning=4)
     Rz = rotation_about([0, 0, 1], np.pi / 2)
@@ -74,8 +76,9 @@ def test_lines_running_down_the_image_are_searched_across():
         return CameraModel(cam.height, cam.width, K, cam.dist, Rz @ cam.R, Rz @ cam.t)
 
     rig = world.rig
-    world.rig = replace(rig, camera=turned(rig.camera), operator_camera=turned(rig.operator_camera))
-    result = scan_live(world, spacing=2.0)
+    world.rig = replace(rig, camera=turned(rig.camera),
+                        operator=replace(rig.operator, camera=turned(rig.operator.camera)))
+    result = scan_live(simulated(world), spacing=2.0)
     assert result.summary.frames_with_line >= 0.9 * result.summary.frames
     err = _step_errors(result.cloud)
     assert np.all(np.abs(err) < 1.5), err

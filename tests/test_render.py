@@ -3,7 +3,9 @@
 import numpy as np
 import pytest
 
-from insitu.devices.sim import SimCamera, SimScanHead, SimStage, SimWorld
+from insitu.sim.world import SimWorld
+
+from insitu.sim.devices import SimCamera, SimScanHead, SimStage
 from insitu.errors import SafetyError
 from insitu.geometry.beams import line_commands
 from insitu.sim.render import Renderer

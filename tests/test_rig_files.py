@@ -11,6 +11,7 @@ import pytest
 from insitu.errors import ConfigError, FormatError
 from insitu.formats.sequence import ScanHeadSpec
 from insitu.rig.files import (CalibrationEnvelope, CameraCalibration, RigConfig, ScanHeadConfig,
+                              ScanHeadGeometry,
                               load_json_model, save_json_model)
 
 CAMERA = {"width": 64, "height": 48, "K": [[60.0, 0, 32.0], [0, 60.0, 24.0], [0, 0, 1]],
@@ -49,8 +50,13 @@ def test_scan_head_config_round_trip(tmp_path):
     save_json_model(tmp_path / "head.json", head)
     back = load_json_model(tmp_path / "head.json", ScanHeadConfig)
     assert back == head
-    assert back.to_spec() == ScanHeadSpec(lens="non-telecentric", pivot_height_mm=350.0,
-                                          field_size_mm=[200.0, 200.0], z_range_mm=[-25.0, 25.0])
+    assert ScanHeadSpec(**back.spec()) == ScanHeadSpec(
+        lens="non-telecentric", pivot_height_mm=350.0, field_size_mm=[200.0, 200.0],
+        z_range_mm=[-25.0, 25.0])
+    assert back.spec(mirrors=True)["mirror_distance_mm"] == 350.0
+    # the file is a geometry (one type): it drives the head as it is, or reduced to just that
+    assert isinstance(back, ScanHeadGeometry) and back.geometry() == ScanHeadGeometry(
+        **back.spec(mirrors=True))
 
 
 def test_extra_fields_of_calibrations_are_kept(tmp_path):

@@ -27,7 +27,7 @@ def scan(
     workpiece: Annotated[str, typer.Option(help="Simulated rig: the part on the table.")] = "step-block",
     spacing: Annotated[float, typer.Option(help="Line spacing, mm.")] = 0.5,
     region: Annotated[tuple[float, float, float, float] | None,
-                      typer.Option(help="Region X0 X1 Y0 Y1, mm (default: the whole part).")] = None,
+                      typer.Option(help="Region X0 X1 Y0 Y1, mm (default on the simulated rig: the whole part; a real rig needs one).")] = None,
     seed: Annotated[int, typer.Option(help="Simulated rig: seed.")] = 0,
     binning: Annotated[int, typer.Option(help="Simulated rig: divide the image size by this.")] = 1,
     line_speed: Annotated[float | None, typer.Option(
@@ -80,9 +80,8 @@ def _live(station, out: Path, **kw):
     laser off; what was measured until then is written beside ``out`` (``*.partial.ply``)."""
     from insitu import services
 
-    dev = station.devices
     try:
-        return services.scan_live(station.world, camera=dev.camera, head=dev.head, **kw)
+        return services.scan_live(station, **kw)
     except services.ScanInterrupted as e:
         if e.partial is None:
             raise

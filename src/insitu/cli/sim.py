@@ -8,7 +8,7 @@ from typing import Annotated
 import typer
 
 from insitu.cli.common import check_output, console, fail, one_line_errors, progress_bar
-from insitu.sim import record
+from insitu.services import record
 from insitu.sim.workpieces import WORKPIECES
 
 app = typer.Typer(help="The simulated rig.", no_args_is_help=True,
@@ -51,8 +51,10 @@ def record_cmd(
     (`insitu calibrate field`), then record spots at two heights with the camera moved
     (`--heights 0,20 --grid 7 --camera-moved-deg 0.5 --camera-moved-mm 2`) and run
     `insitu calibrate camera SPOTS --field FIELD.json -o CAMERA.json`."""
-    from insitu.services import sim_world
+    from insitu.services.station import simulated
+    from insitu.sim.board import BoardViews
     from insitu.sim.rig import default_rig, move_camera
+    from insitu.sim.world import sim_world
 
     if kind not in record.KINDS:
         fail(f"KIND {kind!r}: expected one of {', '.join(record.KINDS)}")
@@ -66,18 +68,20 @@ def record_cmd(
     if camera_moved_deg or camera_moved_mm:
         rig = move_camera(rig, camera_moved_deg, camera_moved_mm, seed)
     world = sim_world(workpiece if kind == "scan" else "step-block", rig=rig, seed=seed)
-    with progress_bar(f"recording {kind}") as progress:
+    with progress_bar(f"recording {kind}") as progress, simulated(world) as station:
         if kind == "scan":
-            record.record_scan(world, out, spacing=spacing, region=region, progress=progress)
+            record.record_scan(station, out, spacing=spacing, region=region, progress=progress)
         elif kind == "height-calibration":
-            record.record_height_calibration(world, out, progress=progress)
+            record.record_height_calibration(station, out, progress=progress)
         elif kind == "field-calibration" and marked:
-            record.record_marked_field_calibration(world, out, n=grid, progress=progress)
+            record.record_marked_field_calibration(station, out, n=grid, progress=progress)
         elif kind == "field-calibration":
-            record.record_field_calibration(world, out, n=grid, heights=plate_z,
+            record.record_field_calibration(station, out, n=grid, heights=plate_z,
                                             progress=progress)
         else:
-            record.record_camera_calibration(world, out, views=views, progress=progress)
+            board = BoardViews(world, views)
+            record.record_camera_calibration(station, out, board, views, truth=board.truth,
+                                             progress=progress)
     console.print(f"wrote {out}")
 
 
@@ -108,13 +112,10 @@ def calib_cmd(
     rig = default_rig(seed=seed)
     source = [f"simulated rig, seed {seed}"]
     save_json_model(out / "camera.json", CameraCalibration(
-        camera=rig.operator_camera.to_dict(), inputs=source,
+        camera=rig.operator.camera.to_dict(), inputs=source,
         notes="the simulated operator's calibration: the true camera plus realistic errors"))
-    n = rig.nominal
-    save_json_model(out / "scan-head.json", ScanHeadConfig(
-        lens=n.lens, pivot_height_mm=n.pivot_height_mm, mirror_distance_mm=n.mirror_distance_mm,
-        mirror_separation_mm=n.mirror_separation_mm, field_size_mm=list(n.field_size_mm),
-        z_range_mm=list(n.z_range_mm), inputs=source))
+    save_json_model(out / "scan-head.json", ScanHeadConfig(**rig.operator.head.model_dump(),
+                                                           inputs=source))
     save_json_model(out / "rig.json", RigConfig(camera_calibration="camera.json",
                                                 scan_head_config="scan-head.json", sim_seed=seed))
     console.print(f"wrote {out}/camera.json, scan-head.json, rig.json")

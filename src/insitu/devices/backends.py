@@ -32,8 +32,8 @@ PATH_KEYS = {"producer", "library", "correction_file", "program_dir"}
 
 
 @dataclass
-class Station:
-    """The opened devices. ``controller`` executes mark jobs; ``head`` projects scan lines
+class Devices:
+    """A station's opened devices. ``controller`` executes mark jobs; ``head`` projects scan lines
     (on the same scan head); ``stage`` is None without one."""
 
     camera: Camera
@@ -75,7 +75,7 @@ def _build(cfg, block: str, target, **fixed):
         raise ConfigError(f"{cfg.path}: options.{block}: {e}") from None
 
 
-def open_camera(cfg, world=None) -> Camera:
+def open_camera(cfg, sim: Devices | None = None) -> Camera:
     if cfg.camera == "opencv":
         from insitu.devices.camera_opencv import OpenCVCamera
         opts = _options(cfg, "camera", OpenCVCamera)
@@ -92,51 +92,49 @@ def open_camera(cfg, world=None) -> Camera:
                               "producer .cti of the camera maker)")
         return _build(cfg, "camera", GenICamCamera)
     if cfg.camera == "sim":
-        from insitu.devices.sim_marking import SimInspectionCamera
-        return SimInspectionCamera(_need_world(world, "camera"))
+        return _need_sim(sim, "camera").camera
     raise ConfigError(f"{cfg.path}: camera: '{cfg.camera}' is for recorded sequences "
                       "(insitu scan replay), not a live station")
 
 
-def open_controller(cfg, head: TwoMirrorHead, world=None) -> Controller:
+def open_controller(cfg, head: TwoMirrorHead, sim: Devices | None = None) -> Controller:
     if cfg.scan_head == "rtc":
         from insitu.devices.rtc import RtcController, RtcSettings
         return RtcController(head, _build(cfg, "rtc", RtcSettings))
     if cfg.scan_head == "lmc":
         from insitu.devices.lmc import LmcController, LmcSettings
         return LmcController(head, _build(cfg, "lmc", LmcSettings))
-    from insitu.devices.sim_marking import SimController
-    return SimController(_need_world(world, "scan_head"))
+    return _need_sim(sim, "scan_head").controller
 
 
-def open_stage(cfg, world=None) -> Stage | None:
+def open_stage(cfg, sim: Devices | None = None) -> Stage | None:
     if cfg.stage == "grbl":
         from insitu.devices.stage_grbl import GrblStage
         if "port" not in cfg.options.get("stage", {}):
             raise ConfigError(f"{cfg.path}: options.stage.port: required (e.g. /dev/ttyUSB0)")
         return _build(cfg, "stage", GrblStage)
     if cfg.stage == "sim":
-        from insitu.devices.sim import SimStage
-        return SimStage(_need_world(world, "stage"))
+        return _need_sim(sim, "stage").stage
     return None
 
 
-def _need_world(world, what: str):
-    if world is None:
-        raise ConfigError(f"{what}: 'sim' needs the simulated world (open it with a SimWorld)")
-    return world
+def _need_sim(sim: Devices | None, what: str) -> Devices:
+    if sim is None:
+        raise ConfigError(f"{what}: 'sim' is a device of the simulated rig (the station "
+                          "factory opens it)")
+    return sim
 
 
-def open_station(cfg, head_config, world=None,
-                 correction: FieldCorrection | None = None) -> Station:
+def open_devices(cfg, head_config, correction: FieldCorrection | None = None,
+                 sim: Devices | None = None) -> Devices:
     """The devices of ``cfg`` (a :class:`~insitu.rig.files.RigConfig`). ``head_config``:
-    the scan head's nominal geometry (mirror_distance_mm, mirror_separation_mm,
-    field_size_mm, z_range_mm); ``world``: the SimWorld for 'sim' devices; ``correction``:
-    the field correction for line projection. On failure, what was opened is closed again."""
+    the scan head's nominal geometry (a :class:`~insitu.rig.files.ScanHeadGeometry`);
+    ``correction``: the field correction for line projection; ``sim``: the simulated rig's
+    devices, taken for those ``cfg`` names 'sim'. On failure, what was opened is closed
+    again."""
     from insitu.devices.projection import GalvoLineProjector
-    from insitu.devices.sim import SimScanHead
 
-    head = TwoMirrorHead(head_config.mirror_distance_mm, head_config.mirror_separation_mm)
+    head = head_config.two_mirror()
     closers: list = []
 
     def opened(dev):
@@ -145,18 +143,18 @@ def open_station(cfg, head_config, world=None,
         return dev
 
     try:
-        controller = opened(open_controller(cfg, head, world))
+        controller = opened(open_controller(cfg, head, sim))
         if cfg.scan_head == "sim":
-            projector = SimScanHead(world)
+            projector = _need_sim(sim, "scan_head").head
         else:
             projector = _build(cfg, "projection", GalvoLineProjector, controller=controller,
                                head=head, field_size_mm=tuple(head_config.field_size_mm),
                                z_range_mm=tuple(head_config.z_range_mm), correction=correction)
-        camera = opened(open_camera(cfg, world))
-        stage = opened(open_stage(cfg, world))
+        camera = opened(open_camera(cfg, sim))
+        stage = opened(open_stage(cfg, sim))
     except BaseException:
         for close in reversed(closers):
             with suppress(Exception):
                 close()
         raise
-    return Station(camera, projector, controller, stage, closers)
+    return Devices(camera, projector, controller, stage, closers)

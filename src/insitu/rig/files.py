@@ -17,8 +17,9 @@ from pydantic import BaseModel, ConfigDict, Field, PrivateAttr, ValidationError,
 from insitu.errors import ConfigError, InsituError
 from insitu.formats.atomic import atomic_write_text
 from insitu.formats.sequence import CameraSpec, ScanHeadSpec
-from insitu.formats.validation import (Positive, PositivePair, Range, bad, dump_json, read_json,
+from insitu.formats.validation import (Positive, Range, bad, dump_json, read_json,
                                        show, validation_message)
+from insitu.geometry.beams import TwoMirrorHead
 
 M = TypeVar("M", bound=BaseModel)
 
@@ -79,22 +80,39 @@ class CameraCalibration(CalibrationEnvelope):
     std_intrinsics: list[float] = []
 
 
-class ScanHeadConfig(CalibrationEnvelope):
-    """Scan-head geometry: pivot height H, two-mirror distance d and separation e, usable field
-    and focus range, mm."""
+class ScanHeadGeometry(ScanHeadSpec):
+    """The scan head as the operator knows it — the one geometry type of insitu: the
+    ``scan_head`` object of a recorded sequence (pivot height H, lens, usable field and focus
+    range) plus the two-mirror distance d and separation e (Mikkelstrup et al.), mm."""
 
-    kind: Literal["scan-head"] = "scan-head"
-    lens: Literal["non-telecentric", "telecentric"] = "non-telecentric"
-    pivot_height_mm: Positive
+    model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
     mirror_distance_mm: Positive
     mirror_separation_mm: float = Field(ge=0)
-    field_size_mm: PositivePair
-    z_range_mm: Range
 
-    def to_spec(self) -> ScanHeadSpec:
-        """The ``scan_head`` object of a recorded sequence (formats.md §1)."""
-        return ScanHeadSpec(lens=self.lens, pivot_height_mm=self.pivot_height_mm,
-                            field_size_mm=self.field_size_mm, z_range_mm=self.z_range_mm)
+    def spec(self, mirrors: bool = False) -> dict:
+        """The ``scan_head`` object of a recorded sequence (formats.md §1); with ``mirrors``
+        also d and e (a field calibration's recording carries them)."""
+        keys = set(ScanHeadSpec.model_fields) | (
+            {"mirror_distance_mm", "mirror_separation_mm"} if mirrors else set())
+        return self.model_dump(mode="json", include=keys)
+
+    def two_mirror(self) -> TwoMirrorHead:
+        """The nominal two-mirror kinematics."""
+        return TwoMirrorHead(self.mirror_distance_mm, self.mirror_separation_mm)
+
+    def geometry(self) -> "ScanHeadGeometry":
+        """Just the geometry (of a file that carries more)."""
+        return ScanHeadGeometry.model_validate(self.model_dump(
+            include=set(ScanHeadGeometry.model_fields)))
+
+
+class ScanHeadConfig(CalibrationEnvelope, ScanHeadGeometry):
+    """The scan-head file (``calib/scan-head.json``): a :class:`ScanHeadGeometry` with the
+    envelope every calibration file carries."""
+
+    model_config = ConfigDict(extra="allow", frozen=False, allow_inf_nan=False)
+    kind: Literal["scan-head"] = "scan-head"
+    lens: Literal["non-telecentric", "telecentric"] = "non-telecentric"
 
 
 class SheetModelSpec(BaseModel):

@@ -5,10 +5,8 @@ from insitu.services.common import Progress, camera_model
 from insitu.services.height import (calibrate_height, centre_settings, height_model,
                                     load_height_calibration)
 from insitu.services.scan import (Cancelled, ScanFrame, ScanInterrupted, ScanResult,
-                                  ScanSummary, save_cloud, scan_live, scan_replay, sim_world,
-                                  sim_world_from_rig_file)
+                                  ScanSummary, save_cloud, scan_live, scan_replay)
 
 __all__ = ["Cancelled", "Progress", "ScanFrame", "ScanInterrupted", "ScanResult", "ScanSummary",
            "calibrate_height", "camera_model", "centre_settings", "height_model",
-           "load_height_calibration", "save_cloud", "scan_live", "scan_replay", "sim_world",
-           "sim_world_from_rig_file"]
+           "load_height_calibration", "save_cloud", "scan_live", "scan_replay"]

@@ -1,29 +1,31 @@
-"""Connecting the station: the rig file's devices (or the simulated rig), the operator's
-calibration of them, and the scan-head driver with its field correction — what scanning and
-marking on a live rig need, for the commands and the application alike."""
+"""The station: the operator's rig model and the devices a rig file names — real ones, or the
+simulated rig's (the only place that picks the simulator) — and the scan-head driver with its
+field correction; what scanning, recording and marking need, for the commands and the
+application alike."""
 
 from __future__ import annotations
 
+from dataclasses import replace
 from pathlib import Path
 
-from insitu.devices.backends import Station as Devices
-from insitu.devices.backends import open_station
-from insitu.devices.sim import SimWorld
+from insitu.devices.backends import Devices, open_devices
+from insitu.errors import ConfigError
 from insitu.marking import GalvoDriver
 from insitu.rig.files import RigConfig, load_json_model
-from insitu.services.scan import sim_world, sim_world_from_rig_file
+from insitu.rig.model import RigModel, rig_model, simulated_devices
+from insitu.sim.world import SimWorld, sim_world
 
 
 class Station:
-    """``world``: the operator's knowledge of the rig (and, on the simulated rig, the
-    simulation itself); ``driver``: nominal kinematics with the field correction of the file
-    ``field``; ``devices``: camera, line projector, job controller, stage — opened on first
-    use, so planning never touches the hardware. Close it when done (laser off, devices
-    released); it is a context manager."""
+    """``rig``: the operator's rig model; ``world``: the simulated world when the rig is
+    (partly) simulated, else None; ``driver``: nominal kinematics with the field correction
+    of the file ``field``; ``devices``: camera, line projector, job controller, stage —
+    opened on first use, so planning never touches the hardware. Close it when done (laser
+    off, devices released); it is a context manager."""
 
-    def __init__(self, cfg: RigConfig, world: SimWorld, field: Path | None,
-                 rig_file: Path | None = None):
-        self.cfg, self.world, self.rig_file = cfg, world, rig_file
+    def __init__(self, rig: RigModel, cfg: RigConfig, world: SimWorld | None = None,
+                 field: Path | None = None, rig_file: Path | None = None):
+        self.rig, self.cfg, self.world, self.rig_file = rig, cfg, world, rig_file
         self._devices: Devices | None = None
         self.use_field(field)
 
@@ -32,15 +34,17 @@ class Station:
         from insitu.calibrate.field_file import load_field_correction
 
         correction = load_field_correction(field).correct if field is not None else None
-        self.driver: GalvoDriver = GalvoDriver.from_config(self.world.rig.nominal, correction)
+        self.driver: GalvoDriver = GalvoDriver.from_config(self.rig.head, correction)
         self.field = field
         self.close()                 # the devices reopen with it (the projector corrects too)
 
     @property
     def devices(self) -> Devices:
         if self._devices is None:
-            self._devices = open_station(self.cfg, self.world.rig.nominal, self.world,
-                                         self.driver.correction)
+            from insitu.sim.devices import sim_devices
+
+            sim = sim_devices(self.world) if self.world is not None else None
+            self._devices = open_devices(self.cfg, self.rig.head, self.driver.correction, sim)
         return self._devices
 
     def close(self) -> None:
@@ -56,21 +60,46 @@ class Station:
 
     def describe(self) -> tuple[str, str]:
         """(camera, scan head) one-liners for a status line."""
-        cam, head = self.world.rig.operator_camera, self.world.rig.nominal
-        kind = "sim" if self.rig_file is None else f"rig {self.rig_file.name}"
-        return (f"camera {cam.width}×{cam.height} px ({kind})",
-                f"head {head.lens}, field {head.field_size_mm[0]:g}×{head.field_size_mm[1]:g} "
-                f"mm, z {head.z_range_mm[0]:g}…{head.z_range_mm[1]:g} mm")
+        return self.rig.describe("sim" if self.rig_file is None else f"rig {self.rig_file.name}")
+
+    def truth(self, **extra) -> dict | None:
+        """On the simulated rig, the true rig and parts (a recording's ``truth.json``) with
+        ``extra``; None on a real one."""
+        return None if self.world is None else self.world.truth(**extra)
+
+    def default_region(self) -> tuple[float, float, float, float]:
+        """Where to scan when no region is given: the simulated parts' footprint; a real rig
+        does not know where its part is (ConfigError)."""
+        if self.world is None:
+            raise ConfigError("a scan on a real rig needs a region (--region X0 X1 Y0 Y1, mm): "
+                              "insitu does not know where the part lies")
+        return self.world.footprint()
+
+
+def simulated(world: SimWorld, field: Path | None = None) -> Station:
+    """The station of the simulated ``world``, its operator knowing what its rig model says."""
+    return Station(world.rig.operator, RigConfig(), world, field)
 
 
 def connect(rig_file: Path | None = None, workpiece: str = "step-block", seed: int = 0,
             binning: int = 1, field: Path | None = None) -> Station:
     """The station a rig file names (devices chosen by it, never probed), or the simulated
-    rig with ``workpiece`` on the table. ``field``: the field correction file to apply
-    (default: the rig file's, if it names one)."""
+    rig with ``workpiece`` on the table. A rig file with simulated devices simulates
+    ``workpiece`` with its ``sim_seed``, the operator knowing what its calibration files say.
+    ``field``: the field correction file to apply (default: the rig file's, if it names one)."""
     if rig_file is None:
-        return Station(RigConfig(), sim_world(workpiece, seed=seed, binning=binning), field)
+        return simulated(sim_world(workpiece, seed=seed, binning=binning), field)
     cfg = load_json_model(rig_file, RigConfig)
-    world = sim_world_from_rig_file(rig_file, workpiece, binning, allow_real=True)
-    return Station(cfg, world, field if field is not None else cfg.resolve(cfg.field_correction),
+    world = None
+    if simulated_devices(cfg):
+        world = sim_world(workpiece, seed=cfg.sim_seed, binning=binning)
+    rig = rig_model(cfg, world.rig.operator if world is not None else None)
+    if world is not None and cfg.camera in ("sim", "replay"):
+        size, sim = (rig.camera.width, rig.camera.height), world.rig.camera
+        if size != (sim.width, sim.height):
+            raise ConfigError(f"{cfg.camera_calibration}: camera is {size[0]}×{size[1]} px, "
+                              f"the rig's is {sim.width}×{sim.height} px")
+    if world is not None:            # the simulated head reads angles as the driver wrote them
+        world.rig = replace(world.rig, operator=rig)
+    return Station(rig, cfg, world, field if field is not None else rig.field_correction,
                    Path(rig_file))

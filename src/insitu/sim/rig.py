@@ -13,8 +13,9 @@ import numpy as np
 
 from insitu.geometry.beams import ScanHeadOptics, TwoMirrorHead
 from insitu.geometry.camera import CameraModel, rotation_about
-from insitu.geometry.distortion import (FieldDistortion, NoDistortion, PolynomialFieldDistortion,
-                                        distortion_from_dict)
+from insitu.geometry.distortion import FieldDistortion, NoDistortion, PolynomialFieldDistortion
+from insitu.rig.files import ScanHeadGeometry
+from insitu.rig.model import RigModel
 
 PIXEL_PITCH_MM = 0.00345
 LENS_FOCAL_MM = 16.0
@@ -53,32 +54,21 @@ class Optics:
         return self.beam_waist_mm * np.sqrt(1.0 + (np.asarray(defocus_mm) / self.rayleigh_mm) ** 2)
 
 
-@dataclass(frozen=True)
-class ScanHeadNominal:
-    """What the operator knows of the head (formats.md ``scan_head`` plus the two-mirror d, e)."""
-
-    lens: str = "non-telecentric"
-    pivot_height_mm: float = 350.0
-    mirror_distance_mm: float = 350.0
-    mirror_separation_mm: float = 12.0
-    field_size_mm: tuple[float, float] = (200.0, 200.0)
-    z_range_mm: tuple[float, float] = (-25.0, 25.0)
-
-    def to_dict(self) -> dict:
-        """The ``scan_head`` object of a recorded sequence."""
-        return {"lens": self.lens, "pivot_height_mm": self.pivot_height_mm,
-                "field_size_mm": list(self.field_size_mm), "z_range_mm": list(self.z_range_mm)}
+NOMINAL_HEAD = ScanHeadGeometry(lens="non-telecentric", pivot_height_mm=350.0,
+                                mirror_distance_mm=350.0, mirror_separation_mm=12.0,
+                                field_size_mm=(200.0, 200.0), z_range_mm=(-25.0, 25.0))
+"""What the operator knows of the default head: its nominal geometry."""
 
 
 @dataclass(frozen=True)
 class SimRig:
-    """True camera and head, and the operator's calibration of them."""
+    """True camera and head, and the rig model its operator would have: the camera as
+    calibrated (with realistic errors) and the head's nominal geometry."""
 
     camera: CameraModel                 # true
     head: TwoMirrorHead                 # true kinematics
     distortion: FieldDistortion         # true field distortion
-    operator_camera: CameraModel        # as calibrated
-    nominal: ScanHeadNominal = field(default_factory=ScanHeadNominal)
+    operator: RigModel                  # what the operator knows
     optics: Optics = field(default_factory=Optics)
     seed: int = 0
 
@@ -111,14 +101,6 @@ class SimRig:
             "optics": {k: getattr(self.optics, k) for k in self.optics.__dataclass_fields__},
         }
 
-    @classmethod
-    def from_truth_dict(cls, truth: dict, operator_camera: CameraModel) -> "SimRig":
-        sh = truth["scan_head"]
-        return cls(CameraModel.from_dict(truth["camera"]),
-                   TwoMirrorHead(sh["mirror_distance_mm"], sh["mirror_separation_mm"]),
-                   distortion_from_dict(sh.get("field_distortion")), operator_camera,
-                   optics=Optics(**truth.get("optics", {})), seed=int(truth.get("seed", 0)))
-
 
 def _camera_pose(rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
     """Camera on the side of the head (−x), ~24° off vertical, mounted slightly imperfectly."""
@@ -145,7 +127,7 @@ def default_rig(seed: int = 0, binning: int = 1, distortion_rms_mm: float = 0.8,
     distortion = (PolynomialFieldDistortion.random(rng, distortion_rms_mm)
                   if distortion_rms_mm > 0 else NoDistortion())
     operator = operator_calibration(camera, rng) if calibration_errors else camera
-    return SimRig(camera, head, distortion, operator, seed=seed)
+    return SimRig(camera, head, distortion, RigModel(operator, NOMINAL_HEAD), seed=seed)
 
 
 def operator_calibration(camera: CameraModel, rng: np.random.Generator) -> CameraModel:

@@ -179,7 +179,7 @@ class MainWindow(QMainWindow):
         cam, head = station.describe()
         self.camera_label.setText(cam)
         self.head_label.setText(head)
-        nominal = station.world.rig.nominal
+        nominal = station.rig.head
         self.binding.show_field(nominal.field_size_mm, nominal.z_range_mm)
         if self.session.cloud is None:
             h = max(nominal.field_size_mm) / 2

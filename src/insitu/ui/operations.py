@@ -47,10 +47,9 @@ def scan(station: Station | None, settings: ScanSettings, height_cal, progress: 
                                     cancel=cancel, on_frame=on_frame)
     if station is None:
         raise InsituError("connect the rig first (Rig ▸ Connect)")
-    return services.scan_live(station.world, settings.spacing_mm, settings.region, height_cal,
+    return services.scan_live(station, settings.spacing_mm, settings.region, height_cal,
                               progress=progress, cancel=cancel, on_frame=on_frame,
-                              exposure_ms=settings.exposure_ms, speed_mm_s=settings.speed_mm_s,
-                              camera=station.devices.camera, head=station.devices.head)
+                              exposure_ms=settings.exposure_ms, speed_mm_s=settings.speed_mm_s)
 
 
 def where(error: SafetyError) -> tuple[float, float] | None:

@@ -1,6 +1,9 @@
-"""A galvo controller on the simulated rig: marks burn into the simulated workpiece.
+"""The simulated devices: a camera that sees what the simulated scan head draws on the
+simulated workpiece, the Z stage carrying the plate, and a galvo controller whose marks burn
+into the workpiece. All share one :class:`~insitu.sim.world.SimWorld`;
+:func:`sim_devices` opens them as a station's devices.
 
-Mirror angles are what the driver computed with the operator's *nominal* kinematics; the head
+The controller: mirror angles are what the driver computed with the operator's *nominal* kinematics; the head
 then does what the *true* head does with them: the angles become a command on z = 0 through
 the nominal forward model, and the true beam for that command (true mirror geometry plus the
 true field distortion, ``rig.beams``) is ray-cast into the true scene. Where it hits, with the
@@ -18,13 +21,81 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from insitu.devices.backends import Devices
 from insitu.devices.galvo import Command, focus_points, nominal_commands
-from insitu.devices.sim import LaserState, SimCamera, SimWorld
-from insitu.errors import DeviceError
-from insitu.geometry.beams import TwoMirrorHead
+from insitu.devices.protocols import check_in_field
+from insitu.errors import DeviceError, SafetyError
 from insitu.sim.marks import Burn, render_inspection
 from insitu.sim.render import NOMINAL_EXPOSURE_MS
 from insitu.sim.scene import Scene
+from insitu.sim.world import LaserState, SimWorld
+
+
+class SimCamera:
+    """Sees the world: the laser line or spot on the parts, a calibration board in view, or
+    room light."""
+
+    def __init__(self, world: SimWorld):
+        self.world = world
+        self.width, self.height = world.rig.camera.width, world.rig.camera.height
+        self.exposure_ms = NOMINAL_EXPOSURE_MS
+
+    def set_exposure(self, exposure_ms: float) -> None:
+        self.exposure_ms = float(exposure_ms)
+
+    def grab(self, timeout_s: float = 5.0) -> np.ndarray:
+        if self.world.board is not None:
+            return self.world.board.frame(self.world.laser)
+        r, laser = self.world.renderer(), self.world.laser
+        if laser.kind == "line":
+            return r.line_frame(laser.start, laser.end, self.exposure_ms, laser.focus_z)
+        if laser.kind == "spot":
+            return r.spot_frame(laser.start, self.exposure_ms, laser.focus_z)
+        return r.ambient_frame(self.exposure_ms)
+
+
+class SimScanHead:
+    def __init__(self, world: SimWorld):
+        self.world = world
+        nominal = world.rig.operator.head
+        self.field_size_mm = tuple(nominal.field_size_mm)
+        self.z_range_mm = tuple(nominal.z_range_mm)
+
+    def _check(self, *points) -> None:
+        check_in_field(self.field_size_mm, *points)
+
+    def set_line_speed(self, speed_mm_s: float) -> None:
+        """Accepted and checked; the simulated head draws the whole line within every
+        exposure, whatever its speed."""
+        if not speed_mm_s > 0:
+            raise SafetyError(f"scan head: line speed {speed_mm_s:g} mm/s: expected > 0")
+        self.speed_mm_s = float(speed_mm_s)
+
+    def show_line(self, start, end, focus_z: float = 0.0) -> None:
+        self._check(start, end)
+        self.world.laser = LaserState("line", np.asarray(start, float), np.asarray(end, float),
+                                      float(focus_z))
+
+    def show_spot(self, xy, focus_z: float = 0.0) -> None:
+        self._check(xy)
+        self.world.laser = LaserState("spot", np.asarray(xy, float), None, float(focus_z))
+
+    def off(self) -> None:
+        self.world.laser = LaserState()
+
+
+class SimStage:
+    """Z stage carrying the calibration plate."""
+
+    def __init__(self, world: SimWorld):
+        self.world = world
+
+    def move_z(self, z_mm: float) -> None:
+        self.world.plate_z = float(z_mm)
+        self.world.invalidate()
+
+    def position_z(self) -> float:
+        return float(self.world.plate_z if self.world.plate_z is not None else np.nan)
 
 
 class SimController:
@@ -36,9 +107,8 @@ class SimController:
     def __init__(self, world: SimWorld, sample_mm: float = 0.02, scene: Scene | None = None):
         self.world = world
         rig = world.rig
-        self.nominal = TwoMirrorHead(rig.nominal.mirror_distance_mm,
-                                     rig.nominal.mirror_separation_mm)
-        self.scene = scene or world.renderer().scene
+        self.nominal = rig.operator.head.two_mirror()
+        self._scene = scene
         self.sample_mm = float(sample_mm)
         self.burns: list[Burn] = []
         self.pilot_trace: list[np.ndarray] = []
@@ -49,6 +119,11 @@ class SimController:
         self.speed = {"mark": 500.0, "jump": 3000.0}
         self.elapsed_s = 0.0
         self._open: list[tuple[np.ndarray, np.ndarray]] = []
+
+    @property
+    def scene(self) -> Scene:
+        """Where the marks burn: the given scene, else the world's as it is now."""
+        return self._scene if self._scene is not None else self.world.renderer().scene
 
     # -- Controller --------------------------------------------------------------------------
     def execute(self, commands: Sequence[Command]) -> None:
@@ -139,9 +214,16 @@ class SimInspectionCamera(SimCamera):
         self._frames = 0
 
     def grab(self, timeout_s: float = 5.0) -> np.ndarray:
-        if self.world.laser.kind != "off":
+        if self.world.laser.kind != "off" or self.world.board is not None:
             return super().grab(timeout_s)
         self._frames += 1
         return render_inspection(self.world.rig, self.world.renderer().scene,
                                  list(self.world.burns), self.inspection_exposure_ms,
                                  seed=self.world.seed + self._frames)
+
+
+def sim_devices(world: SimWorld) -> Devices:
+    """The simulated station's devices, all on ``world``: the camera that also images marks,
+    the head projecting scan lines, the marking controller and the plate's Z stage."""
+    return Devices(SimInspectionCamera(world), SimScanHead(world), SimController(world),
+                   SimStage(world))

@@ -1,4 +1,7 @@
-"""Simulated frames for the camera ↔ scan-head alignment (Li et al. Case 1 step 1).
+"""The calibration board in the simulated world: checkerboard views at random poses in front of
+the true camera, then the board flat on the plate for the camera ↔ scan-head alignment (Li et
+al. Case 1 step 1). :class:`BoardViews` places it (``SimWorld.board``) view by view for
+:func:`insitu.services.record.record_camera_calibration`; the simulated camera then sees it.
 
 The checkerboard lies flat on the calibration plate (its top at ``plate_z``, normally the focal
 plane z = 0) at a random place and rotation near the field centre; the true scan head draws its
@@ -8,9 +11,8 @@ laser signal of the physical renderer (``Renderer(ideal=False)``: true beams wit
 distortion, speckle, blur, noise) on the plate, scaled by the board's reflectance (the line is
 bright on the white squares, faint on the black ones) and clipped to 8 bits.
 
-Recording (:func:`record_camera_calibration_with_alignment`): a camera-calibration sequence
-whose first frames are the usual checkerboard views (frames with only ``file``), followed by
-the alignment frames, which carry ``plate_z_mm``:
+Recorded, a camera-calibration sequence's first frames are the checkerboard views (frames with
+only ``file``), followed by the alignment frames, which carry ``plate_z_mm``:
 
 * a laser-off frame of the board on the plate (``plate_z_mm`` only) — also a calibration view;
 * one frame per line, with ``line`` {start, end}: the x axis (−L, 0) → (L, 0), the y axis
@@ -22,19 +24,14 @@ the alignment frames, which carry ``plate_z_mm``:
 
 from __future__ import annotations
 
-from collections.abc import Callable
-from pathlib import Path
-
 import cv2
 import numpy as np
 
-from insitu.devices.sim import SimWorld
-from insitu.formats.sequence import SequenceWriter
 from insitu.geometry.camera import rotation_about
 from insitu.sim.checkerboard import random_board_poses, render_checkerboard
 from insitu.sim.rig import SimRig
+from insitu.sim.world import LaserState, SimWorld
 
-Progress = Callable[[int, int], None]
 AXIS_HALF_MM = 30.0
 
 
@@ -75,6 +72,11 @@ class AlignmentScene:
         """(H, W) uint8: the board on the plate, laser off."""
         return render_checkerboard(self.rig.camera, self.R_cb, self.t_cb, *self.board, self.rng)
 
+    def frame(self, laser: LaserState) -> np.ndarray:
+        """What the camera sees with the laser in state ``laser`` (off or a line)."""
+        return self.board_frame() if laser.kind == "off" else self.line_frame(laser.start,
+                                                                              laser.end)
+
     def line_frame(self, start, end) -> np.ndarray:
         """(H, W) uint8: the board with the line commanded from ``start`` to ``end`` (mm)."""
         board = self.board_frame().astype(np.float32)
@@ -84,39 +86,45 @@ class AlignmentScene:
         return np.clip(board + reflect * laser + 0.5, 0, 255).astype(np.uint8)
 
 
-def record_camera_calibration_with_alignment(
-        world: SimWorld, out: Path, views: int = 15, cols: int = 9, rows: int = 6,
-        square_mm: float = 10.0, half_mm: float = AXIS_HALF_MM, plate_z: float = 0.0,
-        reference: bool = True, progress: Progress | None = None) -> Path:
-    """A camera-calibration sequence (the views of ``record_camera_calibration``, same seed)
-    followed by the alignment frames (module docstring). ``reference=False`` leaves out the
-    laser-off frame (the line is then found as a ridge)."""
-    rig = world.rig
-    rng = np.random.default_rng(world.seed + 7)
-    poses = random_board_poses(rig.camera, cols, rows, square_mm, views, rng)
-    R_wb, t_wb = board_on_plate(cols, rows, square_mm, np.random.default_rng(world.seed + 11),
-                                plate_z)
-    lines = axis_lines(half_mm)
-    truth = {"rig": rig.truth_dict(), "workpieces": [],
-             "board_poses": [{"R": R.tolist(), "t": t.tolist()} for R, t in poses],
-             "alignment": {"R_world_board": R_wb.tolist(), "t_world_board": t_wb.tolist(),
-                           "plate_z_mm": plate_z,
-                           "lines": [{"start": a.tolist(), "end": b.tolist()} for a, b in lines]}}
-    board = {"cols": cols, "rows": rows, "square_mm": square_mm}
-    total = views + len(lines) + int(reference)
-    with SequenceWriter(out, "camera-calibration", rig.nominal.to_dict(), checkerboard=board,
-                        truth=truth) as w:
-        for i, (R, t) in enumerate(poses):
-            w.add(render_checkerboard(rig.camera, R, t, cols, rows, square_mm, rng))
-            if progress:
-                progress(i + 1, total)
-        scene = AlignmentScene(rig, cols, rows, square_mm, R_wb, t_wb, plate_z, world.seed)
-        if reference:
-            w.add(scene.board_frame(), plate_z_mm=plate_z)
-        for a, b in lines:
-            w.add(scene.line_frame(a, b), line={"start": a.tolist(), "end": b.tolist()},
-                  plate_z_mm=plate_z)
-            if progress:
-                progress(len(w), total)
-    return out
+class _HeldBoard:
+    """The board held at (R, t) board → camera, laser off."""
 
+    def __init__(self, camera, R, t, board, rng):
+        self.camera, self.R, self.t, self.board, self.rng = camera, R, t, board, rng
+
+    def frame(self, laser: LaserState) -> np.ndarray:
+        return render_checkerboard(self.camera, self.R, self.t, *self.board, self.rng)
+
+
+class BoardViews:
+    """The simulated operator presenting the board: ``views`` random poses (drawn from the
+    world's seed) in front of the true camera, then (view number ``views``) the board flat on
+    the plate at ``plate_z``. Call it with the view number (None takes the board away);
+    :attr:`truth` holds the poses."""
+
+    def __init__(self, world: SimWorld, views: int, cols: int = 9, rows: int = 6,
+                 square_mm: float = 10.0, plate_z: float = 0.0,
+                 lines: list[tuple[np.ndarray, np.ndarray]] | None = None):
+        self.world, self.views, self.board = world, views, (cols, rows, square_mm)
+        self.rng = np.random.default_rng(world.seed + 7)
+        self.poses = random_board_poses(world.rig.camera, cols, rows, square_mm, views, self.rng)
+        self.plate_z = plate_z
+        self.truth = {"board_poses": [{"R": R.tolist(), "t": t.tolist()} for R, t in self.poses]}
+        if lines is not None:
+            self.R_wb, self.t_wb = board_on_plate(cols, rows, square_mm,
+                                                  np.random.default_rng(world.seed + 11), plate_z)
+            self.truth["alignment"] = {
+                "R_world_board": self.R_wb.tolist(), "t_world_board": self.t_wb.tolist(),
+                "plate_z_mm": plate_z,
+                "lines": [{"start": a.tolist(), "end": b.tolist()} for a, b in lines]}
+
+    def __call__(self, i: int | None) -> None:
+        w = self.world
+        if i is None:
+            w.board = None
+        elif i < self.views:
+            R, t = self.poses[i]
+            w.board = _HeldBoard(w.rig.camera, R, t, self.board, self.rng)
+        else:
+            w.board = AlignmentScene(w.rig, *self.board, self.R_wb, self.t_wb, self.plate_z,
+                                     w.seed)

@@ -1,0 +1,185 @@
+"""Recording sequences (formats.md §1) on any station: the same four kinds on a real rig as
+on the simulated one, frames grabbed exactly as a live run grabs them. ``sequence.json``
+carries the operator's rig model; on the simulated rig, ``truth.json`` the true rig and
+workpiece beside it (for scoring)."""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence as Seq
+from pathlib import Path
+
+import numpy as np
+
+from insitu.errors import ConfigError
+from insitu.formats.sequence import SequenceWriter
+from insitu.measure.plan import check_region, scan_lines
+from insitu.services.common import Progress
+from insitu.services.station import Station
+
+KINDS = ("scan", "height-calibration", "field-calibration", "camera-calibration")
+PAPER_HEIGHTS_MM = tuple(float(z) for z in range(-15, 16, 5))
+PAPER_OFFSETS_MM = tuple(float(x) for x in range(-30, 31, 5))
+NextView = Callable[[int | None], None]
+"""Bring the board into view ``i`` (the operator moves it; the simulator places it); None:
+the board is put away."""
+
+
+def _writer(station: Station, out: Path, kind: str, mirrors: bool = False,
+            **kw) -> SequenceWriter:
+    rig = station.rig
+    camera = rig.camera.to_dict() if kind != "camera-calibration" else None
+    return SequenceWriter(out, kind, rig.head.spec(mirrors), camera=camera, **kw)
+
+
+def _exposure(camera, exposure_ms: float | None) -> float | None:
+    """Set the camera's exposure when given; the exposure its frames are taken with."""
+    if exposure_ms is not None:
+        camera.set_exposure(exposure_ms)
+    return getattr(camera, "exposure_ms", exposure_ms)
+
+
+def _on_plate(station: Station):
+    """The Z stage carrying the plate (ConfigError without one); on the simulated rig the
+    parts leave the table first (on a real one the operator clears it)."""
+    stage = station.devices.stage
+    if stage is None:
+        raise ConfigError("a calibration on the plate needs the rig's Z stage (stage: none)")
+    if station.world is not None:
+        station.world.clear_table()
+    return stage
+
+
+def record_scan(station: Station, out: Path, spacing: float = 0.5, region=None,
+                exposure_ms: float | None = None, progress: Progress | None = None) -> Path:
+    """A scan over ``region`` (x0, x1, y0, y1) mm (default: the station's), a line every
+    ``spacing`` mm."""
+    region = tuple(region) if region is not None else station.default_region()
+    check_region(region, station.rig.head.field_size_mm)
+    lines = scan_lines(region, spacing)
+    cam, head = station.devices.camera, station.devices.head
+    exposure = _exposure(cam, exposure_ms)
+    with _writer(station, out, "scan", truth=station.truth(region=list(region))) as w:
+        try:
+            for i, (a, b) in enumerate(lines):
+                head.show_line(a, b)
+                w.add(cam.grab(), line={"start": a.tolist(), "end": b.tolist()},
+                      exposure_ms=exposure)
+                if progress:
+                    progress(i + 1, len(lines))
+        finally:
+            head.off()
+    return out
+
+
+def record_height_calibration(station: Station, out: Path,
+                              heights: Seq[float] = PAPER_HEIGHTS_MM,
+                              offsets: Seq[float] = PAPER_OFFSETS_MM, line_y=(-50.0, 50.0),
+                              exposure_ms: float | None = None,
+                              progress: Progress | None = None) -> Path:
+    """The flat plate on the stage at each height, a line at each offset (Li et al. §2.2)."""
+    stage = _on_plate(station)
+    cam, head = station.devices.camera, station.devices.head
+    exposure = _exposure(cam, exposure_ms)
+    total, done = len(heights) * len(offsets), 0
+    with _writer(station, out, "height-calibration", truth=station.truth()) as w:
+        try:
+            for z in heights:
+                stage.move_z(z)
+                for x in offsets:
+                    a, b = np.array([x, line_y[0]]), np.array([x, line_y[1]])
+                    head.show_line(a, b)
+                    w.add(cam.grab(), line={"start": a.tolist(), "end": b.tolist()},
+                          plate_z_mm=float(z), exposure_ms=exposure)
+                    done += 1
+                    if progress:
+                        progress(done, total)
+        finally:
+            head.off()
+    return out
+
+
+def record_field_calibration(station: Station, out: Path, n: int = 21, half_mm: float = 90.0,
+                             heights: Seq[float] = (0.0,), exposure_ms: float | None = None,
+                             progress: Progress | None = None) -> Path:
+    """The pilot spot on an n × n grid over ±half_mm on the plate at each of ``heights``
+    (world mm; focused there). One height is a field calibration; two or more are what the
+    camera's pose recalibration after a move uses (:mod:`insitu.calibrate.pose_from_spots`).
+    ``scan_head`` also carries the nominal mirror distance and separation."""
+    stage = _on_plate(station)
+    cam, head = station.devices.camera, station.devices.head
+    exposure = _exposure(cam, exposure_ms)
+    grid = np.linspace(-half_mm, half_mm, n)
+    spots = [(float(x), float(y)) for y in grid for x in grid]
+    total = len(spots) * len(heights)
+    with _writer(station, out, "field-calibration", mirrors=True, truth=station.truth()) as w:
+        try:
+            for z in map(float, heights):
+                stage.move_z(z)
+                for xy in spots:
+                    head.show_spot(np.array(xy), focus_z=z)
+                    w.add(cam.grab(), spot=list(xy), plate_z_mm=z, exposure_ms=exposure)
+                    if progress:
+                        progress(len(w), total)
+        finally:
+            head.off()
+    return out
+
+
+def record_marked_field_calibration(station: Station, out: Path, n: int = 21,
+                                    half_mm: float = 90.0, diameter_mm: float = 2.0,
+                                    progress: Progress | None = None) -> Path:
+    """The marked-fiducial variant (Mikkelstrup et al. §2.4): circles of ``diameter_mm`` are
+    marked, uncorrected, at an n × n grid of commands over ±half_mm on the plate at z = 0,
+    then imaged under room light: one frame with the commanded centres (``fiducials``)."""
+    from insitu.marking import GalvoDriver, make_job, run_job
+
+    _on_plate(station).move_z(0.0)
+    grid = np.linspace(-half_mm, half_mm, n)
+    Q = np.array([(x, y) for y in grid for x in grid])
+    t = np.linspace(0.0, 2 * np.pi, 97)
+    ring = 0.5 * diameter_mm * np.column_stack([np.cos(t), np.sin(t), np.zeros_like(t)])
+    job = make_job([ring + [q[0], q[1], 0.0] for q in Q])
+    run_job(job, GalvoDriver.from_config(station.rig.head), station.devices.controller,
+            progress=progress)
+    with _writer(station, out, "field-calibration", truth=station.truth()) as w:
+        w.add(station.devices.camera.grab(), fiducials=Q.tolist(),
+              fiducial_diameter_mm=float(diameter_mm), plate_z_mm=0.0)
+    return out
+
+
+def record_camera_calibration(station: Station, out: Path, next_view: NextView, views: int,
+                              cols: int = 9, rows: int = 6, square_mm: float = 10.0,
+                              axis_lines: Seq[tuple[np.ndarray, np.ndarray]] = (),
+                              plate_z: float = 0.0, reference: bool = True,
+                              truth: dict | None = None,
+                              progress: Progress | None = None) -> Path:
+    """``views`` checkerboard views (``next_view(i)`` brings view i), then with
+    ``axis_lines`` the camera ↔ scan-head alignment (Li et al. Case 1 step 1): the board
+    flat on the plate at ``plate_z`` (``next_view(views)``), a laser-off frame of it
+    (``reference``) and one frame per line drawn on it; ``next_view(None)`` at the end.
+    ``truth``: added to the station's."""
+    board = {"cols": cols, "rows": rows, "square_mm": square_mm}
+    cam, head = station.devices.camera, station.devices.head
+    total = views + len(axis_lines) + int(bool(axis_lines) and reference)
+    truth = station.truth(**(truth or {}))
+    with _writer(station, out, "camera-calibration", checkerboard=board, truth=truth) as w:
+        for i in range(views):
+            next_view(i)
+            w.add(cam.grab())
+            if progress:
+                progress(i + 1, total)
+        if axis_lines:
+            next_view(views)
+            if reference:
+                w.add(cam.grab(), plate_z_mm=plate_z)
+            try:
+                for a, b in axis_lines:
+                    head.show_line(a, b)
+                    w.add(cam.grab(), line={"start": list(map(float, a)),
+                                            "end": list(map(float, b))}, plate_z_mm=plate_z)
+                    if progress:
+                        progress(len(w), total)
+            finally:
+                head.off()
+    next_view(None)
+    return out
