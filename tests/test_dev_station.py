@@ -16,7 +16,7 @@ from insitu.errors import ConfigError
 from insitu.formats.sequence import Sequence
 from insitu.rig.files import (CameraCalibration, RigConfig, ScanHeadConfig, load_json_model,
                               save_json_model)
-from insitu.services.scan import ScanInterrupted, scan_live
+from insitu.services.scan import ScanInterrupted, scan_live, scan_replay
 from insitu.services.station import connect
 
 RECORDED = Path(__file__).parent / "data" / "scan-step-block-b4"
@@ -168,3 +168,33 @@ def test_a_real_rig_never_simulates_and_scans_only_where_it_is_told(tmp_path, rt
     assert res.exit_code == 1 and len(lines) == 1, res.output
     assert "a scan on a real rig needs a region (--region X0 X1 Y0 Y1, mm)" in lines[0]
     assert not out.exists() and not FakeBoard(rtc_lib).laser_enabled
+
+
+def test_a_real_rig_records_a_scan_that_replays_like_a_live_one(tmp_path, rtc_lib, peer):
+    from typer.testing import CliRunner
+
+    from insitu.cli.main import app
+
+    FakeBoard(rtc_lib).reset()
+    rig = write_rig(tmp_path, rtc_lib, peer.port, frames=27)
+    rec = tmp_path / "rec"
+    res = CliRunner().invoke(app, ["record", "scan", "-o", str(rec), "--rig", str(rig),
+                                   "--spacing", "1", "--region", *map(str, REGION)])
+    assert res.exit_code == 0, res.output
+    seq = Sequence.open(rec)
+    assert len(seq) == 27 and not seq.has_truth          # a real rig knows no truth
+    assert seq.frames[3].line.start == [REGION[0] + 3.0, REGION[2]]
+    assert not FakeBoard(rtc_lib).laser_enabled
+    replayed = scan_replay(rec)
+    with connect(rig) as station:                         # the camera serves the same frames
+        live = scan_live(station, spacing=1.0, region=REGION)
+    assert replayed.summary.points == live.summary.points > 1000
+    np.testing.assert_allclose(replayed.cloud.points, live.cloud.points)
+    # a calibration on the plate needs a stage: this rig has one, a rig without is refused
+    data = json.loads(rig.read_text())
+    data["stage"] = "none"
+    rig.write_text(json.dumps(data))
+    res = CliRunner().invoke(app, ["record", "height-calibration", "-o", str(tmp_path / "h"),
+                                   "--rig", str(rig)])
+    assert res.exit_code == 1 and "needs the rig's Z stage" in res.output
+    assert not (tmp_path / "h").exists()

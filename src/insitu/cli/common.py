@@ -54,3 +54,15 @@ def check_output(path: Path, suffix: str | None = None) -> Path:
     if suffix and path.suffix.lower() != suffix:
         raise InsituError(f"{path}: expected a {suffix} file name")
     return path
+
+
+def parse_heights(text: str) -> list[float]:
+    """``--heights`` "Z1,Z2,..." → distinct finite heights, mm (fails with one line)."""
+    try:
+        zs = [float(z) for z in text.split(",")]
+    except ValueError:
+        zs = []
+    if not zs or not all(abs(z) < 1e3 for z in zs) or len(set(zs)) != len(zs):
+        fail(f"--heights {text!r}: expected distinct plate heights in mm separated by commas, "
+             "e.g. 0,20")
+    return zs

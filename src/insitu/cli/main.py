@@ -13,6 +13,7 @@ from insitu.cli import camera as camera_cmd
 from insitu.cli import field as field_cmd
 from insitu.cli import job as job_cmd
 from insitu.cli import mark as mark_cmd
+from insitu.cli import record as record_cmd
 from insitu.cli import scan as scan_cmd
 from insitu.cli import sim as sim_cmd
 from insitu.cli.common import err_console, fail
@@ -22,6 +23,7 @@ app = typer.Typer(help=__doc__.split("\n")[0] if __doc__ else None, no_args_is_h
                   rich_markup_mode="markdown")
 app.command("scan")(scan_cmd.scan)
 app.command("mark")(mark_cmd.mark)
+app.command("record")(record_cmd.record)
 calibrate_cmd.app.command("camera")(camera_cmd.camera)
 calibrate_cmd.app.command("field")(field_cmd.field)
 app.add_typer(calibrate_cmd.app, name="calibrate")

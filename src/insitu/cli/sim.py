@@ -7,7 +7,8 @@ from typing import Annotated
 
 import typer
 
-from insitu.cli.common import check_output, console, fail, one_line_errors, progress_bar
+from insitu.cli.common import (check_output, console, fail, one_line_errors, parse_heights,
+                               progress_bar)
 from insitu.services import record
 from insitu.sim.workpieces import WORKPIECES
 
@@ -60,7 +61,7 @@ def record_cmd(
         fail(f"KIND {kind!r}: expected one of {', '.join(record.KINDS)}")
     if binning not in (1, 2, 4, 8):
         fail(f"--binning {binning}: expected 1, 2, 4 or 8")
-    plate_z = _heights(heights)
+    plate_z = parse_heights(heights)
     if plate_z != [0.0] and (kind != "field-calibration" or marked):
         fail(f"--heights {heights}: plate heights are for spot field calibrations only")
     check_output(out)
@@ -83,18 +84,6 @@ def record_cmd(
             record.record_camera_calibration(station, out, board, views, truth=board.truth,
                                              progress=progress)
     console.print(f"wrote {out}")
-
-
-def _heights(text: str) -> list[float]:
-    """``--heights`` "Z1,Z2,..." → distinct finite heights, mm (fails with one line)."""
-    try:
-        zs = [float(z) for z in text.split(",")]
-    except ValueError:
-        zs = []
-    if not zs or not all(abs(z) < 1e3 for z in zs) or len(set(zs)) != len(zs):
-        fail(f"--heights {text!r}: expected distinct plate heights in mm separated by commas, "
-             "e.g. 0,20")
-    return zs
 
 
 @app.command("calib")

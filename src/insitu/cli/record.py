@@ -1,0 +1,70 @@
+"""``insitu record KIND --rig RIG -o REC``: record a sequence on a station (a real rig, or the
+simulated one its rig file names) — the same four kinds as ``insitu sim record``."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+from typing import Annotated
+
+import typer
+
+from insitu.cli.common import (check_output, console, fail, one_line_errors, parse_heights,
+                               progress_bar)
+from insitu.services import record as svc
+
+
+@one_line_errors
+def record(
+    kind: Annotated[str, typer.Argument(help="scan | height-calibration | field-calibration | "
+                                             "camera-calibration")],
+    out: Annotated[Path, typer.Option("-o", "--output",
+                                      help="Folder to write (replaced if it exists).")],
+    rig: Annotated[Path, typer.Option(help="Rig file of the station.")],
+    spacing: Annotated[float, typer.Option(help="Scan: line spacing, mm.")] = 0.5,
+    region: Annotated[tuple[float, float, float, float] | None, typer.Option(
+        help="Scan: region X0 X1 Y0 Y1, mm (required on a real rig).")] = None,
+    grid: Annotated[int, typer.Option(help="Field calibration: spots per side.")] = 21,
+    marked: Annotated[bool, typer.Option(help="Field calibration: mark circles on the plate "
+                                              "and image them instead of pilot spots.")] = False,
+    heights: Annotated[str, typer.Option(metavar="Z1,Z2,...", help="Field calibration: plate "
+                                         "heights, mm, comma-separated.")] = "0",
+    views: Annotated[int, typer.Option(help="Camera calibration: checkerboard views (the "
+                                            "operator moves the board between them).")] = 15,
+) -> None:
+    """Record a sequence (formats.md) on the station a rig file names: a scan, the height
+    calibration on the plate (Z stage), the field calibration (pilot spots or marked
+    circles) or the camera calibration (checkerboard views, the operator moving the board
+    when asked). The folder appears complete or not at all."""
+    from insitu.services.station import connect
+
+    if kind not in svc.KINDS:
+        fail(f"KIND {kind!r}: expected one of {', '.join(svc.KINDS)}")
+    if not spacing > 0:
+        fail(f"--spacing {spacing:g}: expected a positive line spacing in mm")
+    plate_z = parse_heights(heights)
+    if kind == "camera-calibration" and not sys.stdin.isatty():
+        fail("camera-calibration: the operator moves the board between views; run it at a "
+             "terminal")
+    check_output(out)
+    with connect(rig) as station, progress_bar(f"recording {kind}") as progress:
+        if kind == "scan":
+            svc.record_scan(station, out, spacing, region, progress=progress)
+        elif kind == "height-calibration":
+            svc.record_height_calibration(station, out, progress=progress)
+        elif kind == "field-calibration" and marked:
+            svc.record_marked_field_calibration(station, out, n=grid, progress=progress)
+        elif kind == "field-calibration":
+            svc.record_field_calibration(station, out, n=grid, heights=plate_z,
+                                         progress=progress)
+        else:
+            svc.record_camera_calibration(station, out, _ask_for_view, views,
+                                          progress=progress)
+    console.print(f"wrote {out}", highlight=False)
+
+
+def _ask_for_view(i: int | None) -> None:
+    """The operator brings the board into view ``i`` (None: done)."""
+    if i is not None:
+        typer.prompt(f"move the checkerboard to view {i + 1}, then press Enter",
+                     default="", show_default=False, prompt_suffix=" ")
