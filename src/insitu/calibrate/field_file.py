@@ -16,9 +16,10 @@ import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
 
 from insitu.calibrate.field import AreaStats, CorrectionTable, Model, RBFNetwork, invert
-from insitu.errors import ConfigError, SafetyError
+from insitu.errors import ConfigError
 from insitu.formats.sequence import CameraSpec
 from insitu.formats.validation import Finite, PositivePair, Vec2, bad, numbers
+from insitu.geometry.field import check_in_field
 from insitu.rig.files import CalibrationEnvelope, load_json_model, save_json_model
 
 CONVENTION = ("landing(C) = C + delta(C) on z = 0 (delta = measured P - commanded Q); the "
@@ -149,20 +150,14 @@ class FieldCorrection(CalibrationEnvelope):
         target (``where`` and its 1-based number) outside the field, or whose command would
         leave it."""
         Q = np.asarray(targets, np.float64).reshape(-1, 2)
-        half = np.asarray(self.field_size_mm) / 2
-        out = ~np.isfinite(Q).all(1) | (np.abs(Q) > half + 1e-9).any(1)
-        if out.any():
-            i = int(np.argmax(out))
-            raise SafetyError(f"{where} {i + 1}: {_xy(Q[i])} mm is outside the scan field "
-                              f"±{half[0]:g} × ±{half[1]:g} mm")
+        check_in_field(Q, self.field_size_mm, lambda i, field: f"{where} {i + 1}: {_xy(Q[i])} "
+                       f"mm is outside the scan field {field}")
         if not len(Q):
             return Q.copy()
         K = invert(self.delta(), Q)
-        out = (np.abs(K) > half + 1e-9).any(1)
-        if out.any():
-            i = int(np.argmax(out))
-            raise SafetyError(f"{where} {i + 1}: {_xy(Q[i])} mm needs the command {_xy(K[i])} mm, "
-                              f"outside the scan field ±{half[0]:g} × ±{half[1]:g} mm")
+        check_in_field(K, self.field_size_mm, lambda i, field: f"{where} {i + 1}: {_xy(Q[i])} "
+                       f"mm needs the command {_xy(K[i])} mm, outside the scan field {field}",
+                       at=Q)
         return K
 
 

@@ -113,7 +113,8 @@ def surface_for(polylines, cloud: PointCloud | np.ndarray, anchor=None, **kw) ->
     except MeasurementError:
         c = pts.mean(0) if len(pts) else np.zeros(2)
         raise SafetyError(f"pattern point at (x, y) = ({c[0]:.3f}, {c[1]:.3f}) mm is outside "
-                          "the scanned area (no measured points under the pattern)") from None
+                          "the scanned area (no measured points under the pattern)",
+                          where_mm=(c[0], c[1])) from None
 
 
 def _split(arr: np.ndarray, off: np.ndarray) -> list[np.ndarray]:
