@@ -17,8 +17,9 @@ def plan_job(polylines: list[np.ndarray], cloud: PointCloud | np.ndarray, limits
              anchor=None, direction_deg: float | None = None, step_mm: float | None = None
              ) -> tuple[MarkJob, Projection]:
     """Project ``polylines`` ((N, 2) world mm each) onto ``cloud`` (``mode``: a key of
-    :data:`~insitu.marking.modes.PROJECTIONS`; ``anchor`` (2,) mm: the point wrap keeps in place, e.g. the --at centre;
-    ``direction_deg``: wrap's unroll direction, default the least-stretch one), refuse it
+    :data:`~insitu.marking.modes.PROJECTIONS`; ``anchor`` (2,) mm: the point wrap keeps in
+    place, e.g. the --at centre; ``direction_deg``: wrap's unroll direction, default the
+    least-stretch one), refuse it
     (SafetyError) outside the field or focus range or over a hole or a wall, and make the
     job. Returns the job and the projection (max_stretch, step, per-point support)."""
     proj = project(polylines, cloud, mode, anchor=anchor, direction_deg=direction_deg,

@@ -24,8 +24,9 @@ from insitu.services.common import Progress
 class Placement:
     """Where and how a pattern is marked. ``pattern``: a file or a ``text:``/``qr:`` spec;
     ``at_mm``: its centre, world x, y; ``width_mm``: its width before rotating;
-    ``rotate_deg``: CCW about +z; ``mode``: a key of ``marking.PROJECTIONS``; ``hatch_mm``: fill spacing
-    (None: outlines only); ``hatch_angle_deg``, ``cross``: the hatch's direction(s)."""
+    ``rotate_deg``: CCW about +z; ``mode``: a key of ``marking.PROJECTIONS``; ``hatch_mm``:
+    fill spacing (None: outlines only); ``hatch_angle_deg``, ``cross``: the hatch's
+    direction(s)."""
 
     pattern: str
     at_mm: tuple[float, float]
