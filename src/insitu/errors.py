@@ -4,6 +4,8 @@ The CLI prints ``str(error)`` as one line and exits non-zero; no traceback for t
 Messages name the file, the field and the expected value.
 """
 
+import math
+
 
 class InsituError(Exception):
     """Base of all user-facing failures."""
@@ -30,4 +32,10 @@ class DeviceError(InsituError):
 
 
 class SafetyError(InsituError):
-    """A request would fire the laser where it must not (outside field or focus range)."""
+    """A request would fire the laser where it must not (outside field or focus range).
+    ``where_mm``: the place refused, world (x, y) mm, when the check knows one (else None)."""
+
+    def __init__(self, message: str, where_mm: tuple[float, float] | None = None):
+        super().__init__(message)
+        xy = None if where_mm is None else (float(where_mm[0]), float(where_mm[1]))
+        self.where_mm = xy if xy is not None and all(map(math.isfinite, xy)) else None

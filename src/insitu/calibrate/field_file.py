@@ -3,22 +3,28 @@ the scan-head driver read it): the fitted model of where the beam lands, the mea
 was fitted to and its before/after residuals, mm.
 
 :func:`correction_from_file` gives the function the driver needs: targets Q (N, 2) on z = 0 →
-commands K (N, 2) such that the spot lands on Q.
+commands K (N, 2) such that the spot lands on Q. :data:`FIELD_METHODS` is the one table of
+the models (``insitu calibrate field --method``, the file's ``method``): a new one is a module
+with its model and selection, and here its file form and its entry.
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Annotated, Any, Literal
 
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
 
-from insitu.calibrate.field import AreaStats, CorrectionTable, Model, RBFNetwork, invert
-from insitu.errors import ConfigError, SafetyError
+from insitu.calibrate.field import (DEFAULT_GOALS, DEFAULT_SMOOTHING, AreaStats, CorrectionTable,
+                                    Model, RBFNetwork, Selection, invert, select_rbf,
+                                    select_table)
+from insitu.errors import ConfigError
 from insitu.formats.sequence import CameraSpec
 from insitu.formats.validation import Finite, PositivePair, Vec2, bad, numbers
+from insitu.geometry.field import check_in_field
 from insitu.rig.files import CalibrationEnvelope, load_json_model, save_json_model
 
 CONVENTION = ("landing(C) = C + delta(C) on z = 0 (delta = measured P - commanded Q); the "
@@ -43,9 +49,22 @@ class RBFSpec(BaseModel):
                       f"{len(self.weights_mm)} weights", at="weights_mm")
         return self
 
+    @classmethod
+    def of(cls, model: RBFNetwork, mse_goal_mm2: float = 0.0, **_) -> "RBFSpec":
+        return cls(sigma_mm=model.sigma, mse_goal_mm2=mse_goal_mm2,
+                   centres_mm=model.centres.tolist(), weights_mm=model.weights.tolist(),
+                   bias_mm=model.bias.tolist())
+
     def model(self) -> RBFNetwork:
         return RBFNetwork(np.array(self.centres_mm), np.array(self.weights_mm),
                           np.array(self.bias_mm), self.sigma_mm)
+
+    def summary(self) -> str:
+        return (f"RBF: σ = {self.sigma_mm:g} mm, MSE goal {self.mse_goal_mm2:g} mm², "
+                f"{len(self.centres_mm)} neurons")
+
+    def counts(self) -> dict[str, float]:
+        return {"neurons": float(len(self.centres_mm))}
 
 
 class TableSpec(BaseModel):
@@ -74,9 +93,46 @@ class TableSpec(BaseModel):
                       f"{len(self.values_mm)} rows", at="values_mm")
         return self
 
+    @classmethod
+    def of(cls, model: CorrectionTable, **_) -> "TableSpec":
+        return cls(smoothing=model.smoothing, x_nodes_mm=model.x_nodes.tolist(),
+                   y_nodes_mm=model.y_nodes.tolist(), values_mm=model.values.tolist())
+
     def model(self) -> CorrectionTable:
         return CorrectionTable(np.array(self.x_nodes_mm), np.array(self.y_nodes_mm),
                                np.array(self.values_mm), self.smoothing)
+
+    def summary(self) -> str:
+        return (f"table: {len(self.x_nodes_mm)} × {len(self.y_nodes_mm)} nodes, smoothing "
+                f"{self.smoothing:g}")
+
+    def counts(self) -> dict[str, float]:
+        return {}
+
+
+@dataclass(frozen=True)
+class FieldMethod:
+    """A model of δ. ``select(X, D, extent, **options)`` → :class:`Selection`: fitted to
+    commands X and deviations D (N, 2) mm, settings by 5-fold CV (``extent``: the field
+    [x0, x1, y0, y1] mm; ``options``: sigmas, goals, smoothing — each method takes its own).
+    ``spec``: its file form (``of(model, **cv_params)``, ``model()``, ``summary()``,
+    ``counts()``), stored under the method's name; ``model_type``: the fitted model's class;
+    ``description``: one line (CLI help)."""
+
+    select: Callable[..., Selection]
+    spec: type[BaseModel]
+    model_type: type
+    description: str
+
+
+FIELD_METHODS: dict[str, FieldMethod] = {
+    "rbf": FieldMethod(lambda X, D, extent, sigmas=None, goals=DEFAULT_GOALS, **_:
+                       select_rbf(X, D, sigmas, goals), RBFSpec, RBFNetwork,
+                       "RBF network trained by orthogonal least squares (Mikkelstrup et al.)"),
+    "table": FieldMethod(lambda X, D, extent, smoothing=DEFAULT_SMOOTHING, **_:
+                         select_table(X, D, extent, smoothing), TableSpec, CorrectionTable,
+                         "correction table on a grid, spline-interpolated"),
+}
 
 
 class AreaRow(BaseModel):
@@ -110,7 +166,7 @@ class FieldCorrection(CalibrationEnvelope):
 
     kind: Literal["field-correction"] = "field-correction"
     convention: str = CONVENTION
-    method: Literal["rbf", "table"]
+    method: Literal[tuple(FIELD_METHODS)]       # a key of the table
     field_size_mm: PositivePair
     region_mm: Annotated[list[Finite], numbers(4)]
     plate_z_mm: Finite = 0.0
@@ -135,7 +191,7 @@ class FieldCorrection(CalibrationEnvelope):
 
     def delta(self) -> Model:
         """δ(C): (N, 2) commands → (N, 2) predicted landing shifts, mm."""
-        return (self.rbf if self.method == "rbf" else self.table).model()
+        return getattr(self, self.method).model()
 
     def outside_region(self, targets: np.ndarray) -> np.ndarray:
         """(N,) bool: targets outside the calibrated region (the correction extrapolates)."""
@@ -149,20 +205,14 @@ class FieldCorrection(CalibrationEnvelope):
         target (``where`` and its 1-based number) outside the field, or whose command would
         leave it."""
         Q = np.asarray(targets, np.float64).reshape(-1, 2)
-        half = np.asarray(self.field_size_mm) / 2
-        out = ~np.isfinite(Q).all(1) | (np.abs(Q) > half + 1e-9).any(1)
-        if out.any():
-            i = int(np.argmax(out))
-            raise SafetyError(f"{where} {i + 1}: {_xy(Q[i])} mm is outside the scan field "
-                              f"±{half[0]:g} × ±{half[1]:g} mm")
+        check_in_field(Q, self.field_size_mm, lambda i, field: f"{where} {i + 1}: {_xy(Q[i])} "
+                       f"mm is outside the scan field {field}")
         if not len(Q):
             return Q.copy()
         K = invert(self.delta(), Q)
-        out = (np.abs(K) > half + 1e-9).any(1)
-        if out.any():
-            i = int(np.argmax(out))
-            raise SafetyError(f"{where} {i + 1}: {_xy(Q[i])} mm needs the command {_xy(K[i])} mm, "
-                              f"outside the scan field ±{half[0]:g} × ±{half[1]:g} mm")
+        check_in_field(K, self.field_size_mm, lambda i, field: f"{where} {i + 1}: {_xy(Q[i])} "
+                       f"mm needs the command {_xy(K[i])} mm, outside the scan field {field}",
+                       at=Q)
         return K
 
 
@@ -188,13 +238,8 @@ def correction_from_file(path: str | Path) -> Callable[[np.ndarray], np.ndarray]
 
 
 def model_spec(model: Any, mse_goal_mm2: float = 0.0) -> dict:
-    """``{"rbf": RBFSpec}`` or ``{"table": TableSpec}`` for a fitted model."""
-    if isinstance(model, RBFNetwork):
-        return {"rbf": RBFSpec(sigma_mm=model.sigma, mse_goal_mm2=mse_goal_mm2,
-                               centres_mm=model.centres.tolist(),
-                               weights_mm=model.weights.tolist(), bias_mm=model.bias.tolist())}
-    if isinstance(model, CorrectionTable):
-        return {"table": TableSpec(smoothing=model.smoothing, x_nodes_mm=model.x_nodes.tolist(),
-                                   y_nodes_mm=model.y_nodes.tolist(),
-                                   values_mm=model.values.tolist())}
+    """``{method: spec}`` (e.g. ``{"rbf": RBFSpec}``) for a fitted model."""
+    for name, m in FIELD_METHODS.items():
+        if isinstance(model, m.model_type):
+            return {name: m.spec.of(model, mse_goal_mm2=mse_goal_mm2)}
     raise TypeError(f"not a field model: {type(model).__name__}")

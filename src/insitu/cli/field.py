@@ -11,8 +11,10 @@ import numpy as np
 import typer
 from rich.table import Table
 
+from insitu.calibrate.field_file import FIELD_METHODS
 from insitu.cli.common import (check_output, console, err_console, fail, one_line_errors,
                                progress_bar)
+from insitu.formats.validation import one_of
 
 
 @one_line_errors
@@ -21,9 +23,8 @@ def field(
                                                            "folder (spots on the plate).")],
     out: Annotated[Path, typer.Option("-o", "--output", help="Field correction file (.json); "
                                       "the report is written beside it (.png).")],
-    method: Annotated[str, typer.Option(help="rbf: RBF network trained by orthogonal least "
-                                             "squares (Mikkelstrup et al.); table: correction "
-                                             "table on a grid, spline-interpolated.")] = "rbf",
+    method: Annotated[str, typer.Option(help="; ".join(f"{k}: {m.description}" for k, m in
+                                                       FIELD_METHODS.items()) + ".")] = "rbf",
     sigma: Annotated[float | None, typer.Option(
         help="RBF spread σ, mm (default: chosen by 5-fold CV over 0.15…0.75 × the half "
              "field).")] = None,
@@ -39,8 +40,8 @@ def field(
     from insitu.services.field import calibrate_and_report
 
     check_output(out, ".json")
-    if method not in ("rbf", "table"):
-        fail(f"--method {method!r}: expected 'rbf' or 'table'")
+    if method not in FIELD_METHODS:
+        fail(f"--method {method!r}: expected {one_of(FIELD_METHODS)}")
     for name, value in (("--sigma", sigma), ("--mse-goal", mse_goal), ("--smoothing", smoothing)):
         if value is not None and not (value > 0 or (value == 0 and name != "--sigma")):
             fail(f"{name} {value:g}: expected a positive number")

@@ -11,20 +11,21 @@ from rich.table import Table
 from insitu.cli.common import check_output, console, fail, one_line_errors, progress_bar
 from insitu.cli.job import (Field, Inspect, Preview, Resume, Rig, Seed, Workpiece,
                             run_on_station)
+from insitu.marking.modes import PROJECTIONS, projection_mode
+from insitu.patterns.load import sources_help
 
 
 @one_line_errors
 def mark(
     cloud: Annotated[Path, typer.Option(help="Measured point cloud (.ply) of the part.")],
-    pattern: Annotated[str, typer.Option(help='SVG, DXF or image file, text:"...", qr:"..." or '
-                                              'fiducials:COLSxROWS.')],
+    pattern: Annotated[str, typer.Option(help=f"A file or spec: {sources_help()}.")],
     at: Annotated[tuple[float, float], typer.Option(help="Centre of the pattern X Y, mm, "
                                                          "world frame.")],
     width: Annotated[float, typer.Option(help="Width of the pattern, mm (before --rotate).")],
     out: Annotated[Path, typer.Option("-o", "--output", help="Mark job to write (.json).")],
     rotate: Annotated[float, typer.Option(help="Rotation, degrees CCW about +z.")] = 0.0,
-    mode: Annotated[str, typer.Option(help="planar: keep x, y, take z from the surface; wrap: "
-                                           "keep lengths along the surface.")] = "planar",
+    mode: Annotated[str, typer.Option(help="; ".join(f"{k}: {m.description}" for k, m in
+                                                     PROJECTIONS.items()) + ".")] = "planar",
     hatch: Annotated[float | None, typer.Option(help="Fill filled regions with hatch lines this "
                                                      "far apart, mm (default: outlines "
                                                      "only).")] = None,
@@ -40,7 +41,7 @@ def mark(
     field: Field = None, workpiece: Workpiece = "step-block", seed: Seed = 0,
 ) -> None:
     """Place a pattern with its centre at X Y, WIDTH mm wide, turned by --rotate; project it
-    onto the measured surface (planar or wrap) and write the mark job. The job is refused,
+    onto the measured surface (--mode) and write the mark job. The job is refused,
     and nothing is written, when any point lies outside the scan field or the focus range, over
     a hole in the cloud or over a steep wall. --run then marks it: the laser is on only while
     marking, off at once on any fault, and an interrupted job resumes with --resume."""
@@ -49,6 +50,7 @@ def mark(
     from insitu.services.station import connect
 
     check_output(out, ".json")
+    projection_mode(mode)
     if inspect is not None:
         check_output(inspect, ".png")
     if (preview or resume or inspect is not None) and not run:
@@ -86,7 +88,7 @@ def _summary(out: Path, placement, plan, field: Path | None) -> None:
             + (" crossed" if placement.cross else "")) if placement.hatch_mm else "outlines"
     table.add_row("marks", f"{len(plan.job.paths):,} paths, {len(pts):,} points ({fill})")
     mode = placement.mode + (f", worst stretch {plan.projection.max_stretch:.2%}"
-                             if placement.mode == "wrap" else "")
+                             if PROJECTIONS[placement.mode].stretches else "")
     table.add_row("projection", mode)
     table.add_row("z on the surface, mm", f"{pts[:, 2].min():.3f} … {pts[:, 2].max():.3f}")
     table.add_row("field correction", str(field) if field else "none")

@@ -9,6 +9,8 @@ import typer
 from rich.table import Table
 
 from insitu.cli.common import check_output, console, fail, one_line_errors, progress_bar
+from insitu.formats.validation import one_of
+from insitu.measure.height_models import HEIGHT_MODELS
 
 
 @one_line_errors
@@ -22,7 +24,8 @@ def scan(
         help="plane: light-plane intersection only (Method 1); height: with the height "
              "calibration (Method 2, the default when --height-cal is given).")] = None,
     height_model: Annotated[str | None, typer.Option(
-        help="With --method height: sheet (ours, the default) or paper (Li et al.'s P1 + P2).")] = None,
+        help="With --method height: " + " or ".join(f"{k} ({m.description})" for k, m in
+                                                     HEIGHT_MODELS.items()) + ".")] = None,
     rig: Annotated[Path | None, typer.Option(help="Rig file (default: the simulated rig).")] = None,
     workpiece: Annotated[str, typer.Option(help="Simulated rig: the part on the table.")] = "step-block",
     spacing: Annotated[float, typer.Option(help="Line spacing, mm.")] = 0.5,
@@ -44,8 +47,8 @@ def scan(
         fail(f"--method {method!r}: expected 'plane' or 'height'")
     if method == "height" and height_cal is None:
         fail("--method height needs --height-cal HCAL")
-    if height_model not in (None, "sheet", "paper"):
-        fail(f"--height-model {height_model!r}: expected 'sheet' or 'paper'")
+    if height_model is not None and height_model not in HEIGHT_MODELS:
+        fail(f"--height-model {height_model!r}: expected {one_of(HEIGHT_MODELS)}")
     if spacing <= 0:
         fail(f"--spacing {spacing:g}: expected a positive line spacing in mm")
     cal = None

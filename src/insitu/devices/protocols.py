@@ -9,7 +9,7 @@ from typing import Protocol, runtime_checkable
 
 import numpy as np
 
-from insitu.errors import SafetyError
+from insitu.geometry import field
 
 
 @runtime_checkable
@@ -25,13 +25,12 @@ class Camera(Protocol):
 
 
 def check_in_field(field_size_mm, *points) -> None:
-    """SafetyError naming the first point (x, y mm on z = 0) outside the field, centred on
-    the origin, of ``field_size_mm`` (width, height)."""
-    half = np.asarray(field_size_mm, float) / 2
-    for p in points:
-        if np.any(np.abs(np.asarray(p, float)) > half + 1e-9):
-            raise SafetyError(f"scan head: point {list(map(float, p))} mm is outside the "
-                              f"field ±{half[0]:g} × ±{half[1]:g} mm")
+    """What a scan head does before it draws: SafetyError naming the first of ``points``
+    ((2,) mm on z = 0 each) outside the field ``field_size_mm`` (width, height) centred on the
+    origin (:func:`insitu.geometry.field.check_in_field`)."""
+    pts = np.array(points, float).reshape(-1, 2)
+    field.check_in_field(pts, field_size_mm, lambda i, size: f"scan head: point "
+                         f"{list(map(float, pts[i]))} mm is outside the field {size}")
 
 
 @runtime_checkable

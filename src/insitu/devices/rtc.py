@@ -106,7 +106,7 @@ class RtcListBuilder:
         if np.any(np.abs(b) > BITS_MAX):
             raise SafetyError(f"RTC: point ({p[0]:.3f}, {p[1]:.3f}, {p[2]:.3f}) mm is "
                               f"outside the board's ±{BITS_MAX} bit range at "
-                              f"{self.s.k_bits_per_mm:g} bits/mm")
+                              f"{self.s.k_bits_per_mm:g} bits/mm", where_mm=(p[0], p[1]))
         return int(b[0]), int(b[1]), int(b[2])
 
     def calls(self, commands: Sequence[Command]) -> tuple[list[tuple[str, tuple]], bool]:

@@ -43,12 +43,13 @@ def _fsync_dir(folder: Path) -> None:
             os.close(fd)
 
 
-def atomic_write_bytes(path: str | Path, data: bytes) -> None:
-    """Write ``data`` to ``path``: a hidden temp file in the same folder, fsync, rename.
-
-    Raises FormatError if the folder does not exist or the write fails; the temp file is
-    removed on any error and an existing ``path`` is left as it was.
-    """
+@contextmanager
+def atomic_file(path: str | Path, suffix: str = ".tmp") -> Iterator[Path]:
+    """A hidden temporary path beside ``path`` to write the new file to (by name, e.g. a
+    library that only writes paths; ``suffix``: its ending, e.g. ".ply" for one that picks
+    the format by it). On normal exit it is fsynced, given ``path``'s mode (a new file: the
+    umask's) and renamed onto ``path``; on an exception it is removed and ``path`` is left as
+    it was. FormatError if the folder does not exist or an OS call fails."""
     path = Path(path)
     _check_parent(path)
     try:
@@ -56,14 +57,17 @@ def atomic_write_bytes(path: str | Path, data: bytes) -> None:
     except OSError:
         mode = _NEW_FILE_MODE
     try:
-        fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+        fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=suffix)
+        os.close(fd)
     except OSError as e:
         raise FormatError(f"{path}: cannot write ({e.strerror or e})") from e
     try:
-        with os.fdopen(fd, "wb") as f:
-            f.write(data)
-            f.flush()
-            os.fsync(f.fileno())
+        yield Path(tmp)
+        fd = os.open(tmp, os.O_RDONLY)
+        try:
+            os.fsync(fd)
+        finally:
+            os.close(fd)
         with suppress(OSError):
             os.chmod(tmp, mode)
         os.replace(tmp, path)
@@ -74,6 +78,12 @@ def atomic_write_bytes(path: str | Path, data: bytes) -> None:
             raise FormatError(f"{path}: cannot write ({e.strerror or e})") from e
         raise
     _fsync_dir(path.parent)
+
+
+def atomic_write_bytes(path: str | Path, data: bytes) -> None:
+    """Write ``data`` to ``path`` through :func:`atomic_file` (temp file, fsync, rename)."""
+    with atomic_file(path) as tmp:
+        tmp.write_bytes(data)
 
 
 def atomic_write_text(path: str | Path, text: str) -> None:

@@ -3,8 +3,6 @@ with optional per-point intensity, line index and quality."""
 
 from __future__ import annotations
 
-import os
-import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -12,6 +10,7 @@ import numpy as np
 import open3d as o3d
 
 from insitu.errors import FormatError
+from insitu.formats.atomic import atomic_file
 
 _ATTRIBUTES = ("intensity", "line", "quality")
 
@@ -29,7 +28,7 @@ class PointCloud:
 
 
 def write_ply(path: str | Path, cloud: PointCloud) -> None:
-    """Write ``cloud`` atomically: to a temporary file beside ``path``, then renamed."""
+    """Write ``cloud`` atomically (:func:`insitu.formats.atomic.atomic_file`)."""
     path = Path(path)
     if not path.parent.is_dir():
         raise FormatError(f"{path}: folder {path.parent} does not exist")
@@ -40,15 +39,9 @@ def write_ply(path: str | Path, cloud: PointCloud) -> None:
         arr = np.asarray(values)
         dtype = np.int32 if np.issubdtype(arr.dtype, np.integer) else np.float32
         pcd.point[name] = o3d.core.Tensor(arr.astype(dtype).reshape(-1, 1))
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=".ply", dir=path.parent)
-    os.close(fd)
-    try:
-        if not o3d.t.io.write_point_cloud(tmp, pcd, write_ascii=False, compressed=False):
+    with atomic_file(path, suffix=".ply") as tmp:
+        if not o3d.t.io.write_point_cloud(str(tmp), pcd, write_ascii=False, compressed=False):
             raise FormatError(f"{path}: Open3D could not write the point cloud")
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
 
 
 def read_ply(path: str | Path) -> PointCloud:

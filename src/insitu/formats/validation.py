@@ -30,6 +30,12 @@ def show(value: Any) -> str:
     return text if len(text) <= _MAX_SHOWN else text[: _MAX_SHOWN - 3] + "..."
 
 
+def one_of(names) -> str:
+    """``'a', 'b' or 'c'``: the choices of an error message (the keys of a table)."""
+    shown = [repr(n) for n in names]
+    return shown[0] if len(shown) == 1 else ", ".join(shown[:-1]) + " or " + shown[-1]
+
+
 def bad(expected: str, got: Any = ..., *, at: str = "", more: int = 0) -> PydanticCustomError:
     """A validation error reading ``<expected>, got <got>``; ``at`` extends the field path
     (e.g. ``frames[3].line`` from a model validator), ``more`` counts further problems."""

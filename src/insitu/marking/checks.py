@@ -11,6 +11,7 @@ import numpy as np
 
 from insitu.errors import SafetyError
 from insitu.geometry.beams import TwoMirrorHead
+from insitu.geometry.field import check_in_field
 from insitu.marking.project import Projection
 
 DEFAULT_MAX_SLOPE_DEG = 60.0
@@ -41,14 +42,19 @@ def _where(p: np.ndarray) -> str:
     return f"({p[0]:.3f}, {p[1]:.3f}) mm"
 
 
+def point_name(pts: np.ndarray, i: int) -> str:
+    """How a refusal names target ``i`` of ``pts`` (N, ≥ 2) world mm."""
+    return f"pattern point at (x, y) = {_where(pts[i])}"
+
+
 def _refuse(bad: np.ndarray, pts: np.ndarray, what, worst: int | None = None) -> None:
     """SafetyError naming the point ``worst`` (default: the first bad one) and ``what`` is
-    wrong there (a string, or a function of the point's index)."""
+    wrong there (a string, or a function of the point's index); ``where_mm``: its x, y."""
     idx = np.flatnonzero(bad)
     i = int(idx[0] if worst is None else worst)
     more = f" (and {len(idx) - 1} more points)" if len(idx) > 1 else ""
     reason = what(i) if callable(what) else what
-    raise SafetyError(f"pattern point at (x, y) = {_where(pts[i])} {reason}{more}")
+    raise SafetyError(f"{point_name(pts, i)} {reason}{more}", where_mm=pts[i, :2])
 
 
 def field_positions(points: np.ndarray, head: TwoMirrorHead | None) -> np.ndarray:
@@ -68,13 +74,10 @@ def check_targets(points: np.ndarray, limits: Limits) -> None:
     bad = ~np.isfinite(pts).all(1)
     if bad.any():
         _refuse(bad, np.nan_to_num(pts), "has no height (not on the measured surface)")
-    half = np.asarray(limits.field_size_mm, float) / 2
     fp = field_positions(pts, limits.head)
-    out = (np.abs(fp) > half + 1e-9).any(1)
-    if out.any():
-        worst = int(np.argmax(np.max(np.abs(fp) / half, axis=1)))
-        _refuse(out, pts, lambda i: f"(z = {pts[i, 2]:.3f} mm) is outside the scan field "
-                f"±{half[0]:g} × ±{half[1]:g} mm (beam at {_where(fp[i])} on z = 0)", worst)
+    check_in_field(fp, limits.field_size_mm, lambda i, field: f"{point_name(pts, i)} (z = "
+                   f"{pts[i, 2]:.3f} mm) is outside the scan field {field} (beam at "
+                   f"{_where(fp[i])} on z = 0)", at=pts, worst=True, more=True)
     z0, z1 = limits.z_range_mm
     out = (pts[:, 2] < z0) | (pts[:, 2] > z1)
     if out.any():
@@ -90,10 +93,8 @@ def check_projection(proj: Projection, limits: Limits) -> None:
     pts = proj.points
     if len(pts) == 0:
         return
-    half = np.asarray(limits.field_size_mm, float) / 2
-    out = (np.abs(pts[:, :2]) > half + 1e-9).any(1)
-    if out.any():
-        _refuse(out, pts, f"is outside the scan field ±{half[0]:g} × ±{half[1]:g} mm")
+    check_in_field(pts[:, :2], limits.field_size_mm, lambda i, field: f"{point_name(pts, i)} "
+                   f"is outside the scan field {field}", more=True)
     hole = ~(proj.gap_mm <= proj.hole_radius_mm) | ~np.isfinite(pts[:, 2])
     if hole.any():
         _refuse(hole, pts, f"is over a hole in the point cloud (no measured point within "

@@ -19,9 +19,9 @@ import numpy as np
 from scipy.spatial import ConvexHull, QhullError
 
 from insitu.devices.galvo import Command, FieldCorrection, joint_from_targets
-from insitu.errors import SafetyError
 from insitu.geometry.beams import TwoMirrorHead
-from insitu.marking.checks import Limits, check_targets
+from insitu.geometry.field import check_in_field
+from insitu.marking.checks import Limits, check_targets, point_name
 from insitu.marking.job import LaserParams, MarkJob, Timing, corner_delays_us
 
 
@@ -73,13 +73,9 @@ class GalvoDriver:
         if self.correction is not None and len(pts):
             j = self.joints(pts)
             x, y = self.head.forward(2 * np.radians(j[:, 0]), 2 * np.radians(j[:, 1]), 0.0)
-            half = np.asarray(self.limits.field_size_mm) / 2
-            out = (np.abs(x) > half[0]) | (np.abs(y) > half[1])
-            if out.any():
-                i = int(np.flatnonzero(out)[0])
-                raise SafetyError(f"pattern point at (x, y) = ({pts[i, 0]:.3f}, {pts[i, 1]:.3f}) "
-                                  f"mm is outside the scan field ±{half[0]:g} × ±{half[1]:g} mm "
-                                  "after the field correction")
+            check_in_field(np.column_stack([x, y]), self.limits.field_size_mm,
+                           lambda i, field: f"{point_name(pts, i)} is outside the scan field "
+                           f"{field} after the field correction", at=pts)
 
     def compile(self, job: MarkJob, first_path: int = 0) -> list[list[Command]]:
         """Check the job, then one command list per path from ``first_path`` on (settings

@@ -113,7 +113,8 @@ def surface_for(polylines, cloud: PointCloud | np.ndarray, anchor=None, **kw) ->
     except MeasurementError:
         c = pts.mean(0) if len(pts) else np.zeros(2)
         raise SafetyError(f"pattern point at (x, y) = ({c[0]:.3f}, {c[1]:.3f}) mm is outside "
-                          "the scanned area (no measured points under the pattern)") from None
+                          "the scanned area (no measured points under the pattern)",
+                          where_mm=(c[0], c[1])) from None
 
 
 def _split(arr: np.ndarray, off: np.ndarray) -> list[np.ndarray]:
@@ -121,10 +122,12 @@ def _split(arr: np.ndarray, off: np.ndarray) -> list[np.ndarray]:
 
 
 def project_planar(polylines, cloud: PointCloud | np.ndarray | Surface,
-                   step_mm: float | None = None) -> Projection:
+                   step_mm: float | None = None, *, anchor=None,
+                   direction_deg: float | None = None) -> Projection:
     """Keep x, y; z from the surface. Polylines: list of (N, 2) world mm. A polyline that
     crosses a step is split where it drops from one level to the other (the laser is off
-    across the wall), so there may be more paths than polylines."""
+    across the wall), so there may be more paths than polylines. ``anchor`` and
+    ``direction_deg`` (the projectors' common keywords) do not matter here."""
     pts, off = _pack(polylines)
     surf = cloud if isinstance(cloud, Surface) else surface_for(polylines, cloud)
     step = float(step_mm or surf.spacing_mm)
@@ -265,15 +268,3 @@ def project_wrap(polylines, cloud: PointCloud | np.ndarray | Surface, anchor=Non
                       smp.slope_deg, stretch, float(np.degrees(theta)),
                       (float(anchor[0]), float(anchor[1])))
 
-
-def project(polylines, cloud: PointCloud | np.ndarray | Surface, mode: str = "planar", *,
-            anchor=None, direction_deg: float | None = None, step_mm: float | None = None
-            ) -> Projection:
-    """``mode`` "planar" (:func:`project_planar`; ``anchor`` and ``direction_deg`` unused) or
-    "wrap" (:func:`project_wrap`)."""
-    if mode == "planar":
-        return project_planar(polylines, cloud, step_mm=step_mm)
-    if mode == "wrap":
-        return project_wrap(polylines, cloud, anchor=anchor, direction_deg=direction_deg,
-                            step_mm=step_mm)
-    raise ValueError(f"--mode {mode!r}: expected 'planar' or 'wrap'")

@@ -11,7 +11,8 @@ at known offsets, and the better model of ours that uses every centre's row and 
   the pivot-height error and the camera's errors; a scan point is the camera ray meeting its
   sheet (Newton on the ray, started from Method 1).
 
-Both take lines along y (constant x), as the paper does.
+Both take lines along y (constant x), as the paper does; both are a
+:class:`~insitu.measure.height_models.HeightModel`.
 """
 
 from __future__ import annotations
@@ -77,6 +78,11 @@ class PaperHeightModel:
             raise CalibrationError(f"height calibration: no line seen at offset {offsets[k]:g} mm "
                                    f"on the plate at {heights[j]:g} mm")
         return cls(ref_u, ref_v, offsets, heights, P)
+
+    @property
+    def z_range(self) -> tuple[float, float]:
+        """The plate heights of the calibration grid, (low, high) mm."""
+        return float(self.heights.min()), float(self.heights.max())
 
     def height(self, x_mm: float, u: np.ndarray, v: np.ndarray) -> np.ndarray:
         """Z (N,) mm of centres (u, v) of the line at offset x. NaN outside the reference."""
@@ -216,8 +222,7 @@ class SheetHeightModel:
 
 def check_bracket(model, z: np.ndarray, what: str, tol_mm: float = 2.0) -> None:
     """Refuse results far outside the heights the calibration recorded."""
-    lo, hi = (model.z_range if isinstance(model, SheetHeightModel)
-              else (model.heights.min(), model.heights.max()))
+    lo, hi = model.z_range
     zf = z[np.isfinite(z)]
     if len(zf) and (zf.min() < lo - tol_mm or zf.max() > hi + tol_mm):
         raise MeasurementError(f"{what}: measured heights {zf.min():.1f} … {zf.max():.1f} mm are "

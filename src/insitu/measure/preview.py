@@ -9,6 +9,7 @@ import cv2
 import numpy as np
 
 from insitu.errors import FormatError
+from insitu.formats.atomic import atomic_write_bytes
 from insitu.geometry.camera import rotation_about
 
 
@@ -52,6 +53,4 @@ def save_cloud_picture(points: np.ndarray, path: str | Path, **kw) -> None:
     ok, buf = cv2.imencode(path.suffix or ".png", cloud_picture(points, **kw))
     if not ok:
         raise FormatError(f"{path}: cannot encode a picture of this type")
-    tmp = path.with_name(f".{path.name}.tmp")
-    tmp.write_bytes(buf.tobytes())
-    tmp.replace(path)
+    atomic_write_bytes(path, buf.tobytes())

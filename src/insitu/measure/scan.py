@@ -8,7 +8,8 @@ from scipy.spatial import cKDTree
 from insitu.errors import MeasurementError
 from insitu.formats.pointcloud import PointCloud
 from insitu.geometry.camera import CameraModel
-from insitu.measure.heightcal import PaperHeightModel, SheetHeightModel, check_bracket
+from insitu.measure.height_models import HeightModel
+from insitu.measure.heightcal import check_bracket
 from insitu.measure.plane import expected_band, line_runs_along_rows, reconstruct_line
 from insitu.vision.extract import CentreSettings, extract_centres
 
@@ -26,7 +27,7 @@ class ScanReconstructor:
     """
 
     def __init__(self, camera: CameraModel, pivot_height_mm: float, telecentric: bool = False,
-                 height_model: SheetHeightModel | PaperHeightModel | None = None,
+                 height_model: HeightModel | None = None,
                  settings: CentreSettings = CentreSettings(),
                  z_range_mm: tuple[float, float] | None = None, min_points: int = 5):
         self.camera, self.H, self.telecentric = camera, pivot_height_mm, telecentric

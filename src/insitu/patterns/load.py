@@ -1,12 +1,13 @@
-"""``load_pattern(spec)``: the CLI's ``--pattern`` argument → :class:`Pattern`.
+"""``load_pattern(spec)``: the CLI's ``--pattern`` argument → :class:`Pattern`, by the one table
+of pattern sources, :data:`SOURCES` (the CLI's help, the GUI's file dialog and drag and drop,
+and the project files read it). A new source is a module with its loader and one entry here.
 
-Specs (cli.md: SVG, DXF, PNG, text:"...", qr:"..."), each with optional ``;key=value``
-options at the end::
+A spec is a file (its suffix picks the source) or ``prefix:payload`` (text:, qr:, fiducials:),
+each with optional ``;key=value`` options at the end (the entry's ``options``)::
 
     logo.svg                         SVG (fills → contours, strokes → paths)
-    part.dxf                         DXF (closed outlines → contours, open ones → paths)
     photo.png;mode=dither;width=20   image: mode fill|threshold|dither, dpi, width (mm),
-                                     threshold (0–1), invert (0/1); also .jpg .bmp .tif
+                                     threshold (0–1), invert (0/1)
     text:"Serial 0042";font=DejaVu Serif Bold;size=5
                                      glyph outlines; font family or .ttf path, size = em in mm
     qr:"https://example.com";ec=H;quiet=2;invert=1
@@ -23,27 +24,99 @@ win. Every failure is a one-line FormatError.
 from __future__ import annotations
 
 import re
+from collections.abc import Callable
+from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 from insitu.errors import FormatError
+from insitu.patterns import codes, raster, text, vector
 from insitu.patterns.model import Pattern
 
-IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".webp")
-_KEYS = {
-    "text": {"font": str, "size": float, "line_spacing": float},
-    "qr": {"ec": str, "quiet": int, "invert": bool, "module": float},
-    "fiducials": {"pitch": float, "diameter": float, "filled": bool},
-    "image": {"mode": str, "dpi": float, "width": float, "threshold": float, "invert": bool},
-    "svg": {}, "dxf": {},
+
+@dataclass(frozen=True)
+class PatternSource:
+    """One way to make a pattern. ``load(payload, options)`` → :class:`Pattern`: ``payload``
+    is the file's Path (a file source, picked by its ``suffixes``) or the text after
+    ``prefix`` (a spec source, e.g. ``qr:``); ``options``: the ``;key=value`` options parsed
+    to their types (``option_types``: key → type). ``description``: one line (CLI help);
+    ``payload_hint``: how a spec source's payload is written."""
+
+    load: Callable[[Any, dict], Pattern]
+    description: str
+    option_types: dict[str, type] = field(default_factory=dict)
+    suffixes: tuple[str, ...] = ()
+    prefix: str | None = None
+    payload_hint: str = '"..."'
+
+    @property
+    def usage(self) -> str:
+        """How it is written: its suffixes, or prefix and payload."""
+        return " ".join(self.suffixes) if self.prefix is None else self.prefix + self.payload_hint
+
+
+def _image(path: Path, o: dict) -> Pattern:
+    return raster.load_image(path, dpi=o.get("dpi"), width_mm=o.get("width"),
+                             mode=o.get("mode", "fill"), threshold=o.get("threshold", 0.5),
+                             invert=o.get("invert", False))
+
+
+def _text(body: str, o: dict) -> Pattern:
+    return text.text_pattern(body, font=o.get("font", text.DEFAULT_FONT),
+                             size_mm=o.get("size", 10.0), line_spacing=o.get("line_spacing", 1.0))
+
+
+def _qr(body: str, o: dict) -> Pattern:
+    return codes.qr_pattern(body, error=o.get("ec", "M"), quiet_zone=o.get("quiet", 4),
+                            module_mm=o.get("module", 1.0), invert=o.get("invert", False))
+
+
+def _fiducials(body: str, o: dict) -> Pattern:
+    m = re.fullmatch(r"\s*(\d+)\s*[xX×]\s*(\d+)\s*", body)
+    if not m:
+        raise FormatError(f"fiducials:{body[:40]!r}: expected fiducials:ROWSxCOLS, e.g. "
+                          "fiducials:5x5")
+    return codes.fiducial_grid(int(m[1]), int(m[2]), pitch_mm=o.get("pitch", 5.0),
+                               diameter_mm=o.get("diameter", 1.0), filled=o.get("filled", True))
+
+
+SOURCES: dict[str, PatternSource] = {
+    "svg": PatternSource(lambda path, o: vector.load_svg(path),
+                         "SVG drawing", suffixes=(".svg",)),
+    "dxf": PatternSource(lambda path, o: vector.load_dxf(path),
+                         "DXF drawing", suffixes=(".dxf",)),
+    "image": PatternSource(_image, "image, ;mode=fill|threshold|dither",
+                           {"mode": str, "dpi": float, "width": float, "threshold": float,
+                            "invert": bool},
+                           suffixes=(".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".webp")),
+    "text": PatternSource(_text, "text outlines, ;font= ;size= mm",
+                          {"font": str, "size": float, "line_spacing": float}, prefix="text:"),
+    "qr": PatternSource(_qr, "QR code, ;ec=L|M|Q|H",
+                        {"ec": str, "quiet": int, "invert": bool, "module": float},
+                        prefix="qr:"),
+    "fiducials": PatternSource(_fiducials, "grid of circles, ;pitch= mm",
+                               {"pitch": float, "diameter": float, "filled": bool},
+                               prefix="fiducials:", payload_hint="ROWSxCOLS"),
 }
+FILE_SUFFIXES = tuple(x for src in SOURCES.values() for x in src.suffixes)
+SPEC_PREFIXES = tuple(src.prefix for src in SOURCES.values() if src.prefix)
 _OPTS = r"(?P<opts>(?:;[A-Za-z_]+=[^;]*)*)"
-_GENERATED = re.compile(r"^(?P<kind>text|qr|fiducials):(?P<rest>.*)$", re.S)
+
+
+def is_spec(spec: str) -> bool:
+    """``spec`` names a spec source (``text:…``), not a file."""
+    return spec.startswith(SPEC_PREFIXES)
+
+
+def sources_help() -> str:
+    """Every source, one clause each (the CLI's ``--pattern`` help)."""
+    return "; ".join(f"{src.usage} ({src.description})" for src in SOURCES.values())
 
 
 def _value(kind: str, key: str, raw, where: str):
-    typ = _KEYS[kind].get(key)
+    typ = SOURCES[kind].option_types.get(key)
     if typ is None:
-        allowed = ", ".join(_KEYS[kind]) or "none"
+        allowed = ", ".join(SOURCES[kind].option_types) or "none"
         raise FormatError(f"{where}: unknown option {key!r} (allowed: {allowed})")
     if not isinstance(raw, str):
         return raw
@@ -59,19 +132,20 @@ def _value(kind: str, key: str, raw, where: str):
 
 
 def _options(kind: str, opts: str, defaults: dict, where: str) -> dict:
-    known = set().union(*_KEYS.values())
+    known = set().union(*(src.option_types for src in SOURCES.values()))
     bad = set(defaults) - known
     if bad:
         raise FormatError(f"load_pattern: unknown option {sorted(bad)[0]!r}")
-    out = {k: _value(kind, k, v, where) for k, v in defaults.items() if k in _KEYS[kind]}
+    types = SOURCES[kind].option_types
+    out = {k: _value(kind, k, v, where) for k, v in defaults.items() if k in types}
     for item in filter(None, opts.split(";")):
         key, _, raw = item.partition("=")
         out[key.strip()] = _value(kind, key.strip(), raw, where)
     return out
 
 
-def _split_generated(rest: str) -> tuple[str, str]:
-    """(payload without quotes, options string) of what follows ``kind:``."""
+def _split_spec(rest: str) -> tuple[str, str]:
+    """(payload without quotes, options string) of what follows ``prefix``."""
     for q in ('"', "'"):
         if rest.startswith(q):
             m = re.match(rf"^{q}(?P<body>.*){q}{_OPTS}$", rest, re.S)
@@ -81,30 +155,13 @@ def _split_generated(rest: str) -> tuple[str, str]:
     return m["body"], m["opts"]
 
 
-def _generated(kind: str, rest: str, defaults: dict) -> Pattern:
-    from insitu.patterns import codes, text
-
-    body, opts = _split_generated(rest)
-    where = f"{kind}:{body[:40]!r}"
-    o = _options(kind, opts, defaults, where)
-    if kind == "text":
-        return text.text_pattern(body, font=o.get("font", text.DEFAULT_FONT),
-                                 size_mm=o.get("size", 10.0),
-                                 line_spacing=o.get("line_spacing", 1.0))
-    if kind == "qr":
-        return codes.qr_pattern(body, error=o.get("ec", "M"), quiet_zone=o.get("quiet", 4),
-                                module_mm=o.get("module", 1.0), invert=o.get("invert", False))
-    m = re.fullmatch(r"\s*(\d+)\s*[xX×]\s*(\d+)\s*", body)
-    if not m:
-        raise FormatError(f"{where}: expected fiducials:ROWSxCOLS, e.g. fiducials:5x5")
-    return codes.fiducial_grid(int(m[1]), int(m[2]), pitch_mm=o.get("pitch", 5.0),
-                               diameter_mm=o.get("diameter", 1.0),
-                               filled=o.get("filled", True))
+def _spec(kind: str, rest: str, defaults: dict) -> Pattern:
+    body, opts = _split_spec(rest)
+    src = SOURCES[kind]
+    return src.load(body, _options(kind, opts, defaults, f"{src.prefix}{body[:40]!r}"))
 
 
 def _file(spec: str, defaults: dict) -> Pattern:
-    from insitu.patterns import raster, vector
-
     if any(ord(c) < 32 for c in spec):
         raise FormatError(f"--pattern {spec!r}: no such pattern file")
     path, opts = Path(spec), ""
@@ -113,31 +170,24 @@ def _file(spec: str, defaults: dict) -> Pattern:
         if m and m["opts"]:
             path, opts = Path(m["file"]), m["opts"]
     suffix = path.suffix.lower()
-    kind = ("svg" if suffix == ".svg" else "dxf" if suffix == ".dxf"
-            else "image" if suffix in IMAGE_SUFFIXES else None)
+    kind = next((k for k, src in SOURCES.items() if suffix in src.suffixes), None)
     if kind is None:
         if not path.exists():
             raise FormatError(f"{path}: no such pattern file (or give text:\"...\" or "
                               f"qr:\"...\")")
         raise FormatError(f"{path}: unknown pattern type {suffix or '(no suffix)'} "
-                          f"(expected .svg, .dxf, {', '.join(IMAGE_SUFFIXES)})")
-    o = _options(kind, opts, defaults, str(path))
-    if kind == "svg":
-        return vector.load_svg(path)
-    if kind == "dxf":
-        return vector.load_dxf(path)
-    return raster.load_image(path, dpi=o.get("dpi"), width_mm=o.get("width"),
-                             mode=o.get("mode", "fill"), threshold=o.get("threshold", 0.5),
-                             invert=o.get("invert", False))
+                          f"(expected {', '.join(FILE_SUFFIXES)})")
+    return SOURCES[kind].load(path, _options(kind, opts, defaults, str(path)))
 
 
 def load_pattern(spec: str | Path, **defaults) -> Pattern:
-    """A pattern from a file path (.svg, .dxf, image) or a ``text:``/``qr:``/``fiducials:``
-    spec (see the module docstring). Raises FormatError with a one-line message."""
+    """A pattern from a file path or a spec of one of :data:`SOURCES` (see the module
+    docstring). Raises FormatError with a one-line message."""
     spec_s = str(spec)
     if not spec_s.strip():
         raise FormatError("--pattern: empty (give a file, text:\"...\" or qr:\"...\")")
-    m = _GENERATED.match(spec_s) if not isinstance(spec, Path) else None
-    if m and not Path(spec_s).is_file():
-        return _generated(m["kind"], m["rest"], defaults)
+    kind = next((k for k, src in SOURCES.items() if src.prefix and spec_s.startswith(src.prefix)),
+                None) if not isinstance(spec, Path) else None
+    if kind is not None and not Path(spec_s).is_file():
+        return _spec(kind, spec_s[len(SOURCES[kind].prefix):], defaults)
     return _file(spec_s, defaults)

@@ -158,7 +158,7 @@ class CentreSettingsSpec(BaseModel):
     """How line centres were extracted (insitu.vision.extract.CentreSettings)."""
 
     model_config = ConfigDict(allow_inf_nan=False)
-    method: Literal["gray", "gaussian", "steger"] = "steger"
+    method: str = "steger"              # a key of insitu.vision.centres.CENTRE_METHODS
     k: float = Field(default=0.3, gt=0, lt=1)
     subtract: bool = False
     smooth_half_window: int = Field(default=7, ge=0, le=50)
@@ -186,12 +186,15 @@ class ResidualGridSpec(BaseModel):
 
 class HeightCalibration(CalibrationEnvelope):
     """Height calibration (Li et al. §2.2 and ours) with the camera it was fitted through and
-    the centre extraction it was made with (a scan must use the same)."""
+    the centre extraction it was made with (a scan must use the same). ``model``: the default
+    one; each model under its name. ``model`` and ``centres.method`` are checked against their
+    tables by :func:`insitu.services.height.load_height_calibration` (the tables live above
+    this layer)."""
 
     kind: Literal["height-calibration"] = "height-calibration"
     camera: CameraSpec
     centres: CentreSettingsSpec = CentreSettingsSpec()
-    model: Literal["sheet", "paper"] = "sheet"
+    model: str = "sheet"                # a key of insitu.measure.height_models.HEIGHT_MODELS
     sheet: SheetModelSpec
     paper: PaperModelSpec | None = None
     residual_grid: ResidualGridSpec | None = None

@@ -19,13 +19,14 @@ from pathlib import Path
 import numpy as np
 
 from insitu.calibrate.field import (DEFAULT_GOALS, DEFAULT_SMOOTHING, MIN_POINTS, Selection,
-                                    area_table, select_rbf, select_table, stats)
+                                    area_table, stats)
 from insitu.calibrate.fiducials import CircleSettings, find_circles
-from insitu.calibrate.field_file import AreaRow, CVRow, FieldCorrection, model_spec
+from insitu.calibrate.field_file import FIELD_METHODS, AreaRow, CVRow, FieldCorrection
 from insitu.calibrate.report import report_image, write_report_png
 from insitu.errors import CalibrationError, FormatError
 from insitu.formats.atomic import atomic_write_text
 from insitu.formats.sequence import Sequence
+from insitu.formats.validation import one_of
 from insitu.services.common import Progress, camera_model, save_with_picture
 from insitu.vision.spots import SpotSettings, find_spot
 
@@ -174,23 +175,17 @@ def calibrate_field(folder: str | Path, method: str = "rbf",
                     sigmas: list[float] | None = None, goals=DEFAULT_GOALS,
                     smoothing=DEFAULT_SMOOTHING) -> FieldCorrection:
     """Measure the spots of a recorded field-calibration folder and fit the correction
-    (``method`` "rbf" or "table"), σ / goal / smoothing chosen by 5-fold CV."""
-    if method not in ("rbf", "table"):
-        raise CalibrationError(f"method {method!r}: expected 'rbf' or 'table'")
+    (``method``: a key of :data:`FIELD_METHODS`), σ / goal / smoothing chosen by 5-fold CV."""
+    if method not in FIELD_METHODS:
+        raise CalibrationError(f"method {method!r}: expected {one_of(FIELD_METHODS)}")
     seq = Sequence.open(folder)
     m = measure_spots(seq, settings, progress)
     Q, D = m.commands, m.deviations
     half = np.asarray(seq.scan_head.field_size_mm) / 2
-    if method == "rbf":
-        sel: Selection = select_rbf(Q, D, sigmas, goals)
-        spec = model_spec(sel.model, sel.cv.params["mse_goal_mm2"])
-        detail = (f"RBF: σ = {sel.model.sigma:g} mm, MSE goal {sel.cv.params['mse_goal_mm2']:g} "
-                  f"mm², {len(sel.model.centres)} neurons")
-    else:
-        sel = select_table(Q, D, (-half[0], half[0], -half[1], half[1]), smoothing)
-        spec = model_spec(sel.model)
-        detail = (f"table: {len(sel.model.x_nodes)} × {len(sel.model.y_nodes)} nodes, smoothing "
-                  f"{sel.model.smoothing:g}")
+    fm = FIELD_METHODS[method]
+    sel: Selection = fm.select(Q, D, (-half[0], half[0], -half[1], half[1]), sigmas=sigmas,
+                               goals=goals, smoothing=smoothing)
+    spec = fm.spec.of(sel.model, **sel.cv.params)
     fit = D - sel.model(Q)
     after = -sel.cv.residuals                      # landing error expected after correction
     region = [float(Q[:, 0].min()), float(Q[:, 0].max()), float(Q[:, 1].min()),
@@ -203,16 +198,15 @@ def calibrate_field(folder: str | Path, method: str = "rbf",
                  "cv_rms_mm": cv_s.rms_mm[2], "cv_max_mm": cv_s.max_mm[2],
                  "cv_fold_rms_mean_mm": sel.cv.mean_fold_rms,
                  "cv_fold_rms_std_mm": sel.cv.std_fold_rms}
-    if method == "rbf":
-        residuals["neurons"] = float(len(sel.model.centres))
+    residuals.update(spec.counts())
     notes = (f"{len(seq)} frames, {len(Q)} spots measured"
              + (f", {len(m.skipped)} skipped ({m.out_of_view} outside the camera's view)"
                 if m.skipped else "")
-             + f"; plate at z = {m.plate_z_mm:g} mm; {detail}; 'after' = 5-fold CV prediction "
-               "error at the measured points")
+             + f"; plate at z = {m.plate_z_mm:g} mm; {spec.summary()}; 'after' = 5-fold CV "
+               "prediction error at the measured points")
     return FieldCorrection(
         method=method, field_size_mm=list(seq.scan_head.field_size_mm), region_mm=region,
-        plate_z_mm=m.plate_z_mm, camera=seq.camera, **spec,
+        plate_z_mm=m.plate_z_mm, camera=seq.camera, **{method: spec},
         cross_validation=[CVRow(params={k: float(v) for k, v in c.params.items()},
                                 rms_mm=c.rms, fold_rms_mm=c.fold_rms.tolist())
                           for c in sel.tried],

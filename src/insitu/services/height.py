@@ -6,14 +6,17 @@ from pathlib import Path
 
 import numpy as np
 
-from insitu.errors import CalibrationError, MeasurementError
+from insitu.errors import CalibrationError, ConfigError, MeasurementError
 from insitu.formats.sequence import Sequence
+from insitu.formats.validation import one_of, show
 from insitu.geometry.camera import CameraModel
-from insitu.measure.plane import expected_band
+from insitu.measure.height_models import HEIGHT_MODELS, HeightModel
 from insitu.measure.heightcal import (LineObservation, PaperHeightModel, SheetHeightModel,
                                       cross_validate_sheet, height_residuals, residual_grid)
+from insitu.measure.plane import expected_band
 from insitu.rig.files import HeightCalibration, ResidualGridSpec, load_json_model
 from insitu.services.common import Progress, camera_model, save_with_picture
+from insitu.vision.centres import CENTRE_METHODS
 from insitu.vision.extract import CentreSettings, extract_centres
 
 
@@ -95,11 +98,18 @@ def calibrate_height_and_report(folder: str | Path, out: str | Path,
 
 def load_height_calibration(path: str | Path, progress: Progress | None = None
                             ) -> HeightCalibration:
-    """A height calibration file, or a recorded height-calibration folder (fitted now)."""
+    """A height calibration file, or a recorded height-calibration folder (fitted now).
+    ConfigError naming the file and field for a ``model`` not in :data:`HEIGHT_MODELS` or a
+    ``centres.method`` not in :data:`CENTRE_METHODS`."""
     path = Path(path)
     if path.is_dir():
         return calibrate_height(path, progress=progress)
-    return load_json_model(path, HeightCalibration)
+    cal = load_json_model(path, HeightCalibration)
+    for field, value, table in (("model", cal.model, HEIGHT_MODELS),
+                                ("centres.method", cal.centres.method, CENTRE_METHODS)):
+        if value not in table:
+            raise ConfigError(f"{path}: {field}: expected {one_of(table)}, got {show(value)}")
+    return cal
 
 
 def centre_settings(cal: HeightCalibration) -> CentreSettings:
@@ -108,18 +118,17 @@ def centre_settings(cal: HeightCalibration) -> CentreSettings:
 
 
 def height_model(cal: HeightCalibration, which: str | None = None
-                 ) -> tuple[CameraModel, SheetHeightModel | PaperHeightModel]:
+                 ) -> tuple[CameraModel, HeightModel]:
     """The camera the calibration was fitted through and the model to measure with
-    (``which``: "sheet", "paper" or None for the file's default)."""
+    (``which``: a key of :data:`HEIGHT_MODELS`, None: the file's ``model``), read from the
+    file's field of that name."""
     which = which or cal.model
-    if which == "paper":
-        if cal.paper is None:
-            raise MeasurementError("this height calibration has no paper model (its recording "
-                                   "has no line at offset 0 on the plate at height 0)")
-        model = PaperHeightModel.from_dict(cal.paper.model_dump())
-    else:
-        model = SheetHeightModel.from_dict(cal.sheet.model_dump())
-    return camera_model(cal.camera), model
+    if which not in HEIGHT_MODELS:
+        raise ConfigError(f"height model {which!r}: expected {one_of(HEIGHT_MODELS)}")
+    kind, spec = HEIGHT_MODELS[which], getattr(cal, which, None)
+    if spec is None:
+        raise MeasurementError(f"this height calibration has no {which} model ({kind.absent})")
+    return camera_model(cal.camera), kind.model.from_dict(spec.model_dump())
 
 
 def check_same_camera(cal: HeightCalibration, width: int, height: int, where: str) -> None:

@@ -14,8 +14,8 @@ from insitu.errors import FormatError
 from insitu.formats.atomic import atomic_write_bytes
 from insitu.formats.pointcloud import PointCloud, read_ply
 from insitu.marking import (GalvoDriver, LaserParams, MarkJob, Projection, RunResult,
-                            TimeEstimate, estimate_time, plan_job, progress_path_for, run_job,
-                            run_preview, write_job)
+                            TimeEstimate, estimate_time, plan_job, progress_path_for,
+                            projection_mode, run_job, run_preview, write_job)
 from insitu.patterns import Pattern, hatch, load_pattern, order_paths
 from insitu.services.common import Progress
 
@@ -24,8 +24,9 @@ from insitu.services.common import Progress
 class Placement:
     """Where and how a pattern is marked. ``pattern``: a file or a ``text:``/``qr:`` spec;
     ``at_mm``: its centre, world x, y; ``width_mm``: its width before rotating;
-    ``rotate_deg``: CCW about +z; ``mode``: "planar" or "wrap"; ``hatch_mm``: fill spacing
-    (None: outlines only); ``hatch_angle_deg``, ``cross``: the hatch's direction(s)."""
+    ``rotate_deg``: CCW about +z; ``mode``: a key of ``marking.PROJECTIONS``; ``hatch_mm``:
+    fill spacing (None: outlines only); ``hatch_angle_deg``, ``cross``: the hatch's
+    direction(s)."""
 
     pattern: str
     at_mm: tuple[float, float]
@@ -38,8 +39,7 @@ class Placement:
 
     def placed(self) -> Pattern:
         """The pattern loaded and moved to its place, world mm (FormatError if it cannot be)."""
-        if self.mode not in ("planar", "wrap"):
-            raise FormatError(f"--mode {self.mode!r}: expected 'planar' or 'wrap'")
+        projection_mode(self.mode)
         return load_pattern(self.pattern).placed(self.at_mm, self.width_mm, self.rotate_deg)
 
     def polylines(self, pattern: Pattern) -> list[np.ndarray]:

@@ -12,13 +12,14 @@ from PySide6.QtGui import QAction, QKeySequence
 from PySide6.QtWidgets import QDockWidget, QFileDialog, QLabel, QMainWindow
 
 from insitu.errors import InsituError
+from insitu.patterns import FILE_SUFFIXES
 from insitu.services import load_height_calibration
 from insitu.ui import operations as ops
 from insitu.ui.calibrate_panel import CalibratePanel
 from insitu.ui.camera_image import CameraImage
 from insitu.ui.forms import icon
 from insitu.ui.mark_panel import MarkPanel
-from insitu.ui.place_panel import PATTERN_SUFFIXES, PlacePanel
+from insitu.ui.place_panel import PlacePanel
 from insitu.ui.project_file import SUFFIX, Project
 from insitu.ui.scan_panel import ScanPanel
 from insitu.ui.scene_binding import SceneBinding
@@ -365,7 +366,7 @@ class MainWindow(QMainWindow):
             path = Path(url.toLocalFile())
             if path.name.endswith(SUFFIX):
                 self.open_project(path)
-            elif path.suffix.lower() in PATTERN_SUFFIXES:
+            elif path.suffix.lower() in FILE_SUFFIXES:
                 self.place_panel.add_pattern(str(path))
                 self.docks["place"].raise_()
             else:

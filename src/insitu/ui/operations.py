@@ -4,7 +4,6 @@ takes a ``progress(done, total)`` callback and a ``cancel`` Event where the work
 
 from __future__ import annotations
 
-import re
 import threading
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -22,9 +21,6 @@ from insitu.services.station import Station
 from insitu.services.station import connect as connect_station
 from insitu.ui.project_file import SUFFIX, Project, read_project, write_project
 from insitu.ui.session import PlanOutcome, RigChoice, ScanSettings
-
-_WHERE = re.compile(r"\(x, y\) = \((-?[\d.]+), (-?[\d.]+)\) mm")
-
 
 def connect(choice: RigChoice, field: Path | None = None) -> Station:
     """The station of ``choice`` (its rig file, or the simulated rig), its camera answering."""
@@ -52,12 +48,6 @@ def scan(station: Station | None, settings: ScanSettings, height_cal, progress: 
                               exposure_ms=settings.exposure_ms, speed_mm_s=settings.speed_mm_s)
 
 
-def where(error: SafetyError) -> tuple[float, float] | None:
-    """The (x, y) mm a SafetyError names, if it names one."""
-    m = _WHERE.search(str(error))
-    return (float(m.group(1)), float(m.group(2))) if m else None
-
-
 def plan_all(cloud: PointCloud, placements, driver: GalvoDriver,
              laser: LaserParams | None = None) -> list[PlanOutcome]:
     """:func:`services.mark.plan_mark` of each placement; a refusal is kept as its message."""
@@ -66,7 +56,7 @@ def plan_all(cloud: PointCloud, placements, driver: GalvoDriver,
         try:
             out.append(PlanOutcome(plan=mark_svc.plan_mark(cloud, p, driver, laser)))
         except SafetyError as e:
-            out.append(PlanOutcome(error=str(e), where=where(e)))
+            out.append(PlanOutcome(error=str(e), where=e.where_mm))
         except InsituError as e:
             out.append(PlanOutcome(error=str(e)))
     return out

@@ -6,19 +6,21 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from PySide6.QtCore import Qt
 from PySide6.QtWidgets import QFileDialog, QInputDialog, QVBoxLayout, QWidget
 
 from insitu.errors import InsituError
+from insitu.marking import PROJECTIONS
+from insitu.patterns import FILE_SUFFIXES, is_spec
 from insitu.services.mark import Placement
 from insitu.ui.forms import load_form
 from insitu.ui.scene_data import base_pattern
 
-PATTERN_FILES = "Patterns (*.svg *.dxf *.png *.jpg *.jpeg *.bmp *.tif *.tiff)"
-PATTERN_SUFFIXES = (".svg", ".dxf", ".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff")
+PATTERN_FILES = f"Patterns ({' '.join('*' + s for s in FILE_SUFFIXES)})"
 
 
 def short_name(spec: str) -> str:
-    return spec if spec.startswith(("text:", "qr:", "fiducials:")) else Path(spec).name
+    return spec if is_spec(spec) else Path(spec).name
 
 
 class PlacePanel(QWidget):
@@ -40,6 +42,9 @@ class PlacePanel(QWidget):
         for spin, name in fields.items():
             spin.setKeyboardTracking(False)
             spin.valueChanged.connect(lambda _v, n=name: self._edited(n))
+        for i, (name, mode) in enumerate(PROJECTIONS.items()):
+            ui.modeCombo.addItem(name)
+            ui.modeCombo.setItemData(i, mode.description, Qt.ItemDataRole.ToolTipRole)
         ui.modeCombo.currentIndexChanged.connect(lambda _i: self._edited("mode"))
         ui.hatchCheck.toggled.connect(lambda _b: self._edited("hatch_mm"))
         ui.crossCheck.toggled.connect(lambda _b: self._edited("cross"))

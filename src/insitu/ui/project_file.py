@@ -27,13 +27,14 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError
 from insitu.errors import FormatError
 from insitu.formats.atomic import atomic_write_text
 from insitu.formats.validation import dump_json, read_json, validation_message
+from insitu.marking import PROJECTIONS
+from insitu.patterns import is_spec
 from insitu.services.mark import Placement
 from insitu.ui.session import RigChoice, ScanSettings
 
 PROJECT_FORMAT = "insitu-project/1"
 SCHEMA_VERSION = 1
 SUFFIX = ".insitu.json"
-_SPEC_PREFIXES = ("text:", "qr:", "fiducials:")
 
 
 class _Strict(BaseModel):
@@ -66,7 +67,7 @@ class _Placement(_Strict):
     at_mm: tuple[float, float]
     width_mm: float = Field(gt=0)
     rotate_deg: float = 0.0
-    mode: Literal["planar", "wrap"] = "planar"
+    mode: Literal[tuple(PROJECTIONS)] = "planar"     # a key of the table
     hatch_mm: float | None = Field(None, gt=0)
     hatch_angle_deg: float = 0.0
     cross: bool = False
@@ -118,17 +119,13 @@ def _abs(text: str | None, folder: Path, where: str, source: Path, must_exist=Tr
     return p
 
 
-def _is_spec(pattern: str) -> bool:
-    return pattern.startswith(_SPEC_PREFIXES)
-
-
 def project_json(project: Project, path: Path) -> str:
     """The text of the project file at ``path`` (paths made relative to its folder)."""
     folder = Path(path).parent
     placements = []
     for p in project.placements:
         d = asdict(p)
-        d["pattern"] = p.pattern if _is_spec(p.pattern) else _rel(Path(p.pattern), folder)
+        d["pattern"] = p.pattern if is_spec(p.pattern) else _rel(Path(p.pattern), folder)
         placements.append(d)
     scan = project.scan
     data = _Project(
@@ -171,7 +168,7 @@ def read_project(path: str | Path) -> Project:
     folder = path.parent
     placements = []
     for i, p in enumerate(d.placements):
-        pattern = p.pattern if _is_spec(p.pattern) else str(
+        pattern = p.pattern if is_spec(p.pattern) else str(
             _abs(p.pattern, folder, f"placements[{i}].pattern", path))
         placements.append(Placement(pattern, tuple(p.at_mm), p.width_mm, p.rotate_deg, p.mode,
                                     p.hatch_mm, p.hatch_angle_deg, p.cross))

@@ -96,7 +96,7 @@ class PlacementHistory:
 @dataclass(frozen=True)
 class PlanOutcome:
     """The plan of one placement: ``plan`` when it passed the checks, else the one-line
-    ``error`` and, when the message names one, the place ``where`` (x, y) mm."""
+    ``error`` and, when the refusal knows one, the place ``where`` (x, y) mm."""
 
     plan: MarkPlan | None = None
     error: str | None = None

@@ -1,212 +1,23 @@
-"""Sub-pixel centres of a laser line: one crossing per scan column (rows mode) or per row.
+"""Sub-pixel centres of a laser line: one crossing per scan column (rows mode) or per row, by
+one of the methods of :data:`CENTRE_METHODS`.
 
-All methods share one detection stage: median pre-filter, the peak row per column, a validity
-test, and a choice between two separated peaks. Common keyword arguments:
-
-* band: (v_lo, v_hi), each (W,) or scalar — rows allowed per column, e.g. the light plane's
-  expected band from the geometry; NaN: the column is not searched.
-* min_peak: absolute floor, gray values; min_contrast, snr: least peak − background, and least
-  multiple of the frame's noise sigma. A column gives a point only when its peak ≥ min_peak AND
-  its contrast ≥ max(min_contrast, snr · noise) — noise and edges of bright areas make none.
-* continuity: where a column has a second valid peak > window rows from the first (ghost,
-  secondary reflection), keep the one on the better supported chain of peaks across columns
-  (rows ≤ 4 px apart per column; support = summed contrast); such points are ``ambiguous``.
-* saturation: gray value counted as saturated (None: the dtype's maximum).
-
-Methods: :func:`gray_centroid` (Li et al. §2.3, Eq. 7) here; :func:`gaussian_peak` and
-:func:`steger` in :mod:`insitu.vision.steger` (re-exported); :func:`line_centres` dispatches
-and handles lines that run along the columns.
+Every method uses the detection stage and keywords of :mod:`insitu.vision.detect`.
+:func:`gray_centroid` (Li et al. §2.3, Eq. 7) is here; :func:`~insitu.vision.steger.gaussian_peak`
+and :func:`~insitu.vision.steger.steger` in :mod:`insitu.vision.steger`; :func:`line_centres`
+dispatches on the table and handles lines that run along the columns.
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import cv2
 import numpy as np
-from scipy.sparse import coo_matrix
-from scipy.sparse.csgraph import connected_components
 
-FWHM_PER_SIGMA = 2.0 * np.sqrt(2.0 * np.log(2.0))
-
-
-@dataclass(frozen=True)
-class LineCentres:
-    """Centres found in one frame; one per scan column at most, ordered by column.
-
-    u, v: (N,) float64 px (image x = column, y = row). peak: (N,) gray value of the peak.
-    width: (N,) px — pixels above the threshold (gray centroid) or FWHM (other methods).
-    contrast: (N,) peak minus the local background on the brighter side (median of 3 px at
-    ±window rows from the peak, median-filtered image), gray values. saturated: (N,) bool, the
-    raw peak reached the sensor's saturation. ambiguous: (N,) bool, the column (inside the band,
-    if one was given) had a second valid peak more than window rows away; continuity chose.
-    """
-
-    u: np.ndarray
-    v: np.ndarray
-    peak: np.ndarray
-    width: np.ndarray
-    contrast: np.ndarray
-    saturated: np.ndarray | None = None
-    ambiguous: np.ndarray | None = None
-
-    def __post_init__(self):
-        for name in ("saturated", "ambiguous"):
-            if getattr(self, name) is None:
-                object.__setattr__(self, name, np.zeros(len(self.u), bool))
-
-    def __len__(self) -> int:
-        return len(self.u)
-
-    @property
-    def uv(self) -> np.ndarray:
-        """(N, 2) float64 px."""
-        return np.column_stack([self.u, self.v])
-
-
-@dataclass
-class _Det:
-    """Detection result for the n valid columns: cols, row (int, plateau-centred), gmax, bg,
-    contrast, ambiguous: (n,). pre: the filtered image. noise: its noise sigma (gray values)."""
-
-    cols: np.ndarray
-    row: np.ndarray
-    gmax: np.ndarray
-    bg: np.ndarray
-    contrast: np.ndarray
-    ambiguous: np.ndarray
-    pre: np.ndarray
-    noise: float
-
-
-def _as_image(image) -> np.ndarray:
-    img = np.asarray(image)
-    if img.ndim != 2 or img.size == 0:
-        raise ValueError(f"expected a non-empty (H, W) gray image, got shape {img.shape}")
-    if img.dtype not in (np.uint8, np.uint16, np.float32):
-        img = img.astype(np.uint8 if img.dtype == bool else np.float32)
-    return np.ascontiguousarray(img)
-
-
-def _saturation(img: np.ndarray, saturation: float | None) -> float:
-    if saturation is not None:
-        return float(saturation)
-    return float(np.iinfo(img.dtype).max) if img.dtype.kind == "u" else np.inf
-
-
-def _gather(img: np.ndarray, rows: np.ndarray, cols: np.ndarray):
-    """img[rows, cols] as float32 (k, n) with rows (k, n) clipped, and the (k, n) inside mask."""
-    H = img.shape[0]
-    inside = (rows >= 0) & (rows < H)
-    return img[np.clip(rows, 0, H - 1), cols].astype(np.float32), inside
-
-
-def _noise(pre: np.ndarray) -> float:
-    """Robust noise sigma (gray values) from differences of rows 8 apart, ≤ 32 row pairs."""
-    H = pre.shape[0]
-    d = min(8, H - 1)
-    if d < 1:
-        return 0.0
-    idx = np.arange(0, H - d, max(1, (H - d) // 32))
-    diff = pre[idx, ::2].astype(np.float32) - pre[idx + d, ::2].astype(np.float32)
-    return float(1.4826 / np.sqrt(2.0) * np.median(np.abs(diff)))
-
-
-def _stats(pre, row, w):
-    """Plateau-centred rows, peak, background and contrast for all columns. Background: the
-    mean of the medians of 3 px at each end of the ±w band; contrast: peak minus the brighter
-    end's (an edge of a bright region is no line)."""
-    cols = np.arange(pre.shape[1])
-    below, inside = _gather(pre, row[None, :] + np.arange(0, w + 1)[:, None], cols)
-    gmax = below[0]
-    same = (below == gmax) & inside
-    run = np.where(same.all(axis=0), w + 1, np.argmin(same, axis=0))  # plateau from 1st max
-    row = row + (run - 1) // 2
-    above, _ = _gather(pre, row[None, :] + np.arange(-w, -w + 3)[:, None], cols)
-    below, _ = _gather(pre, row[None, :] + np.arange(w - 2, w + 1)[:, None], cols)
-    (a0, a1, a2), (b0, b1, b2) = above, below
-    top = np.maximum(np.minimum(a0, a1), np.minimum(np.maximum(a0, a1), a2))   # medians of 3
-    bot = np.maximum(np.minimum(b0, b1), np.minimum(np.maximum(b0, b1), b2))
-    return row, gmax, (top + bot) / 2, gmax - np.maximum(top, bot)
-
-
-def _continuity(v1, v2, ok1, ok2, weight1, weight2, max_jump):
-    """True where the second candidate belongs to the better supported chain of peaks.
-
-    Chains link candidates of columns 1 or 2 apart whose rows differ ≤ max_jump px per column;
-    a chain's support is the summed contrast of its members.
-    """
-    W = len(v1)
-    V, OK, Wt = np.r_[v1, v2].astype(np.float64), np.r_[ok1, ok2], np.r_[weight1, weight2]
-    src, dst = [], []
-    for d in (1, 2):
-        for s in (0, W):
-            for t in (0, W):
-                a, b = s + np.arange(W - d), t + np.arange(d, W)
-                m = OK[a] & OK[b] & (np.abs(V[a] - V[b]) <= max_jump * d)
-                src.append(a[m])
-                dst.append(b[m])
-    src, dst = np.concatenate(src), np.concatenate(dst)
-    graph = coo_matrix((np.ones(len(src)), (src, dst)), shape=(2 * W, 2 * W))
-    n, lab = connected_components(graph, directed=False)
-    support = np.bincount(lab[OK], weights=Wt[OK], minlength=n)
-    return ok2 & (support[lab[W:]] > support[lab[:W]])
-
-
-def _detect(image, median=3, band=None, window=12, min_peak=40.0, min_contrast=20.0,
-            snr=6.0, continuity=True, max_jump=4.0) -> _Det:
-    """Peak row per valid column of a line running along the rows (module docstring)."""
-    img = _as_image(image)
-    pre = cv2.medianBlur(img, median) if median and median > 1 else img
-    H, W = pre.shape
-    w = max(int(window or 12), 3)
-    noise = _noise(pre)
-    fill = np.iinfo(pre.dtype).min if pre.dtype.kind == "u" else -np.inf
-    search = cv2.transpose(pre)                          # (W, H) contiguous; ours to overwrite
-    lo = np.zeros(W, np.int64)
-    searched = np.ones(W, bool)
-    if band is not None:
-        blo, bhi = (np.broadcast_to(np.asarray(b, np.float64), (W,)) for b in band)
-        with np.errstate(invalid="ignore"):
-            flo, fhi = np.ceil(blo), np.floor(bhi)
-            searched = (np.isfinite(flo) & np.isfinite(fhi) & (flo <= fhi) & (flo <= H - 1)
-                        & (fhi >= 0))
-        lo = np.where(searched, np.clip(flo, 0, H - 1), 0).astype(np.int64)
-        hi = np.where(searched, np.clip(fhi, 0, H - 1), 0).astype(np.int64)
-        span = np.arange(int((hi - lo).max()) + 1 if W else 1)
-        idx = lo[:, None] + span[None, :]
-        search = np.take_along_axis(search, np.minimum(idx, H - 1), axis=1)
-        search[idx > hi[:, None]] = fill
-    thr = max(min_contrast, snr * noise)
-
-    def candidate(j):
-        row, gmax, bg, contrast = _stats(pre, lo + j, w)
-        return row, gmax, bg, contrast, searched & (gmax >= min_peak) & (contrast >= thr)
-
-    j1 = np.argmax(search, axis=1)
-    row, gmax, bg, contrast, ok = candidate(j1)
-    ambiguous = np.zeros(W, bool)
-    if continuity and W > 2 and search.shape[1] > 2 * w + 1:
-        guard = np.clip(j1[:, None] + np.arange(-w, w + 1)[None, :], 0, search.shape[1] - 1)
-        np.put_along_axis(search, guard, fill, axis=1)
-        row2, gmax2, bg2, contrast2, ok2 = candidate(np.argmax(search, axis=1))
-        ambiguous = ok & ok2
-        if ambiguous.any():
-            second = ambiguous & _continuity(row, row2, ok, ok2, contrast, contrast2, max_jump)
-            pairs = ((row, row2), (gmax, gmax2), (bg, bg2), (contrast, contrast2))
-            row, gmax, bg, contrast = (np.where(second, b, a) for a, b in pairs)
-    cols = np.flatnonzero(ok)
-    return _Det(cols, row[ok], gmax[ok], bg[ok], contrast[ok], ambiguous[ok], pre, noise)
-
-
-def _raw_saturated(img, det: _Det, sat: float) -> np.ndarray:
-    g, _ = _gather(img, det.row[None, :] + np.arange(-2, 3)[:, None], det.cols)
-    return g.max(axis=0) >= sat if len(det.cols) else np.zeros(0, bool)
-
-
-def _fwhm(g, inside, bg, gmax) -> np.ndarray:
-    """Pixels of the (k, n) band above half the contrast: a FWHM in px."""
-    return ((g > (bg + gmax) / 2) & inside).sum(axis=0).astype(np.float64)
+from insitu.vision.detect import (LineCentres, as_image, detect, gather, raw_saturated,
+                                  saturation_level)
+from insitu.vision.steger import gaussian_peak, steger
 
 
 def gray_centroid(image: np.ndarray, k: float = 0.5, min_peak: float = 40.0,
@@ -218,14 +29,14 @@ def gray_centroid(image: np.ndarray, k: float = 0.5, min_peak: float = 40.0,
     image: (H, W) uint8/uint16/float32. k: threshold scale, K = k · g_max (0 < k < 1).
     min_peak: absolute floor of the filtered peak. window: only pixels within ±window rows of
     the peak (None: the whole column as the paper, so a ghost above K counts too). median:
-    aperture of the median pre-filter (0 or 1: none). Keywords: see the module docstring.
+    aperture of the median pre-filter (0 or 1: none). Keywords: :mod:`insitu.vision.detect`.
     width: px above K.
     subtract: weights g_i − K instead of Eq. 7's g_i (not the paper; removes most of Eq. 7's
     phase-dependent bias of ≈ 0.15 px at k = 0.3, which comes from pixels entering the sum
     with weight K as the line moves).
     """
-    img = _as_image(image)
-    det = _detect(img, median, band, window, min_peak, min_contrast, snr, continuity)
+    img = as_image(image)
+    det = detect(img, median, band, window, min_peak, min_contrast, snr, continuity)
     c, r, gmax = det.cols, det.row, det.gmax
     K = (k * gmax).astype(np.float32)
     if window is None:                                             # whole columns, (n, H)
@@ -238,7 +49,7 @@ def gray_centroid(image: np.ndarray, k: float = 0.5, min_peak: float = 40.0,
         v = (g @ np.arange(img.shape[0], dtype=np.float32)) / np.where(total > 0, total, 1)
     else:
         rows = np.arange(-window, window + 1)[:, None]
-        g, inside = _gather(det.pre, r[None, :] + rows, c)
+        g, inside = gather(det.pre, r[None, :] + rows, c)
         g[(g <= K) | ~inside] = 0
         width = (g > 0).sum(axis=0).astype(np.float64)
         if subtract:
@@ -247,32 +58,49 @@ def gray_centroid(image: np.ndarray, k: float = 0.5, min_peak: float = 40.0,
         v = r + (g * rows).sum(axis=0, dtype=np.float64) / np.where(total > 0, total, 1)
     return LineCentres(c.astype(np.float64), v.astype(np.float64), gmax.astype(np.float64),
                        width, det.contrast.astype(np.float64),
-                       _raw_saturated(img, det, _saturation(img, saturation)), det.ambiguous)
+                       raw_saturated(img, det, saturation_level(img, saturation)), det.ambiguous)
 
 
 def line_direction(image: np.ndarray) -> str:
     """"rows" if the line runs mostly along the rows (crosses more columns than rows), else
     "cols": counts of columns and rows whose maximum is above half-way between the frame's
     median and its maximum (max projections, ≈ 0.3 ms a 5 MPix frame)."""
-    img = _as_image(image)
+    img = as_image(image)
     cmax, rmax = img.max(axis=0), img.max(axis=1)
     thr = (float(np.median(img[::16, ::16])) + float(cmax.max())) / 2
     return "cols" if (rmax > thr).sum() > (cmax > thr).sum() else "rows"
 
 
+@dataclass(frozen=True)
+class CentreMethod:
+    """A centre method: ``find(image, band=…, **kw)`` → :class:`LineCentres` of a line running
+    along the rows of ``image`` (H, W); ``options``: the fields of
+    :class:`~insitu.vision.extract.CentreSettings` it takes; ``description``: one line."""
+
+    find: Callable[..., LineCentres]
+    options: tuple[str, ...]
+    description: str
+
+
+CENTRE_METHODS: dict[str, CentreMethod] = {
+    "gray": CentreMethod(gray_centroid, ("k", "subtract"),
+                         "gray centroid above k × the peak (Li et al. Eq. 7)"),
+    "gaussian": CentreMethod(gaussian_peak, (), "3-point Gaussian peak fit per column"),
+    "steger": CentreMethod(steger, (), "Steger's Hessian ridge detector (ours, the default)"),
+}
+
+
 def line_centres(image: np.ndarray, method: str = "gray", direction: str | None = None,
                  band=None, **kw) -> LineCentres:
-    """Centres by ``method`` ("gray" | "gaussian" | "steger") in image coordinates.
+    """Centres by ``method`` (a key of :data:`CENTRE_METHODS`) in image coordinates.
 
     direction: "rows" (one point per column), "cols" (one per row: the frame is transposed
     and u, v swapped back) or None (auto, :func:`line_direction`). band: (lo, hi) allowed
     range of the cross coordinate per scan line (v per column, or u per row for "cols").
     kw: passed to the method.
     """
-    from insitu.vision.steger import gaussian_peak, steger
-
-    fn = {"gray": gray_centroid, "gaussian": gaussian_peak, "steger": steger}[method]
-    img = _as_image(image)
+    fn = CENTRE_METHODS[method].find
+    img = as_image(image)
     direction = direction or line_direction(img)
     if direction == "rows":
         return fn(img, band=band, **kw)
@@ -280,14 +108,3 @@ def line_centres(image: np.ndarray, method: str = "gray", direction: str | None 
         raise ValueError(f"direction must be 'rows', 'cols' or None, not {direction!r}")
     t = fn(cv2.transpose(img), band=band, **kw)
     return LineCentres(t.v, t.u, t.peak, t.width, t.contrast, t.saturated, t.ambiguous)
-
-
-
-def __getattr__(name: str):
-    """Re-export gaussian_peak and steger (they live in insitu.vision.steger, which imports
-    this module)."""
-    if name in ("gaussian_peak", "steger"):
-        from insitu.vision import steger as module
-
-        return getattr(module, name)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -13,15 +13,19 @@ import cv2
 import numpy as np
 from scipy.signal import savgol_filter
 
-from insitu.vision.centres import LineCentres, gray_centroid, line_centres
+from insitu.errors import ConfigError
+from insitu.formats.validation import one_of
+from insitu.vision.centres import CENTRE_METHODS, line_centres
+from insitu.vision.detect import LineCentres
 
 
 @dataclass(frozen=True)
 class CentreSettings:
     """How centres are extracted. The paper's: gray centroid (Eq. 7), no smoothing. Ours
     (default): Steger's detector, then smoothing along the line (benchmarks/accuracy.py).
-    ``method``: "gray" (uses k, subtract), "gaussian" or "steger". A height calibration
-    stores the settings it was made with; a scan uses the same."""
+    ``method``: a key of :data:`~insitu.vision.centres.CENTRE_METHODS` ("gray" uses k and
+    subtract); ConfigError for another. A height calibration stores the settings it was made
+    with; a scan uses the same."""
 
     method: str = "steger"
     k: float = 0.3
@@ -29,6 +33,11 @@ class CentreSettings:
     smooth_half_window: int = 7
     jump_px: float = 1.0
     end_fraction: float = 0.5
+
+    def __post_init__(self) -> None:
+        if self.method not in CENTRE_METHODS:
+            raise ConfigError(f"centre method {self.method!r}: expected "
+                              f"{one_of(CENTRE_METHODS)}")
 
     def to_dict(self) -> dict:
         return asdict(self)
@@ -45,10 +54,8 @@ def extract_centres(image: np.ndarray, settings: CentreSettings = CentreSettings
     (lo, hi) per column (rows) or per row (columns) where the line can be; ghosts outside it
     are ignored. u, v are image coordinates in both cases."""
     img = image if along_rows else cv2.transpose(image)
-    if settings.method == "gray":
-        c = gray_centroid(img, k=settings.k, band=band, subtract=settings.subtract)
-    else:
-        c = line_centres(img, settings.method, direction="rows", band=band)
+    options = {o: getattr(settings, o) for o in CENTRE_METHODS[settings.method].options}
+    c = line_centres(img, settings.method, direction="rows", band=band, **options)
     if settings.smooth_half_window:
         c = smooth_centres(c, settings.smooth_half_window, settings.jump_px, settings.end_fraction)
     return c if along_rows else replace(c, u=c.v, v=c.u)

@@ -1,6 +1,6 @@
 """Model-based sub-pixel line centres: per-column Gaussian peak fit and Steger's Hessian
 ridge detector (Steger 1998, "An unbiased detector of curvilinear structures"). Both use the
-detection stage, band and continuity of :mod:`insitu.vision.centres` (keywords there).
+detection stage, band and continuity of :mod:`insitu.vision.detect` (keywords there).
 
 Gaussian: 3-point log-parabola through the column's raw maximum and its neighbours (exact for a
 sampled Gaussian; 8-bit quantisation gives ≈ 0.01–0.02 px). Steger: see :func:`steger`.
@@ -17,8 +17,8 @@ import numpy as np
 from numpy.lib.stride_tricks import sliding_window_view
 from scipy.special import ndtr
 
-from insitu.vision.centres import (FWHM_PER_SIGMA, LineCentres, _as_image, _detect, _fwhm,
-                                   _gather, _saturation)
+from insitu.vision.detect import (FWHM_PER_SIGMA, LineCentres, as_image, detect, fwhm, gather,
+                                  saturation_level)
 
 _M = 3          # candidate rows: the detected peak ± _M
 _T_MAX = 0.6    # |t·n| ≤ 0.5 px, plus room for the Taylor step's overshoot near pixel borders
@@ -67,12 +67,12 @@ def gaussian_peak(image: np.ndarray, min_peak: float = 40.0, window: int = 12, m
     half the maximum. Detection on the median-filtered image; the fit on the raw ``image``.
     Arguments as :func:`gray_centroid`; width: FWHM px.
     """
-    img = _as_image(image)
-    det = _detect(img, median, band, window, min_peak, min_contrast, snr, continuity)
+    img = as_image(image)
+    det = detect(img, median, band, window, min_peak, min_contrast, snr, continuity)
     c, r, bg, w = det.cols, det.row, det.bg, max(int(window), 3)
-    sat = _saturation(img, saturation)
+    sat = saturation_level(img, saturation)
     x = np.arange(-w, w + 1)[:, None]
-    raw, inside = _gather(img, r[None, :] + x, c)
+    raw, inside = gather(img, r[None, :] + x, c)
     g = np.where(inside, raw - bg, 0)
     j = w - 2 + np.argmax(g[w - 2:w + 3], axis=0)
     a, b, d = (np.take_along_axis(g, (j + s)[None, :], 0)[0] for s in (-1, 0, 1))
@@ -89,7 +89,7 @@ def gaussian_peak(image: np.ndarray, min_peak: float = 40.0, window: int = 12, m
     if rest.any():
         gs, ins = g[:, rest], inside[:, rest]
         v[rest] = r[rest] + _plateau_centre(gs, ins, x, raw[:, rest] >= sat, det.noise)
-        width[rest] = _fwhm(gs, ins, 0.0, gs.max(axis=0))
+        width[rest] = fwhm(gs, ins, 0.0, gs.max(axis=0))
     return LineCentres(c.astype(np.float64), v.astype(np.float64), peak.astype(np.float64),
                        width.astype(np.float64), det.contrast.astype(np.float64), saturated,
                        det.ambiguous)
@@ -177,12 +177,12 @@ def steger(image: np.ndarray, sigma: float | None = None, min_peak: float = 40.0
     width: FWHM px of the filtered column. Within ≈ 3.5σ of the frame's border the clipped
     patch biases the centre.
     """
-    img = _as_image(image)
-    det = _detect(img, median, band, window, min_peak, min_contrast, snr, continuity)
+    img = as_image(image)
+    det = detect(img, median, band, window, min_peak, min_contrast, snr, continuity)
     c, r, n, w = det.cols, det.row, len(det.cols), max(int(window), 3)
     x = np.arange(-w, w + 1)[:, None]
-    g, inside = _gather(det.pre, r[None, :] + x, c)
-    width = _fwhm(g, inside, det.bg, det.gmax)
+    g, inside = gather(det.pre, r[None, :] + x, c)
+    width = fwhm(g, inside, det.bg, det.gmax)
     if sigma is None:
         sigma = max(1.0, float(np.median(width)) / (2 * np.sqrt(3))) if n else 1.0
     if min_curvature is None:
@@ -209,8 +209,8 @@ def steger(image: np.ndarray, sigma: float | None = None, min_peak: float = 40.0
     s = np.where(down, _hermite_root(y0, d0, yn, dn), _hermite_root(yp, dp, y0, d0) - 1.0)
     u = np.where(refined, c, c + bt * bu)
     v = r + (k - _M - 1) + np.where(refined, s, bt * bv)
-    raw, _ = _gather(img, r[None, :] + x, c)
-    level = _saturation(img, saturation)
+    raw, _ = gather(img, r[None, :] + x, c)
+    level = saturation_level(img, saturation)
     sat = raw[w - 2:w + 3].max(axis=0) >= level
     if sat.any():                                 # clipped plateau: the flank fit instead
         gs = np.where(inside[:, sat], raw[:, sat] - det.bg[sat], 0)
