@@ -17,7 +17,7 @@ import pytest
 from insitu.ui import scene_data as sd
 from insitu.ui.orbit_camera import OrbitCamera
 
-DATA = Path(__file__).parent / "data"
+DATA = Path(__file__).parents[1] / "data"
 BACKGROUND = np.array([0.14, 0.12, 0.11]) * 255        # BGR of the view's clear colour
 
 

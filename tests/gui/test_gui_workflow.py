@@ -16,9 +16,9 @@ from insitu.rig.files import save_json_model
 from insitu.ui.main_window import MainWindow
 from insitu.ui.session import RigChoice
 
-DATA = Path(__file__).parent / "data"
+DATA = Path(__file__).parents[1] / "data"
 SCAN = DATA / "scan-step-block-b4"
-ROOT = Path(__file__).parents[1]
+ROOT = Path(__file__).parents[2]
 WAIT_MS = 30_000
 
 

@@ -19,7 +19,7 @@ from insitu.rig.files import (CameraCalibration, RigConfig, ScanHeadConfig, load
                               save_json_model)
 from insitu.services.scan import ScanInterrupted, scan_live, sim_world_from_rig_file
 
-RECORDED = Path(__file__).parent / "data" / "scan-step-block-b4"
+RECORDED = Path(__file__).parents[1] / "data" / "scan-step-block-b4"
 REGION = tuple(json.loads((RECORDED / "truth.json").read_text())["region"])
 
 

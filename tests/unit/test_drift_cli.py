@@ -75,7 +75,7 @@ def test_a_shifted_field_fails_naming_the_worst_point(field, tmp_path):
 ])
 def test_bad_input_one_line_error(field, tmp_path, case, message):
     fc, rig = field
-    spots = Path(__file__).parent / "data" / "height-cal-b4" if case == "not-spots" else (
+    spots = Path(__file__).parents[1] / "data" / "height-cal-b4" if case == "not-spots" else (
         _spots(rig, tmp_path / "s"))
     args = {"no-field": (tmp_path / "nofile.json", spots),
             "not-spots": (fc, spots),

@@ -21,7 +21,7 @@ from insitu.sim.marks import find_marks, render_inspection
 from insitu.sim.rig import default_rig
 from insitu.sim.workpieces import make_workpiece
 
-GOLDEN = Path(__file__).parent / "data" / "golden_small_job.txt"
+GOLDEN = Path(__file__).parents[1] / "data" / "golden_small_job.txt"
 HEAD = TwoMirrorHead(350.0, 12.0)
 
 

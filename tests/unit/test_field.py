@@ -346,7 +346,7 @@ def test_cli_bad_input(rec, tmp_path):
     out = tmp_path / "FIELD.json"
     _one_line_error(_run("calibrate", "field", tmp_path / "missing", "-o", out), "missing")
     _one_line_error(_run("calibrate", "field", rec, "-o", out, "--method", "magic"), "--method")
-    hcal = Path(__file__).parent / "data" / "height-cal-b4"
+    hcal = Path(__file__).parents[1] / "data" / "height-cal-b4"
     _one_line_error(_run("calibrate", "field", hcal, "-o", out),
                     "a 'height-calibration' sequence, not a field calibration")
     assert not out.exists() and not out.with_suffix(".png").exists()

@@ -32,7 +32,7 @@ FUZZ = settings(max_examples=int(os.environ.get("INSITU_FUZZ_EXAMPLES", 60)), de
                 suppress_health_check=[HealthCheck.function_scoped_fixture,
                                        HealthCheck.too_slow])
 HEAD = TwoMirrorHead(350.0, 12.0)
-RECORDED = Path(__file__).parent / "data" / "scan-step-block-b4"
+RECORDED = Path(__file__).parents[1] / "data" / "scan-step-block-b4"
 
 json_values = st.recursive(
     st.none() | st.booleans() | st.integers(-10**6, 10**6) | st.text(max_size=8)

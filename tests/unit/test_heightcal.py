@@ -15,7 +15,7 @@ from insitu.rig.files import HeightCalibration, load_json_model
 from insitu.services import calibrate_height, scan_replay
 from insitu.sim.workpieces import make_workpiece
 
-DATA = Path(__file__).parent / "data"
+DATA = Path(__file__).parents[1] / "data"
 runner = CliRunner()
 
 

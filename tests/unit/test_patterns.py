@@ -24,7 +24,7 @@ from insitu.patterns.fill import offset
 from insitu.patterns.model import normalised, region
 from insitu.patterns.order import order_units
 
-SAMPLES = Path(__file__).resolve().parents[1] / "patterns"
+SAMPLES = Path(__file__).resolve().parents[2] / "patterns"
 SQUARE = Pattern((np.array([[0, 0], [10, 0], [10, 10], [0, 10]], float),), (), "square")
 
 

@@ -198,7 +198,7 @@ def test_bad_spot_recordings_one_line_error_and_no_file(flow, tmp_path, case, me
         "few": lambda: (_edited(flow / "spots", tmp_path / "r",
                                 lambda i, f: i % 49 in (16, 17, 18, 23, 24)), []),
         "dark": lambda: (_dark(tmp_path / "r"), []),
-        "no-spots": lambda: (Path(__file__).parent / "data" / "height-cal-b4", []),
+        "no-spots": lambda: (Path(__file__).parents[1] / "data" / "height-cal-b4", []),
         "other-camera": lambda: (flow / "spots", ["--intrinsics", flow / "full" / "camera.json"]),
     }[case]()
     out = tmp_path / "cam.json"

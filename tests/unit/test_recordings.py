@@ -12,7 +12,7 @@ from insitu.formats.sequence import Sequence
 from insitu.services import scan_replay
 from insitu.sim.workpieces import make_workpiece
 
-DATA = Path(__file__).parent / "data"
+DATA = Path(__file__).parents[1] / "data"
 
 
 def _step_errors(cloud, tol_edge=1.5):
