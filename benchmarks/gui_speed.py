@@ -26,10 +26,10 @@ from PySide6.QtWidgets import QApplication
 from rich.console import Console
 from rich.table import Table
 
-from insitu.ui.app import surface_format
-from insitu.ui.main_window import MainWindow
-from insitu.ui.screenshot import wait_until
-from insitu.ui.session import RigChoice
+from insitu.formats.project import RigChoice
+from insitu.ui.qt.app import surface_format
+from insitu.ui.qt.main_window import MainWindow
+from insitu.ui.qt.screenshot import wait_until
 
 
 def surface_cloud(n: int, lines: int = 1000) -> np.ndarray:

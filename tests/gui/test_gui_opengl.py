@@ -2,7 +2,7 @@
 because the test session's Qt runs offscreen): the step block's cloud coloured by height
 and the projected pattern must be where the camera puts them. (The README's docs/gui.png is
 made by the same module: see its docstring.) Fails, never skips, without a display: CI must
-render."""
+render. And the renderer's budget: a moving view draws a thinned cloud."""
 
 import json
 import os
@@ -14,8 +14,8 @@ import cv2
 import numpy as np
 import pytest
 
-from insitu.ui import scene_data as sd
-from insitu.ui.orbit_camera import OrbitCamera
+from insitu.ui.model import scene_data as sd
+from insitu.ui.model.orbit_camera import OrbitCamera
 
 DATA = Path(__file__).parents[1] / "data"
 BACKGROUND = np.array([0.14, 0.12, 0.11]) * 255        # BGR of the view's clear colour
@@ -25,7 +25,7 @@ def _render(tmp_path) -> tuple[dict, np.ndarray, np.ndarray]:
     if not os.environ.get("DISPLAY"):
         pytest.fail("no X display: the OpenGL test needs Xvfb + Mesa (run scripts/test.sh)")
     view_png = tmp_path / "view.png"
-    cmd = [sys.executable, "-m", "insitu.ui.screenshot", str(tmp_path / "gui.png"),
+    cmd = [sys.executable, "-m", "insitu.ui.qt.screenshot", str(tmp_path / "gui.png"),
            "--replay", str(DATA / "scan-step-block-b4"), "--height-cal",
            str(DATA / "height-cal-b4"), "--pattern", 'text:"insitu"', "--at", "0", "28",
            "--width", "16", "--view", "iso", "--view-png", str(view_png)]
@@ -77,3 +77,18 @@ def test_the_view_draws_the_cloud_by_height_and_the_projected_pattern(tmp_path):
     near = [np.min(np.linalg.norm(img[y - 1:y + 2, x - 1:x + 2].reshape(-1, 3) - colour,
                                   axis=1)) < 60 for x, y in px]
     assert np.mean(near) > 0.7
+
+
+def test_a_moving_view_draws_a_thinned_cloud():
+    from insitu.ui.qt.gl_renderer import INTERACTIVE_POINTS, Renderer
+
+    r = Renderer()
+    r.points.set(np.random.default_rng(1).normal(size=(1_000_000, 3)))
+    assert r._cloud(fast=False) is r.points
+    thin = r._cloud(fast=True)
+    assert INTERACTIVE_POINTS / 2 < thin.count <= INTERACTIVE_POINTS
+    k = -(-1_000_000 // INTERACTIVE_POINTS)                # every k-th point, in order
+    assert np.array_equal(thin.data[1], r.points.data[k])
+    count = thin.count
+    r.points.set(np.ones((1_000_000 + k, 3)))              # a new cloud is thinned anew
+    assert r._cloud(fast=True) is thin and thin.count == count + 1 and (thin.data == 1).all()

@@ -13,8 +13,8 @@ from PySide6.QtTest import QTest
 
 from insitu import services
 from insitu.rig.files import save_json_model
-from insitu.ui.main_window import MainWindow
-from insitu.ui.session import RigChoice
+from insitu.ui.qt.main_window import MainWindow
+from insitu.ui.model.session import RigChoice
 
 DATA = Path(__file__).parents[1] / "data"
 SCAN = DATA / "scan-step-block-b4"

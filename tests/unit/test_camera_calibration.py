@@ -128,6 +128,7 @@ def test_cli_calibrates_intrinsics_and_the_world_pose(rec, tmp_path):
     centre = -R.T @ np.array(cal.camera.t)
     assert angle < 0.3 and np.linalg.norm(centre - true.centre_world) < 2.0
     assert "world pose" in cal.notes and cal.inputs == [str(folder)]
+    assert cv2.imread(str(out.with_suffix(".png"))).shape[1] >= 500    # the per-view bars
 
 
 def _copy(folder, dst, edit):
@@ -184,7 +185,7 @@ def test_cli_bad_input_one_line_error_and_no_file(rec, tmp_path, case, message):
 
 
 def test_the_application_camera_page_pictures_the_per_view_residuals(rec, tmp_path):
-    from insitu.ui import operations
+    from insitu.ui.model import operations
 
     folder, _ = rec
     out = tmp_path / "camera.json"
@@ -192,6 +193,7 @@ def test_the_application_camera_page_pictures_the_per_view_residuals(rec, tmp_pa
     cal = load_json_model(out, CameraCalibration)
     assert outcome.residuals == cal.residuals and len(cal.per_view_rms_px) >= 4
     pic = outcome.picture
+    assert np.array_equal(pic, cv2.imread(str(out.with_suffix(".png"))))   # as written
     assert pic.ndim == 3 and pic.shape[2] == 3 and pic.shape[1] >= 500
     # one bar per view: the bars' colour appears in as many columns of blocks as there are views
     bar = np.all(pic == (200, 140, 60), axis=2).any(axis=0)

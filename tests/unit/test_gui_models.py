@@ -1,22 +1,20 @@
-"""The GUI's Qt-free parts: camera maths, undo history, project file, scene data, the
-actions' error handling."""
+"""The GUI's Qt-free parts: camera maths, undo history, project file, scene data, and the
+command that starts without Qt."""
 
 import json
 import shutil
-import threading
 
 import numpy as np
 import pytest
 
 from insitu.errors import FormatError
-from insitu.services import Cancelled
 from insitu.formats.pointcloud import PointCloud
+from insitu.formats.project import Project, RigChoice, ScanSettings, read_project, write_project
 from insitu.services.mark import Placement
-from insitu.ui import operations as ops
-from insitu.ui import scene_data as sd
-from insitu.ui.orbit_camera import OrbitCamera
-from insitu.ui.project_file import Project, read_project, write_project
-from insitu.ui.session import PlacementHistory, RigChoice, ScanSettings, Session
+from insitu.services.project import save_project
+from insitu.ui.model import scene_data as sd
+from insitu.ui.model.orbit_camera import OrbitCamera
+from insitu.ui.model.session import PlacementHistory, Session
 
 
 # -- camera -----------------------------------------------------------------------------
@@ -108,12 +106,12 @@ def test_project_round_trip_with_relative_paths(tmp_path):
     assert raw["format"] == "insitu-project/1" and raw["schema_version"] == 1
     assert raw["calibration"]["height"] == "calib/height.json"
     assert raw["placements"][0]["pattern"] == "logo.svg"
-    back = read_project(path)
+    back = read_project(path, Placement)
     assert back.placements == pr.placements and back.scan == pr.scan
     assert back.rig == pr.rig and back.selected == 1
     assert back.cloud == tmp_path / "part.cloud.ply"
     moved = shutil.copytree(tmp_path, tmp_path.parent / f"{tmp_path.name}-moved")
-    assert read_project(moved / "p.insitu.json").cloud == moved / "part.cloud.ply"
+    assert read_project(moved / "p.insitu.json", Placement).cloud == moved / "part.cloud.ply"
 
 
 @pytest.mark.parametrize("text, expect", [
@@ -129,7 +127,7 @@ def test_bad_project_files_give_one_line(tmp_path, text, expect):
     path = tmp_path / "bad.insitu.json"
     path.write_text(text)
     with pytest.raises(FormatError) as e:
-        read_project(path)
+        read_project(path, Placement)
     assert expect in str(e.value) and str(path) in str(e.value)
     assert "\n" not in str(e.value)
 
@@ -137,9 +135,9 @@ def test_bad_project_files_give_one_line(tmp_path, text, expect):
 def test_save_writes_cloud_job_then_project(tmp_path):
     pts = np.random.default_rng(0).uniform(-5, 5, (200, 3))
     path = tmp_path / "s.insitu.json"
-    written = ops.save_project(path, Project(), PointCloud(pts), None)
+    written = save_project(path, Project(), PointCloud(pts), None)
     assert written.cloud == tmp_path / "s.cloud.ply" and written.cloud.exists()
-    assert read_project(path).cloud == written.cloud
+    assert read_project(path, Placement).cloud == written.cloud
     assert sorted(p.name for p in tmp_path.iterdir()) == ["s.cloud.ply", "s.insitu.json"]
 
 
@@ -168,53 +166,7 @@ def test_segments_pairs_vertices():
     assert np.allclose(v[-1], [0, 0, 2])
 
 
-# -- actions ----------------------------------------------------------------------------
-def test_plan_outside_the_field_is_refused_where_it_is():
-    station = ops.connect(RigChoice(binning=4))
-    xs, ys = np.meshgrid(np.linspace(80, 120, 60), np.linspace(-10, 10, 30))
-    cloud = PointCloud(np.c_[xs.ravel(), ys.ravel(), np.zeros(xs.size)])
-    out = ops.plan_all(cloud, [Placement('text:"A"', (99.0, 0.0), 8.0)], station.driver)
-    assert out[0].plan is None and "outside the scan field" in out[0].error
-    assert out[0].where is not None and out[0].where[0] > 100.0
-
-
-class _Recorder:
-    def __init__(self):
-        self.sent, self.off = [], 0
-
-    def execute(self, commands):
-        self.sent.extend(commands)
-
-    def laser_off(self):
-        self.off += 1
-
-
-def test_abort_stops_before_the_next_command():
-    inner, abort = _Recorder(), threading.Event()
-    c = ops.AbortableController(inner, abort)
-    c.execute(["a", "b"])
-    abort.set()
-    with pytest.raises(Cancelled):
-        c.execute(["c", "d"])
-    assert inner.sent == ["a", "b"] and inner.off == 1
-
-
-# -- drawing budget and the command -----------------------------------------------------
-def test_a_moving_view_draws_a_thinned_cloud():
-    from insitu.ui.gl_renderer import INTERACTIVE_POINTS, Renderer
-
-    r = Renderer()
-    r.points.set(np.random.default_rng(1).normal(size=(1_000_000, 3)))
-    assert r._cloud(fast=False) is r.points
-    thin = r._cloud(fast=True)
-    assert INTERACTIVE_POINTS / 2 < thin.count <= INTERACTIVE_POINTS
-    k = -(-1_000_000 // INTERACTIVE_POINTS)                # every k-th point, in order
-    assert np.array_equal(thin.data[1], r.points.data[k])
-    count = thin.count
-    r.points.set(np.ones((1_000_000 + k, 3)))              # a new cloud is thinned anew
-    assert r._cloud(fast=True) is thin and thin.count == count + 1 and (thin.data == 1).all()
-
-
+# -- the command ------------------------------------------------------------------------
 def test_the_cli_starts_without_qt_and_offers_gui():
     import subprocess
     import sys

@@ -17,6 +17,7 @@ from insitu.cli import scan as scan_cmd
 from insitu.cli import sim as sim_cmd
 from insitu.cli.common import err_console, fail
 
+GUI_MODULES = ("PySide6", "OpenGL")      # the packages of the ``gui`` extra, as imported
 app = typer.Typer(help=__doc__.split("\n")[0] if __doc__ else None, no_args_is_help=True,
                   pretty_exceptions_enable=False, add_completion=False,
                   rich_markup_mode="markdown")
@@ -49,8 +50,11 @@ def gui(
     if project is not None and not project.is_file():
         fail(f"{project}: project file not found")
     try:
-        from insitu.ui.app import run       # Qt is imported only for this command
+        from insitu.ui.qt.app import run    # Qt is imported only for this command
     except ImportError as e:
+        if isinstance(e, ModuleNotFoundError) and (e.name or "").split(".")[0] in GUI_MODULES:
+            fail(f"the GUI needs PySide6 and PyOpenGL ({e.name} is not installed): "
+                 "pip install 'insitu[gui]'")
         fail(f"the GUI cannot start: {e} (Qt/OpenGL libraries missing? see scripts/setup.sh)")
     raise typer.Exit(run(project, rig, workpiece, binning))
 

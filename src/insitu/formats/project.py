@@ -1,4 +1,4 @@
-"""The project file of ``insitu gui`` (no Qt): one JSON file holding the whole session — rig,
+"""The project file of ``insitu gui``: one JSON file holding the whole session — rig,
 calibration references, cloud, placed patterns, job — with paths relative to the file.
 
     {"format": "insitu-project/1", "schema_version": 1, "saved": "...Z",
@@ -9,31 +9,57 @@ calibration references, cloud, placed patterns, job — with paths relative to t
      "placements": [{"pattern": "logo.svg", "at_mm": [0, 25], "width_mm": 12, ...}],
      "selected": 0, "job": "part.job.json"}
 
-Saving writes the cloud (if it is not on disk yet) and the job beside the project first, then
-the project file, each atomically. Loading validates every field and checks that the files it
-names exist; errors are one-line FormatErrors naming the file and the field.
+Saving (:func:`insitu.services.project.save_project`) writes the cloud (if it is not on disk
+yet) and the job beside the project first, then the project file, each atomically. Loading
+validates every field and checks that the files it names exist; errors are one-line
+FormatErrors naming the file and the field. The placed patterns are the caller's dataclass
+(``insitu.services.mark.Placement``), passed in to :func:`read_project`.
 """
 
 from __future__ import annotations
 
 import os
+from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
 from datetime import datetime, timezone
 from pathlib import Path
-from typing import Literal
+from typing import Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
 from insitu.errors import FormatError
 from insitu.formats.atomic import atomic_write_text
 from insitu.formats.validation import dump_json, read_json, validation_message
-from insitu.services.mark import Placement
-from insitu.ui.session import RigChoice, ScanSettings
 
 PROJECT_FORMAT = "insitu-project/1"
 SCHEMA_VERSION = 1
 SUFFIX = ".insitu.json"
 _SPEC_PREFIXES = ("text:", "qr:", "fiducials:")
+
+
+@dataclass(frozen=True)
+class RigChoice:
+    """Which rig: the simulated one (``workpiece``, ``seed``, ``binning``: image size divided
+    by it) or the one a ``rig_file`` describes (the workpiece still chooses the simulated
+    part while the backends are "sim")."""
+
+    workpiece: str = "step-block"
+    seed: int = 0
+    binning: int = 2
+    rig_file: Path | None = None
+
+
+@dataclass(frozen=True)
+class ScanSettings:
+    """``region``: (x0, x1, y0, y1) mm, None for the part's footprint; ``spacing_mm``
+    between lines; ``exposure_ms`` of the camera; ``replay``: a recorded scan folder to
+    reconstruct instead of driving the rig; ``speed_mm_s``: how fast the head sweeps a line."""
+
+    region: tuple[float, float, float, float] | None = None
+    spacing_mm: float = 0.5
+    exposure_ms: float = 10.0
+    replay: Path | None = None
+    speed_mm_s: float = 2000.0
 
 
 class _Strict(BaseModel):
@@ -88,7 +114,9 @@ class _Project(_Strict):
 @dataclass
 class Project:
     """A project in memory, every path absolute. ``cloud`` is the .ply to read (load) or the
-    one the cloud already is in (save; None: write it beside the project)."""
+    one the cloud already is in (save; None: write it beside the project). ``placements``:
+    dataclasses with the fields of a placement (pattern, at_mm, width_mm, rotate_deg, mode,
+    hatch_mm, hatch_angle_deg, cross)."""
 
     rig: RigChoice = field(default_factory=RigChoice)
     height_cal: Path | None = None
@@ -96,9 +124,17 @@ class Project:
     camera_cal: Path | None = None
     scan: ScanSettings = field(default_factory=ScanSettings)
     cloud: Path | None = None
-    placements: tuple[Placement, ...] = ()
+    placements: tuple[Any, ...] = ()
     selected: int = -1
     job: Path | None = None
+
+
+def beside(path: str | Path, suffix: str) -> Path:
+    """The file named after project ``path`` with ``suffix`` (``p.insitu.json`` →
+    ``p.job.json`` for ".job.json")."""
+    path = Path(path)
+    stem = path.name[:-len(SUFFIX)] if path.name.endswith(SUFFIX) else path.stem
+    return path.with_name(stem + suffix)
 
 
 def _rel(path: Path | None, folder: Path) -> str | None:
@@ -153,8 +189,10 @@ def write_project(path: str | Path, project: Project) -> None:
     atomic_write_text(path, project_json(project, path))
 
 
-def read_project(path: str | Path) -> Project:
-    """Read and validate a project file; FormatError naming the file and the field."""
+def read_project(path: str | Path, placement: Callable[..., Any]) -> Project:
+    """Read and validate a project file; FormatError naming the file and the field. Each
+    placed pattern is made by ``placement(pattern, at_mm, width_mm, rotate_deg, mode,
+    hatch_mm, hatch_angle_deg, cross)``."""
     path = Path(path)
     raw = read_json(path)
     if not isinstance(raw, dict) or raw.get("format") != PROJECT_FORMAT:
@@ -173,7 +211,7 @@ def read_project(path: str | Path) -> Project:
     for i, p in enumerate(d.placements):
         pattern = p.pattern if _is_spec(p.pattern) else str(
             _abs(p.pattern, folder, f"placements[{i}].pattern", path))
-        placements.append(Placement(pattern, tuple(p.at_mm), p.width_mm, p.rotate_deg, p.mode,
+        placements.append(placement(pattern, tuple(p.at_mm), p.width_mm, p.rotate_deg, p.mode,
                                     p.hatch_mm, p.hatch_angle_deg, p.cross))
     return Project(
         rig=RigChoice(d.rig.workpiece, d.rig.seed, d.rig.binning,

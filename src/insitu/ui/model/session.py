@@ -4,39 +4,15 @@ here draws or blocks."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import replace
 from pathlib import Path
 
 from psygnal import Signal
 
 from insitu.formats.pointcloud import PointCloud
+from insitu.formats.project import RigChoice
 from insitu.marking import MarkJob
-from insitu.services.mark import MarkPlan, Placement
-
-
-@dataclass(frozen=True)
-class RigChoice:
-    """Which rig: the simulated one (``workpiece``, ``seed``, ``binning``: image size divided
-    by it) or the one a ``rig_file`` describes (the workpiece still chooses the simulated
-    part while the backends are "sim")."""
-
-    workpiece: str = "step-block"
-    seed: int = 0
-    binning: int = 2
-    rig_file: Path | None = None
-
-
-@dataclass(frozen=True)
-class ScanSettings:
-    """``region``: (x0, x1, y0, y1) mm, None for the part's footprint; ``spacing_mm``
-    between lines; ``exposure_ms`` of the camera; ``replay``: a recorded scan folder to
-    reconstruct instead of driving the rig; ``speed_mm_s``: how fast the head sweeps a line."""
-
-    region: tuple[float, float, float, float] | None = None
-    spacing_mm: float = 0.5
-    exposure_ms: float = 10.0
-    replay: Path | None = None
-    speed_mm_s: float = 2000.0
+from insitu.services.mark import Placement, PlanOutcome
 
 
 class PlacementHistory:
@@ -91,16 +67,6 @@ class PlacementHistory:
             self._index += 1
             self._merge_key = None
             self.changed.emit()
-
-
-@dataclass(frozen=True)
-class PlanOutcome:
-    """The plan of one placement: ``plan`` when it passed the checks, else the one-line
-    ``error`` and, when the message names one, the place ``where`` (x, y) mm."""
-
-    plan: MarkPlan | None = None
-    error: str | None = None
-    where: tuple[float, float] | None = None
 
 
 class Session:

@@ -8,9 +8,9 @@ from pathlib import Path
 from PySide6.QtGui import QSurfaceFormat
 from PySide6.QtWidgets import QApplication
 
-from insitu.ui.forms import stylesheet
-from insitu.ui.main_window import MainWindow
-from insitu.ui.session import RigChoice
+from insitu.formats.project import RigChoice
+from insitu.ui.qt.forms import stylesheet
+from insitu.ui.qt.main_window import MainWindow
 
 
 def surface_format() -> QSurfaceFormat:

@@ -10,9 +10,9 @@ from PySide6.QtGui import QPixmap
 from PySide6.QtWidgets import (QFileDialog, QTableWidgetItem, QTabWidget, QVBoxLayout,
                                QWidget)
 
-from insitu.ui import operations as ops
-from insitu.ui.camera_image import to_qimage
-from insitu.ui.forms import load_form
+from insitu.ui.model import operations as ops
+from insitu.ui.qt.camera_image import to_qimage
+from insitu.ui.qt.forms import load_form
 
 GUIDES = {
     "camera": "Record the checkerboard in several poses, with the head's axis lines drawn on "

@@ -9,7 +9,7 @@ import ctypes
 import numpy as np
 from OpenGL import GL
 
-from insitu.ui.scene_data import COLORMAP_STOPS
+from insitu.ui.model.scene_data import COLORMAP_STOPS
 
 
 def _cmap_glsl() -> str:

@@ -12,19 +12,22 @@ from PySide6.QtGui import QAction, QKeySequence
 from PySide6.QtWidgets import QDockWidget, QFileDialog, QLabel, QMainWindow
 
 from insitu.errors import InsituError
+from insitu.formats.project import SUFFIX, Project, RigChoice, beside
 from insitu.services import load_height_calibration
-from insitu.ui import operations as ops
-from insitu.ui.calibrate_panel import CalibratePanel
-from insitu.ui.camera_image import CameraImage
-from insitu.ui.forms import icon
-from insitu.ui.mark_panel import MarkPanel
-from insitu.ui.place_panel import PATTERN_SUFFIXES, PlacePanel
-from insitu.ui.project_file import SUFFIX, Project
-from insitu.ui.scan_panel import ScanPanel
-from insitu.ui.scene_binding import SceneBinding
-from insitu.ui.session import RigChoice, Session
-from insitu.ui.view3d import View3D
-from insitu.ui.workers import TaskRunner
+from insitu.services.mark import PlanOutcome, plan_all
+from insitu.services.project import OpenedProject, open_project, save_project
+from insitu.services.station import Station
+from insitu.ui.model import operations as ops
+from insitu.ui.model.session import Session
+from insitu.ui.qt.calibrate_panel import CalibratePanel
+from insitu.ui.qt.camera_image import CameraImage
+from insitu.ui.qt.forms import icon
+from insitu.ui.qt.mark_panel import MarkPanel
+from insitu.ui.qt.place_panel import PATTERN_SUFFIXES, PlacePanel
+from insitu.ui.qt.scan_panel import ScanPanel
+from insitu.ui.qt.scene_binding import SceneBinding
+from insitu.ui.qt.view3d import View3D
+from insitu.ui.qt.workers import TaskRunner
 
 PROJECT_FILES = f"insitu projects (*{SUFFIX})"
 MAX_RECENT = 8
@@ -54,7 +57,7 @@ class MainWindow(QMainWindow):
         self.settings = settings or QSettings("insitu", "insitu gui")
         self.session = Session()
         self.runner = TaskRunner(self)
-        self.station: ops.Station | None = None
+        self.station: Station | None = None
         self.view = View3D(self)
         self.setCentralWidget(self.view)
         self.binding = SceneBinding(self.session, self.view)
@@ -225,13 +228,13 @@ class MainWindow(QMainWindow):
         self.session.update_selected(key, at_mm=(round(x, 3), round(y, 3)))
 
     def _rotated(self, x: float, y: float, key) -> None:
-        from insitu.ui.scene_data import rotate_to
+        from insitu.ui.model.scene_data import rotate_to
         p = self.session.current()
         if p is not None:
             self.session.update_selected(key, rotate_deg=rotate_to(p, (x, y)))
 
     def _scaled(self, x0: float, y0: float, x: float, y: float, key) -> None:
-        from insitu.ui.scene_data import scale_to
+        from insitu.ui.model.scene_data import scale_to
         p = self.session.current()
         if p is None:
             return
@@ -254,13 +257,13 @@ class MainWindow(QMainWindow):
             return
         if cloud is None or self.station is None:
             why = "no point cloud: scan or open one" if cloud is None else "connect the rig"
-            s.set_plans([ops.PlanOutcome(error=why) for _ in items])
+            s.set_plans([PlanOutcome(error=why) for _ in items])
             return
         if self.runner.running("plan"):
             self._plan_again = True
             return
         driver = self.station.driver
-        self.runner.start("plan", lambda p, c, f: (items, ops.plan_all(cloud, items, driver)),
+        self.runner.start("plan", lambda p, c, f: (items, plan_all(cloud, items, driver)),
                           self._planned, lambda m, _c: self.show_error(m))
 
     def _planned(self, result) -> None:
@@ -274,10 +277,7 @@ class MainWindow(QMainWindow):
     # -- projects ------------------------------------------------------------------------
     def job_path(self) -> Path | None:
         p = self.session.project_path
-        if p is None:
-            return None
-        stem = p.name[:-len(SUFFIX)] if p.name.endswith(SUFFIX) else p.stem
-        return p.with_name(stem + ".job.json")
+        return None if p is None else beside(p, ".job.json")
 
     def new_project(self) -> None:
         self.session.set_cloud(None)
@@ -296,11 +296,11 @@ class MainWindow(QMainWindow):
             self.save(Path(path if path.endswith(SUFFIX) else path + SUFFIX))
 
     def open_project(self, path: Path) -> None:
-        self.runner.start("open", lambda p, c, f: ops.open_project(path, p),
+        self.runner.start("open", lambda p, c, f: open_project(path, p),
                           lambda opened: self._opened(path, opened),
                           lambda m, _c: self.show_error(m))
 
-    def _opened(self, path: Path, opened: ops.OpenedProject) -> None:
+    def _opened(self, path: Path, opened: OpenedProject) -> None:
         pr, s = opened.project, self.session
         s.project_path = path
         s.height_cal_path, s.height_cal = pr.height_cal, opened.height_cal
@@ -330,7 +330,7 @@ class MainWindow(QMainWindow):
                           self.scan_panel.settings(), s.cloud_path, s.placements.items,
                           s.selected, None)
         try:
-            written = ops.save_project(path, project, s.cloud, self.mark_panel.job())
+            written = save_project(path, project, s.cloud, self.mark_panel.job())
         except InsituError as e:
             self.show_error(str(e))
             return False

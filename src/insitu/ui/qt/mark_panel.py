@@ -9,9 +9,10 @@ import time
 from PySide6.QtWidgets import QVBoxLayout, QWidget
 
 from insitu.marking import LaserParams, MarkJob, estimate_time
-from insitu.ui import operations as ops
-from insitu.ui import scene_data as sd
-from insitu.ui.forms import icon, load_form
+from insitu.services.mark import StationRun
+from insitu.ui.model import operations as ops
+from insitu.ui.model import scene_data as sd
+from insitu.ui.qt.forms import icon, load_form
 
 
 class MarkPanel(QWidget):
@@ -97,7 +98,7 @@ class MarkPanel(QWidget):
         left = elapsed / max(done, 1) * (total - done)
         self.ui.timeLabel.setText(f"path {done} of {total}, about {left:.1f} s left")
 
-    def _marked(self, outcome: ops.MarkOutcome) -> None:
+    def _marked(self, outcome: StationRun) -> None:
         self.last_result = outcome.result
         r = outcome.result
         self.ui.resultLabel.setText(f"{r.state}: paths {r.completed} of {r.total} marked; "

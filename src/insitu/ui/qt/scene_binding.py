@@ -7,9 +7,9 @@ from __future__ import annotations
 import numpy as np
 
 from insitu.errors import InsituError
-from insitu.ui import scene_data as sd
-from insitu.ui.session import Session
-from insitu.ui.view3d import View3D
+from insitu.ui.model import scene_data as sd
+from insitu.ui.model.session import Session
+from insitu.ui.qt.view3d import View3D
 
 
 class SceneBinding:

@@ -1,12 +1,12 @@
 """Render the application on a recorded scan with a placed pattern and save pictures (the
-README's docs/gui.png, the OpenGL test, the benchmark). Needs a display with OpenGL 3.3
-(on a headless machine: ``QT_QPA_PLATFORM=xcb xvfb-run -a python -m insitu.ui.screenshot``).
+README's docs/gui.png, the OpenGL test, the benchmark). Needs a display with OpenGL 3.3 (on a
+headless machine: ``QT_QPA_PLATFORM=xcb xvfb-run -a python -m insitu.ui.qt.screenshot``).
 docs/gui.png is the step block recorded at binning 2 with the logo across a step edge::
 
     insitu sim record scan --binning 2 -o rec2
     insitu sim record height-calibration --binning 2 -o hcal2
     insitu calibrate height hcal2 -o h2.json
-    python -m insitu.ui.screenshot docs/gui.png --replay rec2 --height-cal h2.json \\
+    python -m insitu.ui.qt.screenshot docs/gui.png --replay rec2 --height-cal h2.json \\
         --pattern patterns/logo.svg --at 0 0 --width 18
 
 ``--view-png V.png`` also saves the 3-D view's own framebuffer and ``V.json`` beside it: the
@@ -27,10 +27,10 @@ from PySide6.QtCore import QEventLoop, QSettings
 from PySide6.QtGui import QSurfaceFormat
 from PySide6.QtWidgets import QApplication
 
-from insitu.ui.app import surface_format
-from insitu.ui.forms import stylesheet
-from insitu.ui.main_window import MainWindow
-from insitu.ui.session import RigChoice
+from insitu.formats.project import RigChoice
+from insitu.ui.qt.app import surface_format
+from insitu.ui.qt.forms import stylesheet
+from insitu.ui.qt.main_window import MainWindow
 
 
 def wait_until(app: QApplication, condition, timeout_s: float = 30.0, what: str = "") -> None:
