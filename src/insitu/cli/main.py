@@ -7,6 +7,7 @@ from pathlib import Path
 from typing import Annotated
 
 import typer
+from rich.markup import escape
 
 from insitu.cli import calibrate as calibrate_cmd
 from insitu.cli import camera as camera_cmd
@@ -52,9 +53,10 @@ def gui(
     try:
         from insitu.ui.qt.app import run    # Qt is imported only for this command
     except ImportError as e:
-        if isinstance(e, ModuleNotFoundError) and (e.name or "").split(".")[0] in GUI_MODULES:
-            fail(f"the GUI needs PySide6 and PyOpenGL ({e.name} is not installed): "
-                 "pip install 'insitu[gui]'")
+        missing = (e.name or "").split(".")[0]
+        if isinstance(e, ModuleNotFoundError) and missing in GUI_MODULES:
+            fail(f"the GUI needs PySide6 and PyOpenGL ({missing} is not installed): "
+                 + escape("pip install 'insitu[gui]'"))
         fail(f"the GUI cannot start: {e} (Qt/OpenGL libraries missing? see scripts/setup.sh)")
     raise typer.Exit(run(project, rig, workpiece, binning))
 
