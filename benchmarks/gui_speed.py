@@ -65,7 +65,7 @@ def first_points_s(app, window, binning: int) -> tuple[float, float, int]:
     """(s to the first points in the view, s for the whole scan, lines) of a 200-line scan."""
     window.connect_rig(RigChoice(binning=binning))
     wait_until(app, lambda: window.station is not None and
-               window.station.choice.binning == binning and
+               window.session.rig_choice.binning == binning and
                not window.runner.running("connect"), 120, "the rig")
     ui = window.scan_panel.ui
     ui.sourceCombo.setCurrentIndex(0)

@@ -10,8 +10,8 @@ from PySide6.QtWidgets import QFileDialog, QInputDialog, QVBoxLayout, QWidget
 
 from insitu.errors import InsituError
 from insitu.services.mark import Placement
-from insitu.ui.qt.forms import load_form
 from insitu.ui.model.scene_data import base_pattern
+from insitu.ui.qt.forms import load_form
 
 PATTERN_FILES = "Patterns (*.svg *.dxf *.png *.jpg *.jpeg *.bmp *.tif *.tiff)"
 PATTERN_SUFFIXES = (".svg", ".dxf", ".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff")

@@ -8,9 +8,9 @@ from pathlib import Path
 
 from PySide6.QtWidgets import QFileDialog, QVBoxLayout, QWidget
 
+from insitu.formats.project import ScanSettings
 from insitu.ui.model import operations as ops
 from insitu.ui.qt.forms import load_form
-from insitu.formats.project import ScanSettings
 
 
 class ScanPanel(QWidget):

@@ -12,8 +12,8 @@ from PySide6.QtGui import QColor, QMouseEvent, QPainter, QPolygonF, QWheelEvent
 from PySide6.QtOpenGLWidgets import QOpenGLWidget
 
 from insitu.ui.model import scene_data as sd
-from insitu.ui.qt.gl_renderer import Renderer
 from insitu.ui.model.orbit_camera import OrbitCamera
+from insitu.ui.qt.gl_renderer import Renderer
 
 HANDLE_PX = 9
 SETTLE_MS = 250                 # full detail this long after the view stopped moving
