@@ -26,10 +26,10 @@ from PySide6.QtWidgets import QApplication
 from rich.console import Console
 from rich.table import Table
 
-from insitu.ui.app import surface_format
-from insitu.ui.main_window import MainWindow
-from insitu.ui.screenshot import wait_until
-from insitu.ui.session import RigChoice
+from insitu.formats.project import RigChoice
+from insitu.ui.qt.app import surface_format
+from insitu.ui.qt.main_window import MainWindow
+from insitu.ui.qt.screenshot import wait_until
 
 
 def surface_cloud(n: int, lines: int = 1000) -> np.ndarray:
@@ -65,7 +65,7 @@ def first_points_s(app, window, binning: int) -> tuple[float, float, int]:
     """(s to the first points in the view, s for the whole scan, lines) of a 200-line scan."""
     window.connect_rig(RigChoice(binning=binning))
     wait_until(app, lambda: window.station is not None and
-               window.station.choice.binning == binning and
+               window.session.rig_choice.binning == binning and
                not window.runner.running("connect"), 120, "the rig")
     ui = window.scan_panel.ui
     ui.sourceCombo.setCurrentIndex(0)

@@ -40,7 +40,8 @@ from insitu.marking.project import densify
 from insitu.marking.surface import Surface
 from insitu.services import calibrate_height
 from insitu.services.field import calibrate_field
-from insitu.services.mark import Placement, plan_mark
+from insitu.marking import Placement
+from insitu.services.mark import plan_mark
 from insitu.services.scan import scan_live
 from insitu.sim.world import sim_world
 from insitu.sim.marks import find_marks

@@ -2,10 +2,12 @@
 # Sourced by demo.sh and test.sh: installs what is missing, quickly when nothing is.
 # Debian system libraries (open3d: libusb; Qt/OpenGL tests: Xvfb + Mesa; Qt's xcb platform, which
 # the OpenGL test and `insitu gui` on a desktop use: libxcb-*; the fake RTC library that the
-# device tests compile: gcc, libc6-dev), then .venv with insitu.
+# device tests compile: gcc, libc6-dev), then .venv with insitu, its GUI and the test tools
+# (INSITU_EXTRAS, default gui,test,test-gui; scripts/test-core.sh makes .venv-core without the GUI).
 set -euo pipefail
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
-VENV="$ROOT/.venv"
+VENV="${INSITU_VENV:-$ROOT/.venv}"
+EXTRAS="${INSITU_EXTRAS:-gui,test,test-gui}"
 
 need_pkgs=()
 for pkg in libusb-1.0-0 gcc libc6-dev xvfb xauth libgl1 libegl1 libgl1-mesa-dri libglx-mesa0 \
@@ -29,14 +31,14 @@ if [ ! -x "$VENV/bin/python" ]; then
     "$PY" -m venv "$VENV"
 fi
 STAMP="$VENV/.insitu-installed"
-if [ ! -f "$STAMP" ] || [ "$ROOT/pyproject.toml" -nt "$STAMP" ]; then
+if [ ! -f "$STAMP" ] || [ "$ROOT/pyproject.toml" -nt "$STAMP" ] || [ "$(cat "$STAMP")" != "$EXTRAS" ]; then
     echo "insitu setup: installing insitu and its packages into $VENV"
     LOG="$VENV/pip-install.log"
-    if ! "$VENV/bin/python" -m pip install -e "$ROOT[test]" >"$LOG" 2>&1; then
+    if ! "$VENV/bin/python" -m pip install -e "$ROOT[$EXTRAS]" >"$LOG" 2>&1; then
         tail -n 30 "$LOG" >&2
         echo "insitu setup: pip install failed (full log: $LOG)" >&2
         exit 1
     fi
-    touch "$STAMP"
+    echo "$EXTRAS" >"$STAMP"
 fi
 export PATH="$VENV/bin:$PATH"

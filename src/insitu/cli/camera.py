@@ -18,7 +18,8 @@ def camera(
                                              "views, optionally the head's axis lines on the "
                                              "board), or a folder of spots on the plate at two "
                                              "heights (re-estimates the pose only).")],
-    out: Annotated[Path, typer.Option("-o", "--output", help="Camera calibration file (.json).")],
+    out: Annotated[Path, typer.Option("-o", "--output", help="Camera calibration file (.json); "
+                                      "its picture is drawn beside it (.png).")],
     intrinsics: Annotated[Path | None, typer.Option(
         help="Spots only: camera calibration whose intrinsics to keep (default: the "
              "sequence's camera).")] = None,
@@ -31,16 +32,16 @@ def camera(
     """Calibrate the camera: intrinsics and distortion from the checkerboard views (bad views
     rejected and listed), with their uncertainties, and its pose in the scan-head frame from
     the head's x and y axis lines drawn on the board lying on the plate. Given spots on the
-    plate at two heights instead, re-estimate only the pose (after the camera moved)."""
-    from insitu.rig.files import save_json_model
-    from insitu.services.camera import calibrate_camera_recording
+    plate at two heights instead, re-estimate only the pose (after the camera moved). The
+    picture beside the file shows the reprojection RMS of each view."""
+    from insitu.services.camera import calibrate_camera_and_report
 
     check_output(out, ".json")
     with progress_bar("camera calibration") as progress:
-        cal = calibrate_camera_recording(rec, intrinsics, scan_head, field, progress)
-    save_json_model(out, cal)
+        cal = calibrate_camera_and_report(rec, out, intrinsics, scan_head, field, progress)
     K = cal.camera.K
-    table = Table(title=f"camera calibration → {out}", show_header=False)
+    table = Table(title=f"camera calibration → {out}, {out.with_suffix('.png').name}",
+                  show_header=False)
     table.add_row("recording", cal.notes)
     table.add_row("fx, fy, cx, cy (px)",
                   f"{K[0][0]:.2f}  {K[1][1]:.2f}  {K[0][2]:.2f}  {K[1][2]:.2f}")

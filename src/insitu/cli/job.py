@@ -29,21 +29,19 @@ Seed = Annotated[int, typer.Option(help="Simulated rig: seed.")]
 
 def run_on_station(station, job, job_path: Path, resume: bool, preview: bool,
                    inspect: Path | None) -> None:
-    """Mark ``job`` on ``station`` (a :class:`insitu.services.station.Station`; pilot preview
-    first with ``preview``; after the last completed path with ``resume``), report how far it
-    got, and write the camera's image of the result."""
-    from insitu.services import mark as svc
+    """:func:`insitu.services.mark.mark_on_station` with a progress bar, then say how far it
+    got and where the camera's image of the result went."""
+    from insitu.services.mark import mark_on_station
 
-    ppath = svc.progress_path_for(job_path)
     with progress_bar("marking") as progress:
-        result = svc.mark(job, station.driver, station.devices.controller, ppath, resume,
-                          preview, progress=progress)
-    done = (f"marked paths {result.start_path + 1}…{result.completed} of {result.total}"
-            if result.completed > result.start_path else
-            f"nothing left to mark: {result.completed} of {result.total} paths were marked")
-    console.print(f"{done} ({result.state}); progress in {ppath}", highlight=False)
+        run = mark_on_station(station, job, job_path, resume=resume, preview=preview,
+                              inspect=inspect, progress=progress)
+    r = run.result
+    done = (f"marked paths {r.start_path + 1}…{r.completed} of {r.total}"
+            if r.completed > r.start_path else
+            f"nothing left to mark: {r.completed} of {r.total} paths were marked")
+    console.print(f"{done} ({r.state}); progress in {run.progress_path}", highlight=False)
     if inspect is not None:
-        svc.save_image(inspect, station.devices.camera.grab())
         console.print(f"wrote {inspect}", highlight=False)
 
 

@@ -7,6 +7,7 @@ from pathlib import Path
 from typing import Annotated
 
 import typer
+from rich.markup import escape
 
 from insitu.cli import calibrate as calibrate_cmd
 from insitu.cli import camera as camera_cmd
@@ -18,6 +19,7 @@ from insitu.cli import scan as scan_cmd
 from insitu.cli import sim as sim_cmd
 from insitu.cli.common import err_console, fail
 
+GUI_MODULES = ("PySide6", "OpenGL")      # the packages of the ``gui`` extra, as imported
 app = typer.Typer(help=__doc__.split("\n")[0] if __doc__ else None, no_args_is_help=True,
                   pretty_exceptions_enable=False, add_completion=False,
                   rich_markup_mode="markdown")
@@ -51,8 +53,12 @@ def gui(
     if project is not None and not project.is_file():
         fail(f"{project}: project file not found")
     try:
-        from insitu.ui.app import run       # Qt is imported only for this command
+        from insitu.ui.qt.app import run    # Qt is imported only for this command
     except ImportError as e:
+        missing = (e.name or "").split(".")[0]
+        if isinstance(e, ModuleNotFoundError) and missing in GUI_MODULES:
+            fail(f"the GUI needs PySide6 and PyOpenGL ({missing} is not installed): "
+                 + escape("pip install 'insitu[gui]'"))
         fail(f"the GUI cannot start: {e} (Qt/OpenGL libraries missing? see scripts/setup.sh)")
     raise typer.Exit(run(project, rig, workpiece, binning))
 

@@ -45,7 +45,7 @@ def mark(
     and nothing is written, when any point lies outside the scan field or the focus range, over
     a hole in the cloud or over a steep wall. --run then marks it: the laser is on only while
     marking, off at once on any fault, and an interrupted job resumes with --resume."""
-    from insitu.marking import LaserParams, read_job
+    from insitu.marking import LaserParams, Placement, read_job
     from insitu.services import mark as svc
     from insitu.services.station import connect
 
@@ -61,7 +61,7 @@ def mark(
                         ("--jump-speed", jump_speed)):
         if not value > 0:
             fail(f"{name} {value:g}: expected a positive number")
-    placement = svc.Placement(pattern, at, width, rotate, mode, hatch, hatch_angle, cross)
+    placement = Placement(pattern, at, width, rotate, mode, hatch, hatch_angle, cross)
     laser = LaserParams(power_pct=power, frequency_khz=frequency, mark_speed_mm_s=speed,
                         jump_speed_mm_s=jump_speed)
     with connect(rig, workpiece, seed, field=field) as station:

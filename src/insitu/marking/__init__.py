@@ -12,6 +12,7 @@ from insitu.marking.job import (LaserOverride, LaserParams, MarkJob, MarkPath, T
                                 Timing, estimate_time, make_job, read_job, write_job)
 from insitu.marking.plan import plan_job
 from insitu.marking.modes import PROJECTIONS, ProjectionMode, project, projection_mode
+from insitu.marking.placement import Placement
 from insitu.marking.project import Projection, densify, project_planar, project_wrap
 from insitu.marking.run import (RunResult, progress_path_for, read_progress, resume_point,
                                 run_job, run_preview)
@@ -19,7 +20,7 @@ from insitu.marking.surface import Surface, SurfaceSample
 
 __all__ = [
     "GalvoDriver", "LaserOverride", "LaserParams", "Limits", "MarkJob", "MarkPath", "PROJECTIONS",
-    "Projection", "ProjectionMode", "RunResult", "Surface", "SurfaceSample", "TimeEstimate",
+    "Placement", "Projection", "ProjectionMode", "RunResult", "Surface", "SurfaceSample", "TimeEstimate",
     "Timing", "check_projection", "check_targets", "densify", "estimate_time", "make_job",
     "plan_job", "preview_outlines", "progress_path_for", "project", "project_planar",
     "project_wrap", "projection_mode", "read_job", "read_progress", "resume_point", "run_job",

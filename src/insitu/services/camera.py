@@ -1,12 +1,13 @@
 """Camera calibration use cases: intrinsics (and the world pose) from a recorded
-camera-calibration folder; the pose alone, after the camera moved, from laser spots.
+camera-calibration folder; the pose alone, after the camera moved, from laser spots; the
+calibration file with its picture beside it.
 
 A camera-calibration sequence (formats.md) holds checkerboard views (frames with only
 ``file``). It may also hold alignment frames — the board lying on the plate, frames carrying
-``plate_z_mm`` — as :mod:`insitu.sim.alignment_frames` records them: one laser-off frame (no
-``line``; it is also a calibration view) and frames of the head's axis lines (``line``). With
-them the camera's pose in the world (scan-head) frame is computed (:mod:`insitu.calibrate.
-alignment`); without, the extrinsics stay R = I, t = 0 and the notes say so.
+``plate_z_mm`` — as :func:`insitu.services.record.record_camera_calibration` records them:
+one laser-off frame (no ``line``; it is also a calibration view) and frames of the head's
+axis lines (``line``). With them the camera's pose in the world (scan-head) frame is computed
+(:mod:`insitu.calibrate.alignment`); without, the extrinsics stay R = I, t = 0 and the notes say so.
 """
 
 from __future__ import annotations
@@ -24,7 +25,7 @@ from insitu.formats.sequence import Sequence
 from insitu.geometry.beams import BeamModel, PivotHead, ScanHeadOptics, TwoMirrorHead
 from insitu.geometry.camera import CameraModel
 from insitu.rig.files import CameraCalibration, ScanHeadConfig, load_json_model
-from insitu.services.common import Progress, camera_model
+from insitu.services.common import Progress, camera_model, save_with_picture
 
 
 def _prefixed(folder, e: InsituError) -> CalibrationError:
@@ -278,3 +279,31 @@ def calibrate_camera_recording(folder: str | Path, intrinsics: str | Path | None
         return recalibrate_camera_pose(folder, intrinsics, scan_head, field, progress)
     raise CalibrationError(f"{folder}: a '{seq.kind}' sequence without spots: expected a "
                            "camera-calibration folder, or spots on the plate at two heights")
+
+
+def camera_report_png(cal: CameraCalibration, folder: str | Path, path: str | Path) -> None:
+    """Write the calibration's picture: the reprojection RMS of each view as bars, or, for a
+    pose from spots without them, the middle frame of the recorded ``folder``."""
+    from insitu.calibrate.report import bars_image, write_report_png
+
+    if cal.per_view_rms_px:
+        image = bars_image(cal.per_view_rms_px, f"reprojection RMS per view, px (all: "
+                                                f"{cal.rms_px:.3f} px)")
+    else:
+        seq = Sequence.open(folder)
+        image = seq.read_frame(len(seq) // 2)
+        if image.dtype != np.uint8:
+            image = (image >> 8).astype(np.uint8)
+    write_report_png(path, image)
+
+
+def calibrate_camera_and_report(folder: str | Path, out: str | Path,
+                                intrinsics: str | Path | None = None,
+                                scan_head: str | Path | None = None,
+                                field: str | Path | None = None,
+                                progress: Progress | None = None) -> CameraCalibration:
+    """:func:`calibrate_camera_recording`, then write ``out`` (JSON) and its picture beside
+    it (.png, :func:`camera_report_png`); nothing is left behind if either fails."""
+    cal = calibrate_camera_recording(folder, intrinsics, scan_head, field, progress)
+    save_with_picture(out, cal, lambda png: camera_report_png(cal, folder, png))
+    return cal

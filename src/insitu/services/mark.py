@@ -1,57 +1,29 @@
 """Marking use cases: place a pattern on a measured cloud, make the checked job, preview it
-with the pilot laser, mark it and image the result."""
+with the pilot laser, mark it (stopping before the next command when cancelled) and image
+the result."""
 
 from __future__ import annotations
 
 import threading
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import cv2
 import numpy as np
 
-from insitu.errors import FormatError
+from insitu.errors import FormatError, InsituError, SafetyError
 from insitu.formats.atomic import atomic_write_bytes
 from insitu.formats.pointcloud import PointCloud, read_ply
-from insitu.marking import (GalvoDriver, LaserParams, MarkJob, Projection, RunResult,
-                            TimeEstimate, estimate_time, plan_job, progress_path_for,
-                            projection_mode, run_job, run_preview, write_job)
-from insitu.patterns import Pattern, hatch, load_pattern, order_paths
+from insitu.marking import (GalvoDriver, LaserParams, MarkJob, Placement, Projection,
+                            RunResult, TimeEstimate, estimate_time, plan_job, progress_path_for,
+                            run_job, run_preview, write_job)
+from insitu.patterns import Pattern
 from insitu.services.common import Progress
+from insitu.services.scan import Cancelled
 
-
-@dataclass(frozen=True)
-class Placement:
-    """Where and how a pattern is marked. ``pattern``: a file or a ``text:``/``qr:`` spec;
-    ``at_mm``: its centre, world x, y; ``width_mm``: its width before rotating;
-    ``rotate_deg``: CCW about +z; ``mode``: a key of ``marking.PROJECTIONS``; ``hatch_mm``:
-    fill spacing (None: outlines only); ``hatch_angle_deg``, ``cross``: the hatch's
-    direction(s)."""
-
-    pattern: str
-    at_mm: tuple[float, float]
-    width_mm: float
-    rotate_deg: float = 0.0
-    mode: str = "planar"
-    hatch_mm: float | None = None
-    hatch_angle_deg: float = 0.0
-    cross: bool = False
-
-    def placed(self) -> Pattern:
-        """The pattern loaded and moved to its place, world mm (FormatError if it cannot be)."""
-        projection_mode(self.mode)
-        return load_pattern(self.pattern).placed(self.at_mm, self.width_mm, self.rotate_deg)
-
-    def polylines(self, pattern: Pattern) -> list[np.ndarray]:
-        """What to mark of the placed ``pattern``, in marking order: hatched fill and outlines
-        with ``hatch_mm``, else the outlines and open paths. (N, 2) world mm each."""
-        if self.hatch_mm is not None:
-            return hatch(pattern, self.hatch_mm, self.hatch_angle_deg, self.cross,
-                         start=self.at_mm)
-        if pattern.is_empty:
-            raise FormatError(f"pattern {pattern.name}: empty (nothing to mark)")
-        loops = [np.vstack([c, c[:1]]) for c in pattern.contours]
-        return order_paths(loops + list(pattern.paths), start=self.at_mm)
+if TYPE_CHECKING:
+    from insitu.services.station import Station
 
 
 @dataclass(frozen=True)
@@ -80,6 +52,30 @@ def plan_mark(cloud: PointCloud | str | Path, placement: Placement, driver: Galv
     return MarkPlan(job, pattern, proj, estimate_time(job, driver.timing))
 
 
+@dataclass(frozen=True)
+class PlanOutcome:
+    """The plan of one placement: ``plan`` when it passed the checks, else the one-line
+    ``error`` and, when the refusal knows one, the place ``where`` (x, y) mm."""
+
+    plan: MarkPlan | None = None
+    error: str | None = None
+    where: tuple[float, float] | None = None
+
+
+def plan_all(cloud: PointCloud, placements, driver: GalvoDriver,
+             laser: LaserParams | None = None) -> list[PlanOutcome]:
+    """:func:`plan_mark` of each placement; a refusal is kept as its message (and place)."""
+    out = []
+    for p in placements:
+        try:
+            out.append(PlanOutcome(plan=plan_mark(cloud, p, driver, laser)))
+        except SafetyError as e:
+            out.append(PlanOutcome(error=str(e), where=e.where_mm))
+        except InsituError as e:
+            out.append(PlanOutcome(error=str(e)))
+    return out
+
+
 def save_job(path: str | Path, job: MarkJob) -> Path:
     """Write ``job`` atomically and drop a progress record of an older job at the same place
     (a new job starts from its first path). Returns the progress file's path."""
@@ -89,15 +85,64 @@ def save_job(path: str | Path, job: MarkJob) -> Path:
     return ppath
 
 
+class _Abortable:
+    """Forwards to ``inner`` one command at a time; once ``cancel`` is set it sends no
+    further command, turns the laser off and raises Cancelled."""
+
+    def __init__(self, inner, cancel: threading.Event):
+        self.inner, self.cancel = inner, cancel
+
+    def execute(self, commands) -> None:
+        for c in commands:
+            if self.cancel.is_set():
+                self.inner.laser_off()
+                raise Cancelled("marking aborted by the operator")
+            self.inner.execute([c])
+
+    def laser_off(self) -> None:
+        self.inner.laser_off()
+
+
 def mark(job: MarkJob, driver: GalvoDriver, controller, progress_path: str | Path | None,
          resume: bool = False, preview: bool = False, cancel: threading.Event | None = None,
          progress: Progress | None = None) -> RunResult:
     """Optionally draw the job's outline with the pilot laser, then mark it (resuming after
     the last completed path with ``resume``). The laser is off when this returns or raises;
-    the progress file records how far the job got."""
+    the progress file records how far the job got. Once ``cancel`` is set no further command
+    is sent: between paths the run ends "cancelled"; within one, the laser goes off and
+    Cancelled is raised (that path is recorded as not completed, so a resume marks it)."""
+    if cancel is not None:
+        controller = _Abortable(controller, cancel)
     if preview:
         run_preview(job, driver, controller)
     return run_job(job, driver, controller, progress_path, resume, cancel, progress)
+
+
+@dataclass(frozen=True)
+class StationRun:
+    """A job marked on the station: ``result``, the ``progress_path`` recording it (None:
+    not recorded) and the camera's ``image`` (H, W) of the marked part (None: not asked)."""
+
+    result: RunResult
+    progress_path: Path | None
+    image: np.ndarray | None = None
+
+
+def mark_on_station(station: Station, job: MarkJob, job_path: str | Path | None = None, *,
+                    resume: bool = False, preview: bool = False,
+                    inspect: str | Path | None = None, image: bool = False,
+                    cancel: threading.Event | None = None,
+                    progress: Progress | None = None) -> StationRun:
+    """:func:`mark` ``job`` with the station's driver and controller, its progress recorded
+    beside ``job_path`` (the job file; None: not recorded); then image the marked part when
+    ``image`` is set or ``inspect`` names the .png to write."""
+    ppath = progress_path_for(job_path) if job_path is not None else None
+    result = mark(job, station.driver, station.devices.controller, ppath, resume, preview,
+                  cancel, progress)
+    picture = station.devices.camera.grab() if image or inspect is not None else None
+    if inspect is not None:
+        save_image(inspect, picture)
+    return StationRun(result, ppath, picture)
 
 
 def save_image(path: str | Path, image: np.ndarray) -> None:

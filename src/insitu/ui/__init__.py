@@ -1,9 +1,9 @@
-"""``insitu gui``, the operator's application (PySide6 + PyOpenGL): the only part of insitu
-that imports Qt or OpenGL.
+"""``insitu gui``, the operator's application (``pip install 'insitu[gui]'``: PySide6 +
+PyOpenGL).
 
-Models (no Qt): :mod:`session` (evented state, undo), :mod:`project_file`,
-:mod:`operations` (actions in terms of the services), :mod:`scene_data` and
-:mod:`orbit_camera` (what and how the 3-D view draws). Qt: :mod:`main_window` and its docks,
-:mod:`view3d` with :mod:`gl_renderer`, :mod:`workers`. Forms, icons and the stylesheet are
-in the top-level ``ui/`` folder (:mod:`forms`).
+:mod:`insitu.ui.model` holds what has no Qt (the contract in pyproject keeps it so): the
+evented session with undo, the actions beyond the services, what and how the 3-D view draws.
+:mod:`insitu.ui.qt` holds the widgets: the main window and its docks, the 3-D view with its
+OpenGL renderer, the worker threads, the forms. Forms, icons and the stylesheet are in the
+top-level ``ui/`` folder, shipped as ``insitu/ui/assets``.
 """

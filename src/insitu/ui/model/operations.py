@@ -1,0 +1,96 @@
+"""What the application's actions do beyond the services (no Qt, no algorithm of its own):
+connect with the camera answering, the scan source, the pilot preview's trace, marking with
+the job beside the project, the calibration pages. Every function here may run on a worker
+thread: it takes a ``progress(done, total)`` callback and a ``cancel`` Event where the work
+is long."""
+
+from __future__ import annotations
+
+import threading
+from dataclasses import dataclass
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from insitu import services
+from insitu.errors import InsituError
+from insitu.formats.project import RigChoice, ScanSettings
+from insitu.marking import MarkJob
+from insitu.services import mark as mark_svc
+from insitu.services.common import Progress
+from insitu.services.station import Station
+from insitu.services.station import connect as connect_station
+
+
+def connect(choice: RigChoice, field: Path | None = None) -> Station:
+    """The station of ``choice`` (its rig file, or the simulated rig), its camera answering."""
+    station = connect_station(choice.rig_file, choice.workpiece, choice.seed, choice.binning,
+                              field)
+    try:
+        station.devices.camera.grab()   # the camera answers (the simulator builds its scene)
+    except BaseException:
+        station.close()
+        raise
+    return station
+
+
+def scan(station: Station | None, settings: ScanSettings, height_cal, progress: Progress,
+         cancel: threading.Event, on_frame) -> services.ScanResult:
+    """Replay ``settings.replay`` or drive the rig over ``settings.region``; Method 2 with a
+    height calibration, else Method 1."""
+    if settings.replay is not None:
+        return services.scan_replay(settings.replay, height_cal, progress=progress,
+                                    cancel=cancel, on_frame=on_frame)
+    if station is None:
+        raise InsituError("connect the rig first (Rig ▸ Connect)")
+    return services.scan_live(station, settings.spacing_mm, settings.region, height_cal,
+                              progress=progress, cancel=cancel, on_frame=on_frame,
+                              exposure_ms=settings.exposure_ms, speed_mm_s=settings.speed_mm_s)
+
+
+def preview(job: MarkJob, station: Station) -> list[np.ndarray]:
+    """Draw the job's outline with the pilot laser; returns the outline's (2, 3) mm segments."""
+    from insitu.marking import preview_outlines, run_preview
+
+    run_preview(job, station.driver, station.devices.controller)
+    return [seg for loop in preview_outlines(job) for seg in np.stack([loop[:-1], loop[1:]], 1)]
+
+
+def mark(job: MarkJob, station: Station, job_path: Path | None, progress: Progress,
+         cancel: threading.Event) -> mark_svc.StationRun:
+    """Write ``job`` to ``job_path`` (when given; its progress is recorded beside it), mark
+    it and image the part. Setting ``cancel`` stops the laser before the next command."""
+    if job_path is not None:
+        mark_svc.save_job(job_path, job)
+    return mark_svc.mark_on_station(station, job, job_path, image=True, cancel=cancel,
+                                    progress=progress)
+
+
+@dataclass(frozen=True)
+class CalibrationOutcome:
+    """What a calibration page shows: ``residuals`` (name → value), ``notes`` and a
+    ``picture`` (H, W) or (H, W, 3) uint8 (BGR), and the file it wrote."""
+
+    residuals: dict[str, float]
+    notes: str
+    picture: np.ndarray
+    path: Path
+
+
+def calibrate(kind: str, folder: Path, out: Path, progress: Progress) -> CalibrationOutcome:
+    """``kind`` "camera", "height" or "field": fit from the recorded ``folder`` and write
+    ``out`` (JSON) with its picture beside it (.png), as the headless commands do."""
+    if kind == "camera":
+        from insitu.services.camera import calibrate_camera_and_report
+        cal = calibrate_camera_and_report(folder, out, progress=progress)
+    elif kind == "height":
+        from insitu.services.height import calibrate_height_and_report
+        cal = calibrate_height_and_report(folder, out, progress)
+    elif kind == "field":
+        from insitu.services.field import calibrate_and_report
+        cal = calibrate_and_report(folder, out, progress=progress)
+    else:
+        raise ValueError(kind)
+    picture = cv2.imread(str(out.with_suffix(".png")), cv2.IMREAD_COLOR)
+    return CalibrationOutcome(dict(cal.residuals), cal.notes or "", picture, out)

@@ -1,0 +1,105 @@
+"""The Calibrate dock: one guided page each for the camera, the height calibration and the
+field correction — recording in, file out, then its residuals and a picture."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from PySide6.QtCore import Qt
+from PySide6.QtGui import QPixmap
+from PySide6.QtWidgets import (QFileDialog, QTableWidgetItem, QTabWidget, QVBoxLayout,
+                               QWidget)
+
+from insitu.ui.model import operations as ops
+from insitu.ui.qt.camera_image import to_qimage
+from insitu.ui.qt.forms import load_form
+
+GUIDES = {
+    "camera": "Record the checkerboard in several poses, with the head's axis lines drawn on "
+              "it lying on the plate (insitu sim record camera-calibration). Gives the "
+              "intrinsics, distortion and the camera's pose in the scan-head frame.",
+    "height": "Record the flat plate at several known heights with lines at known offsets "
+              "(insitu sim record height-calibration). Gives the height calibration the "
+              "scan uses (Method 2).",
+    "field": "Record pilot spots on the plate over the field (insitu sim record "
+             "field-calibration). Gives the field correction the marking applies; the "
+             "picture is the before/after report.",
+}
+
+
+class CalibratePage(QWidget):
+    def __init__(self, window, kind: str, parent=None):
+        super().__init__(parent)
+        self.window_, self.kind = window, kind
+        self.ui = load_form("calibrate_page", self)
+        QVBoxLayout(self).addWidget(self.ui)
+        ui = self.ui
+        ui.guideLabel.setText(GUIDES[kind])
+        ui.outputEdit.setText(f"calib/{kind}.json")
+        ui.recordingBrowse.clicked.connect(self._browse_recording)
+        ui.outputBrowse.clicked.connect(self._browse_output)
+        ui.runButton.clicked.connect(self.run)
+        window.runner.busy_changed.connect(self._busy)
+
+    @property
+    def task_name(self) -> str:
+        return f"calibrate-{self.kind}"
+
+    def _browse_recording(self) -> None:
+        folder = QFileDialog.getExistingDirectory(self, f"Recorded {self.kind} calibration")
+        if folder:
+            self.ui.recordingEdit.setText(folder)
+
+    def _browse_output(self) -> None:
+        path, _ = QFileDialog.getSaveFileName(self, "Save the calibration", "", "JSON (*.json)")
+        if path:
+            self.ui.outputEdit.setText(path)
+
+    def run(self) -> None:
+        rec, out = self.ui.recordingEdit.text().strip(), self.ui.outputEdit.text().strip()
+        if not rec or not out:
+            self.window_.show_error(f"{self.kind} calibration: choose the recording and the "
+                                    "file to save")
+            return
+        out_path = Path(out).expanduser()
+        if not out_path.is_absolute() and self.window_.session.project_path is not None:
+            out_path = self.window_.session.project_path.parent / out_path
+        out_path.parent.mkdir(parents=True, exist_ok=True)
+        kind = self.kind
+        task = self.window_.runner.start(
+            self.task_name, lambda progress, _c, _f: ops.calibrate(kind, Path(rec), out_path,
+                                                                   progress),
+            self._done, self._failed)
+        if task is not None:
+            self.ui.notesLabel.setText("calibrating…")
+            task.progress.connect(lambda d, t: (self.ui.progressBar.setMaximum(t),
+                                                self.ui.progressBar.setValue(d)))
+
+    def _done(self, outcome: ops.CalibrationOutcome) -> None:
+        ui = self.ui
+        ui.notesLabel.setText(f"wrote {outcome.path}: {outcome.notes}")
+        ui.residualsTable.setRowCount(len(outcome.residuals))
+        for row, (k, v) in enumerate(outcome.residuals.items()):
+            ui.residualsTable.setItem(row, 0, QTableWidgetItem(k))
+            ui.residualsTable.setItem(row, 1, QTableWidgetItem(f"{v:.4g}"))
+        ui.residualsTable.resizeColumnsToContents()
+        pix = QPixmap.fromImage(to_qimage(outcome.picture))
+        ui.pictureLabel.setPixmap(pix.scaled(ui.pictureLabel.width(), 240, Qt.KeepAspectRatio,
+                                             Qt.SmoothTransformation))
+        self.window_.calibration_done(self.kind, outcome.path)
+
+    def _failed(self, message: str, _cancelled: bool) -> None:
+        self.ui.notesLabel.setText(message)
+        self.window_.show_error(message)
+
+    def _busy(self, name: str, busy: bool) -> None:
+        if name == self.task_name:
+            self.ui.runButton.setEnabled(not busy)
+
+
+class CalibratePanel(QTabWidget):
+    def __init__(self, window, parent=None):
+        super().__init__(parent)
+        self.pages = {k: CalibratePage(window, k) for k in ("camera", "height", "field")}
+        for kind, page in self.pages.items():
+            self.addTab(page, kind.capitalize())

@@ -1,0 +1,379 @@
+"""The main window of ``insitu gui``: the 3-D view in the middle, docks for Scan, Place, Mark,
+Calibrate and the camera; menus, toolbar, status bar (camera, scan head, calibration age),
+project files with recent files, undo/redo, drag-and-drop of patterns and projects."""
+
+from __future__ import annotations
+
+from datetime import datetime, timezone
+from pathlib import Path
+
+from PySide6.QtCore import QSettings, Qt, QTimer
+from PySide6.QtGui import QAction, QKeySequence
+from PySide6.QtWidgets import QDockWidget, QFileDialog, QLabel, QMainWindow
+
+from insitu.errors import InsituError
+from insitu.formats.project import SUFFIX, Project, RigChoice, beside
+from insitu.patterns import FILE_SUFFIXES
+from insitu.services import load_height_calibration
+from insitu.services.mark import PlanOutcome, plan_all
+from insitu.services.project import OpenedProject, open_project, save_project
+from insitu.services.station import Station
+from insitu.ui.model import operations as ops
+from insitu.ui.model.session import Session
+from insitu.ui.qt.calibrate_panel import CalibratePanel
+from insitu.ui.qt.camera_image import CameraImage
+from insitu.ui.qt.forms import icon
+from insitu.ui.qt.mark_panel import MarkPanel
+from insitu.ui.qt.place_panel import PlacePanel
+from insitu.ui.qt.scan_panel import ScanPanel
+from insitu.ui.qt.scene_binding import SceneBinding
+from insitu.ui.qt.view3d import View3D
+from insitu.ui.qt.workers import TaskRunner
+
+PROJECT_FILES = f"insitu projects (*{SUFFIX})"
+MAX_RECENT = 8
+PLAN_DELAY_MS = 150
+
+
+def age_text(created: str | None) -> str:
+    """"2 h old" from an ISO-8601 UTC time."""
+    try:
+        t = datetime.fromisoformat(created.replace("Z", "+00:00"))
+    except (AttributeError, ValueError):
+        return "age unknown"
+    s = (datetime.now(timezone.utc) - t).total_seconds()
+    for unit, n in (("d", 86400), ("h", 3600), ("min", 60)):
+        if s >= n:
+            return f"{s / n:.0f} {unit} old"
+    return "new"
+
+
+class MainWindow(QMainWindow):
+    def __init__(self, settings: QSettings | None = None):
+        super().__init__()
+        self.setWindowTitle("insitu")
+        self.setWindowIcon(icon("app"))
+        self.setAcceptDrops(True)
+        self.resize(1280, 800)
+        self.settings = settings or QSettings("insitu", "insitu gui")
+        self.session = Session()
+        self.runner = TaskRunner(self)
+        self.station: Station | None = None
+        self.view = View3D(self)
+        self.setCentralWidget(self.view)
+        self.binding = SceneBinding(self.session, self.view)
+        self.camera_image = CameraImage(self)
+        self.scan_panel = ScanPanel(self)
+        self.place_panel = PlacePanel(self)
+        self.mark_panel = MarkPanel(self)
+        self.calibrate_panel = CalibratePanel(self)
+        self._docks()
+        self._status_bar()
+        self._actions()
+        self._plan_timer = QTimer(self, singleShot=True, interval=PLAN_DELAY_MS)
+        self._plan_timer.timeout.connect(self.plan)
+        self._plan_again = False
+        for sig in (self.session.placements.changed, self.session.cloud_changed):
+            sig.connect(lambda: self._plan_timer.start())
+        self.view.pattern_moved.connect(self._moved)
+        self.view.rotate_dragged.connect(self._rotated)
+        self.view.scale_dragged.connect(self._scaled)
+        self.view.region_drawn.connect(self._region_drawn)
+        self.view.gl_ready.connect(lambda name: self.gl_label.setText(f"GL: {name}"))
+        self._scale_start: tuple[object, float] | None = None
+
+    # -- layout --------------------------------------------------------------------------
+    def _docks(self) -> None:
+        def dock(title, widget, area):
+            d = QDockWidget(title, self)
+            d.setObjectName(f"{title.lower()}Dock")
+            d.setWindowIcon(icon(title.lower()))
+            d.setWidget(widget)
+            self.addDockWidget(area, d)
+            return d
+        right = Qt.RightDockWidgetArea
+        self.docks = {"scan": dock("Scan", self.scan_panel, right),
+                      "place": dock("Place", self.place_panel, right),
+                      "mark": dock("Mark", self.mark_panel, right),
+                      "calibrate": dock("Calibrate", self.calibrate_panel, right),
+                      "camera": dock("Camera", self.camera_image, Qt.LeftDockWidgetArea)}
+        for name in ("place", "mark", "calibrate"):
+            self.tabifyDockWidget(self.docks["scan"], self.docks[name])
+        self.docks["scan"].raise_()
+
+    def _status_bar(self) -> None:
+        bar = self.statusBar()
+        self.message_label = QLabel("")
+        self.camera_label = QLabel("camera: not connected")
+        self.head_label = QLabel("scan head: not connected")
+        self.calib_label = QLabel("no height calibration")
+        self.gl_label = QLabel("GL: —")
+        bar.addWidget(self.message_label, 1)
+        for w in (self.camera_label, self.head_label, self.calib_label, self.gl_label):
+            bar.addPermanentWidget(w)
+
+    def _action(self, menu, text, slot, shortcut=None, icon_name=None) -> QAction:
+        a = QAction(text, self)
+        if shortcut:
+            a.setShortcut(QKeySequence(shortcut))
+        if icon_name:
+            a.setIcon(icon(icon_name))
+        a.triggered.connect(slot)
+        menu.addAction(a)
+        return a
+
+    def _actions(self) -> None:
+        mb, tb = self.menuBar(), self.addToolBar("Main")
+        tb.setObjectName("mainToolBar")
+        f = mb.addMenu("&File")
+        self._action(f, "&New project", self.new_project, QKeySequence.New)
+        tb.addAction(self._action(f, "&Open project…", self._open_dialog, QKeySequence.Open,
+                                  "open"))
+        tb.addAction(self._action(f, "&Save project", self.save, QKeySequence.Save, "save"))
+        self._action(f, "Save project &as…", self._save_dialog, QKeySequence.SaveAs)
+        self.recent_menu = f.addMenu("Open &recent")
+        f.addSeparator()
+        self._action(f, "&Quit", self.close, QKeySequence.Quit)
+        e = mb.addMenu("&Edit")
+        self.undo_action = self._action(e, "&Undo", self.session.placements.undo,
+                                        QKeySequence.Undo, "undo")
+        self.redo_action = self._action(e, "&Redo", self.session.placements.redo,
+                                        QKeySequence.Redo, "redo")
+        self._action(e, "Remove pattern", self.session.remove_selected, QKeySequence.Delete)
+        tb.addActions([self.undo_action, self.redo_action])
+        self.session.placements.changed.connect(self._undo_state)
+        self._undo_state()
+        v = mb.addMenu("&View")
+        for name, key in (("top", "1"), ("front", "2"), ("side", "3"), ("iso", "4")):
+            self._action(v, f"{name.capitalize()} view", lambda _=False, n=name:
+                         self.view.set_view(n), key)
+        r = mb.addMenu("&Rig")
+        tb.addAction(self._action(r, "&Connect simulated rig", lambda: self.connect_rig(),
+                                  None, "connect"))
+        self._action(r, "Connect with a rig &file…", self._rig_file_dialog)
+        self._update_recent()
+
+    def _undo_state(self) -> None:
+        self.undo_action.setEnabled(self.session.placements.can_undo())
+        self.redo_action.setEnabled(self.session.placements.can_redo())
+
+    # -- messages ------------------------------------------------------------------------
+    def show_message(self, text: str) -> None:
+        self.message_label.setStyleSheet("")
+        self.message_label.setText(text)
+
+    def show_error(self, text: str) -> None:
+        """One line in the status bar, in red (no dialog: the station keeps running)."""
+        self.message_label.setStyleSheet("color: #ff6b5e;")
+        self.message_label.setText(text.splitlines()[0] if text else "error")
+
+    # -- rig -----------------------------------------------------------------------------
+    def connect_rig(self, choice: RigChoice | None = None) -> None:
+        choice = choice or self.session.rig_choice
+        field = self.session.field_path
+        self.runner.start("connect", lambda p, c, f: (choice, ops.connect(choice, field)),
+                          self._connected, lambda m, _c: self.show_error(m))
+
+    def _connected(self, result) -> None:
+        choice, station = result
+        if self.station is not None:
+            self.station.close()
+        self.station = station
+        self.session.rig_choice = choice
+        cam, head = station.describe()
+        self.camera_label.setText(cam)
+        self.head_label.setText(head)
+        nominal = station.rig.head
+        self.binding.show_field(nominal.field_size_mm, nominal.z_range_mm)
+        if self.session.cloud is None:
+            h = max(nominal.field_size_mm) / 2
+            self.view.frame_all((-h / 2, -h / 2, 0), (h / 2, h / 2, 20))
+        self.session.rig_changed.emit()
+        self._plan_timer.start()
+        self.show_message("rig connected")
+
+    def _rig_file_dialog(self) -> None:
+        path, _ = QFileDialog.getOpenFileName(self, "Rig file", "", "Rig files (*.json)")
+        if path:
+            from dataclasses import replace
+            self.connect_rig(replace(self.session.rig_choice, rig_file=Path(path)))
+
+    def load_height_cal(self, path: Path | None) -> None:
+        """Use the height calibration file (or recorded folder, fitted now) ``path``."""
+        if path is None:
+            self.session.height_cal_path = self.session.height_cal = None
+            self.calib_label.setText("no height calibration")
+            return
+        self.runner.start("height-cal", lambda p, c, f: (path, load_height_calibration(path, p)),
+                          self._height_cal_loaded, lambda m, _c: self.show_error(m))
+
+    def _height_cal_loaded(self, result) -> None:
+        path, cal = result
+        self.session.height_cal_path, self.session.height_cal = path, cal
+        self.scan_panel.ui.heightCalEdit.setText(str(path))
+        self.calib_label.setText(f"height calibration {age_text(cal.created)}")
+
+    def calibration_done(self, kind: str, path: Path) -> None:
+        if kind == "height":
+            self.load_height_cal(path)
+        elif kind == "field":
+            self.session.field_path = path
+            if self.station is not None:
+                self.station.use_field(path)
+                self._plan_timer.start()
+        else:
+            self.session.camera_cal_path = path
+
+    # -- placement from the 3-D view -----------------------------------------------------
+    def _moved(self, x: float, y: float, key) -> None:
+        self.session.update_selected(key, at_mm=(round(x, 3), round(y, 3)))
+
+    def _rotated(self, x: float, y: float, key) -> None:
+        from insitu.ui.model.scene_data import rotate_to
+        p = self.session.current()
+        if p is not None:
+            self.session.update_selected(key, rotate_deg=rotate_to(p, (x, y)))
+
+    def _scaled(self, x0: float, y0: float, x: float, y: float, key) -> None:
+        from insitu.ui.model.scene_data import scale_to
+        p = self.session.current()
+        if p is None:
+            return
+        if self._scale_start is None or self._scale_start[0] is not key:
+            self._scale_start = (key, p.width_mm)
+        self.session.update_selected(key, width_mm=scale_to(p, self._scale_start[1], (x0, y0),
+                                                            (x, y)))
+
+    def _region_drawn(self, region) -> None:
+        self.scan_panel.set_region(region)
+        self.binding.show_region(region)
+
+    # -- planning ------------------------------------------------------------------------
+    def plan(self) -> None:
+        """Project and check every placement on a worker (again when it ends, if changed)."""
+        s = self.session
+        items, cloud = s.placements.items, s.cloud
+        if not items:
+            s.set_plans([])
+            return
+        if cloud is None or self.station is None:
+            why = "no point cloud: scan or open one" if cloud is None else "connect the rig"
+            s.set_plans([PlanOutcome(error=why) for _ in items])
+            return
+        if self.runner.running("plan"):
+            self._plan_again = True
+            return
+        driver = self.station.driver
+        self.runner.start("plan", lambda p, c, f: (items, plan_all(cloud, items, driver)),
+                          self._planned, lambda m, _c: self.show_error(m))
+
+    def _planned(self, result) -> None:
+        items, plans = result
+        if items == self.session.placements.items and not self._plan_again:
+            self.session.set_plans(plans)
+        else:
+            self._plan_again = False
+            self._plan_timer.start()
+
+    # -- projects ------------------------------------------------------------------------
+    def job_path(self) -> Path | None:
+        p = self.session.project_path
+        return None if p is None else beside(p, ".job.json")
+
+    def new_project(self) -> None:
+        self.session.set_cloud(None)
+        self.session.placements.reset()
+        self.session.project_path = None
+        self.setWindowTitle("insitu")
+
+    def _open_dialog(self) -> None:
+        path, _ = QFileDialog.getOpenFileName(self, "Open project", "", PROJECT_FILES)
+        if path:
+            self.open_project(Path(path))
+
+    def _save_dialog(self) -> None:
+        path, _ = QFileDialog.getSaveFileName(self, "Save project", "", PROJECT_FILES)
+        if path:
+            self.save(Path(path if path.endswith(SUFFIX) else path + SUFFIX))
+
+    def open_project(self, path: Path) -> None:
+        self.runner.start("open", lambda p, c, f: open_project(path, p),
+                          lambda opened: self._opened(path, opened),
+                          lambda m, _c: self.show_error(m))
+
+    def _opened(self, path: Path, opened: OpenedProject) -> None:
+        pr, s = opened.project, self.session
+        s.project_path = path
+        s.height_cal_path, s.height_cal = pr.height_cal, opened.height_cal
+        s.field_path, s.camera_cal_path = pr.field_correction, pr.camera_cal
+        s.rig_choice = pr.rig
+        self.scan_panel.show_settings(pr.scan)
+        self.scan_panel.ui.heightCalEdit.setText(str(pr.height_cal or ""))
+        if opened.height_cal is not None:
+            self.calib_label.setText(f"height calibration {age_text(opened.height_cal.created)}")
+        self.binding.show_region(pr.scan.region)
+        s.set_cloud(opened.cloud, pr.cloud)
+        s.placements.reset(pr.placements)
+        s.select(pr.selected)
+        self._remember(path)
+        self.setWindowTitle(f"insitu — {path.name}")
+        self.connect_rig(pr.rig)
+        self.show_message(f"opened {path}")
+
+    def save(self, path: Path | None = None) -> bool:
+        """Save the session to ``path`` (default: where it came from); True when written."""
+        path = path or self.session.project_path
+        if path is None:
+            self._save_dialog()
+            return self.session.project_path is not None
+        s = self.session
+        project = Project(s.rig_choice, s.height_cal_path, s.field_path, s.camera_cal_path,
+                          self.scan_panel.settings(), s.cloud_path, s.placements.items,
+                          s.selected, None)
+        try:
+            written = save_project(path, project, s.cloud, self.mark_panel.job())
+        except InsituError as e:
+            self.show_error(str(e))
+            return False
+        s.project_path, s.cloud_path = path, written.cloud
+        self._remember(path)
+        self.setWindowTitle(f"insitu — {path.name}")
+        self.show_message(f"saved {path}")
+        return True
+
+    def _remember(self, path: Path) -> None:
+        recent = [str(path)] + [p for p in self.recent_files() if p != str(path)]
+        self.settings.setValue("recent_projects", recent[:MAX_RECENT])
+        self._update_recent()
+
+    def recent_files(self) -> list[str]:
+        v = self.settings.value("recent_projects", [])
+        return [v] if isinstance(v, str) else list(v or [])
+
+    def _update_recent(self) -> None:
+        self.recent_menu.clear()
+        for p in self.recent_files():
+            self.recent_menu.addAction(p, lambda p=p: self.open_project(Path(p)))
+        self.recent_menu.setEnabled(bool(self.recent_files()))
+
+    # -- drag and drop -------------------------------------------------------------------
+    def dragEnterEvent(self, e) -> None:
+        if e.mimeData().hasUrls():
+            e.acceptProposedAction()
+
+    def dropEvent(self, e) -> None:
+        for url in e.mimeData().urls():
+            path = Path(url.toLocalFile())
+            if path.name.endswith(SUFFIX):
+                self.open_project(path)
+            elif path.suffix.lower() in FILE_SUFFIXES:
+                self.place_panel.add_pattern(str(path))
+                self.docks["place"].raise_()
+            else:
+                self.show_error(f"{path.name}: not a pattern (SVG, DXF, image) or a project")
+
+    def closeEvent(self, e) -> None:
+        self.runner.wait_all()
+        if self.station is not None:
+            self.station.close()            # laser off, devices released
+        super().closeEvent(e)

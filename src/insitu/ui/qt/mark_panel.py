@@ -1,0 +1,116 @@
+"""The Mark dock: laser settings, the job's size and time, Preview (pilot laser), Mark with
+progress and time left, and ABORT, which stops the laser before the next command. The
+inspection image of the marked part goes to the camera dock."""
+
+from __future__ import annotations
+
+import time
+
+from PySide6.QtWidgets import QVBoxLayout, QWidget
+
+from insitu.marking import LaserParams, MarkJob, estimate_time
+from insitu.services.mark import StationRun
+from insitu.ui.model import operations as ops
+from insitu.ui.model import scene_data as sd
+from insitu.ui.qt.forms import icon, load_form
+
+
+class MarkPanel(QWidget):
+    def __init__(self, window, parent=None):
+        super().__init__(parent)
+        self.window_ = window
+        self.session = window.session
+        self.ui = load_form("mark", self)
+        QVBoxLayout(self).addWidget(self.ui)
+        ui = self.ui
+        ui.previewButton.clicked.connect(self.preview)
+        ui.markButton.clicked.connect(self.mark)
+        ui.abortButton.clicked.connect(self.abort)
+        ui.abortButton.setIcon(icon("abort"))
+        for spin in (ui.powerSpin, ui.frequencySpin, ui.speedSpin):
+            spin.valueChanged.connect(self.refresh)
+        self.session.plans_changed.connect(self.refresh)
+        self.session.cloud_changed.connect(self.refresh)
+        self.session.rig_changed.connect(self.refresh)
+        window.runner.busy_changed.connect(self._busy)
+        self._t0 = 0.0
+        self.last_result = None
+        self.refresh()
+
+    def laser(self) -> LaserParams:
+        ui = self.ui
+        return LaserParams(power_pct=ui.powerSpin.value(), frequency_khz=ui.frequencySpin.value(),
+                           mark_speed_mm_s=ui.speedSpin.value())
+
+    def job(self) -> MarkJob | None:
+        """The session's job with these laser settings, or None (nothing placed or refused)."""
+        job = self.session.job()
+        return None if job is None else job.model_copy(update={"laser": self.laser()})
+
+    def refresh(self) -> None:
+        job, station = self.job(), self.window_.station
+        busy = self.window_.runner.running("mark") or self.window_.runner.running("preview")
+        if job is None:
+            refused = [p.error for p in self.session.plans if p.error]
+            self.ui.jobLabel.setText(f"no job: {refused[0]}" if refused else
+                                     "no job: place a pattern on a cloud")
+        else:
+            e = estimate_time(job, station.driver.timing if station else None)
+            self.ui.jobLabel.setText(f"{len(job.paths)} paths, mark {e.mark_mm:.0f} mm, "
+                                     f"about {e.total_s:.1f} s")
+        ok = job is not None and station is not None and not busy
+        self.ui.previewButton.setEnabled(ok)
+        self.ui.markButton.setEnabled(ok)
+
+    def preview(self) -> None:
+        job, station = self.job(), self.window_.station
+        if job is None or station is None:
+            return
+        self.window_.runner.start("preview", lambda p, c, f: ops.preview(job, station),
+                                  self._previewed, self._failed)
+
+    def _previewed(self, trace) -> None:
+        self.window_.view.set_lines("pilot", sd.segments(trace), sd.PILOT_COLOUR)
+        self.window_.show_message("pilot preview drawn (red); the laser is off")
+
+    def mark(self) -> None:
+        job, station = self.job(), self.window_.station
+        if job is None or station is None:
+            return
+        path = self.window_.job_path()
+        task = self.window_.runner.start(
+            "mark", lambda progress, cancel, _f: ops.mark(job, station, path, progress, cancel),
+            self._marked, self._failed)
+        if task is not None:
+            self._t0 = time.perf_counter()
+            self.ui.progressBar.setValue(0)
+            self.ui.resultLabel.setText("marking…")
+            task.progress.connect(self._progress)
+
+    def abort(self) -> None:
+        self.window_.runner.cancel("mark")
+        self.ui.resultLabel.setText("aborting: laser off")
+
+    def _progress(self, done: int, total: int) -> None:
+        self.ui.progressBar.setMaximum(total)
+        self.ui.progressBar.setValue(done)
+        elapsed = time.perf_counter() - self._t0
+        left = elapsed / max(done, 1) * (total - done)
+        self.ui.timeLabel.setText(f"path {done} of {total}, about {left:.1f} s left")
+
+    def _marked(self, outcome: StationRun) -> None:
+        self.last_result = outcome.result
+        r = outcome.result
+        self.ui.resultLabel.setText(f"{r.state}: paths {r.completed} of {r.total} marked; "
+                                    "the laser is off")
+        self.window_.camera_image.show_image(outcome.image, None, "inspection: marked part")
+        self.window_.show_message(f"marking {r.state}")
+
+    def _failed(self, message: str, _cancelled: bool) -> None:
+        self.ui.resultLabel.setText(f"{message} (the laser is off)")
+        self.window_.show_error(message)
+
+    def _busy(self, name: str, busy: bool) -> None:
+        if name in ("mark", "preview"):
+            self.ui.abortButton.setEnabled(self.window_.runner.running("mark"))
+            self.refresh()

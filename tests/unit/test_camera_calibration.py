@@ -1,0 +1,206 @@
+"""Camera calibration: synthetic corners from a known camera are recovered (mrcal style), bad
+views are rejected, ChArUco boards work, and ``insitu calibrate camera`` end to end."""
+
+import json
+import shutil
+
+import cv2
+import numpy as np
+import pytest
+import typer
+from typer.testing import CliRunner
+
+from insitu.calibrate.camera import (BoardSpec, Detection, board_pose, calibrate_intrinsics,
+                                     detect_board)
+from insitu.cli.camera import camera as camera_cmd
+from insitu.sim.world import SimWorld
+from insitu.errors import CalibrationError
+from insitu.formats.sequence import SequenceWriter
+from insitu.geometry.camera import CameraModel
+from insitu.rig.files import CameraCalibration, load_json_model
+from insitu.services.record import record_camera_calibration
+from insitu.services.station import simulated
+from insitu.sim.board import BoardViews, axis_lines
+from insitu.sim.checkerboard import board_corners, random_board_poses
+from insitu.sim.rig import default_rig
+
+runner = CliRunner()
+
+
+def _app():
+    """``insitu calibrate camera`` as the main app mounts it."""
+    root, calibrate = typer.Typer(), typer.Typer()
+    calibrate.command("camera")(camera_cmd)
+    calibrate.command("other")(lambda: None)
+    root.add_typer(calibrate, name="calibrate")
+    return root
+
+
+def _synthetic(cam: CameraModel, n: int, noise_px: float, seed: int, cols=9, rows=6, sq=10.0):
+    rng = np.random.default_rng(seed)
+    dets = []
+    for R, t in random_board_poses(cam, cols, rows, sq, n, rng):
+        obj = board_corners(cols, rows, sq)
+        uv = CameraModel(cam.width, cam.height, cam.K, cam.dist, R, t).project(obj)
+        dets.append(Detection(obj, uv + rng.normal(0, noise_px, uv.shape)))
+    return dets
+
+
+def test_synthetic_corners_recover_the_true_camera_within_its_uncertainty():
+    cam = default_rig(seed=3).camera
+    dets = _synthetic(cam, 15, 0.05, seed=1)
+    res = calibrate_intrinsics(dets, (cam.width, cam.height))
+    assert len(res.used) == 15 and 0.03 < res.rms_px < 0.1
+    truth = np.array([cam.K[0, 0], cam.K[1, 1], cam.K[0, 2], cam.K[1, 2]])
+    got = np.array([res.K[0, 0], res.K[1, 1], res.K[0, 2], res.K[1, 2]])
+    err = got - truth
+    assert abs(err[0]) / truth[0] < 1e-3 and abs(err[1]) / truth[1] < 1e-3
+    assert np.all(np.abs(err) < 4 * res.std[:4] + 1e-9), (err, res.std[:4])
+    assert np.all(np.abs(res.dist - cam.dist) < 4 * res.std[4:9] + 1e-4)
+    # the board poses too: the first view's pose reproduces its corners
+    R, t, rms = board_pose(dets[0], res.K, res.dist)
+    assert rms < 0.15
+
+
+def test_a_bad_view_and_a_missing_board_are_rejected_and_reported():
+    cam = default_rig(seed=4, binning=2).camera
+    dets = _synthetic(cam, 8, 0.05, seed=2)
+    rng = np.random.default_rng(0)
+    dets[3] = Detection(dets[3].obj, dets[3].img + rng.normal(0, 1.5, dets[3].img.shape))
+    dets.append(None)
+    res = calibrate_intrinsics(dets, (cam.width, cam.height), [f"f{i}.png" for i in range(9)])
+    rejected = {v.name: v.reason for v in res.rejected}
+    assert set(rejected) == {"f3.png", "f8.png"}
+    assert "median" in rejected["f3.png"] and "not found" in rejected["f8.png"]
+    assert abs(res.K[0, 0] / cam.K[0, 0] - 1) < 2e-3
+
+
+def test_too_few_good_views_is_a_calibration_error():
+    cam = default_rig(seed=4, binning=2).camera
+    dets = _synthetic(cam, 3, 0.05, seed=2) + [None, None]
+    with pytest.raises(CalibrationError, match="only 3 good views of 5, need at least 4"):
+        calibrate_intrinsics(dets, (cam.width, cam.height))
+
+
+@pytest.mark.skipif(not hasattr(cv2, "aruco"), reason="OpenCV without aruco")
+def test_charuco_views_are_detected_and_calibrate():
+    board = BoardSpec.from_spec({"cols": 7, "rows": 5, "square_mm": 10.0,
+                                 "charuco": {"dictionary": "DICT_4X4_50", "marker_mm": 7.0}})
+    ppm = 12.0                                     # pixels per mm of the printed board image
+    printed = board._charuco_board().generateImage((int(80 * ppm), int(60 * ppm)))
+    W, H, f = 1000, 800, 1400.0
+    K = np.array([[f, 0, W / 2 - 3], [0, f, H / 2 + 2], [0, 0, 1]])
+    cam = CameraModel(W, H, K, np.zeros(5), np.eye(3), np.zeros(3))
+    rng = np.random.default_rng(5)
+    dets = []
+    for R, t in random_board_poses(cam, 8, 6, 10.0, 6, rng, max_tilt_deg=30,
+                                   depth_mm=f * 80 / (0.6 * W)):
+        S = np.array([[1 / ppm, 0, 0.5 / ppm], [0, 1 / ppm, 0.5 / ppm], [0, 0, 1]])  # px → mm
+        Hm = K @ np.column_stack([R[:, 0], R[:, 1], t]) @ S
+        img = cv2.warpPerspective(printed, Hm, (W, H), flags=cv2.INTER_AREA,
+                                  borderValue=255)
+        det = detect_board(img, board)
+        assert det is not None and len(det) >= 20
+        dets.append(det)
+    res = calibrate_intrinsics(dets, (W, H))
+    assert abs(res.K[0, 0] / f - 1) < 5e-3 and res.rms_px < 0.5
+
+
+# -- the command ---------------------------------------------------------------------------
+@pytest.fixture(scope="module")
+def rec(tmp_path_factory):
+    out = tmp_path_factory.mktemp("cam") / "camcal"
+    rig = default_rig(seed=2, binning=2)
+    world = SimWorld(rig, seed=2)
+    board = BoardViews(world, 4, lines=axis_lines())
+    record_camera_calibration(simulated(world), out, board, 4, axis_lines=axis_lines(),
+                              truth=board.truth)
+    return out, rig
+
+
+def test_cli_calibrates_intrinsics_and_the_world_pose(rec, tmp_path):
+    folder, rig = rec
+    out = tmp_path / "camera.json"
+    res = runner.invoke(_app(), ["calibrate", "camera", str(folder), "-o", str(out)])
+    assert res.exit_code == 0, res.output
+    cal = load_json_model(out, CameraCalibration)
+    K, true = np.array(cal.camera.K), rig.camera
+    assert abs(K[0, 0] / true.K[0, 0] - 1) < 3e-3
+    assert len(cal.per_view_rms_px) == 5 and cal.rms_px < 0.1 and len(cal.std_intrinsics) == 9
+    assert cal.residuals["views_used"] == 5 and abs(cal.residuals["alignment_angle_deg"] - 90) < 0.5
+    R = np.array(cal.camera.R)
+    angle = np.degrees(np.arccos(np.clip((np.trace(R @ true.R.T) - 1) / 2, -1, 1)))
+    centre = -R.T @ np.array(cal.camera.t)
+    assert angle < 0.3 and np.linalg.norm(centre - true.centre_world) < 2.0
+    assert "world pose" in cal.notes and cal.inputs == [str(folder)]
+    assert cv2.imread(str(out.with_suffix(".png"))).shape[1] >= 500    # the per-view bars
+
+
+def _copy(folder, dst, edit):
+    shutil.copytree(folder, dst)
+    seq = json.loads((dst / "sequence.json").read_text())
+    edit(seq, dst)
+    (dst / "sequence.json").write_text(json.dumps(seq))
+    return dst
+
+
+def _blank_sequence(dst):
+    with SequenceWriter(dst, "camera-calibration", default_rig().operator.head.spec(),
+                        checkerboard={"cols": 9, "rows": 6, "square_mm": 10.0}) as w:
+        for i in range(5):
+            w.add(np.full((96, 128), 40 + i, np.uint8))
+    return dst
+
+
+def _no_laser(seq, dst):
+    ref = next(f["file"] for f in seq["frames"] if "plate_z_mm" in f and "line" not in f)
+    for f in seq["frames"]:
+        if "line" in f:
+            shutil.copy(dst / ref, dst / f["file"])
+
+
+@pytest.mark.parametrize("case, message", [
+    ("wrong-board", "no chessboard of 8×6 inner corners, 10 mm squares found in any of the 5 frames"),
+    ("few-views", "only 3 good views of 3, need at least 4"),
+    ("blank", "no chessboard of 9×6 inner corners, 10 mm squares found"),
+    ("no-laser", "no laser line found on the board"),
+    ("symmetric", "cannot tell +x from −x"),
+    ("missing", "no such sequence folder"),
+])
+def test_cli_bad_input_one_line_error_and_no_file(rec, tmp_path, case, message):
+    folder, _ = rec
+    src = {
+        "wrong-board": lambda: _copy(folder, tmp_path / "r",
+                                     lambda s, d: s["checkerboard"].update(cols=8)),
+        "few-views": lambda: _copy(folder, tmp_path / "r", lambda s, d: s.update(
+            frames=[f for f in s["frames"] if "plate_z_mm" not in f][:3])),
+        "blank": lambda: _blank_sequence(tmp_path / "r"),
+        "no-laser": lambda: _copy(folder, tmp_path / "r", _no_laser),
+        "symmetric": lambda: _copy(folder, tmp_path / "r", lambda s, d: s.update(
+            frames=[f for f in s["frames"] if f.get("line", {}).get("start") != [0.0, 0.0]])),
+        "missing": lambda: tmp_path / "nothing",
+    }[case]()
+    out = tmp_path / "camera.json"
+    res = runner.invoke(_app(), ["calibrate", "camera", str(src), "-o", str(out)])
+    assert res.exit_code == 1, res.output
+    lines = [ln for ln in res.output.splitlines() if ln.strip()]
+    assert len(lines) == 1 and message in lines[0], res.output
+    assert "Traceback" not in res.output
+    assert not out.exists() and not list(tmp_path.glob(".*camera*"))
+
+
+def test_the_application_camera_page_pictures_the_per_view_residuals(rec, tmp_path):
+    from insitu.ui.model import operations
+
+    folder, _ = rec
+    out = tmp_path / "camera.json"
+    outcome = operations.calibrate("camera", folder, out, lambda done, total: None)
+    cal = load_json_model(out, CameraCalibration)
+    assert outcome.residuals == cal.residuals and len(cal.per_view_rms_px) >= 4
+    pic = outcome.picture
+    assert np.array_equal(pic, cv2.imread(str(out.with_suffix(".png"))))   # as written
+    assert pic.ndim == 3 and pic.shape[2] == 3 and pic.shape[1] >= 500
+    # one bar per view: the bars' colour appears in as many columns of blocks as there are views
+    bar = np.all(pic == (200, 140, 60), axis=2).any(axis=0)
+    starts = np.flatnonzero(bar[1:] & ~bar[:-1])
+    assert len(starts) == len(cal.per_view_rms_px)

@@ -1,0 +1,199 @@
+"""The GUI's Qt-free parts: camera maths, undo history, project file, scene data, and the
+command that starts without Qt."""
+
+import json
+import shutil
+
+import numpy as np
+import pytest
+
+from insitu.errors import FormatError
+from insitu.formats.pointcloud import PointCloud
+from insitu.formats.project import Project, RigChoice, ScanSettings, read_project, write_project
+from insitu.marking import PROJECTIONS, Placement
+from insitu.services.project import save_project
+from insitu.ui.model import scene_data as sd
+from insitu.ui.model.orbit_camera import OrbitCamera
+from insitu.ui.model.session import PlacementHistory, Session
+
+
+# -- camera -----------------------------------------------------------------------------
+def test_project_and_ray_are_inverse():
+    cam = OrbitCamera(centre=np.array([5.0, -3.0, 2.0]), distance_mm=200, azimuth_deg=-30,
+                      elevation_deg=40)
+    pts = np.array([[5.0, -3.0, 2.0], [20.0, 10.0, 0.0], [-15.0, 4.0, 12.0]])
+    px = cam.project(pts, 800, 600)
+    assert np.allclose(px[0], [400, 300], atol=1e-6)       # the centre is mid-screen
+    for p, (x, y) in zip(pts, px):
+        hit = cam.pick_plane(x, y, 800, 600, p[2])
+        assert np.allclose(hit, p, atol=1e-6)
+
+
+def test_top_view_has_x_right_and_y_up():
+    cam = OrbitCamera()
+    cam.set_view("top")
+    px = cam.project(np.array([[0, 0, 0], [10, 0, 0], [0, 10, 0]]), 640, 480)
+    assert px[1, 0] > px[0, 0] + 5 and abs(px[1, 1] - px[0, 1]) < 1e-6
+    assert px[2, 1] < px[0, 1] - 5 and abs(px[2, 0] - px[0, 0]) < 1e-6
+
+
+def test_orbit_clamps_pan_moves_zoom_and_frame_fit():
+    cam = OrbitCamera()
+    cam.orbit(10, 500)
+    assert cam.elevation_deg == 90.0
+    cam.set_view("front")
+    c0 = cam.centre.copy()
+    cam.pan(100, 0, 600)                  # drag right: the scene follows, the centre goes −x
+    assert cam.centre[0] < c0[0] and abs(cam.centre[2] - c0[2]) < 1e-9
+    d = cam.distance_mm
+    cam.zoom(0.5)
+    assert cam.distance_mm == pytest.approx(d / 2)
+    cam.set_view("iso")
+    cam.frame((-10, -40, 0), (10, 40, 15))
+    corners = np.array([[x, y, z] for x in (-10, 10) for y in (-40, 40) for z in (0, 15)])
+    px = cam.project(corners, 800, 800)
+    assert (px > 0).all() and (px < 800).all()
+
+
+# -- undo -------------------------------------------------------------------------------
+def test_history_undo_redo_and_merged_drag():
+    h = PlacementHistory()
+    a = Placement("text:\"A\"", (0.0, 0.0), 10.0)
+    h.push((a,))
+    key = object()
+    for x in (1.0, 2.0, 3.0):                       # one drag = one undo step
+        h.push((Placement(a.pattern, (x, 0.0), 10.0),), key)
+    h.push((Placement(a.pattern, (3.0, 0.0), 12.0),))
+    assert h.items[0].width_mm == 12.0
+    h.undo()
+    assert h.items[0].at_mm == (3.0, 0.0) and h.items[0].width_mm == 10.0
+    h.undo()
+    assert h.items == (a,)
+    h.redo()
+    assert h.items[0].at_mm == (3.0, 0.0)
+    h.push(())                                      # a new change drops the redo branch
+    assert not h.can_redo() and h.items == ()
+
+
+def test_session_selection_and_combined_job():
+    s = Session()
+    s.add_placement(Placement("text:\"A\"", (0.0, 0.0), 10.0))
+    s.add_placement(Placement("text:\"B\"", (5.0, 0.0), 10.0))
+    assert s.selected == 1
+    s.update_selected(rotate_deg=30.0)
+    assert s.placements.items[1].rotate_deg == 30.0 and s.placements.items[0].rotate_deg == 0
+    s.placements.undo()
+    s.placements.undo()
+    assert len(s.placements.items) == 1 and s.selected == 0
+    assert s.job() is None                          # not planned yet
+
+
+# -- project file -----------------------------------------------------------------------
+def test_project_round_trip_with_relative_paths(tmp_path):
+    (tmp_path / "calib").mkdir()
+    (tmp_path / "calib" / "height.json").write_text("{}")
+    (tmp_path / "logo.svg").write_text("<svg/>")
+    (tmp_path / "part.cloud.ply").write_text("ply")
+    pr = Project(RigChoice("step-block", 3, 4), tmp_path / "calib" / "height.json",
+                 scan=ScanSettings((-10.0, 10.0, -40.0, 40.0), 0.25, 8.0, speed_mm_s=1500.0),
+                 cloud=tmp_path / "part.cloud.ply",
+                 placements=(Placement(str(tmp_path / "logo.svg"), (1.0, 2.0), 12.0, 15.0,
+                                       "wrap", 0.1, 45.0, True),
+                             Placement('text:"x"', (0.0, 0.0), 5.0)), selected=1)
+    path = tmp_path / "p.insitu.json"
+    write_project(path, pr)
+    raw = json.loads(path.read_text())
+    assert raw["format"] == "insitu-project/1" and raw["schema_version"] == 1
+    assert raw["calibration"]["height"] == "calib/height.json"
+    assert raw["placements"][0]["pattern"] == "logo.svg"
+    back = read_project(path, Placement, PROJECTIONS)
+    assert back.placements == pr.placements and back.scan == pr.scan
+    assert back.rig == pr.rig and back.selected == 1
+    assert back.cloud == tmp_path / "part.cloud.ply"
+    moved = shutil.copytree(tmp_path, tmp_path.parent / f"{tmp_path.name}-moved")
+    assert read_project(moved / "p.insitu.json", Placement, PROJECTIONS).cloud == moved / "part.cloud.ply"
+
+
+@pytest.mark.parametrize("text, expect", [
+    ("{not json", "not valid JSON"),
+    ('{"format": "insitu-job/1", "paths": []}', "format: expected 'insitu-project/1'"),
+    ('{"format": "insitu-project/1", "schema_version": 9}', "schema_version 9"),
+    ('{"format": "insitu-project/1", "schema_version": 1, "placements": '
+     '[{"pattern": "text:\\"a\\"", "at_mm": [0], "width_mm": 5}]}', "placements[0].at_mm"),
+    ('{"format": "insitu-project/1", "schema_version": 1, "cloud": "gone.ply"}',
+     "cloud: gone.ply not found"),
+])
+def test_bad_project_files_give_one_line(tmp_path, text, expect):
+    path = tmp_path / "bad.insitu.json"
+    path.write_text(text)
+    with pytest.raises(FormatError) as e:
+        read_project(path, Placement, PROJECTIONS)
+    assert expect in str(e.value) and str(path) in str(e.value)
+    assert "\n" not in str(e.value)
+
+
+def test_save_writes_cloud_job_then_project(tmp_path):
+    pts = np.random.default_rng(0).uniform(-5, 5, (200, 3))
+    path = tmp_path / "s.insitu.json"
+    written = save_project(path, Project(), PointCloud(pts), None)
+    assert written.cloud == tmp_path / "s.cloud.ply" and written.cloud.exists()
+    assert read_project(path, Placement, PROJECTIONS).cloud == written.cloud
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["s.cloud.ply", "s.insitu.json"]
+
+
+# -- scene data -------------------------------------------------------------------------
+def test_height_colours_run_blue_to_red():
+    c = sd.height_colours(np.array([0.0, 7.5, 15.0, 99.0]), (0.0, 15.0))
+    assert c.dtype == np.float32 and c.shape == (4, 3)
+    assert c[0, 2] > c[0, 0] and c[2, 0] > c[2, 2]          # low blue, high red
+    assert np.allclose(c[2], c[3])                          # clipped above the range
+
+
+def test_handles_rotate_and_scale_drags():
+    p = Placement('text:"AB"', (10.0, 5.0), 20.0, 0.0)
+    h = sd.handles(p)
+    assert np.allclose(h.centre, (10, 5))
+    assert h.rotate[1] > h.corners[:, 1].max()              # above the top edge
+    assert sd.rotate_to(p, (0.0, 5.0)) == pytest.approx(90.0)   # handle to the left: +90°
+    assert sd.scale_to(p, 20.0, h.scale, h.centre + 2 * (h.scale - h.centre)) == pytest.approx(40.0)
+    turned = sd.handles(Placement(p.pattern, p.at_mm, 20.0, 90.0))
+    assert turned.rotate[0] < 10.0 - 1
+
+
+def test_segments_pairs_vertices():
+    v = sd.segments([np.array([[0, 0], [1, 0], [1, 1]])], z=2.0, closed=True)
+    assert v.shape == (6, 3) and np.all(v[:, 2] == 2.0)
+    assert np.allclose(v[-1], [0, 0, 2])
+
+
+# -- the command ------------------------------------------------------------------------
+def test_the_cli_starts_without_qt_and_offers_gui():
+    import subprocess
+    import sys
+
+    code = ("import sys; from typer.testing import CliRunner; import insitu.cli.main as m; "
+            "assert not [k for k in sys.modules if k.startswith(('PySide6', 'OpenGL'))]; "
+            "r = CliRunner().invoke(m.app, ['gui', '--help']); print(r.output); "
+            "r = CliRunner().invoke(m.app, ['gui', 'nowhere.insitu.json']); "
+            "print(r.exit_code, r.output)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         timeout=60)
+    assert out.returncode == 0, out.stderr
+    assert "Open the operator's application" in out.stdout
+    assert "1 error: nowhere.insitu.json: project file not found" in " ".join(out.stdout.split())
+
+
+def test_the_gui_command_without_the_gui_packages_names_the_fix():
+    import subprocess
+    import sys
+
+    code = ("import sys; sys.modules['PySide6'] = None; from typer.testing import CliRunner; "
+            "import insitu.cli.main as m; r = CliRunner().invoke(m.app, ['gui']); "
+            "print(r.exit_code, r.output)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         timeout=60)
+    assert out.returncode == 0, out.stderr
+    lines = out.stdout.split("\n")
+    assert lines[0] == ("1 error: the GUI needs PySide6 and PyOpenGL (PySide6 is not "
+                        "installed): pip install 'insitu[gui]'"), out.stdout
+    assert "Traceback" not in out.stdout and not "".join(lines[1:]).strip()

@@ -1,0 +1,131 @@
+"""Height calibration (Li et al. §2.2 and ours) on the committed recordings."""
+
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+from typer.testing import CliRunner
+
+from insitu.cli.main import app
+from insitu.errors import CalibrationError, MeasurementError
+from insitu.formats.pointcloud import read_ply
+from insitu.measure.heightcal import LineObservation, PaperHeightModel, SheetHeightModel
+from insitu.rig.files import HeightCalibration, load_json_model
+from insitu.services import calibrate_height, scan_replay
+from insitu.sim.workpieces import make_workpiece
+
+DATA = Path(__file__).parents[1] / "data"
+runner = CliRunner()
+
+
+@pytest.fixture(scope="module")
+def cal():
+    return calibrate_height(DATA / "height-cal-b4")
+
+
+def _step_height_errors(cloud):
+    part = make_workpiece("step-block")
+    p = cloud.points
+    errs = []
+    for y0, y1 in ((-40, -20), (-20, 0), (0, 20), (20, 40)):
+        sel = (np.abs(p[:, 0]) < 8) & (p[:, 1] > y0 + 2) & (p[:, 1] < y1 - 2)
+        errs.append(np.mean(p[sel, 2] - part.height(p[sel, 0], p[sel, 1])))
+    return np.array(errs)
+
+
+def test_calibration_has_both_models_and_residuals(cal):
+    assert cal.model == "sheet" and cal.paper is not None
+    r = cal.residuals
+    assert r["sheet_rms_mm"] < r["paper_rms_mm"]          # ours fits the plate better
+    assert 0 < r["sheet_cv_rms_mm"] < 0.3                 # binning 4: coarse pixels
+    assert "7 heights" in cal.notes and "13 offsets" in cal.notes
+
+
+def test_method2_beats_method1_on_the_step_block(cal):
+    plane = _step_height_errors(scan_replay(DATA / "scan-step-block-b4").cloud)
+    ours = _step_height_errors(scan_replay(DATA / "scan-step-block-b4", cal).cloud)
+    paper = _step_height_errors(scan_replay(DATA / "scan-step-block-b4", cal, "paper").cloud)
+    assert np.max(np.abs(ours)) < 0.05, ours
+    assert np.max(np.abs(paper)) < 0.2, paper            # the paper: within ±0.2 mm
+    assert np.max(np.abs(plane)) > 2 * np.max(np.abs(ours))
+
+
+def test_sheet_model_recovers_a_synthetic_distorted_sheet():
+    """Observations made from a known curved sheet family are fitted and inverted exactly."""
+    from insitu.sim.rig import default_rig
+    cam = default_rig(seed=1, binning=4).operator.camera
+    H = 350.0
+
+    def true_x(x, Y, Z):          # pivot model plus a smooth bend, like a distorted field
+        return x * (H - Z) / H + 0.3 * (Y / 60) ** 2 + 0.002 * x * Z / 10 + 0.1 * x / 30
+
+    obs = []
+    for z in (-15.0, -5.0, 5.0, 15.0):
+        for x in np.arange(-30.0, 31.0, 10.0):
+            Y = np.linspace(-45, 45, 200)
+            pts = np.column_stack([true_x(x, Y, z), Y, np.full_like(Y, z)])
+            uv = cam.project(pts)
+            obs.append(LineObservation(x, z, uv[:, 0], uv[:, 1]))
+    model = SheetHeightModel.fit(obs, cam, H)
+    Y = np.linspace(-40, 40, 50)
+    pts = np.column_stack([true_x(12.5, Y, 7.0), Y, np.full_like(Y, 7.0)])
+    uv = cam.project(pts)
+    np.testing.assert_allclose(model.points(cam, 12.5, uv[:, 0], uv[:, 1]), pts, atol=2e-3)
+    restored = SheetHeightModel.from_dict(model.to_dict())
+    np.testing.assert_allclose(restored.points(cam, 12.5, uv[:, 0], uv[:, 1]), pts, atol=2e-3)
+
+
+def test_paper_model_needs_the_reference_line():
+    obs = [LineObservation(5.0, 0.0, np.arange(10.0), np.arange(10.0))]
+    with pytest.raises(CalibrationError, match="reference line"):
+        PaperHeightModel.fit(obs)
+
+
+def test_cli_calibrate_then_scan_with_the_file(tmp_path):
+    hjson = tmp_path / "height.json"
+    res = runner.invoke(app, ["calibrate", "height", str(DATA / "height-cal-b4"), "-o", str(hjson)])
+    assert res.exit_code == 0, res.output
+    cal = load_json_model(hjson, HeightCalibration)
+    assert cal.residuals["sheet_rms_mm"] > 0 and cal.centres.method == "steger"
+    # the residual grid: one cell per plate height × line offset, its RMS consistent with the
+    # overall one, and drawn beside the file
+    g = cal.residual_grid
+    rms = np.array([[np.nan if v is None else v for v in row] for row in g.rms_mm])
+    assert rms.shape == (len(g.heights_mm), len(g.offsets_mm)) and len(g.heights_mm) >= 3
+    assert np.nanmin(rms) > 0 and np.nanmax(rms) <= cal.residuals["sheet_max_mm"]
+    assert np.nanmax(rms) >= cal.residuals["sheet_rms_mm"] * 0.9
+    picture = cv2.imread(str(hjson.with_suffix(".png")))
+    assert picture is not None and picture.shape[1] >= 500
+    out = tmp_path / "c.ply"
+    res = runner.invoke(app, ["scan", "--replay", str(DATA / "scan-step-block-b4"),
+                              "--height-cal", str(hjson), "-o", str(out)])
+    assert res.exit_code == 0, res.output
+    assert "height (sheet)" in res.output
+    assert np.max(np.abs(_step_height_errors(read_ply(out)))) < 0.05
+    # the recorded folder works as HCAL too, and --method plane ignores it
+    res = runner.invoke(app, ["scan", "--replay", str(DATA / "scan-step-block-b4"), "--height-cal",
+                              str(DATA / "height-cal-b4"), "--method", "plane", "-o", str(out)])
+    assert res.exit_code == 0 and "plane" in res.output
+
+
+def test_height_calibration_from_another_rig_is_refused(tmp_path):
+    res = runner.invoke(app, ["scan", "--replay", str(DATA / "scan-step-block-full"),
+                              "--height-cal", str(DATA / "height-cal-b4"), "-o", str(tmp_path / "c.ply")])
+    assert res.exit_code == 1
+    assert "another rig" in res.output and "612×512" in res.output
+    assert not (tmp_path / "c.ply").exists()
+
+
+def test_heights_outside_the_calibration_are_refused(cal):
+    narrow = cal.model_copy(deep=True)
+    narrow.sheet.z_range_mm = [-15.0, 5.0]       # as if the plate had only gone up to 5 mm
+    with pytest.raises(MeasurementError, match="outside the height calibration"):
+        scan_replay(DATA / "scan-step-block-b4", narrow)
+
+
+def test_wrong_sequence_kind(tmp_path):
+    res = runner.invoke(app, ["calibrate", "height", str(DATA / "scan-step-block-b4"),
+                              "-o", str(tmp_path / "h.json")])
+    assert res.exit_code == 1 and "not a height calibration" in res.output
+    assert not (tmp_path / "h.json").exists()

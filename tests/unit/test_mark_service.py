@@ -1,0 +1,87 @@
+"""The marking service that the commands and the GUI share: every placement planned (a
+refusal kept with its place), cancelling before the next command with the laser off, and
+marking on the station with its progress file and the image of the part."""
+
+import threading
+
+import numpy as np
+import pytest
+
+from insitu.devices.galvo import RecordingController
+from insitu.formats.pointcloud import PointCloud
+from insitu.geometry.beams import TwoMirrorHead
+from insitu.marking import GalvoDriver, make_job, progress_path_for, read_progress, write_job
+from insitu.services import Cancelled
+from insitu.marking import Placement
+from insitu.services.mark import mark, mark_on_station, plan_all
+from insitu.services.station import connect
+
+HEAD = TwoMirrorHead(350.0, 12.0)
+
+
+def paths_job(n=4):
+    return make_job([np.array([[x, -3.0, 0.5], [x, 3.0, 0.5], [x + 0.5, 3.0, 0.5]])
+                     for x in np.linspace(-10, 10, n)])
+
+
+class CancelAfter(RecordingController):
+    """Sets ``cancel`` once it has executed ``n`` commands."""
+
+    def __init__(self, n: int, cancel: threading.Event):
+        super().__init__()
+        self.n, self.cancel = n, cancel
+
+    def execute(self, commands):
+        super().execute(commands)
+        if len(self.commands) >= self.n:
+            self.cancel.set()
+
+
+def test_each_placement_is_planned_and_a_refusal_kept_where_it_is(tmp_path):
+    with connect(binning=4) as station:
+        xs, ys = np.meshgrid(np.linspace(80, 120, 60), np.linspace(-10, 10, 30))
+        cloud = PointCloud(np.c_[xs.ravel(), ys.ravel(), np.zeros(xs.size)])
+        out = plan_all(cloud, [Placement('text:"A"', (99.0, 0.0), 8.0),
+                               Placement(str(tmp_path / "gone.svg"), (90.0, 0.0), 4.0),
+                               Placement('text:"A"', (90.0, 0.0), 4.0)], station.driver)
+    assert out[0].plan is None and "outside the scan field" in out[0].error
+    assert out[0].where is not None and out[0].where[0] > 100.0
+    assert out[1].plan is None and out[1].where is None and "gone.svg" in out[1].error
+    assert out[2].error is None and len(out[2].plan.job.paths) > 0
+
+
+def test_cancel_within_a_path_stops_before_the_next_command_with_the_laser_off(tmp_path):
+    job, cancel = paths_job(), threading.Event()
+    lists = GalvoDriver(HEAD).compile(job)
+    cut = sum(map(len, lists[:2])) + 3                 # inside path 2, the laser on
+    controller = CancelAfter(cut, cancel)
+    write_job(tmp_path / "job.json", job)
+    ppath = progress_path_for(tmp_path / "job.json")
+    with pytest.raises(Cancelled):
+        mark(job, GalvoDriver(HEAD), controller, ppath, cancel=cancel)
+    assert len(controller.commands) == cut and controller.commands == sum(lists, [])[:cut]
+    assert not controller.laser_is_on and controller.off_calls >= 1
+    rec = read_progress(ppath)
+    assert rec["state"] == "interrupted" and rec["completed"] == 2   # path 2 not completed
+
+
+def test_cancel_between_paths_ends_the_run_cancelled(tmp_path):
+    job, cancel = paths_job(), threading.Event()
+    lists = GalvoDriver(HEAD).compile(job)
+    controller = CancelAfter(len(lists[0]), cancel)
+    result = mark(job, GalvoDriver(HEAD), controller, tmp_path / "p.json", cancel=cancel)
+    assert (result.state, result.completed) == ("cancelled", 1)
+    assert controller.commands == lists[0] and not controller.laser_is_on
+
+
+def test_mark_on_the_station_records_progress_and_images_the_part(tmp_path):
+    job = make_job([np.array([[-2.0, 30.0, 5.0], [2.0, 30.0, 5.0]])])
+    job_path, png = tmp_path / "j.json", tmp_path / "inspect.png"
+    write_job(job_path, job)
+    with connect(binning=4) as station:
+        run = mark_on_station(station, job, job_path, inspect=png)
+        quiet = mark_on_station(station, job, None)
+    assert run.result.state == "done" and run.progress_path == progress_path_for(job_path)
+    assert read_progress(run.progress_path)["state"] == "done"
+    assert run.image is not None and run.image.ndim == 2 and png.stat().st_size > 0
+    assert quiet.progress_path is None and quiet.image is None and quiet.result.completed == 1

@@ -1,0 +1,455 @@
+"""Patterns: every source (sample files and known geometry), transforms, hatching, ordering,
+simplification, and one-line FormatErrors for every kind of bad input."""
+
+from __future__ import annotations
+
+import math
+import tempfile
+from pathlib import Path
+
+import cv2
+import ezdxf
+import numpy as np
+import pytest
+import segno
+import shapely
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from insitu.errors import FormatError
+from insitu.patterns import (Pattern, fiducial_centres, fiducial_grid, hatch, jump_length,
+                             load_image, load_pattern, order_paths, qr_pattern, simplify,
+                             text_pattern, to_svg)
+from insitu.patterns.fill import offset
+from insitu.patterns.model import normalised, region
+from insitu.patterns.order import order_units
+
+SAMPLES = Path(__file__).resolve().parents[2] / "patterns"
+SQUARE = Pattern((np.array([[0, 0], [10, 0], [10, 10], [0, 10]], float),), (), "square")
+
+
+def _svg(tmp_path, body, size='width="50mm" height="50mm" viewBox="0 0 50 50"', name="t.svg"):
+    p = tmp_path / name
+    p.write_text(f'<svg xmlns="http://www.w3.org/2000/svg" {size}>{body}</svg>')
+    return p
+
+
+def _one_line(e: pytest.ExceptionInfo) -> str:
+    msg = str(e.value)
+    assert msg and "\n" not in msg
+    return msg
+
+
+def _filled(p: Pattern, x, y) -> bool:
+    return p.to_shapely().contains(shapely.Point(x, y))
+
+
+def _square_with_hole():
+    hole = np.column_stack([5 + 2 * np.cos(np.linspace(0, 2 * np.pi, 64, endpoint=False)),
+                            5 + 2 * np.sin(np.linspace(0, 2 * np.pi, 64, endpoint=False))])
+    return Pattern((SQUARE.contours[0], hole), (), "holed")
+
+
+# --- sources -----------------------------------------------------------------------------------
+
+def test_logo_svg_fills_holes_knockout_and_stroke():
+    p = load_pattern(str(SAMPLES / "logo.svg"))
+    assert len(p.paths) == 1 and len(p.contours) >= 4        # the wave is a stroke
+    assert _filled(p, 16, 10) and not _filled(p, 10, 10)     # ring, even-odd hole
+    assert _filled(p, 24, 10)                                # the turned square
+    assert _filled(p, 32, 4) and not _filled(p, 34, 7)       # triangle, white knock-out dot
+    sq = [c for c in p.contours if np.allclose(shapely.Polygon(c).centroid.coords[0], (24, 10))]
+    assert len(sq) == 1 and shapely.Polygon(sq[0]).area == pytest.approx(36, rel=1e-9)
+
+
+def test_svg_rect_exact_bounds_in_mm(tmp_path):
+    p = load_pattern(str(_svg(tmp_path, '<rect x="5" y="10" width="10" height="20"/>')))
+    assert p.bounds() == pytest.approx((5, 20, 15, 40), abs=1e-9)   # y flipped, page 50 mm
+    # user units without a width: px = 1/96 in
+    q = load_pattern(str(_svg(tmp_path, '<rect width="96" height="48"/>', size="")))
+    assert q.size == pytest.approx((25.4, 12.7), abs=1e-9)
+    # viewBox scaling: 100 user units across 20 mm
+    r = load_pattern(str(_svg(tmp_path, '<rect width="50" height="50"/>',
+                              'width="20mm" height="20mm" viewBox="0 0 100 100"')))
+    assert r.size == pytest.approx((10, 10), abs=1e-9)
+
+
+def test_svg_transforms_and_fill_rules(tmp_path):
+    p = load_pattern(str(_svg(tmp_path, '<g transform="translate(25 25) rotate(30) scale(2)">'
+                                        '<rect x="-2" y="-1" width="4" height="2"/></g>')))
+    assert p.to_shapely().area == pytest.approx(32, rel=1e-9)
+    assert p.centre == pytest.approx((25, 25), abs=1e-9)
+    d = "M0 0 H20 V20 H0 Z M5 5 H15 V15 H5 Z"  # both squares clockwise on screen
+    nz = load_pattern(str(_svg(tmp_path, f'<path d="{d}"/>')))
+    eo = load_pattern(str(_svg(tmp_path, f'<path fill-rule="evenodd" d="{d}"/>')))
+    assert nz.to_shapely().area == pytest.approx(400) and len(nz.contours) == 1
+    assert eo.to_shapely().area == pytest.approx(300) and len(eo.contours) == 2
+    s = load_pattern(str(_svg(tmp_path, '<circle cx="10" cy="10" r="5" fill="none" '
+                                        'stroke="black"/>')))
+    assert not s.contours and len(s.paths) == 1
+    assert np.allclose(s.paths[0][0], s.paths[0][-1])        # a closed line, not a fill
+    assert np.hypot(*(s.paths[0] - (10, 40)).T) == pytest.approx(5, abs=0.003)
+
+
+def test_part_dxf_outline_chain_circle_hole_area():
+    p = load_pattern(str(SAMPLES / "part.dxf"))
+    assert len(p.contours) == 3 and not p.paths    # lines+arc+spline chained, hole, window
+    assert p.bounds()[0] == pytest.approx(0) and p.bounds()[2] == pytest.approx(60)
+    hole = [c for c in p.contours if np.allclose(c.mean(axis=0), (20, 20), atol=1e-3)]
+    assert len(hole) == 1
+    assert shapely.Polygon(hole[0]).area == pytest.approx(math.pi * 25, rel=1e-3)
+    assert not _filled(p, 20, 20) and not _filled(p, 44, 20) and _filled(p, 5, 5)
+
+
+def test_dxf_units_text_and_open_paths(tmp_path):
+    doc = ezdxf.new(units=ezdxf.units.IN)
+    msp = doc.modelspace()
+    msp.add_line((0, 0), (1, 0))
+    msp.add_arc((0, 0), 1, 10, 80)
+    msp.add_text("AB", height=0.5).set_placement((0, 2))
+    doc.saveas(tmp_path / "in.dxf")
+    p = load_pattern(str(tmp_path / "in.dxf"))
+    assert len(p.paths) == 2 and len(p.contours) >= 3        # A has a hole, B two
+    line = [q for q in p.paths if len(q) == 2][0]
+    assert np.linalg.norm(line[1] - line[0]) == pytest.approx(25.4, rel=1e-9)
+    assert p.bounds()[3] == pytest.approx(2 * 25.4 + 0.5 * 25.4, rel=0.05)
+
+
+def test_qr_png_sample_has_exact_modules():
+    p = load_pattern(str(SAMPLES / "qr.png"))               # 10 px/module at 254 dpi
+    m = np.array([list(r) for r in segno.make_qr("https://example.com/insitu",
+                                                 error="m").matrix]) & 1
+    assert p.size == pytest.approx((len(m) + 8,) * 2)       # 1 mm modules + quiet zone
+    assert p.to_shapely().area == pytest.approx(m.sum(), rel=1e-12)
+
+
+@pytest.mark.parametrize("ec", ["L", "M", "Q", "H"])
+def test_qr_spec_modules_quiet_zone_and_error_level(ec):
+    p = load_pattern(f'qr:"insitu 0042";ec={ec};quiet=2;module=0.5')
+    m = np.array([list(r) for r in segno.make_qr("insitu 0042", error=ec.lower(),
+                                                 boost_error=False).matrix]) & 1
+    n = len(m) + 4
+    assert p.bounds() == pytest.approx((0, 0, n * 0.5, n * 0.5))
+    assert p.to_shapely().area == pytest.approx(m.sum() * 0.25, rel=1e-12)
+    coords = np.concatenate(p.contours) / 0.5
+    assert np.allclose(coords, np.round(coords), atol=1e-12)   # corners on the module grid
+    inv = load_pattern(f'qr:insitu 0042;ec={ec};quiet=2;invert=1;module=0.5')
+    assert inv.to_shapely().area == pytest.approx((n * n - m.sum()) * 0.25, rel=1e-12)
+
+
+def test_qr_error_level_and_placement_keeps_quiet_zone():
+    low, high = qr_pattern("x" * 40, "L"), qr_pattern("x" * 40, "H")
+    assert high.size[0] > low.size[0]
+    placed = qr_pattern("abc", quiet_zone=4).placed((0, 0), 30)
+    assert placed.size == pytest.approx((30, 30))
+    assert shapely.box(-15 + 30 * 4 / 29, -15 + 30 * 4 / 29, 15 - 30 * 4 / 29,
+                       15 - 30 * 4 / 29).contains(placed.to_shapely())
+
+
+def test_text_outlines_and_size():
+    p = load_pattern('text:"HELLO"')
+    assert len(p.contours) == 6 and not p.paths              # the O has a counter
+    assert p.size[1] == pytest.approx(7.29, rel=0.05)        # DejaVu caps: 0.729 em
+    assert text_pattern("HELL").size[1] == pytest.approx(7.29, rel=1e-3)
+    o = text_pattern("O", size_mm=20)
+    assert len(o.contours) == 2 and not _filled(o, *o.centre)   # the counter is a hole
+    serif = load_pattern("text:HELLO;font=DejaVu Serif Bold;size=10")
+    assert serif.size != pytest.approx(p.size)
+    path = load_pattern("text:Hi;font=/usr/share/fonts/truetype/dejavu/DejaVuSansMono.ttf")
+    assert path.size[1] > 5
+    two = text_pattern("A\nB")
+    assert two.size[1] > 15
+
+
+def test_fiducial_grid_centres_and_sample():
+    g = fiducial_grid(3, 4, pitch_mm=5, diameter_mm=1)
+    cents = np.array([c.mean(axis=0) for c in g.contours])
+    assert np.allclose(cents, fiducial_centres(3, 4, 5), atol=1e-9)
+    assert all(shapely.Polygon(c).area == pytest.approx(math.pi / 4, rel=1e-3)
+               for c in g.contours)
+    rings = fiducial_grid(2, 2, filled=False)
+    assert not rings.contours and len(rings.paths) == 4
+    s = load_pattern(str(SAMPLES / "fiducials.svg"))
+    assert len(s.contours) == 25 and s.size == pytest.approx((21, 21), abs=1e-9)
+
+
+def test_raster_modes_and_scale(tmp_path):
+    img = np.full((20, 40), 255, np.uint8)
+    img[5:10, 10:30] = 0                                      # a 20 × 5 px black bar
+    img[12:18, 0:40] = 128                                    # a gray band
+    cv2.imwrite(str(tmp_path / "a.png"), img)
+    fill = load_image(tmp_path / "a.png", width_mm=40)       # 1 mm pixels
+    assert fill.to_shapely().area == pytest.approx(100)
+    assert fill.bounds() == pytest.approx((0, 0, 40, 20))     # the frame: the whole image
+    assert _filled(fill, 20, 12.5) and not _filled(fill, 20, 5)   # row 5..10 → y 10..15
+    lines = load_pattern(f"{tmp_path / 'a.png'};mode=threshold;dpi=25.4")
+    assert len(lines.paths) == 5 and all(len(q) == 2 for q in lines.paths)
+    assert {round(abs(q[1, 0] - q[0, 0]), 9) for q in lines.paths} == {20.0}
+    dots = load_image(tmp_path / "a.png", dpi=25.4, mode="dither")
+    lit = sum(abs(q[1, 0] - q[0, 0]) for q in dots.paths)
+    assert 100 + 0.4 * 240 < lit < 100 + 0.6 * 240            # ~half the gray band
+    assert load_image(tmp_path / "a.png", dpi=25.4, invert=True).to_shapely().area == \
+        pytest.approx(800 - 100)                              # gray 128 is just light
+
+
+# --- model and transforms ---------------------------------------------------------------------
+
+def test_pattern_is_frozen_clean_and_transforms():
+    p = Pattern(([[0, 0], [4, 0], [4, 2], [0, 2], [0, 0]],), ([[1, 1]], [[0, 5], [1, 5]]), "r")
+    assert len(p.contours[0]) == 4 and len(p.paths) == 1    # closing point, 1-point path gone
+    assert not p.contours[0].flags.writeable
+    with pytest.raises(AttributeError):
+        p.name = "x"
+    assert p.bounds() == (0, 0, 4, 5) and p.size == (4, 5) and p.centre == (2, 2.5)
+    r = p.transformed(rotate_deg=90)
+    assert r.size == pytest.approx((5, 4)) and r.centre == pytest.approx((2, 2.5))
+    m = p.transformed(mirror_x=True)
+    assert m.bounds() == pytest.approx(p.bounds()) and m.paths[0][0, 0] == pytest.approx(4)
+    t = p.transformed(translate=(1, -1), scale=2)
+    assert t.centre == pytest.approx((3, 1.5)) and t.size == pytest.approx((8, 10))
+
+
+@pytest.mark.parametrize("spec", ["logo.svg", "part.dxf", "qr.png", 'text:"Ag 42"',
+                                  "qr:hello"])
+def test_placed_centre_and_width_exact(spec):
+    p = load_pattern(str(SAMPLES / spec) if "." in spec else spec)
+    q = p.placed((12.5, -7.25), 33.3)
+    assert q.centre == pytest.approx((12.5, -7.25), abs=1e-9)
+    assert q.size[0] == pytest.approx(33.3, abs=1e-9)
+    assert q.size[1] == pytest.approx(p.size[1] * 33.3 / p.size[0], abs=1e-9)
+    r = p.placed((1, 2), 20, rotate_deg=90)                  # rotated about the placed centre
+    assert r.centre == pytest.approx((1, 2), abs=1e-9)
+    assert r.size[1] == pytest.approx(20, abs=1e-9)
+
+
+def test_empty_pattern_errors():
+    e = Pattern((), (), "nothing")
+    assert e.is_empty
+    with pytest.raises(FormatError, match="empty") as info:
+        e.bounds()
+    _one_line(info)
+    with pytest.raises(FormatError, match="empty"):
+        hatch(e, 0.1)
+    with pytest.raises(FormatError):
+        Pattern(((0, 0), (0, 1)), (((0, 0), (0, 1)),)).placed((0, 0), 10)   # zero width
+
+
+def test_regions_and_svg_round_trip(tmp_path):
+    star = np.array([[math.cos(a), math.sin(a)] for a in
+                     np.radians(90 + 144 * np.arange(5))]) * 10   # self-crossing pentagram
+    assert region([star], "nonzero").area > region([star], "evenodd").area
+    assert region(normalised([star], "nonzero"), "evenodd").area == \
+        pytest.approx(region([star], "nonzero").area)
+    p = _square_with_hole()
+    f = tmp_path / "h.svg"
+    f.write_text(to_svg(p))
+    assert load_pattern(str(f)).to_shapely().area == pytest.approx(p.to_shapely().area)
+
+
+# --- hatching ---------------------------------------------------------------------------------
+
+def _segments(polys):
+    return [q for q in polys if len(q) == 2 and not np.allclose(q[0], q[-1])]
+
+
+@pytest.mark.parametrize("angle", [0.0, 30.0, 90.0, -61.0])
+@pytest.mark.parametrize("spacing", [0.04, 0.12, 0.5])
+def test_hatch_spacing_exact(angle, spacing):
+    p = load_pattern("text:S8").placed((0, 0), 12)
+    segs = _segments(hatch(p, spacing, angle_deg=angle, outline=False))
+    a = math.radians(angle)
+    d = np.array([math.cos(a), math.sin(a)])
+    nrm = np.array([-math.sin(a), math.cos(a)])
+    for s in segs:                                             # along the hatch angle
+        v = s[1] - s[0]
+        assert abs(v @ nrm) < 1e-9 * max(1, np.linalg.norm(v)) and abs(v @ d) > 0
+    offs = np.unique(np.round(np.array([s[0] @ nrm for s in segs]) / spacing, 6))
+    steps = np.diff(offs)
+    assert np.allclose(steps, np.round(steps), atol=1e-6)    # on the grid of lines
+    assert np.all(np.round(steps) >= 1)
+    y = np.array(sorted({round(float(s[0] @ nrm), 9) for s in segs}))
+    k = np.round((y - y[0]) / spacing)
+    assert np.allclose(y - y[0], k * spacing, atol=1e-9)     # exactly spacing apart
+
+
+def test_hatch_square_line_count_and_centering():
+    segs = _segments(hatch(SQUARE, 0.1, outline=False))
+    ys = np.sort([s[0, 1] for s in segs])
+    assert len(segs) == 100 and ys[0] == pytest.approx(0.05) and ys[-1] == pytest.approx(9.95)
+    assert np.allclose(np.diff(ys), 0.1, atol=1e-12)
+    assert all(abs(s[1, 0] - s[0, 0]) == pytest.approx(10) for s in segs)
+
+
+def test_hatch_inside_cross_doubles_and_hole_unfilled():
+    for p in (load_pattern(str(SAMPLES / "logo.svg")), load_pattern("text:&g@"),
+              _square_with_hole()):
+        geom = p.to_shapely().buffer(1e-9)
+        segs = _segments(hatch(p, 0.1, angle_deg=17, outline=False))
+        assert segs and all(geom.contains(shapely.LineString(s)) for s in segs)
+    holed = _square_with_hole()
+    hole = shapely.Point(5, 5).buffer(2 * math.cos(math.pi / 64) - 1e-6, 256)
+    one = _segments(hatch(holed, 0.2, outline=False))
+    two = _segments(hatch(holed, 0.2, outline=False, cross=True))
+    assert not any(hole.intersects(shapely.LineString(s)) for s in two)
+    assert len(two) == 2 * len(one)
+    assert len(_segments(hatch(SQUARE, 0.1, cross=True, outline=False))) == 200
+
+
+def test_hatch_outline_paths_direction_and_offset():
+    p = Pattern(SQUARE.contours, ([[20, 0], [25, 5]],), "sq+line")
+    out = hatch(p, 0.5)
+    closed = [q for q in out if len(q) > 2 and np.array_equal(q[0], q[-1])]
+    assert len(closed) == 1 and len(closed[0]) == 5
+    assert any(len(q) == 2 and {tuple(q[0]), tuple(q[1])} == {(20, 0), (25, 5)} for q in out)
+    assert not [q for q in hatch(p, 0.5, outline=False) if len(q) > 2]
+    one_way = _segments(hatch(SQUARE, 0.5, outline=False, bidirectional=False))
+    assert all(s[1, 0] > s[0, 0] for s in one_way)
+    both = _segments(hatch(SQUARE, 0.5, outline=False))
+    assert {bool(s[1, 0] > s[0, 0]) for s in both} == {True, False}
+    assert all(np.linalg.norm(both[i + 1][0] - both[i][1]) == pytest.approx(0.5)
+               for i in range(len(both) - 1))                  # one block, back and forth
+    shrunk = hatch(SQUARE, 0.5, offset_mm=-0.5)
+    ring = [q for q in shrunk if len(q) == 5][0]
+    assert ring.min(axis=0) == pytest.approx((0.5, 0.5)) and ring.max(axis=0) == \
+        pytest.approx((9.5, 9.5))
+    assert offset(SQUARE, 1).to_shapely().area == pytest.approx(144)
+
+
+def test_hatch_covers_the_area():
+    p = load_pattern("qr:insitu").placed((0, 0), 30)
+    segs = _segments(hatch(p, 0.04, outline=False))
+    length = sum(np.linalg.norm(s[1] - s[0]) for s in segs)
+    assert length * 0.04 == pytest.approx(p.to_shapely().area, rel=0.01)
+
+
+# --- ordering and simplification ----------------------------------------------------------------
+
+def test_order_paths_cuts_jumps_and_keeps_every_path():
+    rng = np.random.default_rng(3)
+    segs = [rng.uniform(0, 100, (2, 2)) for _ in range(500)]
+    out = order_paths(segs, start=(0, 0))
+    assert jump_length(out) < 0.1 * jump_length(segs)
+    key = lambda s: tuple(sorted(map(tuple, np.round(s, 12))))   # noqa: E731
+    assert sorted(map(key, out)) == sorted(map(key, segs))
+    fixed = order_paths(segs, reversible=False)
+    assert jump_length(fixed) < 0.2 * jump_length(segs)
+    assert {tuple(map(tuple, s)) for s in fixed} == {tuple(map(tuple, s)) for s in segs}
+
+
+def test_two_opt_improves_on_nearest_neighbour():
+    rng = np.random.default_rng(4)
+    segs = [rng.uniform(0, 100, (2, 2)) for _ in range(400)]
+    first, last = np.array([s[0] for s in segs]), np.array([s[1] for s in segs])
+    e, x = np.stack([first, last], 1), np.stack([last, first], 1)
+    sym = np.ones(len(segs), bool)
+
+    def length(order, var):
+        return jump_length([segs[u][::-1] if v else segs[u] for u, v in zip(order, var)])
+
+    assert length(*order_units(e, x, sym)) < 0.95 * length(*order_units(e, x, sym,
+                                                                        improve=False))
+
+
+def test_closed_paths_start_near_and_jump_length():
+    loop = np.array([[10, 10], [11, 10], [11, 11], [10, 11], [10, 10]], float)
+    out = order_paths([loop], start=(11.2, 11.3))
+    assert np.array_equal(out[0][0], (11, 11)) and np.array_equal(out[0][0], out[0][-1])
+    assert jump_length([np.array([[1, 0], [2, 0]]), np.array([[2, 3], [0, 0]])]) == \
+        pytest.approx(1 + 3)
+    assert order_paths([]) == [] and jump_length([]) == 0
+
+
+@pytest.mark.parametrize("tol", [0.001, 0.01, 0.1])
+def test_simplify_error_within_tolerance(tol):
+    rng = np.random.default_rng(5)
+    t = np.linspace(0, 6 * np.pi, 2000)
+    wavy = np.column_stack([t, np.sin(t) * 3 + rng.normal(0, tol / 5, t.size)])
+    out = simplify([wavy], tol)[0]
+    assert len(out) < len(wavy) / 3
+    assert np.array_equal(out[0], wavy[0]) and np.array_equal(out[-1], wavy[-1])
+    line = shapely.LineString(out)
+    err = max(line.distance(shapely.Point(q)) for q in wavy)
+    assert err <= tol + 1e-12
+    og = load_pattern("text:Og").to_shapely()
+    pat = simplify(load_pattern("text:Og"), tol).to_shapely()
+    assert pat.symmetric_difference(og).area < og.length * tol
+    assert pat.hausdorff_distance(og) <= tol + 1e-9
+
+
+# --- bad input -------------------------------------------------------------------------------
+
+@pytest.mark.parametrize("name,data", [
+    ("bad.svg", b"this is not xml at all <<<"),
+    ("bad.svg", b'<svg xmlns="http://www.w3.org/2000/svg"><rect width="'),
+    ("bad.dxf", b"0\nSECTION\n2\nHEADER\nnonsense\n"),
+    ("bad.dxf", b"\x00\x01\x02garbage"),
+    ("bad.png", b"\x89PNG\r\n\x1a\n garbage"),
+    ("empty.svg", b'<svg xmlns="http://www.w3.org/2000/svg" width="10mm" height="10mm"/>'),
+])
+def test_garbage_files_raise_one_line_format_error(tmp_path, name, data):
+    f = tmp_path / name
+    f.write_bytes(data)
+    with pytest.raises(FormatError) as info:
+        load_pattern(str(f))
+    assert name in _one_line(info)
+
+
+def test_empty_dxf_white_image_and_missing_things(tmp_path):
+    ezdxf.new().saveas(tmp_path / "empty.dxf")
+    with pytest.raises(FormatError, match="empty") as info:
+        load_pattern(str(tmp_path / "empty.dxf"))
+    _one_line(info)
+    cv2.imwrite(str(tmp_path / "white.png"), np.full((8, 8), 255, np.uint8))
+    with pytest.raises(FormatError, match="white.png.*empty"):
+        load_pattern(str(tmp_path / "white.png"))
+    for spec, match in [(str(tmp_path / "nope.svg"), "nope.svg: no such"),
+                        (str(tmp_path / "nope.txt"), "no such"),
+                        ('text:"hi";font=No Such Font Family', "No Such Font Family"),
+                        ('text:"hi";font=/nowhere/x.ttf', "x.ttf"),
+                        ('text:""', "empty"), ('qr:""', "empty"),
+                        ('qr:"x";ec=Z', "L, M, Q, H"), ("qr:x;colour=red", "unknown option"),
+                        ("text:x;size=big", "size"), ("fiducials:lots", "ROWSxCOLS"),
+                        ("text:\u4e00", "no glyph"), ("", "empty")]:
+        with pytest.raises(FormatError, match=match) as info:
+            load_pattern(spec)
+        _one_line(info)
+    with pytest.raises(FormatError, match="not installed") as info:
+        text_pattern("hi", font="Nonexistent Sans")
+    _one_line(info)
+
+
+@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(data=st.binary(max_size=400), suffix=st.sampled_from([".svg", ".dxf", ".png"]),
+       prefix=st.sampled_from([b"", b"<svg xmlns='http://www.w3.org/2000/svg'>",
+                               b"0\nSECTION\n2\nENTITIES\n0\n"]))
+def test_random_bytes_only_ever_raise_format_error(data, suffix, prefix):
+    with tempfile.TemporaryDirectory() as d:
+        f = Path(d) / f"random{suffix}"
+        f.write_bytes(prefix + data)
+        try:
+            p = load_pattern(str(f))
+        except FormatError as e:
+            assert "\n" not in str(e) and f.name in str(e)
+        else:
+            assert not p.is_empty
+
+
+def test_dxf_entity_of_absurd_size_is_refused_quickly(tmp_path):
+    import time
+
+    import ezdxf
+    doc = ezdxf.new()
+    doc.modelspace().add_circle((0, 0), 1e300)
+    doc.saveas(tmp_path / "huge.dxf")
+    t = time.perf_counter()
+    with pytest.raises(FormatError, match=r"huge\.dxf: a CIRCLE entity reaches beyond ±100000 mm"):
+        load_pattern(tmp_path / "huge.dxf")
+    assert time.perf_counter() - t < 2.0
+
+
+def test_svg_shape_of_absurd_size_is_refused(tmp_path):
+    (tmp_path / "huge.svg").write_text(
+        '<svg xmlns="http://www.w3.org/2000/svg" width="10mm" height="10mm" viewBox="0 0 10 10">'
+        '<rect x="0" y="0" width="1e300" height="5" fill="black"/></svg>')
+    with pytest.raises(FormatError, match=r"huge\.svg: a <rect> reaches beyond ±100000 mm"):
+        load_pattern(tmp_path / "huge.svg")
