@@ -69,7 +69,9 @@ def scan(
     s = result.summary
     table = Table(title=f"scan → {out}", show_header=False)
     table.add_row("method", s.method)
-    table.add_row("points", f"{s.points:,} ({s.outliers_removed:,} outliers removed)")
+    table.add_row("points", f"{s.points:,} ({s.outliers_removed:,} isolated and "
+                            f"{s.unconfirmed_removed:,} unconfirmed by the neighbouring lines "
+                            "removed)")
     table.add_row("lines with points", f"{s.frames_with_line} of {s.frames} ({s.coverage:.0%})")
     table.add_row("x range, mm", f"{s.bounds_min[0]:.2f} … {s.bounds_max[0]:.2f}")
     table.add_row("y range, mm", f"{s.bounds_min[1]:.2f} … {s.bounds_max[1]:.2f}")

@@ -8,6 +8,7 @@ from scipy.spatial import cKDTree
 from insitu.errors import MeasurementError
 from insitu.formats.pointcloud import PointCloud
 from insitu.geometry.camera import CameraModel
+from insitu.measure.consistency import cross_line_inliers
 from insitu.measure.height_models import HeightModel
 from insitu.measure.heightcal import check_bracket
 from insitu.measure.plane import expected_band, line_runs_along_rows, reconstruct_line
@@ -37,6 +38,7 @@ class ScanReconstructor:
         self.frames = 0
         self.frames_with_line = 0
         self.outliers_removed = 0
+        self.unconfirmed_removed = 0
         self.last_centres = np.zeros((0, 2))
         self.last_points = np.zeros((0, 3))
 
@@ -77,11 +79,13 @@ class ScanReconstructor:
                              np.clip(centres.contrast[ok] / 255.0, 0, 1)))
         return int(ok.sum())
 
-    def cloud(self, outlier_radius_mm: float = 1.5, outlier_neighbours: int = 8) -> PointCloud:
+    def cloud(self, outlier_radius_mm: float = 1.5, outlier_neighbours: int = 8,
+              cross_check: bool = True) -> PointCloud:
         """All points so far, less isolated ones (fewer than ``outlier_neighbours`` others
         within ``outlier_radius_mm``: spurious detections floating off the surface; 0 keeps
-        all). Raises MeasurementError when no frame showed a line or heights leave the
-        calibrated range."""
+        all) and, with ``cross_check``, those the neighbouring lines do not confirm
+        (:mod:`insitu.measure.consistency`; counted in ``unconfirmed_removed``). Raises
+        MeasurementError when no frame showed a line or heights leave the calibrated range."""
         if not self._chunks:
             raise MeasurementError(f"no laser line found in any of {self.frames} frames "
                                    "(laser off, exposure too low, or the part outside the view)")
@@ -90,6 +94,10 @@ class ScanReconstructor:
                 if outlier_neighbours else slice(None))
         pts, line, inten, qual = pts[keep], line[keep], inten[keep], qual[keep]
         self.outliers_removed = int(len(keep) - keep.sum()) if isinstance(keep, np.ndarray) else 0
+        if cross_check:
+            confirmed = cross_line_inliers(pts, line)
+            pts, line, inten, qual = (a[confirmed] for a in (pts, line, inten, qual))
+            self.unconfirmed_removed = int(len(confirmed) - confirmed.sum())
         if self.model is not None:
             check_bracket(self.model, pts[:, 2], "scan")
         return PointCloud(pts, {"intensity": inten, "line": line, "quality": qual})

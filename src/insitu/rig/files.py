@@ -164,6 +164,7 @@ class CentreSettingsSpec(BaseModel):
     smooth_half_window: int = Field(default=7, ge=0, le=50)
     jump_px: Positive = 1.0
     end_fraction: float = Field(default=0.5, ge=0, lt=1)
+    smooth_grains: float = Field(default=0.0, ge=0, le=100)    # 0: files before it: fixed
 
 
 class ResidualGridSpec(BaseModel):

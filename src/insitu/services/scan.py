@@ -35,6 +35,7 @@ class ScanSummary:
     bounds_min: tuple[float, float, float]
     bounds_max: tuple[float, float, float]
     outliers_removed: int = 0
+    unconfirmed_removed: int = 0
 
     @property
     def coverage(self) -> float:
@@ -94,7 +95,7 @@ def _finish(rec: ScanReconstructor, t0: float) -> ScanResult:
     lo, hi = cloud.points.min(axis=0), cloud.points.max(axis=0)
     return ScanResult(cloud, ScanSummary(len(cloud), rec.frames, rec.frames_with_line, rec.method,
                                          time.perf_counter() - t0, tuple(lo), tuple(hi),
-                                         rec.outliers_removed))
+                                         rec.outliers_removed, rec.unconfirmed_removed))
 
 
 def reconstructor(camera: CameraModel, pivot_height_mm: float, telecentric: bool,

@@ -9,7 +9,10 @@ peaks. Common keyword arguments of the methods:
   its contrast ≥ max(min_contrast, snr · noise) — noise and edges of bright areas make none.
 * continuity: where a column has a second valid peak > window rows from the first (ghost,
   secondary reflection), keep the one on the better supported chain of peaks across columns
-  (rows ≤ 4 px apart per column; support = summed contrast); such points are ``ambiguous``.
+  (rows ≤ 4 px apart per column; support = summed contrast), and only when that chain has at
+  least ``decisive`` times the other's support (1.25: well beyond the few per cent by which
+  speckle moves the support of a chain of a few dozen columns): a column that stays ambiguous
+  gives no point rather than a guess. Points kept this way are ``ambiguous``.
 * saturation: gray value counted as saturated (None: the dtype's maximum).
 """
 
@@ -126,7 +129,8 @@ def _stats(pre, row, w):
 
 
 def _continuity(v1, v2, ok1, ok2, weight1, weight2, max_jump):
-    """True where the second candidate belongs to the better supported chain of peaks.
+    """(W,) supports of the chains of peaks the first and the second candidate of each column
+    belong to (0 where a candidate is not valid).
 
     Chains link candidates of columns 1 or 2 apart whose rows differ ≤ max_jump px per column;
     a chain's support is the summed contrast of its members.
@@ -145,11 +149,11 @@ def _continuity(v1, v2, ok1, ok2, weight1, weight2, max_jump):
     graph = coo_matrix((np.ones(len(src)), (src, dst)), shape=(2 * W, 2 * W))
     n, lab = connected_components(graph, directed=False)
     support = np.bincount(lab[OK], weights=Wt[OK], minlength=n)
-    return ok2 & (support[lab[W:]] > support[lab[:W]])
+    return np.where(ok1, support[lab[:W]], 0.0), np.where(ok2, support[lab[W:]], 0.0)
 
 
 def detect(image, median=3, band=None, window=12, min_peak=40.0, min_contrast=20.0,
-            snr=6.0, continuity=True, max_jump=4.0) -> Detection:
+            snr=6.0, continuity=True, max_jump=4.0, decisive=1.25) -> Detection:
     """Peak row per valid column of a line running along the rows (module docstring)."""
     img = as_image(image)
     pre = cv2.medianBlur(img, median) if median and median > 1 else img
@@ -187,7 +191,9 @@ def detect(image, median=3, band=None, window=12, min_peak=40.0, min_contrast=20
         row2, gmax2, bg2, contrast2, ok2 = candidate(np.argmax(search, axis=1))
         ambiguous = ok & ok2
         if ambiguous.any():
-            second = ambiguous & _continuity(row, row2, ok, ok2, contrast, contrast2, max_jump)
+            s1, s2 = _continuity(row, row2, ok, ok2, contrast, contrast2, max_jump)
+            second = ambiguous & (s2 > s1)
+            ok &= ~ambiguous | (np.maximum(s1, s2) >= decisive * np.minimum(s1, s2))
             pairs = ((row, row2), (gmax, gmax2), (bg, bg2), (contrast, contrast2))
             row, gmax, bg, contrast = (np.where(second, b, a) for a, b in pairs)
     cols = np.flatnonzero(ok)

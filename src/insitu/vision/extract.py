@@ -3,7 +3,12 @@ smoothing along the line.
 
 Speckle makes the centre of each column wander by a fraction of a pixel, correlated over a few
 columns; a local quadratic fit over a window of columns averages that out while keeping slopes
-and curvature. The line is cut where it jumps (steps, occlusion), so edges stay sharp."""
+and curvature. The line is cut where it jumps (steps, occlusion), so edges stay sharp.
+
+How far the wander is correlated depends on the rig (the speckle grain in the image, the
+surface): 2 px on our simulator, 4 px on independent recordings. So the window is sized to the
+frame: at least ``smooth_grains`` correlation lengths of the frame's own wander
+(:func:`wander_correlation_px`), never less than ``smooth_half_window``."""
 
 from __future__ import annotations
 
@@ -33,6 +38,7 @@ class CentreSettings:
     smooth_half_window: int = 7
     jump_px: float = 1.0
     end_fraction: float = 0.5
+    smooth_grains: float = 7.0
 
     def __post_init__(self) -> None:
         if self.method not in CENTRE_METHODS:
@@ -43,7 +49,8 @@ class CentreSettings:
         return asdict(self)
 
 
-PAPER_SETTINGS = CentreSettings(method="gray", k=0.5, smooth_half_window=0)
+PAPER_SETTINGS = CentreSettings(method="gray", k=0.5, smooth_half_window=0, smooth_grains=0.0)
+MAX_HALF_WINDOW = 25
 
 
 def extract_centres(image: np.ndarray, settings: CentreSettings = CentreSettings(),
@@ -57,7 +64,12 @@ def extract_centres(image: np.ndarray, settings: CentreSettings = CentreSettings
     options = {o: getattr(settings, o) for o in CENTRE_METHODS[settings.method].options}
     c = line_centres(img, settings.method, direction="rows", band=band, **options)
     if settings.smooth_half_window:
-        c = smooth_centres(c, settings.smooth_half_window, settings.jump_px, settings.end_fraction)
+        half = settings.smooth_half_window
+        if settings.smooth_grains:
+            grain = wander_correlation_px(c, settings.jump_px)
+            half = int(np.clip(np.ceil(settings.smooth_grains * grain / 2), half,
+                               max(half, MAX_HALF_WINDOW)))
+        c = smooth_centres(c, half, settings.jump_px, settings.end_fraction)
     return c if along_rows else replace(c, u=c.v, v=c.u)
 
 
@@ -66,6 +78,29 @@ def runs(u: np.ndarray, v: np.ndarray, jump_px: float) -> list[slice]:
     brk = np.nonzero((np.diff(u) > 1.5) | (np.abs(np.diff(v)) > jump_px))[0] + 1
     edges = np.concatenate([[0], brk, [len(u)]])
     return [slice(a, b) for a, b in zip(edges[:-1], edges[1:]) if b > a]
+
+
+def wander_correlation_px(c: LineCentres, jump_px: float = 1.0, min_run: int = 80,
+                          max_lag: int = 24) -> float:
+    """How many columns the centres' wander is correlated over, px (the integral scale
+    1 + 2 Σ ρ_k of its autocorrelation up to the first zero), from the runs of at least
+    ``min_run`` columns, about a 61-column quadratic trend; 0 when no run is long enough."""
+    if len(c) < min_run:
+        return 0.0
+    order = np.argsort(c.u, kind="stable")
+    u, v = c.u[order], c.v[order]
+    acf = np.zeros(max_lag + 1)
+    for r in runs(u, v, jump_px):
+        if r.stop - r.start >= min_run:
+            res = v[r] - savgol_filter(v[r], 61 if r.stop - r.start > 61 else min_run - 1, 2)
+            res -= res.mean()
+            f = np.fft.rfft(res, 2 * len(res))
+            acf += np.fft.irfft(f * np.conj(f))[:max_lag + 1]
+    if acf[0] <= 0:
+        return 0.0
+    rho = acf / acf[0]
+    end = np.argmax(rho[1:] <= 0) + 1 if (rho[1:] <= 0).any() else len(rho)
+    return float(1.0 + 2.0 * rho[1:end].sum())
 
 
 def smooth_centres(c: LineCentres, half_window: int = 7, jump_px: float = 1.0,
