@@ -28,7 +28,7 @@ from insitu.services import calibrate_height, scan_replay
 from insitu.sim.workpieces import make_workpiece
 from insitu.vision.extract import PAPER_SETTINGS, CentreSettings
 
-console = Console()
+console = Console(width=150)
 DEFAULT = Path(__file__).resolve().parents[2] / "shared" / "recordings"
 
 

@@ -45,3 +45,15 @@ def test_too_few_lines_to_judge_keeps_everything():
     pts2, line2 = pts[two].copy(), line[two]
     pts2[:50, 2] += 5.0
     assert cross_line_inliers(pts2, line2).all()
+
+
+def test_a_line_beside_a_wall_with_no_second_line_on_its_side_is_kept():
+    """The floor beside the block seen by one line only: nothing says the surface runs on
+    across it, so nothing removes it (a wall, not a ghost)."""
+    rng = np.random.default_rng(3)
+    pts, line = _scan(rng)
+    keep_lines = pts[:, 0] <= 2.51
+    pts, line = pts[keep_lines], line[keep_lines]
+    keep = cross_line_inliers(pts, line)
+    floor = np.abs(pts[:, 0] - 2.5) < 0.01
+    assert floor.any() and keep[floor].mean() > 0.99

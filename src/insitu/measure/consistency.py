@@ -2,13 +2,15 @@
 see nearly the same surface, so a point that none of them confirms is a wrong line — a ghost,
 a secondary reflection, a peak of the wrong level — not the surface.
 
-For each point, the nearest points of the lines one and two steps away in the scan (in x, y)
-predict its height three ways: interpolated between the line before and the line after, and
-extrapolated from the two lines on either side (so the last line on a part's top, beside a
-wall, is confirmed by the top's own lines). A point is kept when one prediction agrees within
-``k_sigma`` of that prediction's noise sigmas; a point's sigma is measured on the scan itself
-(robustly, from the two-sided predictions). Points no neighbouring line can judge (a line alone, holes on both
-sides) are kept.
+For a point of line i, the nearest points of lines i ± 1 and i ± 2 (in x, y) predict its
+height three ways: interpolated between i − 1 and i + 1, and extrapolated from i − 2, i − 1 or
+from i + 1, i + 2 (so the last line on a part's top, beside a wall, is confirmed by the top's
+own lines). A point is removed only when no prediction agrees *and* the surface is known to
+run on across it — the lines on one side predict those on the other (i − 2, i − 1 predict
+i + 1 or i + 2, or the reverse): a ghost on one or two lines breaks no such continuity, a wall
+does, and beside a wall a line that only one neighbour on its side could confirm is kept.
+"Agrees" means within ``k_sigma`` of the prediction's own noise sigma (from the point noise,
+which is measured on the scan itself, robustly, from the two-sided predictions).
 """
 
 from __future__ import annotations
@@ -16,11 +18,15 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial import cKDTree
 
+MAX_REACH = 4.0
+"""How far a straight line through two points predicts, in lengths of the two points' distance
+from their middle: far enough for line i − 2, i − 1 to predict line i + 2."""
+
 
 def cross_line_inliers(points: np.ndarray, line: np.ndarray, k_sigma: float = 5.0,
                        min_tolerance_mm: float = 0.05) -> np.ndarray:
-    """(N,) bool: the points (N, 3) mm confirmed by their neighbouring lines. ``line``: (N,)
-    the line (frame index) each came from; lines follow each other in the order of their
+    """(N,) bool: the points (N, 3) mm not contradicted by their neighbouring lines. ``line``:
+    (N,) the line (frame index) each came from; lines follow each other in the order of their
     indices, as a scan draws them."""
     n = len(points)
     keep = np.ones(n, bool)
@@ -31,22 +37,28 @@ def cross_line_inliers(points: np.ndarray, line: np.ndarray, k_sigma: float = 5.
         return keep
     trees = [cKDTree(xy[a:b]) for a, b in zip(starts[:-1], starts[1:])]
     reach = 2.5 * _line_spacing(xy, starts, trees)
-    nearest = {o: _nearest_on_line(xy, starts, trees, o, reach) for o in (-2, -1, 1, 2)}
-    predictions = [_predict(xy, z, nearest[-1], nearest[1]),        # between the two sides
-                   _predict(xy, z, nearest[-2], nearest[-1]),       # from the lines before
-                   _predict(xy, z, nearest[1], nearest[2])]         # from the lines after
-    between = predictions[0] - z
-    judged = np.isfinite(between)
+    near = {o: _nearest_on_line(xy, starts, trees, o, reach) for o in (-2, -1, 1, 2)}
+    me = np.arange(n)
+    between = _predict(xy, z, near[-1], near[1], me)
+    r, f = between
+    judged = np.isfinite(r)
     if judged.sum() < 10:
         return keep
-    # the residual of a prediction between two lines has 1.5 × a point's noise variance, of
-    # one extrapolated from two lines on one side (2 z1 − z2) 6 ×
-    sigma = 1.4826 * np.median(np.abs(between[judged])) / np.sqrt(1.5)
-    tol = np.maximum(k_sigma * sigma * np.sqrt([1.5, 6.0, 6.0]), min_tolerance_mm)
-    residual = np.stack([np.abs(p - z) for p in predictions])
-    judged = np.isfinite(residual).any(axis=0)
-    agrees = (np.nan_to_num(residual, nan=np.inf) <= tol[:, None]).any(axis=0)
-    keep[order] = ~judged | agrees
+    sigma = 1.4826 * float(np.median(np.abs(r[judged] / f[judged])))
+
+    def agree(prediction) -> np.ndarray:
+        res, factor = prediction
+        return np.nan_to_num(res, nan=np.inf) <= np.maximum(k_sigma * sigma * factor,
+                                                            min_tolerance_mm)
+
+    confirmed = (agree(between) | agree(_predict(xy, z, near[-2], near[-1], me))
+                 | agree(_predict(xy, z, near[1], near[2], me)))
+    runs_on = np.zeros(n, bool)
+    for a, b, targets in ((near[-2], near[-1], (near[1], near[2])),
+                          (near[2], near[1], (near[-1], near[-2]))):
+        for at in targets:
+            runs_on |= agree(_predict(xy, z, a, b, at))
+    keep[order] = confirmed | ~runs_on
     return keep
 
 
@@ -73,14 +85,19 @@ def _nearest_on_line(xy: np.ndarray, starts: np.ndarray, trees: list, offset: in
     return out
 
 
-def _predict(xy: np.ndarray, z: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """(N,) height at each point from the straight line through points ``a`` and ``b``
-    (indices, −1: none → NaN), taken at the point's position projected on it in x, y."""
-    ok = (a >= 0) & (b >= 0)
-    out = np.full(len(z), np.nan)
-    i, ia, ib = np.flatnonzero(ok), a[ok], b[ok]
+def _predict(xy: np.ndarray, z: np.ndarray, a: np.ndarray, b: np.ndarray, at: np.ndarray
+             ) -> tuple[np.ndarray, np.ndarray]:
+    """For each point: |z[at] − the height the straight line through points ``a`` and ``b``
+    gives at ``at``'s position| (indices; −1: none → NaN), and that residual's noise in
+    units of one point's sigma, √((1 − t)² + t² + 1) at the position t along a → b. NaN
+    beyond ``MAX_REACH`` lengths of a → b (lines far apart predict nothing)."""
+    ok = (a >= 0) & (b >= 0) & (at >= 0)
+    res, factor = np.full(len(z), np.nan), np.full(len(z), np.nan)
+    i, ia, ib, it = np.flatnonzero(ok), a[ok], b[ok], at[ok]
     ab = xy[ib] - xy[ia]
     L2 = np.einsum("ij,ij->i", ab, ab)
-    t = np.einsum("ij,ij->i", xy[i] - xy[ia], ab) / np.where(L2 > 0, L2, 1.0)
-    out[i] = np.where(L2 > 0, z[ia] + t * (z[ib] - z[ia]), np.nan)
-    return out
+    t = np.einsum("ij,ij->i", xy[it] - xy[ia], ab) / np.where(L2 > 0, L2, 1.0)
+    good = (L2 > 0) & (np.abs(t - 0.5) <= MAX_REACH)
+    res[i] = np.where(good, np.abs(z[ia] + t * (z[ib] - z[ia]) - z[it]), np.nan)
+    factor[i] = np.sqrt((1 - t) ** 2 + t ** 2 + 1)
+    return res, factor
