@@ -146,3 +146,17 @@ def test_watchdog_notices_an_idle_board_unplugged(board):
             lmc.execute(GalvoDriver(HEAD).compile(flat_job(1))[0])
     finally:
         lmc.close()
+
+
+def test_the_abortable_service_marks_with_the_laser_on(lmc, board):
+    """The GUI marks through services.mark with a cancel event: each path still reaches the
+    board as one list, so the board switches the laser on for it (sent one command at a time,
+    no list held laser_on and nothing was marked)."""
+    import threading
+
+    from insitu.services.mark import mark
+
+    result = mark(flat_job(), GalvoDriver(HEAD), lmc, None, cancel=threading.Event())
+    assert result.state == "done"
+    assert len(board.marks) == 4            # the fake records a mark only with the laser on
+    assert not board.laser_output() and board.mo == 0 and board.port == 0

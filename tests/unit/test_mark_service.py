@@ -24,17 +24,30 @@ def paths_job(n=4):
                      for x in np.linspace(-10, 10, n)])
 
 
-class CancelAfter(RecordingController):
-    """Sets ``cancel`` once it has executed ``n`` commands."""
+class BoardLike(RecordingController):
+    """Runs each list command by command as a board does, until ``laser_off`` (from any
+    thread) stops it; sets ``cancel`` once it has executed ``n`` commands and goes on
+    until it is stopped."""
 
     def __init__(self, n: int, cancel: threading.Event):
         super().__init__()
-        self.n, self.cancel = n, cancel
+        self.n, self.cancel, self.stopped = n, cancel, threading.Event()
+        self.lists = 0
 
     def execute(self, commands):
-        super().execute(commands)
-        if len(self.commands) >= self.n:
-            self.cancel.set()
+        self.stopped.clear()
+        self.lists += 1
+        for c in commands:
+            if self.stopped.is_set():
+                break
+            super().execute([c])
+            if len(self.commands) == self.n:
+                self.cancel.set()
+                assert self.stopped.wait(2.0), "the abort did not stop the board"
+
+    def laser_off(self):
+        self.stopped.set()
+        super().laser_off()
 
 
 def test_each_placement_is_planned_and_a_refusal_kept_where_it_is(tmp_path):
@@ -50,16 +63,18 @@ def test_each_placement_is_planned_and_a_refusal_kept_where_it_is(tmp_path):
     assert out[2].error is None and len(out[2].plan.job.paths) > 0
 
 
-def test_cancel_within_a_path_stops_before_the_next_command_with_the_laser_off(tmp_path):
+def test_cancel_within_a_path_stops_the_board_at_once_with_the_laser_off(tmp_path):
     job, cancel = paths_job(), threading.Event()
     lists = GalvoDriver(HEAD).compile(job)
     cut = sum(map(len, lists[:2])) + 3                 # inside path 2, the laser on
-    controller = CancelAfter(cut, cancel)
+    controller = BoardLike(cut, cancel)
     write_job(tmp_path / "job.json", job)
     ppath = progress_path_for(tmp_path / "job.json")
     with pytest.raises(Cancelled):
         mark(job, GalvoDriver(HEAD), controller, ppath, cancel=cancel)
     assert len(controller.commands) == cut and controller.commands == sum(lists, [])[:cut]
+    # each path went to the board as one list (a board enables its laser per list)
+    assert controller.lists == 3
     assert not controller.laser_is_on and controller.off_calls >= 1
     rec = read_progress(ppath)
     assert rec["state"] == "interrupted" and rec["completed"] == 2   # path 2 not completed
@@ -68,8 +83,13 @@ def test_cancel_within_a_path_stops_before_the_next_command_with_the_laser_off(t
 def test_cancel_between_paths_ends_the_run_cancelled(tmp_path):
     job, cancel = paths_job(), threading.Event()
     lists = GalvoDriver(HEAD).compile(job)
-    controller = CancelAfter(len(lists[0]), cancel)
-    result = mark(job, GalvoDriver(HEAD), controller, tmp_path / "p.json", cancel=cancel)
+    controller = BoardLike(10**9, cancel)
+
+    def after(done, total):
+        cancel.set()                                    # the operator, between two paths
+
+    result = mark(job, GalvoDriver(HEAD), controller, tmp_path / "p.json", cancel=cancel,
+                  progress=after)
     assert (result.state, result.completed) == ("cancelled", 1)
     assert controller.commands == lists[0] and not controller.laser_is_on
 

@@ -1,6 +1,6 @@
 """Marking use cases: place a pattern on a measured cloud, make the checked job, preview it
-with the pilot laser, mark it (stopping before the next command when cancelled) and image
-the result."""
+with the pilot laser, mark it (the board stopped at once when cancelled) and image the
+result."""
 
 from __future__ import annotations
 
@@ -86,18 +86,34 @@ def save_job(path: str | Path, job: MarkJob) -> Path:
 
 
 class _Abortable:
-    """Forwards to ``inner`` one command at a time; once ``cancel`` is set it sends no
-    further command, turns the laser off and raises Cancelled."""
+    """Sends each path to ``inner`` whole (a board enables its laser per list). Once ``cancel``
+    is set, a watcher stops the board at once — ``inner.laser_off()``, which every controller
+    takes from another thread: it stops the list — and the path ends in Cancelled (recorded
+    as not completed, so a resume marks it again)."""
 
     def __init__(self, inner, cancel: threading.Event):
         self.inner, self.cancel = inner, cancel
 
     def execute(self, commands) -> None:
-        for c in commands:
-            if self.cancel.is_set():
-                self.inner.laser_off()
-                raise Cancelled("marking aborted by the operator")
-            self.inner.execute([c])
+        done = threading.Event()
+
+        def watch() -> None:
+            while not done.is_set():
+                if self.cancel.wait(0.005):
+                    self.inner.laser_off()
+                    return
+
+        if not self.cancel.is_set():
+            watcher = threading.Thread(target=watch, name="abort watcher", daemon=True)
+            watcher.start()
+            try:
+                self.inner.execute(commands)
+            finally:
+                done.set()
+                watcher.join()
+        if self.cancel.is_set():
+            self.inner.laser_off()
+            raise Cancelled("marking aborted by the operator")
 
     def laser_off(self) -> None:
         self.inner.laser_off()
@@ -108,8 +124,8 @@ def mark(job: MarkJob, driver: GalvoDriver, controller, progress_path: str | Pat
          progress: Progress | None = None) -> RunResult:
     """Optionally draw the job's outline with the pilot laser, then mark it (resuming after
     the last completed path with ``resume``). The laser is off when this returns or raises;
-    the progress file records how far the job got. Once ``cancel`` is set no further command
-    is sent: between paths the run ends "cancelled"; within one, the laser goes off and
+    the progress file records how far the job got. Once ``cancel`` is set the board stops at
+    once: between paths the run ends "cancelled"; within one, the laser goes off and
     Cancelled is raised (that path is recorded as not completed, so a resume marks it)."""
     if cancel is not None:
         controller = _Abortable(controller, cancel)

@@ -119,6 +119,7 @@ class SimController:
         self.speed = {"mark": 500.0, "jump": 3000.0}
         self.elapsed_s = 0.0
         self._open: list[tuple[np.ndarray, np.ndarray]] = []
+        self._stopped = False
 
     @property
     def scene(self) -> Scene:
@@ -127,10 +128,14 @@ class SimController:
 
     # -- Controller --------------------------------------------------------------------------
     def execute(self, commands: Sequence[Command]) -> None:
+        self._stopped = False
         for c in commands:
+            if self._stopped:               # laser_off (from any thread) stops the list
+                break
             self._do(c)
 
     def laser_off(self) -> None:
+        self._stopped = True
         self._close_burn()
         self.laser_is_on = self.pilot_is_on = False
         self.world.laser = LaserState()
