@@ -4,17 +4,21 @@ A line frame: the commanded line is sampled densely; each sample's *true* beam i
 first surface hit (shadowing), kept if the camera sees it (occlusion), weighted by the surface's
 reflectance toward the camera (textured Lambertian + Phong lobe), projected through the *true*
 camera with its distortion and splatted as a pixel-integrated Gaussian whose width is the laser
-footprint (growing out of focus) blurred by the lens (diffraction, depth of field). The beam's
-specular reflection is traced once more: where it lands on another surface (near steps) it
-makes a weak secondary line. Then speckle (pupil-filtered complex field), ambient light,
-shot and read noise, saturation and 8-bit quantisation.
+footprint (growing out of focus) blurred by the lens (diffraction, depth of field), its
+brightness modulated along the line by correlated gamma-distributed speckle blotches (per
+material). Secondary light, traced with rays: the beam's specular reflection lights where it
+lands (a wall next to a floor), and the camera sees the lit surface mirrored in specular faces
+(step and hole walls). Then image-plane speckle (pupil-filtered complex field), textured and
+shaded ambient light, fixed-pattern gain and offsets, shot and read noise, saturation and
+8-bit quantisation. Parameters and their sources: docs/simulator.md.
 """
 
 from __future__ import annotations
 
 import cv2
 import numpy as np
-from scipy.special import erf
+from scipy.spatial import cKDTree
+from scipy.special import erf, gammaincinv, ndtr
 
 from insitu.geometry.beams import line_commands
 from insitu.sim.rig import LENS_FOCAL_MM, PIXEL_PITCH_MM, SimRig
@@ -22,13 +26,16 @@ from insitu.sim.scene import Scene
 
 NOMINAL_EXPOSURE_MS = 10.0
 _SAMPLE_SPACING_PX = 0.3
+_MAP_SCALE = 2          # the camera's ambient map: 1/2 of the frame's size
+_MIRROR_SUB = 3         # mirror pixels: 3 × 3 rays per pixel (the line is narrower than a pixel)
 
 
 class Renderer:
     """Renders frames of ``rig``'s true camera looking at ``scene``.
 
-    ``ideal=True`` leaves out speckle, texture, ambient light, noise and quantisation and
-    returns float32 frames: the geometry alone, for tests of where the line must be.
+    ``ideal=True`` leaves out speckle, texture, secondary light, ambient light, noise and
+    quantisation and returns float32 frames: the geometry alone, for tests of where the line
+    must be.
     """
 
     def __init__(self, rig: SimRig, scene: Scene, seed: int = 0, ideal: bool = False):
@@ -38,11 +45,13 @@ class Renderer:
         self._binning = LENS_FOCAL_MM / PIXEL_PITCH_MM / self.cam.K[0, 0]
         self._pitch_mm = PIXEL_PITCH_MM * self._binning
         self._ambient: np.ndarray | None = None
+        self._mirror: tuple | None = None
         self._speckle: np.ndarray | None = None
+        self._fpn: tuple[np.ndarray, np.ndarray] | None = None
 
     def set_scene(self, scene: Scene) -> None:
         """The parts moved (stage, new workpiece): keep the sensor, redo the ambient light."""
-        self.scene, self._ambient = scene, None
+        self.scene, self._ambient, self._mirror = scene, None, None
 
     # -- public frames ----------------------------------------------------------------------
     def ambient_frame(self, exposure_ms: float = NOMINAL_EXPOSURE_MS) -> np.ndarray:
@@ -59,6 +68,8 @@ class Renderer:
         cmd = line_commands(start, end, n)
         energy = self.rig.optics.line_power * length / (n - 1) * exposure_ms / NOMINAL_EXPOSURE_MS
         signal = self._beam_signal(cmd, np.full(n, energy), focus_z, secondary=True)
+        if not self.ideal:
+            signal += self._mirror_image(cmd, energy * (n - 1) / length, focus_z)
         return self._finish(signal, exposure_ms)
 
     def spot_frame(self, xy, exposure_ms: float = NOMINAL_EXPOSURE_MS, focus_z: float = 0.0,
@@ -102,10 +113,71 @@ class Renderer:
         s_focus = (focus_z - o[:, 2]) / d[:, 2]
         w = self.rig.optics.beam_radius_mm(s_hit - s_focus) if beam_blur else np.zeros(len(p))
         cos_in = np.abs(np.einsum("ij,ij->i", d, nrm))
+        if beam_blur and not self.ideal:
+            e = e * self._blotches(p, part)
         self._add(img, p, nrm, part, e, w / 2 / np.sqrt(np.maximum(cos_in, 0.2)), d)
         if secondary and not self.ideal:
             self._add_secondary(img, p, nrm, part, e, w, d)
         return img.reshape(H, W).astype(np.float32)
+
+    def _blotches(self, p: np.ndarray, part: np.ndarray) -> np.ndarray:
+        """(N,) mean-1 along-line speckle factors for the line's hit points p (N, 3) in line
+        order: a Gaussian process in arc length on the surface (1/e correlation at the
+        material's length) mapped to a gamma law of the material's coefficient of variation."""
+        s = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(p, axis=0), axis=1))])
+        corr = self.scene.material_field(part, "speckle_corr_mm", 0.25)
+        cv = self.scene.material_field(part, "speckle_cv", 0.25)
+        step = corr.min() / 6
+        grid = self.rng.standard_normal(int(s[-1] / step) + 25)
+        sigma = corr.min() / 2 / step                    # exp(−τ²/4σ²) = 1/e at τ = corr
+        k = np.exp(-0.5 * (np.arange(-int(4 * sigma) - 1, int(4 * sigma) + 2) / sigma) ** 2)
+        g = np.convolve(grid, k / np.sqrt((k**2).sum()), mode="same")
+        shape = 1.0 / cv**2
+        return gammaincinv(shape, ndtr(np.interp(s / step + 12, np.arange(len(g)), g))) / shape
+
+    def _mirror_image(self, cmd: np.ndarray, line_density: float, focus_z: float) -> np.ndarray:
+        """(H, W) light of the line seen mirrored in specular faces: for each camera pixel whose
+        ray meets a mirror-like face and, reflected, lands on a surface point Q, the radiance of
+        Q under the line's light sheet (Gaussian profile across it) times the face's mirror
+        fraction, averaged over the pixel. ``line_density``: energy per mm of line."""
+        H, W = self.cam.height, self.cam.width
+        pix, q, weight = self._mirror_map()
+        if not len(q):
+            return np.zeros((H, W), np.float32)
+        origins, dirs = self.rig.beams.rays(cmd[[0, len(cmd) // 2, -1]])
+        normal = np.cross(dirs[0], dirs[-1])
+        normal /= np.linalg.norm(normal)
+        dist = (q - origins[1]) @ normal                  # from the light sheet, mm
+        w = float(self.rig.optics.beam_radius_mm(0.0))
+        near = np.abs(dist) < 3 * w
+        if not near.any():
+            return np.zeros((H, W), np.float32)
+        hits = self.scene.cast(*self.rig.beams.rays(cmd[:: max(len(cmd) // 400, 1)]))
+        lit_pts = hits.points[hits.hit]
+        if not len(lit_pts):
+            return np.zeros((H, W), np.float32)
+        gap, _ = cKDTree(lit_pts).query(q[near], distance_upper_bound=3 * w)
+        sel = np.flatnonzero(near)[np.isfinite(gap)]      # lit by the beam, not in its shadow
+        if not len(sel):
+            return np.zeros((H, W), np.float32)
+        sigma = w / 2
+        irr = line_density * np.exp(-0.5 * (dist[sel] / sigma) ** 2) / (np.sqrt(2 * np.pi) * sigma)
+        # a surface seen in the camera gives irradiance × albedo × (362 / f)² / binning² DN per
+        # pixel (the splat of _add integrated over a pixel's footprint), here times the mirror
+        img = np.bincount(pix[sel], irr * weight[sel] * (362.0 / self.cam.K[0, 0]) ** 2
+                          / self._binning**2, minlength=H * W).reshape(H, W).astype(np.float32)
+        v, u = np.divmod(pix[sel], W)
+        v0, v1, u0, u1 = max(v.min() - 4, 0), v.max() + 5, max(u.min() - 4, 0), u.max() + 5
+        img[v0:v1, u0:u1] = cv2.GaussianBlur(img[v0:v1, u0:u1], (0, 0), 0.7)  # rough face
+        return img
+
+    def _mirror_map(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Per scene, for 3 × 3 rays in each pixel that sees a mirror-like face: the frame's
+        flat pixel index (M,), the point Q (M, 3) the ray meets reflected, and the weight (M,) =
+        the face's mirror fraction × Q's albedo / 9."""
+        if self._mirror is None:
+            self._camera_maps()
+        return self._mirror
 
     def _add_secondary(self, img, p, nrm, part, e, w, d) -> None:
         """The specular part of each beam, reflected once, lights where it lands."""
@@ -161,11 +233,13 @@ class Renderer:
             return laser
         o = self.rig.optics
         H, W = laser.shape
+        gain, offset = self._fixed_pattern()
         speckle = self._speckle_field()
         dv, du = self.rng.integers(0, speckle.shape[0] - H), self.rng.integers(0, speckle.shape[1] - W)
         laser *= speckle[dv:dv + H, du:du + W]
         laser += self._ambient_image() * np.float32(exposure_ms / NOMINAL_EXPOSURE_MS)
-        laser += np.float32(o.dark_dn)
+        laser *= gain
+        laser += offset
         var = laser * np.float32(1.0 / o.electrons_per_dn) + np.float32(o.read_noise_dn**2)
         noise = self.rng.standard_normal((H, W), dtype=np.float32)
         laser += noise * np.sqrt(var)
@@ -188,21 +262,77 @@ class Renderer:
             self._speckle = (1 - c + c * intensity).astype(np.float32)
         return self._speckle
 
+    def _fixed_pattern(self) -> tuple[np.ndarray, np.ndarray]:
+        """(H, W) per-pixel gain (mean 1) and offset (dark level + pixel and column offsets,
+        DN) of this camera: drawn from the rig's seed, the same in every frame and renderer."""
+        if self._fpn is None:
+            o, H, W = self.rig.optics, self.cam.height, self.cam.width
+            rng = np.random.default_rng([self.rig.seed, 0xF1C5])
+            gain = 1.0 + o.prnu * rng.standard_normal((H, W), dtype=np.float32)
+            offset = (o.dark_dn + o.dsnu_dn * rng.standard_normal((H, W), dtype=np.float32)
+                      + o.column_dn * rng.standard_normal((1, W), dtype=np.float32))
+            self._fpn = gain.astype(np.float32), offset.astype(np.float32)
+        return self._fpn
+
     def _ambient_image(self) -> np.ndarray:
-        """Room light on the scene, seen by the camera: rendered at 1/4 size, then upsampled."""
+        """(H, W) room light on the scene as the camera sees it (textured albedo, shading by
+        the normal, a fall-off across the field), DN at the nominal exposure."""
         if self._ambient is None:
-            H, W = self.cam.height, self.cam.width
-            h, w = max(H // 4, 2), max(W // 4, 2)
-            u, v = np.meshgrid((np.arange(w) + 0.5) * W / w - 0.5, (np.arange(h) + 0.5) * H / h - 0.5)
-            origin, dirs = self.cam.rays(np.column_stack([u.ravel(), v.ravel()]))
-            hits = self.scene.cast(np.tile(origin, (len(dirs), 1)), dirs)
-            shade = np.zeros(len(dirs))
-            pts, part = hits.points[hits.hit], hits.part[hits.hit]
-            shade[hits.hit] = (self.rig.optics.ambient_dn * self.scene.albedo(pts, part)
-                               * (0.6 + 0.4 * np.abs(hits.normals[hits.hit][:, 2])))
-            small = shade.reshape(h, w).astype(np.float32)
-            self._ambient = cv2.resize(small, (W, H), interpolation=cv2.INTER_LINEAR)
+            self._camera_maps()
         return self._ambient
+
+    def _camera_maps(self) -> None:
+        """One ray cast of the camera's pixels at 1/2 size gives the ambient image and the
+        mirror map: where a pixel's ray meets a face with a mirror fraction and its reflection
+        meets a surface, the pixel is cast again with 3 × 3 rays and the points they meet
+        reflected are kept."""
+        H, W = self.cam.height, self.cam.width
+        h, w = (H + _MAP_SCALE - 1) // _MAP_SCALE, (W + _MAP_SCALE - 1) // _MAP_SCALE
+        u, v = np.meshgrid(np.arange(w) * _MAP_SCALE + (_MAP_SCALE - 1) / 2,
+                           np.arange(h) * _MAP_SCALE + (_MAP_SCALE - 1) / 2)
+        origin, dirs = self.cam.rays(np.column_stack([u.ravel(), v.ravel()]))
+        hits = self.scene.cast(np.tile(origin, (len(dirs), 1)), dirs)
+        o = self.rig.optics
+        shade = np.zeros(len(dirs))
+        pts, part, nrm = hits.points[hits.hit], hits.part[hits.hit], hits.normals[hits.hit]
+        fall = 1.0 + o.ambient_gradient * (pts[:, 0] + 0.5 * pts[:, 1]) / 100.0
+        shade[hits.hit] = (o.ambient_dn * self.scene.albedo(pts, part) * fall
+                           * (0.6 + 0.4 * np.abs(nrm[:, 2])))
+        self._ambient = cv2.resize(shade.reshape(h, w).astype(np.float32), (W, H),
+                                   interpolation=cv2.INTER_LINEAR)
+        # mirror pixels: every frame pixel of a map pixel on a mirror-like face, sub-sampled
+        cell = np.flatnonzero(hits.hit)[self.scene.material_field(part, "mirror") > 0]
+        if len(cell):       # only cells whose reflection meets a surface: sub-sample those
+            c_hit = hits.hit.copy()
+            c_hit[:] = False
+            c_hit[cell] = True
+            sel = c_hit[hits.hit]
+            n = nrm[sel]
+            refl = dirs[cell] - 2 * np.einsum("ij,ij->i", dirs[cell], n)[:, None] * n
+            cell = cell[self.scene.cast(pts[sel] + 1e-3 * n, refl, max_t=300.0,
+                                        lift_to_z=None).hit]
+        if not len(cell):
+            self._mirror = (np.zeros(0, np.int64), np.zeros((0, 3)), np.zeros(0))
+            return
+        sub = (np.arange(_MIRROR_SUB) + 0.5) / _MIRROR_SUB - 0.5
+        blk = np.arange(_MAP_SCALE)
+        du = (blk[:, None] + sub[None, :]).ravel()
+        fu = (cell % w)[:, None, None] * _MAP_SCALE + du[None, :, None] + 0 * du[None, None, :]
+        fv = (cell // w)[:, None, None] * _MAP_SCALE + du[None, None, :] + 0 * du[None, :, None]
+        uv = np.column_stack([fu.ravel(), fv.ravel()])
+        uv = uv[(uv[:, 0] < W - 0.5) & (uv[:, 1] < H - 0.5)]
+        origin, dirs = self.cam.rays(uv)
+        first = self.scene.cast(np.tile(origin, (len(dirs), 1)), dirs)
+        mirror = self.scene.material_field(first.part, "mirror")
+        m = first.hit & (mirror > 0)
+        d, n = dirs[m], first.normals[m]
+        refl = d - 2 * np.einsum("ij,ij->i", d, n)[:, None] * n
+        second = self.scene.cast(first.points[m] + 1e-3 * n, refl, max_t=300.0, lift_to_z=None)
+        ok = second.hit
+        q, qp = second.points[ok], second.part[ok]
+        pix = np.rint(uv[m][ok]).astype(np.int64)
+        self._mirror = (pix[:, 1] * W + pix[:, 0], q,
+                        mirror[m][ok] * self.scene.albedo(q, qp) / _MIRROR_SUB**2)
 
 
 def _splat(img: np.ndarray, W: int, H: int, uv: np.ndarray, sigma: np.ndarray,

@@ -28,7 +28,8 @@ class Optics:
 
     beam_waist_mm: 1/e² radius of the focused laser at the focal plane; wavelength_mm for its
     Rayleigh range. f_number and camera focus distance set the camera's blur. Sensor: gain in
-    electrons per DN, read noise and dark level in DN, 8-bit output.
+    electrons per DN, read noise and dark level in DN, fixed-pattern gain and offsets (drawn
+    from the rig's seed: one camera, one pattern), 8-bit output. Sources: docs/simulator.md.
     """
 
     beam_waist_mm: float = 0.15
@@ -37,13 +38,16 @@ class Optics:
     camera_focus_mm: float = 362.0
     line_power: float = 2.5e4       # DN·mm² reaching the sensor per mm of line, for albedo 1
     spot_power: float = 6.0e3       # DN·mm² for a whole spot, albedo 1
-    ambient_dn: float = 14.0        # room light on an albedo-1 surface facing up
-    speckle_contrast: float = 0.35
-    speckle_grain_px: float = 1.6
+    ambient_dn: float = 30.0        # room light on an albedo-1 surface facing up
+    ambient_gradient: float = 0.25  # room light's fall-off across the field, ± fraction
+    speckle_contrast: float = 0.35  # image-plane (subjective) speckle; along-line: Material
     secondary_fraction: float = 0.25
     electrons_per_dn: float = 8.0
     read_noise_dn: float = 1.2
     dark_dn: float = 3.0
+    prnu: float = 0.01              # fixed pattern: per-pixel gain σ (fraction)
+    dsnu_dn: float = 0.6            # fixed pattern: per-pixel offset σ, DN
+    column_dn: float = 0.4          # fixed pattern: per-column offset σ, DN
 
     @property
     def rayleigh_mm(self) -> float:

@@ -16,22 +16,33 @@ from insitu.sim.workpieces import Workpiece
 
 @dataclass(frozen=True)
 class Material:
-    """Diffuse albedo (0..1), specular fraction and Phong exponent, texture amplitude (0..1)."""
+    """Diffuse albedo (0..1), specular fraction and Phong exponent, texture amplitude (0..1);
+    along-line speckle: coefficient of variation and correlation length on the surface, mm;
+    mirror: the fraction of light a face reflects as a (slightly blurred) mirror image.
+    Values and their sources: docs/simulator.md."""
 
     albedo: float = 0.5
     specular: float = 0.2
     shininess: float = 40.0
     texture: float = 0.15
+    speckle_cv: float = 0.25
+    speckle_corr_mm: float = 0.25
+    mirror: float = 0.0
 
 
+_MATTE = dict(speckle_cv=0.25, speckle_corr_mm=0.25)
+_METAL = dict(speckle_cv=0.45, speckle_corr_mm=0.25)
 MATERIALS = {
-    "table": Material(albedo=0.12, specular=0.05, shininess=10.0, texture=0.10),
-    "plate": Material(albedo=0.60, specular=0.05, shininess=10.0, texture=0.04),
-    "step-block": Material(albedo=0.45, specular=0.30, shininess=60.0, texture=0.15),
-    "arc": Material(albedo=0.50, specular=0.40, shininess=80.0, texture=0.12),
-    "insert": Material(albedo=0.25, specular=0.45, shininess=120.0, texture=0.08),
+    "table": Material(albedo=0.12, specular=0.05, shininess=10.0, texture=0.10, **_MATTE),
+    "plate": Material(albedo=0.60, specular=0.05, shininess=10.0, texture=0.04, **_MATTE),
+    "step-block": Material(albedo=0.45, specular=0.30, shininess=60.0, texture=0.15, mirror=0.50,
+                           **_METAL),
+    "arc": Material(albedo=0.50, specular=0.40, shininess=80.0, texture=0.12, mirror=0.50,
+                    **_METAL),
+    "insert": Material(albedo=0.25, specular=0.45, shininess=120.0, texture=0.08, mirror=0.55,
+                       **_METAL),
 }
-DEFAULT_MATERIAL = Material()
+DEFAULT_MATERIAL = Material(mirror=0.45, **_METAL)  # machined parts without an entry
 
 
 @dataclass
@@ -113,6 +124,8 @@ class Scene:
 
     def material_arrays(self, part: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(N,) specular fraction and shininess for each hit's part."""
-        spec = np.array([m.specular for m in self.materials] + [0.0])
-        shin = np.array([m.shininess for m in self.materials] + [1.0])
-        return spec[part], shin[part]
+        return self.material_field(part, "specular", 0.0), self.material_field(part, "shininess", 1.0)
+
+    def material_field(self, part: np.ndarray, name: str, missed: float = 0.0) -> np.ndarray:
+        """(N,) the material attribute ``name`` of each hit's part (``missed`` for part −1)."""
+        return np.array([getattr(m, name) for m in self.materials] + [missed])[part]
