@@ -3,7 +3,9 @@
 Frames: the simulated camera's line frames (speckle, ambient light, shot and read noise,
 saturation, secondary reflections) on the step block and the freeform part. Prints a table:
 method, frames/s, MPix/s, ms/frame (median over all frames and rounds). Target: the gray
-centroid ≥ 100 frames/s. "before" is the previous gray_centroid, kept here for comparison.
+centroid and Steger ≥ 100 frames/s. "before" is the previous gray_centroid, kept here for
+comparison. line_direction (a top-hat's structure tensor) should take a few ms; the colour row
+includes making the BGR frame.
 Run: .venv/bin/python benchmarks/centres_speed.py
 """
 
@@ -22,7 +24,7 @@ from rich.table import Table  # noqa: E402
 from insitu.sim.world import SimWorld  # noqa: E402
 from insitu.sim.rig import default_rig  # noqa: E402
 from insitu.sim.workpieces import make_workpiece  # noqa: E402
-from insitu.vision.centres import gray_centroid, line_centres  # noqa: E402
+from insitu.vision.centres import gray_centroid, line_centres, line_direction  # noqa: E402
 from insitu.vision.steger import gaussian_peak, steger  # noqa: E402
 
 cv2.setNumThreads(1)
@@ -65,6 +67,7 @@ def frames(n_per_part: int = 3) -> list[np.ndarray]:
 
 METHODS = {
     "gray_centroid (default, ±12 rows)": gray_centroid,
+    "gray_centroid, background=True": lambda f: gray_centroid(f, background=True),
     "gray_centroid, continuity=False": lambda f: gray_centroid(f, continuity=False),
     "gray_centroid, window=None": lambda f: gray_centroid(f, window=None),
     "before: gray_centroid": before_gray_centroid,
@@ -73,6 +76,9 @@ METHODS = {
     "steger": steger,
     "line_centres(gray, auto direction)": line_centres,
     "line_centres(steger, auto direction)": lambda f: line_centres(f, "steger"),
+    "line_direction": lambda f: [line_direction(f)],
+    "line_centres(steger, BGR colour, auto channel)":
+        lambda f: line_centres(cv2.merge([f // 2, f, f // 3]), "steger"),
 }
 
 

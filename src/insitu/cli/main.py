@@ -11,6 +11,7 @@ from rich.markup import escape
 
 from insitu.cli import calibrate as calibrate_cmd
 from insitu.cli import camera as camera_cmd
+from insitu.cli import centres as centres_cmd
 from insitu.cli import field as field_cmd
 from insitu.cli import job as job_cmd
 from insitu.cli import mark as mark_cmd
@@ -26,6 +27,7 @@ app = typer.Typer(help=__doc__.split("\n")[0] if __doc__ else None, no_args_is_h
 app.command("scan")(scan_cmd.scan)
 app.command("mark")(mark_cmd.mark)
 app.command("record")(record_cmd.record)
+app.command("centres")(centres_cmd.centres)
 calibrate_cmd.app.command("camera")(camera_cmd.camera)
 calibrate_cmd.app.command("field")(field_cmd.field)
 app.add_typer(calibrate_cmd.app, name="calibrate")
