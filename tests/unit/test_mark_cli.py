@@ -41,6 +41,11 @@ def files(tmp_path_factory):
     return d
 
 
+def _flat(output: str) -> str:
+    """A table's text on one line: rich's frame and wrapping gone."""
+    return " ".join(re.sub(r"[│┃┌┐└┘├┤┬┴┼─]", " ", output).split())
+
+
 def _points(job_path):
     return np.vstack([p.points for p in read_job(job_path).paths])
 
@@ -144,3 +149,42 @@ def test_job_show_and_run(files, tmp_path):
     res = _run("job", "run", tmp_path / "bad.json")
     assert res.exit_code == 1 and "bad.json" in res.output and "Traceback" not in res.output
     assert not (tmp_path / "bad.progress.json").exists()
+
+
+def test_codes_say_whether_they_decode_and_a_bad_one_is_refused(files, tmp_path):
+    out = tmp_path / "dm.json"
+    res = _run("mark", "--cloud", files / "step3.ply", "--pattern",
+               'datamatrix:"(01)09501101530003(21)0042";module=0.3', "--at", 0, -30, "-o", out)
+    assert res.exit_code == 0, res.output
+    text = _flat(res.output)
+    assert "decodes yes: datamatrix:(01)09501101530003(21)0042 (module 0.3 mm)" in text
+    assert "along the modules" in text and out.exists()
+    bad = tmp_path / "bad.json"
+    res = _run("mark", "--cloud", files / "step3.ply", "--pattern", "qr:HELLO;module=0.25",
+               "--at", 0, -30, "--hatch", 0.6, "-o", bad)
+    assert res.exit_code != 0 and not bad.exists()
+    assert len(res.output.strip().splitlines()) == 1
+    assert "qr:HELLO: does not decode" in res.output and "--force" in res.output
+    res = _run("mark", "--cloud", files / "step3.ply", "--pattern", "qr:HELLO;module=0.25",
+               "--at", 0, -30, "--hatch", 0.6, "--force", "-o", bad)
+    assert res.exit_code == 0 and bad.exists() and "decodes NO: qr:HELLO" in _flat(res.output)
+
+
+def test_fill_option_fills_a_dxf_frame_only_when_asked(tmp_path, files):
+    import ezdxf
+    doc = ezdxf.new()
+    doc.modelspace().add_lwpolyline([(0, 0), (8, 0), (8, 4), (0, 4)], close=True)
+    doc.saveas(tmp_path / "frame.dxf")
+    jobs = {}
+    for fill in ("auto", "all"):
+        jobs[fill] = tmp_path / f"{fill}.json"
+        res = _run("mark", "--cloud", files / "step3.ply", "--pattern", tmp_path / "frame.dxf",
+                   "--at", 0, -30, "--width", 8, "--hatch", 0.5, "--fill", fill, "-o",
+                   jobs[fill])
+        assert res.exit_code == 0, res.output
+        assert "loaded units: $INSUNITS 6 (Meters)" in _flat(res.output)
+    assert len(read_job(jobs["auto"]).paths) == 1          # the frame, a line
+    assert len(read_job(jobs["all"]).paths) > 8            # outline + 8 hatch lines
+    res = _run("mark", "--cloud", files / "step3.ply", "--pattern", tmp_path / "frame.dxf",
+               "--at", 0, -30, "--width", 8, "--fill", "some", "-o", tmp_path / "x.json")
+    assert res.exit_code != 0 and "--fill 'some': expected one of auto, all, none" in res.output

@@ -79,7 +79,7 @@ def test_the_mark_help_lists_every_pattern_source():
 
 
 def test_the_loader_dispatches_on_the_pattern_sources(tmp_path):
-    assert SPEC_PREFIXES == ("text:", "qr:", "fiducials:")
+    assert SPEC_PREFIXES == ("text:", "qr:", "datamatrix:", "microqr:", "code128:", "fiducials:")
     assert {".svg", ".dxf", ".png", ".webp"} <= set(FILE_SUFFIXES)
     assert all(is_spec(p + "x") for p in SPEC_PREFIXES) and not is_spec("logo.svg")
     assert load_pattern(str(SAMPLES / "logo.svg")).contours

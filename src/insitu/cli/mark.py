@@ -12,7 +12,9 @@ from insitu.cli.common import check_output, console, fail, one_line_errors, prog
 from insitu.cli.job import (Field, Inspect, Preview, Resume, Rig, Seed, Workpiece,
                             run_on_station)
 from insitu.marking.modes import PROJECTIONS, projection_mode
+from insitu.patterns.dxf import FILL_MODES
 from insitu.patterns.load import sources_help
+from insitu.patterns.vector import BEAM_MM
 
 
 @one_line_errors
@@ -21,8 +23,10 @@ def mark(
     pattern: Annotated[str, typer.Option(help=f"A file or spec: {sources_help()}.")],
     at: Annotated[tuple[float, float], typer.Option(help="Centre of the pattern X Y, mm, "
                                                          "world frame.")],
-    width: Annotated[float, typer.Option(help="Width of the pattern, mm (before --rotate).")],
     out: Annotated[Path, typer.Option("-o", "--output", help="Mark job to write (.json).")],
+    width: Annotated[float | None, typer.Option(
+        help="Width of the pattern, mm (before --rotate; a code's without its quiet zone; "
+             "default: the size it loads at, e.g. a code's ;module=).")] = None,
     rotate: Annotated[float, typer.Option(help="Rotation, degrees CCW about +z.")] = 0.0,
     mode: Annotated[str, typer.Option(help="; ".join(f"{k}: {m.description}" for k, m in
                                                      PROJECTIONS.items()) + ".")] = "planar",
@@ -31,6 +35,15 @@ def mark(
                                                      "only).")] = None,
     hatch_angle: Annotated[float, typer.Option(help="Hatch direction, degrees from +x.")] = 0.0,
     cross: Annotated[bool, typer.Option(help="Cross-hatch (a second hatch at +90°).")] = False,
+    fill: Annotated[str, typer.Option(help="A DXF's closed outlines: auto (fills where the "
+                                           "file has hatches, solids, wide polylines, text; "
+                                           "other outlines as lines), all (fill every closed "
+                                           "outline), none (outlines only).")] = "auto",
+    beam: Annotated[float, typer.Option(help="Beam width, mm: strokes at least this wide are "
+                                             "marked as their area, thinner ones as lines; a "
+                                             "code's default hatch is no coarser.")] = BEAM_MM,
+    force: Annotated[bool, typer.Option(help="Write the job even when a code would not decode "
+                                             "from the planned marks.")] = False,
     power: Annotated[float, typer.Option(help="Laser power, % of full.")] = 30.0,
     frequency: Annotated[float, typer.Option(help="Pulse frequency, kHz.")] = 20.0,
     speed: Annotated[float, typer.Option(help="Mark speed, mm/s.")] = 500.0,
@@ -61,13 +74,18 @@ def mark(
                         ("--jump-speed", jump_speed)):
         if not value > 0:
             fail(f"{name} {value:g}: expected a positive number")
-    placement = Placement(pattern, at, width, rotate, mode, hatch, hatch_angle, cross)
+    if fill not in FILL_MODES:
+        fail(f"--fill {fill!r}: expected one of {', '.join(FILL_MODES)}")
+    if not beam > 0:
+        fail(f"--beam {beam:g}: expected a positive number")
+    placement = Placement(pattern, at, width, rotate, mode, hatch, hatch_angle, cross, fill,
+                          beam)
     laser = LaserParams(power_pct=power, frequency_khz=frequency, mark_speed_mm_s=speed,
                         jump_speed_mm_s=jump_speed)
     with connect(rig, workpiece, seed, field=field) as station:
         with progress_bar("projecting") as progress:
             progress(0, 1)
-            plan = svc.plan_mark(cloud, placement, station.driver, laser)
+            plan = svc.plan_mark(cloud, placement, station.driver, laser, force)
         if resume and (not out.exists() or read_job(out).digest() != plan.job.digest()):
             fail(f"--resume: {out} does not hold this job; run without --resume to start it")
         if not resume:
@@ -86,10 +104,19 @@ def _summary(out: Path, placement, plan, field: Path | None) -> None:
                              f"({cx:.3f}, {cy:.3f})")
     fill = (f"hatch {placement.hatch_mm:g} mm at {placement.hatch_angle_deg:g}°"
             + (" crossed" if placement.cross else "")) if placement.hatch_mm else "outlines"
+    if placement.hatch_mm is None and plan.pattern.code is not None:
+        fill = "hatch {:.4g} mm at {:g}° along the modules".format(
+            *placement.code_hatch(plan.pattern))
+    for note in plan.pattern.notes:
+        table.add_row("loaded", note)
     table.add_row("marks", f"{len(plan.job.paths):,} paths, {len(pts):,} points ({fill})")
     mode = placement.mode + (f", worst stretch {plan.projection.max_stretch:.2%}"
                              if PROJECTIONS[placement.mode].stretches else "")
     table.add_row("projection", mode)
+    for c in plan.codes:
+        table.add_row("decodes", f"{'yes' if c.ok else 'NO'}: {c.name} (module "
+                                 f"{c.module_mm:.3g} mm" + (f", read {c.decoded!r})" if not c.ok
+                                                            else ")"))
     table.add_row("z on the surface, mm", f"{pts[:, 2].min():.3f} … {pts[:, 2].max():.3f}")
     table.add_row("field correction", str(field) if field else "none")
     table.add_row("estimated time", f"{e.total_s:.1f} s (mark {e.mark_mm:.0f} mm, jump "

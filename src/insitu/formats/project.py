@@ -99,6 +99,8 @@ class _Placement(_Strict):
     hatch_mm: float | None = Field(None, gt=0)
     hatch_angle_deg: float = 0.0
     cross: bool = False
+    fill: Literal["auto", "all", "none"] = "auto"   # a DXF's closed outlines
+    beam_mm: float = Field(0.05, gt=0)             # strokes this wide or more: areas
 
 
 class _Project(_Strict):
@@ -119,7 +121,7 @@ class Project:
     """A project in memory, every path absolute. ``cloud`` is the .ply to read (load) or the
     one the cloud already is in (save; None: write it beside the project). ``placements``:
     dataclasses with the fields of a placement (pattern, at_mm, width_mm, rotate_deg, mode,
-    hatch_mm, hatch_angle_deg, cross)."""
+    hatch_mm, hatch_angle_deg, cross, fill, beam_mm)."""
 
     rig: RigChoice = field(default_factory=RigChoice)
     height_cal: Path | None = None
@@ -192,7 +194,8 @@ def read_project(path: str | Path, placement: Callable[..., Any],
                  modes: Collection[str]) -> Project:
     """Read and validate a project file; FormatError naming the file and the field. Each
     placed pattern is made by ``placement(pattern, at_mm, width_mm, rotate_deg, mode,
-    hatch_mm, hatch_angle_deg, cross)``; ``modes``: the projection modes it may name."""
+    hatch_mm, hatch_angle_deg, cross, fill, beam_mm)``; ``modes``: the projection modes it may
+    name."""
     path = Path(path)
     raw = read_json(path)
     if not isinstance(raw, dict) or raw.get("format") != PROJECT_FORMAT:
@@ -215,7 +218,8 @@ def read_project(path: str | Path, placement: Callable[..., Any],
         pattern = p.pattern if _SPEC.match(p.pattern) else str(
             _abs(p.pattern, folder, f"placements[{i}].pattern", path))
         placements.append(placement(pattern, tuple(p.at_mm), p.width_mm, p.rotate_deg, p.mode,
-                                    p.hatch_mm, p.hatch_angle_deg, p.cross))
+                                    p.hatch_mm, p.hatch_angle_deg, p.cross, p.fill,
+                                    p.beam_mm))
     return Project(
         rig=RigChoice(d.rig.workpiece, d.rig.seed, d.rig.binning,
                       _abs(d.rig.rig_file, folder, "rig.rig_file", path)),

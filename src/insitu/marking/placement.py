@@ -3,6 +3,7 @@ of the commands, the GUI and the project files."""
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -10,15 +11,18 @@ import numpy as np
 from insitu.errors import FormatError
 from insitu.marking.modes import projection_mode
 from insitu.patterns import Pattern, hatch, load_pattern, order_paths
+from insitu.patterns.vector import BEAM_MM
 
 
 @dataclass(frozen=True)
 class Placement:
     """Where and how a pattern is marked. ``pattern``: a file or a ``text:``/``qr:`` spec;
-    ``at_mm``: its centre, world x, y; ``width_mm``: its width before rotating;
-    ``rotate_deg``: CCW about +z; ``mode``: a key of ``marking.PROJECTIONS``; ``hatch_mm``:
-    fill spacing (None: outlines only); ``hatch_angle_deg``, ``cross``: the hatch's
-    direction(s)."""
+    ``at_mm``: its centre, world x, y; ``width_mm``: its width before rotating (a code's
+    without its quiet zone; None: the size it loads at); ``rotate_deg``: CCW about +z;
+    ``mode``: a key of ``marking.PROJECTIONS``; ``hatch_mm``: fill spacing (None: outlines
+    only — but a code is hatched along its modules); ``hatch_angle_deg``, ``cross``: the
+    hatch's direction(s); ``fill``: a DXF's closed outlines, auto|all|none; ``beam_mm``: the
+    beam's width (strokes at least this wide, once placed, are marked as areas)."""
 
     pattern: str
     at_mm: tuple[float, float]
@@ -28,11 +32,30 @@ class Placement:
     hatch_mm: float | None = None
     hatch_angle_deg: float = 0.0
     cross: bool = False
+    fill: str = "auto"
+    beam_mm: float = BEAM_MM
 
     def placed(self) -> Pattern:
-        """The pattern loaded and moved to its place, world mm (FormatError if it cannot be)."""
+        """The pattern loaded and moved to its place, world mm (FormatError if it cannot be).
+        When the scaling decides otherwise for a stroke (wider or thinner than the beam once
+        placed), the file is loaded again with the beam in its own size."""
         projection_mode(self.mode)
-        return load_pattern(self.pattern).placed(self.at_mm, self.width_mm, self.rotate_deg)
+        p = load_pattern(self.pattern, fill=self.fill, beam=self.beam_mm)
+        width = p.mark_width if self.width_mm is None else self.width_mm
+        scale = width / p.mark_width if p.mark_width > 0 else 1.0
+        if p.beam_mm is not None and any((w >= p.beam_mm) != (w * scale >= self.beam_mm)
+                                         for w in p.stroke_widths):
+            p = load_pattern(self.pattern, fill=self.fill, beam=self.beam_mm / scale)
+            width = p.mark_width if self.width_mm is None else self.width_mm
+        return p.placed(self.at_mm, width, self.rotate_deg)
+
+    def code_hatch(self, pattern: Pattern) -> tuple[float, float]:
+        """(spacing mm, angle °) of a placed code's default hatch: along its module rows, a
+        whole number of lines per module, no further apart than the beam."""
+        f = pattern.frame
+        module = float(np.linalg.norm(f[1] - f[0])) / (pattern.code.cols
+                                                       + 2 * pattern.code.quiet)
+        return module / math.ceil(module / self.beam_mm - 1e-9), self.rotate_deg
 
     def polylines(self, pattern: Pattern) -> list[np.ndarray]:
         """What to mark of the placed ``pattern``, in marking order: hatched fill and outlines
@@ -40,6 +63,9 @@ class Placement:
         if self.hatch_mm is not None:
             return hatch(pattern, self.hatch_mm, self.hatch_angle_deg, self.cross,
                          start=self.at_mm)
+        if pattern.code is not None and pattern.frame is not None:
+            spacing, angle = self.code_hatch(pattern)
+            return hatch(pattern, spacing, angle, self.cross, start=self.at_mm)
         if pattern.is_empty:
             raise FormatError(f"pattern {pattern.name}: empty (nothing to mark)")
         loops = [np.vstack([c, c[:1]]) for c in pattern.contours]

@@ -14,7 +14,8 @@ from insitu.patterns.model import Pattern, from_shapely, to_svg
 from insitu.patterns.order import jump_length, order_paths, simplify
 from insitu.patterns.raster import load_image
 from insitu.patterns.text import text_pattern
-from insitu.patterns.vector import load_dxf, load_svg
+from insitu.patterns.dxf import load_dxf
+from insitu.patterns.svg import load_svg
 
 __all__ = [
     "FILE_SUFFIXES", "SOURCES", "SPEC_PREFIXES", "Pattern", "PatternSource", "is_spec",

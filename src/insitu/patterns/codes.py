@@ -1,4 +1,10 @@
-"""Generated patterns: QR codes (segno) and fiducial grids for calibration, in mm, y up."""
+"""Generated patterns: codes — QR (segno), Data Matrix ECC 200, Micro QR and Code 128
+(zxing-cpp) — and fiducial grids for calibration, in mm, y up.
+
+A code is one filled square per dark module (corners exact), origin at the bottom-left of
+its quiet zone; the pattern's frame is the symbol with its quiet zone (kept clear, counted in
+the bounds) and its ``code`` says what it encodes, so placement sizes the symbol without the
+quiet zone and the verifier knows what it must read."""
 
 from __future__ import annotations
 
@@ -7,7 +13,7 @@ import math
 import numpy as np
 
 from insitu.errors import FormatError
-from insitu.patterns.model import Pattern, contours_of
+from insitu.patterns.model import Code, Pattern, contours_of
 from insitu.patterns.raster import mask_region
 from insitu.patterns.vector import _arc_steps
 
@@ -49,8 +55,67 @@ def qr_pattern(data: str, error: str = "M", quiet_zone: int = 4, module_mm: floa
         m = ~m
     n = m.shape[0]
     frame = np.array([[0, 0], [n, 0], [n, n], [0, n]], np.float64) * module_mm
+    k = n - 2 * int(quiet_zone)
     return Pattern(tuple(contours_of(mask_region(m, module_mm))), (),
-                   f"qr:{data}", frame)
+                   f"qr:{data}", frame, Code("qr", data, k, k, int(quiet_zone)))
+
+
+# zxing-cpp symbologies: name → (BarcodeFormat attribute, default quiet zone in modules)
+SYMBOLOGIES = {"datamatrix": ("DataMatrix", 2), "microqr": ("MicroQRCode", 2),
+               "code128": ("Code128", 10), "qr": ("QRCode", 4)}
+
+
+def zxing_matrix(symbology: str, data: str, *, ec: str | None = None, gs1: bool = False,
+                 square: bool = True, aspect: float = 0.25) -> np.ndarray:
+    """(rows, cols) bool module matrix (True = dark) without quiet zone, written by
+    zxing-cpp. Data Matrix: ``gs1`` (FNC1 + element strings "(01)…(21)…"), ``square``
+    symbols; Micro QR: ``ec`` L|M|Q; Code 128: bars ``aspect`` × the symbol's width tall."""
+    import zxingcpp
+
+    where = f"{symbology}:{data[:40]!r}"
+    if not data:
+        raise FormatError(f"{symbology}:\"\": no data to encode (empty pattern)")
+    kw: dict = {}
+    if symbology == "datamatrix":
+        kw = {"gs1": bool(gs1), "force_square": bool(square)}
+    elif ec is not None:
+        if str(ec).upper() not in ("L", "M", "Q"):
+            raise FormatError(f"{where}: error correction must be one of L, M, Q, got {ec!r}")
+        kw = {"ec_level": str(ec).upper()}
+    fmt = getattr(zxingcpp.BarcodeFormat, SYMBOLOGIES[symbology][0])
+    try:
+        img = zxingcpp.create_barcode(data, fmt, **kw).to_image(scale=1,
+                                                                add_quiet_zones=False)
+    except Exception as e:  # noqa: BLE001 — zxing-cpp's encoder errors, one line
+        raise FormatError(f"{where}: cannot encode ({' '.join(str(e).split())[:120]})") from e
+    m = np.asarray(img) < 128
+    if symbology == "code128":
+        if not 0 < aspect <= 10:
+            raise FormatError(f"{where}: aspect must be in (0, 10], got {aspect}")
+        bars = m[m.shape[0] // 2]
+        m = np.repeat(bars[None, :], max(1, round(aspect * len(bars))), axis=0)
+    return m
+
+
+def code_pattern(symbology: str, data: str, module_mm: float = 1.0,
+                 quiet_zone: int | None = None, **options) -> Pattern:
+    """A code of :data:`SYMBOLOGIES` as filled module squares of ``module_mm`` with
+    ``quiet_zone`` light modules all round (default: the symbology's); ``options`` go to
+    :func:`zxing_matrix`."""
+    if not module_mm > 0:
+        raise FormatError(f"{symbology}:{data[:40]!r}: module size must be > 0 mm, got "
+                          f"{module_mm}")
+    q = SYMBOLOGIES[symbology][1] if quiet_zone is None else quiet_zone
+    if int(q) != q or q < 0:
+        raise FormatError(f"{symbology}:{data[:40]!r}: quiet zone must be a whole number of "
+                          f"modules ≥ 0, got {q}")
+    m = zxing_matrix(symbology, data, **options)
+    rows, cols = m.shape
+    w, h = (cols + 2 * q) * module_mm, (rows + 2 * q) * module_mm
+    frame = np.array([[0, 0], [w, 0], [w, h], [0, h]], np.float64)
+    g = mask_region(np.pad(m, int(q)), module_mm)
+    return Pattern(tuple(contours_of(g)), (), f"{symbology}:{data}", frame,
+                   Code(symbology, data, cols, rows, int(q)))
 
 
 def fiducial_centres(rows: int, cols: int, pitch_mm: float) -> np.ndarray:

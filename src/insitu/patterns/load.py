@@ -2,7 +2,8 @@
 of pattern sources, :data:`SOURCES` (the CLI's help, the GUI's file dialog and drag and drop,
 and the project files read it). A new source is a module with its loader and one entry here.
 
-A spec is a file (its suffix picks the source) or ``prefix:payload`` (text:, qr:, fiducials:),
+A spec is a file (its suffix picks the source) or ``prefix:payload`` (text:, qr:, datamatrix:,
+microqr:, code128:, fiducials:),
 each with optional ``;key=value`` options at the end (the entry's ``options``)::
 
     logo.svg                         SVG (fills → contours, strokes → paths)
@@ -13,6 +14,11 @@ each with optional ``;key=value`` options at the end (the entry's ``options``)::
     qr:"https://example.com";ec=H;quiet=2;invert=1
                                      QR code: error correction L|M|Q|H (M), quiet zone in
                                      modules (4), module size mm (module=1)
+    datamatrix:"(01)09501101530003(21)0042";module=0.3
+                                     Data Matrix ECC 200 (GS1 when the data starts with an
+                                     AI in brackets; gs1=0/1 to say), quiet zone 2, square=1
+    microqr:"12345";ec=M             Micro QR (quiet zone 2)
+    code128:"SN-0042";aspect=0.25    Code 128 (quiet zone 10, bars aspect × width tall)
     fiducials:5x7;pitch=5;diameter=1;filled=0
                                      calibration grid of circles
 
@@ -30,8 +36,9 @@ from pathlib import Path
 from typing import Any
 
 from insitu.errors import FormatError
-from insitu.patterns import codes, raster, text, vector
+from insitu.patterns import codes, dxf, raster, svg, text
 from insitu.patterns.model import Pattern
+from insitu.patterns.vector import BEAM_MM
 
 
 @dataclass(frozen=True)
@@ -71,6 +78,16 @@ def _qr(body: str, o: dict) -> Pattern:
                             module_mm=o.get("module", 1.0), invert=o.get("invert", False))
 
 
+def _zxing(symbology: str):
+    def load(body: str, o: dict) -> Pattern:
+        opts = {k: o[k] for k in ("ec", "square", "aspect") if k in o}
+        if symbology == "datamatrix":
+            opts["gs1"] = o.get("gs1", body.startswith("("))
+        return codes.code_pattern(symbology, body, module_mm=o.get("module", 1.0),
+                                  quiet_zone=o.get("quiet"), **opts)
+    return load
+
+
 def _fiducials(body: str, o: dict) -> Pattern:
     m = re.fullmatch(r"\s*(\d+)\s*[xX×]\s*(\d+)\s*", body)
     if not m:
@@ -81,10 +98,13 @@ def _fiducials(body: str, o: dict) -> Pattern:
 
 
 SOURCES: dict[str, PatternSource] = {
-    "svg": PatternSource(lambda path, o: vector.load_svg(path),
-                         "SVG drawing", suffixes=(".svg",)),
-    "dxf": PatternSource(lambda path, o: vector.load_dxf(path),
-                         "DXF drawing", suffixes=(".dxf",)),
+    "svg": PatternSource(lambda path, o: svg.load_svg(path, beam_mm=o.get("beam", BEAM_MM)),
+                         "SVG drawing, strokes ≥ ;beam= mm as areas", {"beam": float},
+                         suffixes=(".svg",)),
+    "dxf": PatternSource(lambda path, o: dxf.load_dxf(path, fill=o.get("fill", "auto"),
+                                                      units=o.get("units")),
+                         "DXF drawing, ;fill=auto|all|none ;units=", {"fill": str, "units": str},
+                         suffixes=(".dxf",)),
     "image": PatternSource(_image, "image, ;mode=fill|threshold|dither",
                            {"mode": str, "dpi": float, "width": float, "threshold": float,
                             "invert": bool},
@@ -94,6 +114,15 @@ SOURCES: dict[str, PatternSource] = {
     "qr": PatternSource(_qr, "QR code, ;ec=L|M|Q|H",
                         {"ec": str, "quiet": int, "invert": bool, "module": float},
                         prefix="qr:"),
+    "datamatrix": PatternSource(_zxing("datamatrix"), "Data Matrix ECC 200, GS1 when it "
+                                "starts with (AI), ;square=0 for rectangles",
+                                {"quiet": int, "module": float, "gs1": bool, "square": bool},
+                                prefix="datamatrix:"),
+    "microqr": PatternSource(_zxing("microqr"), "Micro QR code, ;ec=L|M|Q",
+                             {"ec": str, "quiet": int, "module": float}, prefix="microqr:"),
+    "code128": PatternSource(_zxing("code128"), "Code 128, ;aspect= bar height / width",
+                             {"quiet": int, "module": float, "aspect": float},
+                             prefix="code128:"),
     "fiducials": PatternSource(_fiducials, "grid of circles, ;pitch= mm",
                                {"pitch": float, "diameter": float, "filled": bool},
                                prefix="fiducials:", payload_hint="ROWSxCOLS"),

@@ -52,12 +52,21 @@ class Pattern:
     frame: optional (4, 2) outline of the declared extent (a QR code with its quiet zone, an
         image's full size). It is never marked but counts in :meth:`bounds`, so placement and
         scaling keep the margin.
+    code: what a code source encoded (:class:`Code`), None for drawings.
+    notes: one-line remarks of the loader (units chosen, what became a fill), for the user.
+    stroke_widths: widths (mm, as loaded) of the strokes the loader met; with ``beam_mm`` the
+        width at or above which they were loaded as areas (thinner ones are lines), so a
+        placement that scales the pattern can tell whether to load it again.
     """
 
     contours: tuple[np.ndarray, ...] = ()
     paths: tuple[np.ndarray, ...] = ()
     name: str = ""
     frame: np.ndarray | None = field(default=None, repr=False)
+    code: Code | None = None
+    notes: tuple[str, ...] = ()
+    stroke_widths: tuple[float, ...] = ()
+    beam_mm: float | None = None
 
     def __post_init__(self) -> None:
         cs = tuple(c for c in (_clean(c, True) for c in self.contours) if c is not None)
@@ -103,10 +112,21 @@ class Pattern:
         return x1 - x0, y1 - y0
 
     def map(self, fn, name: str | None = None) -> Pattern:
-        """A new Pattern with ``fn((N, 2)) -> (N, 2)`` applied to every array."""
+        """A new Pattern with ``fn((N, 2)) -> (N, 2)`` applied to every array (code, notes and
+        stroke widths kept as they were loaded)."""
         return Pattern(tuple(fn(c) for c in self.contours), tuple(fn(p) for p in self.paths),
                        self.name if name is None else name,
-                       None if self.frame is None else fn(self.frame))
+                       None if self.frame is None else fn(self.frame), self.code, self.notes,
+                       self.stroke_widths, self.beam_mm)
+
+    @property
+    def mark_width(self) -> float:
+        """The width (mm) that placement scales: a code's symbol without its quiet zone,
+        else the bounding box's."""
+        w = self.size[0]
+        if self.code is not None and self.code.quiet:
+            w *= self.code.cols / (self.code.cols + 2 * self.code.quiet)
+        return w
 
     def transformed(self, translate=(0.0, 0.0), rotate_deg: float = 0.0, scale: float = 1.0,
                     mirror_x: bool = False) -> Pattern:
@@ -124,9 +144,9 @@ class Pattern:
         return self.map(lambda p: (p - c) @ m.T + t)
 
     def placed(self, at_xy, width_mm: float, rotate_deg: float = 0.0) -> Pattern:
-        """Scaled so its (unrotated) width is ``width_mm``, its bbox centre moved to ``at_xy``,
-        then rotated CCW by ``rotate_deg`` about that point."""
-        w = self.size[0]
+        """Scaled so its (unrotated) :attr:`mark_width` is ``width_mm``, its bbox centre moved
+        to ``at_xy``, then rotated CCW by ``rotate_deg`` about that point."""
+        w = self.mark_width
         if w <= 0:
             raise FormatError(f"pattern {self.name}: zero width, cannot scale it to {width_mm} mm")
         if not (math.isfinite(width_mm) and width_mm > 0):
@@ -138,6 +158,19 @@ class Pattern:
     def to_shapely(self) -> BaseGeometry:
         """The filled region (even-odd over ``contours``) as a valid shapely geometry."""
         return region(self.contours, "evenodd")
+
+
+@dataclass(frozen=True)
+class Code:
+    """A code symbol: ``symbology`` (a key of ``codes.SYMBOLOGIES``), the ``text`` it
+    encodes, its size in modules without the quiet zone (``cols`` × ``rows``) and the
+    ``quiet`` zone, modules on each side (part of the pattern's frame, kept clear)."""
+
+    symbology: str
+    text: str
+    cols: int
+    rows: int
+    quiet: int
 
 
 # --- regions: rings + fill rule <-> shapely ---------------------------------------------------
@@ -280,3 +313,28 @@ def to_svg(pattern: Pattern, stroke_mm: float = 0.1) -> str:
 
 def _xml(s: str) -> str:
     return s.replace("&", "&amp;").replace("<", "&lt;").replace(">", "&gt;")
+
+
+_CAPS = {"butt": "flat", "round": "round", "square": "square"}
+_JOINS = {"miter": "mitre", "miter-clip": "mitre", "arcs": "round", "round": "round",
+          "bevel": "bevel"}
+
+
+def stroke_region(line, width: float, cap: str = "butt", join: str = "miter",
+                  mitre_limit: float = 4.0, closed: bool = False) -> BaseGeometry:
+    """The area a pen of ``width`` (mm) covers along ``line`` (N, 2) mm: SVG's ``cap`` (butt,
+    round, square) and ``join`` (miter, round, bevel; miter beyond ``mitre_limit`` — SVG's
+    stroke-miterlimit, the same ratio as shapely's — is clipped there). A closed line has no
+    caps; a one-point line with a round or square cap is a dot."""
+    p = np.asarray(line, np.float64)[:, :2]
+    r = width / 2.0
+    cap_s, join_s = _CAPS.get(cap, "flat"), _JOINS.get(join, "mitre")
+    kw = dict(join_style=join_s, mitre_limit=max(1.0, float(mitre_limit)), quad_segs=16)
+    if len(p) < 2 or np.all(np.abs(p - p[0]) <= _EPS):
+        if cap_s == "flat":
+            return shapely.Polygon()
+        return shapely.Point(p[0]).buffer(r, quad_segs=16, cap_style=cap_s)
+    if closed and len(p) >= 3:
+        ring = shapely.LinearRing(p)
+        return shapely.buffer(ring, r, **kw)
+    return shapely.buffer(shapely.LineString(p), r, cap_style=cap_s, **kw)

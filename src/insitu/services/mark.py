@@ -18,6 +18,7 @@ from insitu.formats.pointcloud import PointCloud, read_ply
 from insitu.marking import (GalvoDriver, LaserParams, MarkJob, Placement, Projection,
                             RunResult, TimeEstimate, estimate_time, plan_job, progress_path_for,
                             run_job, run_preview, write_job)
+from insitu.marking.verify import CodeCheck, check_code, unrolled
 from insitu.patterns import Pattern
 from insitu.services.common import Progress
 from insitu.services.scan import Cancelled
@@ -29,19 +30,36 @@ if TYPE_CHECKING:
 @dataclass(frozen=True)
 class MarkPlan:
     """A checked job and how it came about: ``pattern`` placed (world x, y before
-    projection), ``projection`` (support, stretch), ``estimate`` of the marking time."""
+    projection), ``projection`` (support, stretch), ``estimate`` of the marking time,
+    ``codes``: whether each code reads from the job's marks."""
 
     job: MarkJob
     pattern: Pattern
     projection: Projection
     estimate: TimeEstimate
+    codes: tuple[CodeCheck, ...] = ()
+
+
+def check_codes(job: MarkJob, pattern: Pattern, projection: Projection,
+                beam_mm: float) -> tuple[CodeCheck, ...]:
+    """Decode the code of ``pattern`` (if any) from the job's marks: their x, y, or unrolled
+    along the surface when the projection has an unroll direction (wrap)."""
+    if pattern.code is None or pattern.frame is None:
+        return ()
+    paths3d = [p.points for p in job.paths]
+    if projection.direction_deg is not None and projection.anchor is not None:
+        paths_xy = unrolled(paths3d, projection.anchor, projection.direction_deg)
+    else:
+        paths_xy = [p[:, :2] for p in paths3d]
+    return (check_code(pattern, paths_xy, beam_mm)[0],)
 
 
 def plan_mark(cloud: PointCloud | str | Path, placement: Placement, driver: GalvoDriver,
-              laser: LaserParams | None = None) -> MarkPlan:
+              laser: LaserParams | None = None, force: bool = False) -> MarkPlan:
     """Place, project and check: SafetyError (naming the place) for a pattern outside the
     field or focus range, over a hole or a wall, or whose corrected commands leave the field;
-    FormatError for a bad pattern. Nothing is written or fired."""
+    FormatError for a bad pattern, or for a code that would not decode from the planned marks
+    (unless ``force``). Nothing is written or fired."""
     pattern = placement.placed()
     polylines = placement.polylines(pattern)
     if not isinstance(cloud, PointCloud):
@@ -49,7 +67,14 @@ def plan_mark(cloud: PointCloud | str | Path, placement: Placement, driver: Galv
     job, proj = plan_job(polylines, cloud, driver.limits, placement.mode, laser,
                          anchor=placement.at_mm)
     driver.check(job)
-    return MarkPlan(job, pattern, proj, estimate_time(job, driver.timing))
+    codes = check_codes(job, pattern, proj, placement.beam_mm)
+    bad = [c for c in codes if not c.ok]
+    if bad and not force:
+        c = bad[0]
+        raise FormatError(f"{c.name}: does not decode from the planned marks (read "
+                          f"{c.decoded!r}, module {c.module_mm:.3g} mm); nothing written "
+                          "(--force to mark it anyway)")
+    return MarkPlan(job, pattern, proj, estimate_time(job, driver.timing), codes)
 
 
 @dataclass(frozen=True)

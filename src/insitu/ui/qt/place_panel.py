@@ -4,6 +4,7 @@ through the session's undoable placement history."""
 
 from __future__ import annotations
 
+from dataclasses import replace
 from pathlib import Path
 
 from PySide6.QtCore import Qt
@@ -59,7 +60,7 @@ class PlacePanel(QWidget):
         """Place pattern ``spec`` (file, ``text:"…"``, ``qr:"…"``) on the cloud's middle,
         a third of its width wide; False (and a message) if it cannot be loaded."""
         try:
-            base_pattern(spec)
+            code = base_pattern(spec).code
         except InsituError as e:
             self.window_.show_error(str(e))
             return False
@@ -69,7 +70,11 @@ class PlacePanel(QWidget):
             lo, hi = cloud.points[:, :2].min(0), cloud.points[:, :2].max(0)
             at = tuple(round(float(v), 1) for v in (lo + hi) / 2)
             width = round(max(float(min(hi - lo)) / 3, 1.0), 1)
-        self.session.add_placement(Placement(spec, at, width))
+        placement = Placement(spec, at, width)
+        if code is not None:  # a code is hatched along its modules: an outline does not read
+            placement = replace(placement,
+                                hatch_mm=round(placement.code_hatch(placement.placed())[0], 3))
+        self.session.add_placement(placement)
         return True
 
     def _import(self) -> None:
