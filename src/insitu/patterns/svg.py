@@ -164,6 +164,10 @@ def load_svg(path: str | Path, tol_mm: float = TOL_MM, beam_mm: float = BEAM_MM)
             elif _dark(el.stroke):
                 thin.extend(p for p, _ in subs if len(p) >= 2)
         filled = shapely.unary_union([filled, *dark])
+        # slivers thinner than the tolerance (a fill of a straight path, an erasure's seam)
+        parts = shapely.get_parts(filled)
+        filled = shapely.unary_union(parts[shapely.area(parts) > 0.5 * tol_px
+                                           * shapely.length(parts)])
         notes = [_units_note(svg)]
     except FormatError:
         raise
