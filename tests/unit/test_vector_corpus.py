@@ -112,7 +112,7 @@ def test_hatches_fill_their_area_once():
     p = load_pattern(path)
     assert p.to_shapely().area == pytest.approx(_ezdxf_reference(path), rel=0.01)
     assert not p.paths                   # the hatches' boundary polylines are not marked again
-    assert "16 closed outline(s) marked as lines (16 along a fill's edge not doubled)" in p.notes
+    assert "16 closed outline(s) marked as lines, 16 of them along a fill's edge (not marked again)" in p.notes
     assert len(load_pattern(f"{path};fill=none").paths) == len(p.contours)
 
 
@@ -136,3 +136,23 @@ def test_leica_export_units():
     m = load_pattern(f"{path};units=m")
     assert m.notes[0] == "units: m (given)"
     assert m.size == pytest.approx((p.size[0] * 1000, p.size[1] * 1000), rel=1e-9)
+
+
+def test_pattern_show_says_what_will_be_marked_and_draws_it(tmp_path):
+    from typer.testing import CliRunner
+
+    from insitu.cli.main import app
+
+    out = tmp_path / "preview.png"
+    res = CliRunner().invoke(app, ["pattern", "show", str(CORPUS / "segno" / "my-vcard.svg"),
+                                   "-o", str(out)])
+    assert res.exit_code == 0, res.output
+    text = " ".join(re.sub(r"[│┌┐└┘├┤┬┴┼─]", " ", res.output).split())
+    assert "units: width 228, no viewBox" in text and "1 stroke(s) ≥ beam 0.05 mm" in text
+    img = cv2.imread(str(out))
+    assert img.shape[0] == img.shape[1] == 800
+    gray = np.all(img == (60, 60, 60), axis=2).mean()       # the modules, filled
+    assert 0.3 < gray < 0.7
+    res = CliRunner().invoke(app, ["pattern", "show", str(CORPUS / "ezdxf" /
+                                                         "circle_radius_le_0.dxf")])
+    assert res.exit_code == 1 and "CIRCLE #2D has radius 0" in res.output

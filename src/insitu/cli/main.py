@@ -15,6 +15,7 @@ from insitu.cli import centres as centres_cmd
 from insitu.cli import field as field_cmd
 from insitu.cli import job as job_cmd
 from insitu.cli import mark as mark_cmd
+from insitu.cli import pattern as pattern_cmd
 from insitu.cli import record as record_cmd
 from insitu.cli import scan as scan_cmd
 from insitu.cli import sim as sim_cmd
@@ -37,6 +38,7 @@ galvo_app.command("correct")(field_cmd.correct)
 galvo_app.command("check")(field_cmd.check)
 app.add_typer(galvo_app, name="galvo")
 app.add_typer(job_cmd.app, name="job")
+app.add_typer(pattern_cmd.app, name="pattern")
 app.add_typer(sim_cmd.app, name="sim")
 
 

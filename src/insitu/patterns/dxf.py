@@ -241,7 +241,7 @@ def load_dxf(path: str | Path, tol_mm: float = TOL_MM, join_mm: float = 1e-3,
     if loops:
         notes.append(f"{len(loops)} closed outline(s) " + (
             "filled (fill=all)" if fill == "all" else
-            f"marked as lines ({dropped} along a fill's edge not doubled)"))
+            f"marked as lines, {dropped} of them along a fill's edge (not marked again)"))
     paths_out = [np.vstack([r, r[:1]]) for r in outlines] + opens
     return _non_empty(Pattern(tuple(contours), tuple(paths_out), path.name,
                               notes=tuple(notes)), path, "drawable entities")
