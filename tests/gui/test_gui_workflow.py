@@ -262,7 +262,8 @@ def test_a_device_fault_mid_scan_keeps_what_was_measured(qtbot, window, monkeypa
 
 def test_pilot_preview_then_abort_stops_mid_job(qtbot, window, tmp_path):
     scan_recording(qtbot, window)
-    place(qtbot, window, spec='qr:"insitu"', at=(0.0, 28.0), width=14.0)
+    place(qtbot, window, spec='qr:"insitu"', at=(0.0, 28.0), width=10.1)  # the symbol
+    assert 0 < window.session.placements.items[-1].hatch_mm <= 0.05   # a code: hatched
     window.session.update_selected(hatch_mm=0.03)
     qtbot.waitUntil(lambda: window.mark_panel.job() is not None
                     and len(window.mark_panel.job().paths) > 200

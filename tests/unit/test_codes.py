@@ -135,3 +135,16 @@ def test_segno_svgs_decode_from_the_job(station, step_block, tmp_path, name, tex
         assert check.decoded.startswith("BEGIN:VCARD")
     else:
         assert check.decoded == text
+
+
+def test_a_code_whose_quiet_zone_another_mark_enters_is_refused(station, step_block):
+    from insitu.services.mark import plan_all
+
+    code = Placement(SPECS["datamatrix"] + ";module=0.3", (0.0, -10.0), None)
+    near = Placement('text:"A"', (3.2, -10.0), 2.0)     # the symbol ends at x = 2.4, zone 3.0
+    far = Placement('text:"A"', (6.0, -10.0), 2.0)
+    out = plan_all(step_block, [code, near], station.driver)
+    assert out[0].plan is None and "placement 2's marks enter its quiet zone" in out[0].error
+    assert out[1].plan is not None
+    out = plan_all(step_block, [code, far], station.driver)
+    assert out[0].plan is not None and out[0].plan.codes[0].ok

@@ -89,7 +89,8 @@ class PlanOutcome:
 
 def plan_all(cloud: PointCloud, placements, driver: GalvoDriver,
              laser: LaserParams | None = None) -> list[PlanOutcome]:
-    """:func:`plan_mark` of each placement; a refusal is kept as its message (and place)."""
+    """:func:`plan_mark` of each placement; a refusal is kept as its message (and place).
+    A code whose quiet zone another placement's marks enter is refused too."""
     out = []
     for p in placements:
         try:
@@ -98,7 +99,29 @@ def plan_all(cloud: PointCloud, placements, driver: GalvoDriver,
             out.append(PlanOutcome(error=str(e), where=e.where_mm))
         except InsituError as e:
             out.append(PlanOutcome(error=str(e)))
-    return out
+    return [_quiet_zone_clear(i, o, out) for i, o in enumerate(out)]
+
+
+def _quiet_zone_clear(i: int, outcome: PlanOutcome, outcomes) -> PlanOutcome:
+    """``outcome``, or its refusal when another planned pattern (world x, y, as placed)
+    reaches into the frame — symbol and quiet zone — of its code."""
+    import shapely
+
+    plan = outcome.plan
+    if plan is None or plan.pattern.code is None or plan.pattern.frame is None:
+        return outcome
+    zone = shapely.Polygon(plan.pattern.frame)
+    for j, other in enumerate(outcomes):
+        if j == i or other.plan is None:
+            continue
+        q = other.plan.pattern
+        marks = shapely.union_all([q.to_shapely(), *map(shapely.LineString, q.paths)])
+        if marks.intersects(zone):
+            c = zone.centroid
+            return PlanOutcome(error=f"{plan.pattern.name}: placement {j + 1}'s marks enter "
+                                     "its quiet zone (a reader needs it clear)",
+                               where=(c.x, c.y))
+    return outcome
 
 
 def save_job(path: str | Path, job: MarkJob) -> Path:
