@@ -24,6 +24,7 @@ from pathlib import Path
 import numpy as np
 from rich.console import Console
 from rich.table import Table
+from scipy.spatial import cKDTree
 
 from insitu.sim.world import SimWorld
 from insitu.services.station import simulated
@@ -37,7 +38,7 @@ from insitu.sim.rig import default_rig
 from insitu.sim.workpieces import make_workpiece
 from insitu.vision.extract import PAPER_SETTINGS, CentreSettings
 
-console = Console()
+console = Console(width=150)
 METHODS = ("plane", "paper", "sheet")
 WALL_MARGIN_MM = 1.0
 
@@ -64,15 +65,21 @@ def reconstruct(world: SimWorld, cals, region, spacing=0.5):
     return {m: r.cloud() for m, r in recs.items()}, t_rec
 
 
-def height_errors(part, cloud, margin=WALL_MARGIN_MM):
-    """Height error (N,) of points over the part's top, at least ``margin`` mm from any edge
-    or wall (the true height must be the same all around the point)."""
-    p = cloud.points
+def on_top(part, p, margin=WALL_MARGIN_MM):
+    """(N,) bool: points (N, ≥2) over the part's top at least ``margin`` mm from any edge or
+    wall (the true height is the same all around them), and their true heights (N,)."""
     z_true = part.height(p[:, 0], p[:, 1])
     ok = np.isfinite(z_true)
     for dx, dy in ((margin, 0), (-margin, 0), (0, margin), (0, -margin)):
         zn = part.height(p[:, 0] + dx, p[:, 1] + dy)
         ok &= np.isfinite(zn) & (np.abs(zn - z_true) < 0.05 * margin + 0.3)
+    return ok, z_true
+
+
+def height_errors(part, cloud, margin=WALL_MARGIN_MM):
+    """Points over the part's top ≥ ``margin`` mm from walls (N, 3), and their height error."""
+    p = cloud.points
+    ok, z_true = on_top(part, p, margin)
     return p[ok], p[ok, 2] - z_true[ok]
 
 
@@ -167,15 +174,33 @@ def _triangle_sides(xy):
     return [np.linalg.norm(corners[i] - corners[(i + 1) % 3]) for i in range(3)]
 
 
+def coverage(part, cloud, step=0.25):
+    """Fraction of the part's top (≥ 0.3 mm from walls) along the scanned lines that holds a
+    measured point within ``step`` mm."""
+    p, line = cloud.points, cloud.attributes["line"]
+    xs = np.array([np.median(p[line == k, 0]) for k in np.unique(line)])
+    lo, hi = part.bounds()
+    gx, gy = (g.ravel() for g in np.meshgrid(xs, np.arange(lo[1], hi[1], step)))
+    probe = np.column_stack([gx, gy])
+    top, _ = on_top(part, probe, margin=0.3)
+    d, _ = cKDTree(p[:, :2]).query(probe[top])
+    return float(np.mean(d <= step))
+
+
 def error_table(title, parts_clouds):
     t = Table(title=title)
-    for col in ("workpiece", "method", "points", "mean", "RMS", "max |e|"):
+    for col in ("workpiece", "method", "points", "mean", "RMS", "max |e|", "RMS ≥0.3",
+                "max ≥0.3", "top covered"):
         t.add_column(col)
     for name, (world, clouds) in parts_clouds.items():
+        part = world.parts[0]
         for m in METHODS:
-            _, e = height_errors(world.parts[0], clouds[m])
+            _, e = height_errors(part, clouds[m])
+            _, e3 = height_errors(part, clouds[m], margin=0.3)
             t.add_row(name, m, f"{len(e):,}", f"{np.mean(e):+.4f}",
-                      f"{np.sqrt(np.mean(e**2)):.4f}", f"{np.max(np.abs(e)):.4f}")
+                      f"{np.sqrt(np.mean(e**2)):.4f}", f"{np.max(np.abs(e)):.4f}",
+                      f"{np.sqrt(np.mean(e3**2)):.4f}", f"{np.max(np.abs(e3)):.4f}",
+                      f"{coverage(part, clouds[m]):.1%}")
     console.print(t)
 
 

@@ -64,7 +64,7 @@ def scan_clouds(seed: int, binning: int):
     for name in ("step-block", "arc"):
         t = time.perf_counter()
         worlds[name] = sim_world(name, seed=seed, rig=rig)
-        clouds[name] = scan_live(worlds[name], height_cal=cal).cloud
+        clouds[name] = scan_live(simulated(worlds[name]), height_cal=cal).cloud
         console.print(f"{name}: {len(clouds[name])} points measured in "
                       f"{time.perf_counter() - t:.1f} s")
     return rig, worlds, clouds

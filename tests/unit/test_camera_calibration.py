@@ -3,6 +3,7 @@ views are rejected, ChArUco boards work, and ``insitu calibrate camera`` end to 
 
 import json
 import shutil
+from pathlib import Path
 
 import cv2
 import numpy as np
@@ -11,11 +12,11 @@ import typer
 from typer.testing import CliRunner
 
 from insitu.calibrate.camera import (BoardSpec, Detection, board_pose, calibrate_intrinsics,
-                                     detect_board)
+                                     detect_board, find_chessboard)
 from insitu.cli.camera import camera as camera_cmd
 from insitu.sim.world import SimWorld
 from insitu.errors import CalibrationError
-from insitu.formats.sequence import SequenceWriter
+from insitu.formats.sequence import Sequence, SequenceWriter
 from insitu.geometry.camera import CameraModel
 from insitu.rig.files import CameraCalibration, load_json_model
 from insitu.services.record import record_camera_calibration
@@ -204,3 +205,97 @@ def test_the_application_camera_page_pictures_the_per_view_residuals(rec, tmp_pa
     bar = np.all(pic == (200, 140, 60), axis=2).any(axis=0)
     starts = np.flatnonzero(bar[1:] & ~bar[:-1])
     assert len(starts) == len(cal.per_view_rms_px)
+
+
+# -- a plain folder of photos -----------------------------------------------------------------
+REAL = Path(__file__).resolve().parents[1] / "data/real/opencv-left"
+
+
+def test_opencv_samples_every_view_used_through_the_cli(tmp_path):
+    """OpenCV's 13 left*.jpg: SB misses left11, classic finds it; all 13 calibrate. fx is
+    within 1 % of OpenCV's 536.07 px (0.6 % below it: OpenCV's 11 × 11 half-window reaches the
+    neighbouring corners on these 22–37 px squares, hence its 2× larger reprojection RMS)."""
+    out = tmp_path / "camera.json"
+    res = runner.invoke(_app(), ["calibrate", "camera", str(REAL), "--board", "9x6x1",
+                                 "-o", str(out)])
+    assert res.exit_code == 0, res.output
+    cal = load_json_model(out, CameraCalibration)
+    assert cal.residuals["views_used"] == 13 and cal.residuals["views_rejected"] == 0
+    detectors = {v["file"]: v["detector"] for v in cal.views}
+    assert detectors["left11.jpg"] == "classic" and set(detectors.values()) == {"sb", "classic"}
+    K = np.array(cal.camera.K)
+    assert abs(K[0, 0] / 536.07 - 1) < 0.01 and abs(K[1, 1] / K[0, 0] - 1) < 1e-3
+    assert abs(K[0, 2] - 342.37) < 3 and abs(K[1, 2] - 235.54) < 3
+    assert cal.rms_px < 0.25                         # OpenCV's standard flow: 0.41 px
+    img = cv2.imread(str(REAL / "left11.jpg"), cv2.IMREAD_GRAYSCALE)
+    assert find_chessboard(img, (9, 6), "sb") is None
+    assert find_chessboard(img, (9, 6), "classic") is not None
+
+
+def _photos(rec, dst: Path) -> Path:
+    """The recording's checkerboard views as a plain folder: PNGs, the first in colour."""
+    seq = Sequence.open(rec)
+    dst.mkdir()
+    views = [i for i, f in enumerate(seq.frames) if f.line is None]
+    for n, i in enumerate(views):
+        img = seq.read_frame(i)
+        img = (img >> 8).astype(np.uint8) if img.dtype == np.uint16 else img
+        if n == 0:
+            img = cv2.cvtColor(img, cv2.COLOR_GRAY2BGR)
+        cv2.imwrite(str(dst / f"view{n:02d}.png"), img)
+    return dst
+
+
+def test_a_plain_folder_of_photos_calibrates_with_board(rec, tmp_path):
+    folder, rig = rec
+    photos = _photos(folder, tmp_path / "photos")
+    out = tmp_path / "camera.json"
+    res = runner.invoke(_app(), ["calibrate", "camera", str(photos), "--board", "9x6x10",
+                                 "-o", str(out)])
+    assert res.exit_code == 0, res.output
+    cal = load_json_model(out, CameraCalibration)
+    assert abs(np.array(cal.camera.K)[0, 0] / rig.camera.K[0, 0] - 1) < 3e-3
+    assert cal.residuals["views_used"] == 5 and cal.rms_px < 0.1
+    assert np.array_equal(cal.camera.R, np.eye(3)) and out.with_suffix(".png").exists()
+    # the recording itself, with an agreeing --board, is calibrated as without it
+    same = tmp_path / "same.json"
+    res = runner.invoke(_app(), ["calibrate", "camera", str(folder), "--board", "9x6x10",
+                                 "-o", str(same)])
+    assert res.exit_code == 0, res.output
+
+
+@pytest.mark.parametrize("case, board, message", [
+    ("no-images", "9x6x10", "no images"),
+    ("unreadable", "9x6x10", "bad.png: not a readable image"),
+    ("no-board", None, "no sequence.json; give the board as --board"),
+    ("board-text", "9x6", "--board '9x6': expected COLSxROWSxSQUARE_MM"),
+    ("few-views", "9x6x10", "only 3 good views of 3, need at least 4"),
+    ("not-found", "8x5x10", "no chessboard of 8×5 inner corners, 10 mm squares found in any"),
+    ("disagrees", "9x6x12", "records a chessboard of 9×6 inner corners, 10 mm squares"),
+    ("charuco-alone", None, "--charuco: give the board's size too"),
+])
+def test_plain_folder_bad_input_one_line_error_and_no_file(rec, tmp_path, case, board, message):
+    folder, _ = rec
+    photos = tmp_path / "p"
+    if case in ("unreadable", "few-views", "not-found", "no-board"):
+        _photos(folder, photos)
+    if case == "unreadable":
+        (photos / "bad.png").write_bytes(b"not a png")
+    if case == "few-views":
+        for p in sorted(photos.glob("*.png"))[3:]:
+            p.unlink()
+    if case == "not-found":
+        for p in sorted(photos.glob("*.png")):
+            cv2.imwrite(str(p), np.full((96, 128), 80, np.uint8))
+    if case == "no-images":
+        photos.mkdir()
+        (photos / "notes.txt").write_text("no pictures here")
+    src = folder if case == "disagrees" else photos
+    args = ["calibrate", "camera", str(src), "-o", str(tmp_path / "camera.json")]
+    args += ["--board", board] if board else []
+    args += ["--charuco", "DICT_4X4_50"] if case == "charuco-alone" else []
+    res = runner.invoke(_app(), args)
+    assert res.exit_code == 1, res.output
+    lines = [ln for ln in res.output.splitlines() if ln.strip()]
+    assert len(lines) == 1 and message in lines[0], res.output
+    assert not (tmp_path / "camera.json").exists()

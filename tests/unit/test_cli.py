@@ -1,5 +1,8 @@
 """The headless commands end to end on small simulated recordings."""
 
+import json
+from pathlib import Path
+
 import numpy as np
 import pytest
 from typer.testing import CliRunner
@@ -9,6 +12,7 @@ from insitu.formats.pointcloud import read_ply
 from insitu.formats.sequence import Sequence
 
 runner = CliRunner()
+DATA = Path(__file__).parents[1] / "data"
 
 
 def _run(*args):
@@ -98,3 +102,16 @@ def test_scan_preview_picture(scan_rec, tmp_path):
     import cv2
     img = cv2.imread(str(tmp_path / "c.png"))
     assert img is not None and (img < 250).any()
+
+
+def test_a_rig_file_measures_with_the_height_calibration_it_names(tmp_path):
+    rig = tmp_path / "rig.json"
+    rig.write_text(json.dumps({"kind": "rig", "sim_seed": 11,
+                               "height_calibration": str(DATA / "height-cal-b4")}))
+    res = _run("scan", "-o", tmp_path / "c.ply", "--rig", rig, "--binning", 4,
+               "--region", -2, 2, -45, 45, "--spacing", 2)
+    assert res.exit_code == 0, res.output
+    assert "height (sheet)" in res.output
+    res = _run("scan", "-o", tmp_path / "d.ply", "--rig", rig, "--binning", 4,
+               "--region", -2, 2, -45, 45, "--spacing", 2, "--method", "plane")
+    assert res.exit_code == 0 and "plane" in res.output

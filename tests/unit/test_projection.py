@@ -219,3 +219,19 @@ def test_pattern_entirely_off_the_cloud_is_refused():
     with pytest.raises(SafetyError, match=r"\(x, y\) = \(50\.000, 0\.000\) mm is outside the "
                                           "scanned area"):
         project([np.array([[45.0, 0.0], [55.0, 0.0]])], cloud)
+
+
+def test_a_step_seen_with_a_gap_where_the_lines_break_is_two_levels():
+    """Lines along y every 0.5 mm over a 2 mm step at y = 0, each losing a different stretch
+    around the edge (shadow, dropped columns): to the neighbours of a point beside the gap the
+    rise looks like a 60–70° slope, but no point lies on it — the point keeps its own level,
+    flat (it was planned as a 65° wall and the pattern refused)."""
+    xs, ys = np.meshgrid(np.arange(-5.0, 5.01, 0.5), np.arange(-5.0, 5.0, 0.15))
+    x, y = xs.ravel(), ys.ravel()
+    odd = np.round(x / 0.5).astype(int) % 2 == 1
+    keep = np.where(odd, (y < -0.3) | (y > 0.1), (y < -0.6) | (y > 0.5))
+    z = np.where(y > 0.0, 5.0, 3.0)
+    cloud = np.column_stack([x[keep], y[keep], z[keep]])
+    s = Surface(cloud).sample(np.array([[0.25, -0.35], [0.75, -0.3], [0.25, 0.2]]))
+    np.testing.assert_allclose(s.z, [3.0, 3.0, 5.0], atol=1e-6)
+    assert (s.slope_deg < 1.0).all()

@@ -69,10 +69,12 @@ def test_noisy_frame_is_8bit_with_noise_saturation_and_ambient(rig):
     assert not np.array_equal(a, b)                         # shot and read noise
     assert 0 < np.median(a) < 20                            # dark background with ambient light
     cam.set_exposure(60.0)
-    assert (cam.grab() == 255).sum() > 50                   # over-exposed: saturates
+    lit = cam.grab()
+    assert (lit == 255).sum() > 50                          # over-exposed: saturates
     head.off()
     dark = cam.grab()
-    assert dark.max() < 60                                  # laser off: no line
+    assert dark[lit == 255].max() < 160                     # laser off: no line where it was
+    assert np.median(dark) < 60                             # 6 × the room light, no more
 
 
 def test_line_centres_track_the_true_line_on_the_step_block(rig):

@@ -1,8 +1,12 @@
 """Camera intrinsics from views of a checkerboard (or a ChArUco board).
 
-Detection: ``findChessboardCornersSB`` on a copy reduced to ≤ 1400 px wide (fast, robust),
-then ``cornerSubPix`` on the full frame with a window of ~0.2 × the corner spacing (~0.04 px
-on the simulated rig); ChArUco boards through ``cv2.aruco.CharucoDetector`` (partial views
+Detection: both OpenCV chessboard detectors on a copy reduced to ≤ 1400 px wide — the
+sector-based ``findChessboardCornersSB`` (exhaustive, normalised) and the classic
+``findChessboardCorners`` (adaptive threshold, normalised) — each refined by ``cornerSubPix``
+on the full frame with a window of ~0.2 × the corner spacing (~0.04 px on the simulated rig);
+of two results the one whose grid is smoother (cubic fit of pixel over grid index) is kept,
+numbered as SB numbers it. On OpenCV's 13 ``left*.jpg`` photos SB alone finds 11 (exhaustive
+13), classic 13; refined, both give the same corners. ChArUco boards through ``cv2.aruco.CharucoDetector`` (partial views
 allowed). Calibration: ``cv2.calibrateCameraExtended`` with OpenCV's 5-term distortion
 ``[k1, k2, p1, p2, k3]``; views whose RMS reprojection error is > ``outlier_factor`` × the
 median are dropped and the camera recalibrated, until none is. The parameter uncertainties are
@@ -92,6 +96,7 @@ class Detection:
 
     obj: np.ndarray
     img: np.ndarray
+    detector: str = ""
 
     def __len__(self) -> int:
         return len(self.img)
@@ -111,6 +116,35 @@ def _to_uint8(image: np.ndarray) -> np.ndarray:
     return np.clip((img - lo) * (255.0 / max(hi - lo, 1e-6)), 0, 255).astype(np.uint8)
 
 
+def _grid_roughness(c: np.ndarray, cols: int, rows: int) -> float:
+    """RMS, px, of the corners about a cubic in the grid indices (perspective and lens
+    distortion are smooth over the board; detection noise is not)."""
+    j, i = np.mgrid[0:rows, 0:cols]
+    x, y = i.ravel() / cols, j.ravel() / rows
+    A = np.column_stack([x**a * y**b for a in range(4) for b in range(4 - a)])
+    r = c - A @ np.linalg.lstsq(A, c, rcond=None)[0]
+    return float(np.sqrt(np.mean(np.sum(r**2, axis=1))))
+
+
+def find_chessboard(small: np.ndarray, size: tuple[int, int], detector: str
+                    ) -> np.ndarray | None:
+    """Unrefined (N, 2) corners by ``detector`` "sb" or "classic", or None if not found."""
+    if detector == "sb":
+        found, c = cv2.findChessboardCornersSB(
+            small, size, flags=cv2.CALIB_CB_EXHAUSTIVE | cv2.CALIB_CB_NORMALIZE_IMAGE)
+    else:
+        found, c = cv2.findChessboardCorners(
+            small, size, flags=cv2.CALIB_CB_ADAPTIVE_THRESH | cv2.CALIB_CB_NORMALIZE_IMAGE)
+    return c.reshape(-1, 2) if found else None
+
+
+def _refine(img: np.ndarray, c: np.ndarray, scale: int, size: tuple[int, int]) -> np.ndarray:
+    c = ((c + 0.5) * scale - 0.5).astype(np.float32)
+    half = max(2, int(0.2 * _spacing_px(c, *size)))
+    c = cv2.cornerSubPix(img, c.reshape(-1, 1, 2), (half, half), (-1, -1), _SUBPIX)
+    return c.reshape(-1, 2).astype(np.float64)
+
+
 def _detect_chessboard(img: np.ndarray, board: BoardSpec) -> Detection | None:
     size = (board.cols, board.rows)
     scale = 1
@@ -118,16 +152,23 @@ def _detect_chessboard(img: np.ndarray, board: BoardSpec) -> Detection | None:
         scale *= 2
     small = img if scale == 1 else cv2.resize(img, None, fx=1 / scale, fy=1 / scale,
                                               interpolation=cv2.INTER_AREA)
-    found, c = cv2.findChessboardCornersSB(small, size)
-    if not found and scale > 1:
-        found, c = cv2.findChessboardCornersSB(img, size)
-        scale = 1
+    found = {}
+    for name in ("sb", "classic"):
+        c = find_chessboard(small, size, name)
+        if c is None and scale > 1:
+            c = find_chessboard(img, size, name)
+            if c is not None:
+                found[name] = _refine(img, c, 1, size)
+        elif c is not None:
+            found[name] = _refine(img, c, scale, size)
     if not found:
         return None
-    c = ((c.reshape(-1, 2) + 0.5) * scale - 0.5).astype(np.float32)
-    half = max(2, int(0.2 * _spacing_px(c, *size)))
-    c = cv2.cornerSubPix(img, c.reshape(-1, 1, 2), (half, half), (-1, -1), _SUBPIX)
-    return Detection(board.corners(), c.reshape(-1, 2).astype(np.float64))
+    if len(found) == 2:
+        sb, cl = found["sb"], found["classic"]
+        if np.abs(cl[::-1] - sb).mean() < np.abs(cl - sb).mean():
+            found["classic"] = cl[::-1].copy()       # the other end of the grid first
+    name = min(found, key=lambda k: _grid_roughness(found[k], *size))
+    return Detection(board.corners(), found[name], name)
 
 
 def _detect_charuco(img: np.ndarray, board: BoardSpec, min_corners: int = 6) -> Detection | None:
@@ -137,7 +178,7 @@ def _detect_charuco(img: np.ndarray, board: BoardSpec, min_corners: int = 6) -> 
         return None
     obj, pts = cb.matchImagePoints(corners, ids)
     return Detection(np.asarray(obj, np.float64).reshape(-1, 3),
-                     np.asarray(pts, np.float64).reshape(-1, 2))
+                     np.asarray(pts, np.float64).reshape(-1, 2), "charuco")
 
 
 def detect_board(image: np.ndarray, board: BoardSpec) -> Detection | None:
@@ -155,6 +196,7 @@ class View:
     used: bool
     rms_px: float | None = None
     reason: str = ""
+    detector: str = ""
 
 
 @dataclass(frozen=True)
@@ -226,8 +268,8 @@ def calibrate_intrinsics(detections: list[Detection | None], size: tuple[int, in
             break
         for i in worse:
             reasons[i] = f"RMS {rms_of[i]:.3f} px > {outlier_factor:g} × median {limit / outlier_factor:.3f} px"
-    views = [View(i, names[i], i not in reasons, rms_of.get(i), reasons.get(i, ""))
-             for i in range(len(detections))]
+    views = [View(i, names[i], i not in reasons, rms_of.get(i), reasons.get(i, ""),
+                  d.detector if d is not None else "") for i, d in enumerate(detections)]
     poses, res = {}, []
     for i, rv, tv in zip(keep, rvecs, tvecs):
         R, t = cv2.Rodrigues(rv)[0], np.asarray(tv, np.float64).ravel()

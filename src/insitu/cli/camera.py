@@ -1,4 +1,5 @@
-"""``insitu calibrate camera REC -o CAMERA.json``.
+"""``insitu calibrate camera REC -o CAMERA.json``; ``insitu calibrate camera FOLDER --board
+COLSxROWSxSQUARE_MM -o CAMERA.json`` for a plain folder of board photos.
 """
 
 from __future__ import annotations
@@ -17,7 +18,8 @@ def camera(
     rec: Annotated[Path, typer.Argument(help="Recorded camera-calibration folder (checkerboard "
                                              "views, optionally the head's axis lines on the "
                                              "board), or a folder of spots on the plate at two "
-                                             "heights (re-estimates the pose only).")],
+                                             "heights (re-estimates the pose only), or a "
+                                             "plain folder of board photos (with --board).")],
     out: Annotated[Path, typer.Option("-o", "--output", help="Camera calibration file (.json); "
                                       "its picture is drawn beside it (.png).")],
     intrinsics: Annotated[Path | None, typer.Option(
@@ -28,17 +30,30 @@ def camera(
                             "separation).")] = None,
     field: Annotated[Path | None, typer.Option(
         help="Spots only: field correction describing where uncorrected commands land.")] = None,
+    board: Annotated[str | None, typer.Option(
+        help="The board as COLSxROWSxSQUARE_MM (inner corners across, down, square side in "
+             "mm; e.g. 9x6x25). Needed for a folder of photos without sequence.json (every "
+             ".png/.jpg/.jpeg/.bmp/.tif, by name); with a sequence.json it must agree with the "
+             "recorded checkerboard.")] = None,
+    charuco: Annotated[str | None, typer.Option(
+        help="With --board: a ChArUco board, its ArUco dictionary and marker side, "
+             "DICT[:MARKER_MM] (e.g. DICT_4X4_50:7).")] = None,
 ) -> None:
     """Calibrate the camera: intrinsics and distortion from the checkerboard views (bad views
     rejected and listed), with their uncertainties, and its pose in the scan-head frame from
     the head's x and y axis lines drawn on the board lying on the plate. Given spots on the
     plate at two heights instead, re-estimate only the pose (after the camera moved). The
     picture beside the file shows the reprojection RMS of each view."""
+    from insitu.calibrate.photos import parse_board
+    from insitu.errors import CalibrationError
     from insitu.services.camera import calibrate_camera_and_report
 
     check_output(out, ".json")
+    if charuco is not None and board is None:
+        raise CalibrationError("--charuco: give the board's size too (--board COLSxROWSxSQUARE_MM)")
+    spec = parse_board(board, charuco) if board is not None else None
     with progress_bar("camera calibration") as progress:
-        cal = calibrate_camera_and_report(rec, out, intrinsics, scan_head, field, progress)
+        cal = calibrate_camera_and_report(rec, out, intrinsics, scan_head, field, progress, spec)
     K = cal.camera.K
     table = Table(title=f"camera calibration → {out}, {out.with_suffix('.png').name}",
                   show_header=False)

@@ -48,18 +48,9 @@ def record(
              "terminal")
     check_output(out)
     with connect(rig) as station, progress_bar(f"recording {kind}") as progress:
-        if kind == "scan":
-            svc.record_scan(station, out, spacing, region, progress=progress)
-        elif kind == "height-calibration":
-            svc.record_height_calibration(station, out, progress=progress)
-        elif kind == "field-calibration" and marked:
-            svc.record_marked_field_calibration(station, out, n=grid, progress=progress)
-        elif kind == "field-calibration":
-            svc.record_field_calibration(station, out, n=grid, heights=plate_z,
-                                         progress=progress)
-        else:
-            svc.record_camera_calibration(station, out, _ask_for_view, views,
-                                          progress=progress)
+        svc.record(station, kind, out, spacing=spacing, region=region, grid=grid,
+                   heights=plate_z, marked=marked, next_view=_ask_for_view, views=views,
+                   progress=progress)
     console.print(f"wrote {out}", highlight=False)
 
 

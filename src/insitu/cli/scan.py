@@ -19,7 +19,8 @@ def scan(
     replay: Annotated[Path | None, typer.Option(help="Recorded scan folder to reconstruct.")] = None,
     height_cal: Annotated[Path | None, typer.Option(
         "--height-cal", help="Height calibration: a recorded folder or a file from "
-                             "'insitu calibrate height'.")] = None,
+                             "'insitu calibrate height' (default with --rig: the rig "
+                             "file's).")] = None,
     method: Annotated[str | None, typer.Option(
         help="plane: light-plane intersection only (Method 1); height: with the height "
              "calibration (Method 2, the default when --height-cal is given).")] = None,
@@ -42,6 +43,8 @@ def scan(
     from insitu.services.station import connect
 
     check_output(out, ".ply")
+    if height_cal is None and rig is not None and replay is None:
+        height_cal = _rig_height_calibration(rig)
     method = method or ("height" if height_cal is not None else "plane")
     if method not in ("plane", "height"):
         fail(f"--method {method!r}: expected 'plane' or 'height'")
@@ -78,6 +81,14 @@ def scan(
     table.add_row("z range, mm", f"{s.bounds_min[2]:.2f} … {s.bounds_max[2]:.2f}")
     table.add_row("time", f"{s.seconds:.1f} s")
     console.print(table)
+
+
+def _rig_height_calibration(rig: Path) -> Path | None:
+    """The height calibration the rig file names (None: none)."""
+    from insitu.rig.files import RigConfig, load_json_model
+
+    cfg = load_json_model(rig, RigConfig)
+    return cfg.resolve(cfg.height_calibration)
 
 
 def _live(station, out: Path, **kw):

@@ -69,20 +69,11 @@ def record_cmd(
     if camera_moved_deg or camera_moved_mm:
         rig = move_camera(rig, camera_moved_deg, camera_moved_mm, seed)
     world = sim_world(workpiece if kind == "scan" else "step-block", rig=rig, seed=seed)
+    board = BoardViews(world, views) if kind == "camera-calibration" else None
     with progress_bar(f"recording {kind}") as progress, simulated(world) as station:
-        if kind == "scan":
-            record.record_scan(station, out, spacing=spacing, region=region, progress=progress)
-        elif kind == "height-calibration":
-            record.record_height_calibration(station, out, progress=progress)
-        elif kind == "field-calibration" and marked:
-            record.record_marked_field_calibration(station, out, n=grid, progress=progress)
-        elif kind == "field-calibration":
-            record.record_field_calibration(station, out, n=grid, heights=plate_z,
-                                            progress=progress)
-        else:
-            board = BoardViews(world, views)
-            record.record_camera_calibration(station, out, board, views, truth=board.truth,
-                                             progress=progress)
+        record.record(station, kind, out, spacing=spacing, region=region, grid=grid,
+                      heights=plate_z, marked=marked, next_view=board, views=views,
+                      truth=board.truth if board else None, progress=progress)
     console.print(f"wrote {out}")
 
 

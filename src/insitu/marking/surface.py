@@ -8,10 +8,12 @@ fitted to the rest (a small ridge keeps its slope near 0 across a direction the 
 not span, e.g. all on one scan line), points more than 3 RMS off that plane are rejected once
 more, and the plane is refitted. The plane's value at the query point is the height (exact on
 planes, tilted or not); its gradient gives the slope. Where the neighbourhood straddles two
-levels (a step), the point takes its nearest neighbours' level and that level's slope: a
-vertical step has no surface to mark on, the projection
-splits paths where they drop from one level to the other (:func:`level_jumps`), while a
-steep surface (a chamfer, the flank of a curved part) keeps its steep slope.
+levels — a gap in height that no surface of 60° spans between the nearest points of the two
+(a step leaves one where the scan lines break; a measured slope has points all the way up) —
+the point takes its nearest neighbours' level and that level's slope: a vertical step has no
+surface to mark on, the projection splits paths where they drop from one level to the other
+(:func:`level_jumps`), while a steep surface (a chamfer, the flank of a curved part) keeps
+its steep slope.
 """
 
 from __future__ import annotations
@@ -103,11 +105,11 @@ class Surface:
         #    neighbours on its side of the gap; elsewhere those a surface of slope
         #    _LEVEL_SLOPE can reach from the level's height
         r_near = np.where(valid[:, :_NEAR], d[:, :_NEAR], 0.0).max(1)
-        ref, cut, upper = _level_of(z, valid, r_near)
+        ref, cut, upper = _level_of(z, valid, dx, dy)
         reach = np.abs(z - ref[:, None]) <= _Z_FLOOR_MM + _LEVEL_SLOPE * (
             np.where(valid, d, 0.0) + r_near[:, None])
         same_side = (z > cut[:, None]) == upper[:, None]
-        keep = valid & np.where(np.isfinite(cut)[:, None], same_side, reach)
+        keep = valid & reach & np.where(np.isfinite(cut)[:, None], same_side, True)
         coef = fit(keep)
         # 2: reject points more than 3 RMS off that plane; refit the rows that changed
         res = np.abs(z - (coef[:, :1] + coef[:, 1:2] * dx + coef[:, 2:] * dy))
@@ -156,21 +158,31 @@ def _spacing(tree: cKDTree, pts: np.ndarray) -> tuple[float, float]:
     return max(spacing, 1e-3), max(coverage, spacing, 1e-3)
 
 
-def _level_of(z: np.ndarray, valid: np.ndarray, r_near: np.ndarray
+def _level_of(z: np.ndarray, valid: np.ndarray, dx: np.ndarray, dy: np.ndarray
               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The level a query point is on, from its _NEAR nearest neighbours (rows of (M, k) ``z``
-    sorted by distance). Where they split into two levels (a gap in z larger than a
-    _LEVEL_SLOPE surface spans across them), the level is the nearest neighbour's, unless that
-    one stands alone (an outlier). Returns per row: its height (median), the ``cut`` between
-    the levels (NaN: one level) and whether the point's level is the ``upper`` one."""
+    """The level a query point is on, from its neighbours (rows of (M, k) ``z``, offsets
+    ``dx``, ``dy``, sorted by distance). They are split at their largest gap in z; it is a
+    step (two levels) when that gap is larger than a _LEVEL_SLOPE surface rises over the
+    shortest distance in x, y between the two groups — a measured slope has points all the
+    way up, a wall leaves a gap where the lines break. The level is the nearest neighbour's,
+    unless that one stands alone among the _NEAR nearest (an outlier). Returns per row: its
+    height (median of its level's near neighbours), the ``cut`` between the levels (NaN: one
+    level) and whether the point's level is the ``upper`` one."""
     rows = np.arange(len(z))
-    near = valid[:, :_NEAR]
-    zn = np.where(near, z[:, :_NEAR], np.nan)
-    zs = np.sort(zn, axis=1)                                  # NaN last
+    zv = np.where(valid, z, np.nan)
+    zs = np.sort(zv, axis=1)                                  # NaN last
     gaps = np.nan_to_num(np.diff(zs, axis=1), nan=-np.inf)
     j = np.argmax(gaps, axis=1)
-    split = gaps[rows, j] > _Z_FLOOR_MM + _LEVEL_SLOPE * 2 * r_near
-    cut = np.where(split, 0.5 * (zs[rows, j] + zs[rows, j + 1]), np.nan)
+    gap = gaps[rows, j]
+    cut = 0.5 * (zs[rows, j] + zs[rows, np.minimum(j + 1, zs.shape[1] - 1)])
+    hi = valid & (z > cut[:, None])
+    lo = valid & ~hi
+    d2 = (dx[:, :, None] - dx[:, None, :]) ** 2 + (dy[:, :, None] - dy[:, None, :]) ** 2
+    across = np.where(lo[:, :, None] & hi[:, None, :], d2, np.inf).min(axis=(1, 2))
+    split = np.isfinite(gap) & (gap > _Z_FLOOR_MM + _LEVEL_SLOPE * np.sqrt(across))
+    cut = np.where(split, cut, np.nan)
+    near = valid[:, :_NEAR]
+    zn = np.where(near, z[:, :_NEAR], np.nan)
     upper = zn[:, 0] > cut
     mine = near & ((zn > cut[:, None]) == upper[:, None])
     alone = split & (mine.sum(1) < 2)

@@ -3,12 +3,14 @@ see nearly the same surface, so a point that none of them confirms is a wrong li
 a secondary reflection, a peak of the wrong level — not the surface.
 
 For a point of line i, the nearest points of lines i ± 1 and i ± 2 (in x, y) predict its
-height three ways: interpolated between i − 1 and i + 1, and extrapolated from i − 2, i − 1 or
-from i + 1, i + 2 (so the last line on a part's top, beside a wall, is confirmed by the top's
-own lines). A point is removed only when no prediction agrees *and* the surface is known to
-run on across it — the lines on one side predict those on the other (i − 2, i − 1 predict
-i + 1 or i + 2, or the reverse): a ghost on one or two lines breaks no such continuity, a wall
-does, and beside a wall a line that only one neighbour on its side could confirm is kept.
+height: interpolated between i − 1 and i + 1, and extrapolated from i − 2, i − 1 or from
+i + 1, i + 2. Where the surface runs on across the point on both sides (i − 2, i − 1 predict
+i + 1 or i + 2, and the reverse) the interpolation between i − 1 and i + 1 decides; beside a
+break (a wall on one side) an extrapolation from the lines on the point's own side may confirm
+it too (so the last line on a part's top is confirmed by the top's own lines). A point is
+removed only when nothing confirms it *and* the surface is known to run on across it on at
+least one side: a ghost on one or two lines breaks no such continuity, a wall does, and a line
+beside a wall that only one neighbour on its side could confirm is kept.
 "Agrees" means within ``k_sigma`` of the prediction's own noise sigma (from the point noise,
 which is measured on the scan itself, robustly, from the two-sided predictions).
 """
@@ -51,14 +53,17 @@ def cross_line_inliers(points: np.ndarray, line: np.ndarray, k_sigma: float = 5.
         return np.nan_to_num(res, nan=np.inf) <= np.maximum(k_sigma * sigma * factor,
                                                             min_tolerance_mm)
 
-    confirmed = (agree(between) | agree(_predict(xy, z, near[-2], near[-1], me))
-                 | agree(_predict(xy, z, near[1], near[2], me)))
-    runs_on = np.zeros(n, bool)
-    for a, b, targets in ((near[-2], near[-1], (near[1], near[2])),
-                          (near[2], near[1], (near[-1], near[-2]))):
-        for at in targets:
-            runs_on |= agree(_predict(xy, z, a, b, at))
-    keep[order] = confirmed | ~runs_on
+    # the surface runs on across the point: the lines on one side predict the other side's
+    runs_right = agree(_predict(xy, z, near[-2], near[-1], near[1])) | agree(
+        _predict(xy, z, near[-2], near[-1], near[2]))
+    runs_left = agree(_predict(xy, z, near[2], near[1], near[-1])) | agree(
+        _predict(xy, z, near[2], near[1], near[-2]))
+    # one-sided predictions speak only beside a break (a wall on the other side)
+    one_sided = agree(_predict(xy, z, near[-2], near[-1], me)) | agree(
+        _predict(xy, z, near[1], near[2], me))
+    across = runs_right & runs_left & np.isfinite(r)
+    confirmed = agree(between) | (~across & one_sided)
+    keep[order] = confirmed | ~(runs_right | runs_left)
     return keep
 
 

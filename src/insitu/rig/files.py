@@ -165,6 +165,7 @@ class CentreSettingsSpec(BaseModel):
     jump_px: Positive = 1.0
     end_fraction: float = Field(default=0.5, ge=0, lt=1)
     smooth_grains: float = Field(default=0.0, ge=0, le=100)    # 0: files before it: fixed
+    background: bool = False                                    # files before it: Eq. 7
 
 
 class ResidualGridSpec(BaseModel):

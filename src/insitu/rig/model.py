@@ -4,13 +4,13 @@ calibrations it measures and marks with — the same on a real rig and on the si
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from pathlib import Path
 
 from insitu.errors import ConfigError
 from insitu.geometry.camera import CameraModel
-from insitu.rig.files import CameraCalibration, RigConfig, ScanHeadConfig, ScanHeadGeometry, \
-    load_json_model
+from insitu.rig.files import (CameraCalibration, RigConfig, ScanHeadConfig, ScanHeadGeometry,
+                              load_json_model)
 
 SIMULATED = ("sim",)
 """Backends of the simulated rig (``replay`` and ``none`` open no device)."""
@@ -41,16 +41,11 @@ def simulated_devices(cfg: RigConfig) -> list[str]:
                                        ("stage", cfg.stage)) if backend in SIMULATED]
 
 
-def real_devices(cfg: RigConfig) -> list[tuple[str, str]]:
-    """(device, backend) of ``cfg`` that drive real hardware."""
-    return [(k, v) for k, v in (("camera", cfg.camera), ("scan_head", cfg.scan_head),
-                                ("stage", cfg.stage)) if v not in ("sim", "none", "replay")]
-
-
 def rig_model(cfg: RigConfig, default: RigModel | None = None) -> RigModel:
     """The rig model a rig file describes: the camera and scan head of the files it names,
-    else ``default``'s (the simulated operator's). A real camera or head needs its file
-    (ConfigError naming the field); so does a rig without ``default``."""
+    else ``default``'s (the simulated operator's), and its calibration files. A real camera
+    or head needs its file (ConfigError naming the field); so does a rig without
+    ``default``."""
     for device, backend, calib, name in (
             ("camera", cfg.camera, cfg.camera_calibration, "camera_calibration"),
             ("scan_head", cfg.scan_head, cfg.scan_head_config, "scan_head_config")):
@@ -64,7 +59,5 @@ def rig_model(cfg: RigConfig, default: RigModel | None = None) -> RigModel:
     head = default.head if default is not None else None
     if cfg.scan_head_config:
         head = load_json_model(cfg.resolve(cfg.scan_head_config), ScanHeadConfig).geometry()
-    model = RigModel(camera, head, cfg.resolve(cfg.field_correction),
-                     cfg.resolve(cfg.height_calibration))
-    return model if default is None else replace(default, **{
-        k: v for k, v in vars(model).items() if v is not None})
+    return RigModel(camera, head, cfg.resolve(cfg.field_correction),
+                    cfg.resolve(cfg.height_calibration))

@@ -19,6 +19,7 @@ import numpy as np
 from insitu.calibrate.alignment import Alignment, LineFrame, align_to_head
 from insitu.calibrate.camera import (INTRINSIC_NAMES, BoardSpec, Detection, Intrinsics,
                                      board_pose, calibrate_intrinsics, detect_board)
+from insitu.calibrate.photos import image_files, read_grey
 from insitu.calibrate.pose_from_spots import PoseFromSpots, SpotObservations, pose_from_spots
 from insitu.errors import CalibrationError, InsituError
 from insitu.formats.sequence import Sequence
@@ -97,34 +98,22 @@ def _alignment(seq: Sequence, board: BoardSpec, intr: Intrinsics, idx: list[int]
     return al, info
 
 
-def calibrate_camera(folder: str | Path, progress: Progress | None = None,
-                     outlier_factor: float = 3.0) -> CameraCalibration:
-    """Intrinsics from a recorded camera-calibration folder, and the world pose if it holds
-    alignment frames. CalibrationError (one line, naming the folder) on bad input."""
-    seq = Sequence.open(folder)
-    if seq.kind != "camera-calibration":
-        raise CalibrationError(f"{seq.folder}: a '{seq.kind}' sequence, not a camera calibration")
-    try:
-        board = BoardSpec.from_spec(seq.checkerboard)
-    except CalibrationError as e:
-        raise _prefixed(seq.folder / "sequence.json", e) from None
-    idx, dets, size = detect_views(seq, board, progress)
-    if not idx:
-        raise CalibrationError(f"{seq.folder}: no checkerboard views (every frame has a line)")
+def _intrinsics(folder, dets: list[Detection | None], names: list[str], size, board: BoardSpec,
+                outlier_factor: float, what: str, noun: str) -> Intrinsics:
     if all(d is None for d in dets):
-        raise CalibrationError(f"{seq.folder}: no {board.describe()} found in any of the "
-                               f"{len(idx)} frames; check sequence.json checkerboard (cols and "
-                               "rows count inner corners)")
-    names = [seq.frames[i].file for i in idx]
+        raise CalibrationError(f"{folder}: no {board.describe()} found in any of the "
+                               f"{len(dets)} {noun}; check {what} (cols and rows count inner "
+                               "corners)")
     try:
-        intr = calibrate_intrinsics(dets, size, names, outlier_factor)
+        return calibrate_intrinsics(dets, size, names, outlier_factor)
     except CalibrationError as e:
-        raise _prefixed(seq.folder, e) from None
-    found = _alignment(seq, board, intr, idx, dets)
-    if progress:
-        progress(len(idx) + 1, len(idx) + 1)
+        raise _prefixed(folder, e) from None
+
+
+def _result(folder, board: BoardSpec, intr: Intrinsics, size,
+            found: tuple[Alignment, dict] | None) -> CameraCalibration:
     rejected = intr.rejected
-    notes = [f"{len(intr.used)} of {len(idx)} views used, {board.describe()}"]
+    notes = [f"{len(intr.used)} of {len(intr.views)} views used, {board.describe()}"]
     if rejected:
         notes.append("rejected: " + "; ".join(f"{v.name} ({v.reason})" for v in rejected))
     residuals = {"rms_px": intr.rms_px,
@@ -148,8 +137,64 @@ def calibrate_camera(folder: str | Path, progress: Progress | None = None,
         camera=camera, rms_px=intr.rms_px, per_view_rms_px=[v.rms_px for v in intr.used],
         std_intrinsics=intr.std.tolist(), inputs=[str(folder)], residuals=residuals,
         notes="; ".join(notes), std_intrinsics_order=list(INTRINSIC_NAMES[:len(intr.std)]),
-        views=[{"file": v.name, "used": v.used, "rms_px": v.rms_px, "reason": v.reason}
-               for v in intr.views], **extra)
+        views=[{"file": v.name, "used": v.used, "rms_px": v.rms_px, "reason": v.reason,
+                "detector": v.detector} for v in intr.views], **extra)
+
+
+def calibrate_photos(folder: str | Path, board: BoardSpec | None,
+                     progress: Progress | None = None,
+                     outlier_factor: float = 3.0) -> CameraCalibration:
+    """Intrinsics from a plain folder of board photos (:mod:`insitu.calibrate.photos`); the
+    extrinsics stay R = I, t = 0. CalibrationError (one line) on bad input."""
+    files = image_files(folder)
+    if board is None:
+        raise CalibrationError(f"{folder}: no sequence.json; give the board as --board "
+                               "COLSxROWSxSQUARE_MM (e.g. 9x6x25)")
+    dets, size = [], None
+    for n, path in enumerate(files):
+        img = read_grey(path)
+        if size is None:
+            size = (img.shape[1], img.shape[0])
+        elif (img.shape[1], img.shape[0]) != size:
+            raise CalibrationError(f"{path}: image is {img.shape[1]}x{img.shape[0]} pixels, "
+                                   f"earlier images are {size[0]}x{size[1]}")
+        dets.append(detect_board(img, board))
+        if progress:
+            progress(n + 1, len(files))
+    intr = _intrinsics(folder, dets, [p.name for p in files], size, board, outlier_factor,
+                       "--board", "images")
+    return _result(folder, board, intr, size, None)
+
+
+def calibrate_camera(folder: str | Path, progress: Progress | None = None,
+                     outlier_factor: float = 3.0, board: BoardSpec | None = None
+                     ) -> CameraCalibration:
+    """Intrinsics from a recorded camera-calibration folder, and the world pose if it holds
+    alignment frames; a folder without sequence.json → :func:`calibrate_photos` with
+    ``board``. A ``board`` that disagrees with the sequence's checkerboard is refused.
+    CalibrationError (one line, naming the folder) on bad input."""
+    if Path(folder).is_dir() and not (Path(folder) / "sequence.json").exists():
+        return calibrate_photos(folder, board, progress, outlier_factor)
+    seq = Sequence.open(folder)
+    if seq.kind != "camera-calibration":
+        raise CalibrationError(f"{seq.folder}: a '{seq.kind}' sequence, not a camera calibration")
+    try:
+        recorded = BoardSpec.from_spec(seq.checkerboard)
+    except CalibrationError as e:
+        raise _prefixed(seq.folder / "sequence.json", e) from None
+    if board is not None and board != recorded:
+        raise CalibrationError(f"--board: {board.describe()}, but {seq.folder / 'sequence.json'}"
+                               f" records a {recorded.describe()}; leave --board out")
+    board = recorded
+    idx, dets, size = detect_views(seq, board, progress)
+    if not idx:
+        raise CalibrationError(f"{seq.folder}: no checkerboard views (every frame has a line)")
+    intr = _intrinsics(seq.folder, dets, [seq.frames[i].file for i in idx], size, board,
+                       outlier_factor, "sequence.json checkerboard", "frames")
+    found = _alignment(seq, board, intr, idx, dets)
+    if progress:
+        progress(len(idx) + 1, len(idx) + 1)
+    return _result(folder, board, intr, size, found)
 
 
 # -- pose from spots (recalibration after the camera moved) --------------------------------
@@ -269,12 +314,18 @@ def recalibrate_camera_pose(folder: str | Path, intrinsics: str | Path | None = 
 def calibrate_camera_recording(folder: str | Path, intrinsics: str | Path | None = None,
                                scan_head: str | Path | None = None,
                                field: str | Path | None = None,
-                               progress: Progress | None = None) -> CameraCalibration:
-    """``insitu calibrate camera``: a camera-calibration folder → :func:`calibrate_camera`;
-    a folder of spots at two plate heights → :func:`recalibrate_camera_pose`."""
+                               progress: Progress | None = None,
+                               board: BoardSpec | None = None) -> CameraCalibration:
+    """``insitu calibrate camera``: a camera-calibration folder or a plain folder of board
+    photos → :func:`calibrate_camera`; a folder of spots at two plate heights →
+    :func:`recalibrate_camera_pose`."""
+    if Path(folder).is_dir() and not (Path(folder) / "sequence.json").exists():
+        return calibrate_photos(folder, board, progress)
     seq = Sequence.open(folder)
     if seq.kind == "camera-calibration":
-        return calibrate_camera(folder, progress)
+        return calibrate_camera(folder, progress, board=board)
+    if board is not None:
+        raise CalibrationError(f"--board: {folder} is a '{seq.kind}' sequence, not board views")
     if any(f.spot is not None for f in seq.frames):
         return recalibrate_camera_pose(folder, intrinsics, scan_head, field, progress)
     raise CalibrationError(f"{folder}: a '{seq.kind}' sequence without spots: expected a "
@@ -301,9 +352,10 @@ def calibrate_camera_and_report(folder: str | Path, out: str | Path,
                                 intrinsics: str | Path | None = None,
                                 scan_head: str | Path | None = None,
                                 field: str | Path | None = None,
-                                progress: Progress | None = None) -> CameraCalibration:
+                                progress: Progress | None = None,
+                                board: BoardSpec | None = None) -> CameraCalibration:
     """:func:`calibrate_camera_recording`, then write ``out`` (JSON) and its picture beside
     it (.png, :func:`camera_report_png`); nothing is left behind if either fails."""
-    cal = calibrate_camera_recording(folder, intrinsics, scan_head, field, progress)
+    cal = calibrate_camera_recording(folder, intrinsics, scan_head, field, progress, board)
     save_with_picture(out, cal, lambda png: camera_report_png(cal, folder, png))
     return cal

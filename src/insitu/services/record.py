@@ -183,3 +183,28 @@ def record_camera_calibration(station: Station, out: Path, next_view: NextView, 
                 head.off()
     next_view(None)
     return out
+
+
+def record(station: Station, kind: str, out: Path, *, spacing: float = 0.5, region=None,
+           grid: int = 21, heights: Seq[float] = (0.0,), marked: bool = False,
+           next_view: NextView | None = None, views: int = 15, truth: dict | None = None,
+           progress: Progress | None = None) -> Path:
+    """A sequence of ``kind`` (one of :data:`KINDS`) with the options that kind takes:
+    a scan (``spacing``, ``region``), the height calibration, the field calibration
+    (``grid`` spots per side at ``heights``, or ``marked`` circles), the camera calibration
+    (``views`` brought by ``next_view``; ``truth``: added to the station's)."""
+    if kind == "scan":
+        return record_scan(station, out, spacing, region, progress=progress)
+    if kind == "height-calibration":
+        return record_height_calibration(station, out, progress=progress)
+    if kind == "field-calibration" and marked:
+        return record_marked_field_calibration(station, out, n=grid, progress=progress)
+    if kind == "field-calibration":
+        return record_field_calibration(station, out, n=grid, heights=heights,
+                                        progress=progress)
+    if kind == "camera-calibration" and next_view is not None:
+        return record_camera_calibration(station, out, next_view, views, truth=truth,
+                                         progress=progress)
+    raise ConfigError(f"KIND {kind!r}: expected one of {', '.join(KINDS)}"
+                      + (" (a camera calibration needs someone to move the board)"
+                         if kind == "camera-calibration" else ""))

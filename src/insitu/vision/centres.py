@@ -178,7 +178,7 @@ class CentreMethod:
 
 
 CENTRE_METHODS: dict[str, CentreMethod] = {
-    "gray": CentreMethod(gray_centroid, ("k", "subtract"),
+    "gray": CentreMethod(gray_centroid, ("k", "subtract", "background"),
                          "gray centroid above k × the peak (Li et al. Eq. 7), or above the "
                          "background (background=True)", {"k": 0.5, "background": True}),
     "gaussian": CentreMethod(gaussian_peak, (), "3-point Gaussian peak fit per column"),

@@ -28,9 +28,11 @@ from insitu.vision.detect import LineCentres
 class CentreSettings:
     """How centres are extracted. The paper's: gray centroid (Eq. 7), no smoothing. Ours
     (default): Steger's detector, then smoothing along the line (benchmarks/accuracy.py).
-    ``method``: a key of :data:`~insitu.vision.centres.CENTRE_METHODS` ("gray" uses k and
-    subtract); ConfigError for another. A height calibration stores the settings it was made
-    with; a scan uses the same."""
+    ``method``: a key of :data:`~insitu.vision.centres.CENTRE_METHODS` ("gray" uses k,
+    subtract and background: K from the local background and the peak, not the peak alone);
+    ConfigError for another. ``smooth_grains``: the smoothing window in correlation lengths
+    of the frame's wander (0: fixed ``smooth_half_window``). A height calibration stores the
+    settings it was made with; a scan uses the same."""
 
     method: str = "steger"
     k: float = 0.3
@@ -39,6 +41,7 @@ class CentreSettings:
     jump_px: float = 1.0
     end_fraction: float = 0.5
     smooth_grains: float = 7.0
+    background: bool = True
 
     def __post_init__(self) -> None:
         if self.method not in CENTRE_METHODS:
@@ -49,7 +52,8 @@ class CentreSettings:
         return asdict(self)
 
 
-PAPER_SETTINGS = CentreSettings(method="gray", k=0.5, smooth_half_window=0, smooth_grains=0.0)
+PAPER_SETTINGS = CentreSettings(method="gray", k=0.5, smooth_half_window=0, smooth_grains=0.0,
+                                background=False)
 MAX_HALF_WINDOW = 25
 
 

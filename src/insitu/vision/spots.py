@@ -71,6 +71,15 @@ def _saturation(image: np.ndarray) -> float:
     return float(np.iinfo(image.dtype).max) if image.dtype.kind in "ui" else np.inf
 
 
+def room_light(filt: np.ndarray, step: int = 8) -> np.ndarray:
+    """(H, W) float32: the frame's slowly varying background — the median of 5 × 5 blocks of
+    ``step`` px, smoothly interpolated; a spot of a few px leaves no trace in it."""
+    H, W = filt.shape
+    small = cv2.resize(filt, (max(W // step, 1), max(H // step, 1)), interpolation=cv2.INTER_AREA)
+    small = cv2.medianBlur(small, 5) if min(small.shape) >= 5 else small
+    return cv2.resize(small, (W, H), interpolation=cv2.INTER_LINEAR)
+
+
 def _component_at(mask: np.ndarray, v: int, u: int) -> np.ndarray:
     """The 8-connected component of ``mask`` (bool) containing pixel (v, u)."""
     _, labels = cv2.connectedComponents(mask.astype(np.uint8), connectivity=8)
@@ -90,19 +99,19 @@ def find_spot(image: np.ndarray, settings: SpotSettings = SpotSettings(),
     if img.ndim != 2 or img.size == 0:
         raise CalibrationError(f"{where}: expected a (H, W) grey image, got shape {img.shape}")
     H, W = img.shape
-    # Whole frame, cheaply: find the peak and check there is one spot (uint8 keeps it fast).
+    # Whole frame, cheaply: find the peak and check there is one spot, over the room light
+    # (shaded and textured across the frame) taken away.
     small = img if img.dtype == np.uint8 else img.astype(np.float32)
     filt = cv2.GaussianBlur(small, (0, 0), s.sigma_px).astype(np.float32, copy=False)
-    sample = filt[::8, ::8]
-    bg = float(np.median(sample))
-    noise = 1.4826 * float(np.median(np.abs(sample - bg)))
-    _, peak, _, (pu, pv) = cv2.minMaxLoc(filt)
-    amp = peak - bg
+    flat = filt - room_light(filt)
+    sample = flat[::8, ::8]
+    noise = 1.4826 * float(np.median(np.abs(sample - np.median(sample))))
+    _, amp, _, (pu, pv) = cv2.minMaxLoc(flat)
     min_contrast = s.min_contrast_dn if s.min_contrast_dn is not None else max(8.0, 8.0 * noise)
     if amp < min_contrast:
         raise CalibrationError(f"{where}: no laser spot found (brightest point {amp:.1f} DN "
                                f"above the background, need {min_contrast:.1f})")
-    bright = cv2.findNonZero((filt > bg + s.second_spot_ratio * amp).astype(np.uint8))
+    bright = cv2.findNonZero((flat > s.second_spot_ratio * amp).astype(np.uint8))
     far = bright.reshape(-1, 2)[np.abs(bright.reshape(-1, 2) - (pu, pv)).max(1) > s.roi_px]
     if len(far):
         fu, fv = far[np.argmax(filt[far[:, 1], far[:, 0]])]
