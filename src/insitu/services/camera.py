@@ -39,18 +39,26 @@ def detect_views(seq: Sequence, board: BoardSpec, progress: Progress | None = No
     """Board detection in every frame without a ``line``: (frame indices, detections or None,
     image size (W, H)). FormatError if the frames differ in size."""
     idx = [i for i, f in enumerate(seq.frames) if f.line is None]
+    views = ((seq.folder / seq.frames[i].file, seq.read_frame(i)) for i in idx)
+    dets, size = _detect_all(views, board, len(idx) + 1, progress)
+    return idx, dets, size
+
+
+def _detect_all(views, board: BoardSpec, total: int, progress: Progress | None
+                ) -> tuple[list[Detection | None], tuple[int, int]]:
+    """Board detection in each (where, image) of ``views``, one image in memory at a time:
+    detections (or None) and the image size (W, H); CalibrationError when sizes differ."""
     dets, size = [], None
-    for n, i in enumerate(idx):
-        img = seq.read_frame(i)
+    for n, (where, img) in enumerate(views):
         if size is None:
             size = (img.shape[1], img.shape[0])
         elif (img.shape[1], img.shape[0]) != size:
-            raise CalibrationError(f"{seq.folder / seq.frames[i].file}: image is {img.shape[1]}"
-                                   f"x{img.shape[0]} pixels, earlier frames are {size[0]}x{size[1]}")
+            raise CalibrationError(f"{where}: image is {img.shape[1]}x{img.shape[0]} pixels, "
+                                   f"earlier images are {size[0]}x{size[1]}")
         dets.append(detect_board(img, board))
         if progress:
-            progress(n + 1, len(idx) + 1)
-    return idx, dets, size
+            progress(n + 1, total)
+    return dets, size
 
 
 def _alignment(seq: Sequence, board: BoardSpec, intr: Intrinsics, idx: list[int],
@@ -150,17 +158,7 @@ def calibrate_photos(folder: str | Path, board: BoardSpec | None,
     if board is None:
         raise CalibrationError(f"{folder}: no sequence.json; give the board as --board "
                                "COLSxROWSxSQUARE_MM (e.g. 9x6x25)")
-    dets, size = [], None
-    for n, path in enumerate(files):
-        img = read_grey(path)
-        if size is None:
-            size = (img.shape[1], img.shape[0])
-        elif (img.shape[1], img.shape[0]) != size:
-            raise CalibrationError(f"{path}: image is {img.shape[1]}x{img.shape[0]} pixels, "
-                                   f"earlier images are {size[0]}x{size[1]}")
-        dets.append(detect_board(img, board))
-        if progress:
-            progress(n + 1, len(files))
+    dets, size = _detect_all(((f, read_grey(f)) for f in files), board, len(files), progress)
     intr = _intrinsics(folder, dets, [p.name for p in files], size, board, outlier_factor,
                        "--board", "images")
     return _result(folder, board, intr, size, None)
