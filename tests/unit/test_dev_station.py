@@ -149,13 +149,14 @@ def test_a_real_rig_never_simulates_and_scans_only_where_it_is_told(tmp_path, rt
                                                                      monkeypatch):
     from typer.testing import CliRunner
 
-    import insitu.services.station as station_module
+    import insitu.sim.world as sim_world_module
     from insitu.cli.main import app
 
     def no_world(*a, **k):
         raise AssertionError("a real rig built a simulated world")
 
-    monkeypatch.setattr(station_module, "sim_world", no_world)
+    monkeypatch.setattr(sim_world_module, "sim_world", no_world)
+    monkeypatch.setattr(sim_world_module, "SimWorld", no_world)
     FakeBoard(rtc_lib).reset()
     rig = write_rig(tmp_path, rtc_lib, peer.port, frames=3)
     with connect(rig) as station:

@@ -31,11 +31,9 @@ class Limits:
 
     @classmethod
     def of(cls, head_config, max_slope_deg: float = DEFAULT_MAX_SLOPE_DEG) -> "Limits":
-        """From anything with field_size_mm, z_range_mm, mirror_distance_mm and
-        mirror_separation_mm (``ScanHeadNominal``, ``rig.files.ScanHeadConfig``)."""
+        """From the scan head's geometry (a :class:`~insitu.rig.files.ScanHeadGeometry`)."""
         return cls(tuple(head_config.field_size_mm), tuple(head_config.z_range_mm),
-                   max_slope_deg, TwoMirrorHead(head_config.mirror_distance_mm,
-                                                head_config.mirror_separation_mm))
+                   max_slope_deg, head_config.two_mirror())
 
 
 def _where(p: np.ndarray) -> str:

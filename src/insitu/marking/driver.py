@@ -55,11 +55,10 @@ class GalvoDriver:
     @classmethod
     def from_config(cls, head_config, correction: FieldCorrection | None = None,
                     timing: Timing | None = None) -> "GalvoDriver":
-        """From anything with mirror_distance_mm, mirror_separation_mm, field_size_mm and
-        z_range_mm (``sim.rig.ScanHeadNominal``, ``rig.files.ScanHeadConfig``)."""
-        return cls(TwoMirrorHead(head_config.mirror_distance_mm,
-                                 head_config.mirror_separation_mm),
-                   Limits.of(head_config), correction, timing or Timing())
+        """From the scan head's geometry (a :class:`~insitu.rig.files.ScanHeadGeometry`, or
+        its file :class:`~insitu.rig.files.ScanHeadConfig`)."""
+        return cls(head_config.two_mirror(), Limits.of(head_config), correction,
+                   timing or Timing())
 
     def joints(self, points: np.ndarray) -> np.ndarray:
         """(N, 3) targets, mm → (N, 3) [alpha_x_deg, alpha_y_deg, focus_mm]."""

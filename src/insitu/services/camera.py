@@ -203,7 +203,7 @@ def head_beams(seq: Sequence, scan_head: str | Path | None = None,
     pivot head at pivot_height_mm), corrected by a field correction file if given."""
     if scan_head is not None:
         cfg = load_json_model(scan_head, ScanHeadConfig)
-        beams, what = (TwoMirrorHead(cfg.mirror_distance_mm, cfg.mirror_separation_mm),
+        beams, what = (cfg.two_mirror(),
                        f"two-mirror head of {scan_head}")
     else:
         extra = seq.scan_head.model_extra or {}

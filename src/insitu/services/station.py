@@ -7,13 +7,16 @@ from __future__ import annotations
 
 from dataclasses import replace
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from insitu.devices.backends import Devices, open_devices
 from insitu.errors import ConfigError
 from insitu.marking import GalvoDriver
 from insitu.rig.files import RigConfig, load_json_model
 from insitu.rig.model import RigModel, rig_model, simulated_devices
-from insitu.sim.world import SimWorld, sim_world
+
+if TYPE_CHECKING:
+    from insitu.sim.world import SimWorld
 
 
 class Station:
@@ -87,6 +90,8 @@ def connect(rig_file: Path | None = None, workpiece: str = "step-block", seed: i
     rig with ``workpiece`` on the table. A rig file with simulated devices simulates
     ``workpiece`` with its ``sim_seed``, the operator knowing what its calibration files say.
     ``field``: the field correction file to apply (default: the rig file's, if it names one)."""
+    from insitu.sim.world import sim_world      # the simulator (Open3D) only when simulated
+
     if rig_file is None:
         return simulated(sim_world(workpiece, seed=seed, binning=binning), field)
     cfg = load_json_model(rig_file, RigConfig)
