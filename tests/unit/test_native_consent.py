@@ -11,47 +11,22 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from fakes.canary import build
+from fakes.canary import build, project_naming
 from fakes.station import allow
 
 from insitu.devices.native import allowed_library, read_station, station_path
 from insitu.devices.rtc import RtcLibrary
 from insitu.errors import ConfigError, DeviceError
-from insitu.formats.sequence import Sequence
 from insitu.marking import make_job
-from insitu.rig.files import CameraCalibration, ScanHeadConfig, save_json_model
 from insitu.services.mark import save_job
 from insitu.services.project import open_project
 
 SRC = Path(__file__).parents[2] / "src"
-RECORDED = Path(__file__).parents[1] / "data" / "scan-step-block-b4"
 
 
 @pytest.fixture
 def canary(tmp_path):
     return build(tmp_path)
-
-
-def write_project(folder: Path, library: Path) -> tuple[Path, Path]:
-    """A project naming a rig file whose RTC library is ``library``; (project, rig file)."""
-    rig_dir = folder / "rig"
-    rig_dir.mkdir()
-    save_json_model(rig_dir / "camera.json", CameraCalibration(camera=Sequence.open(RECORDED).camera))
-    save_json_model(rig_dir / "head.json", ScanHeadConfig(
-        pivot_height_mm=350.0, mirror_distance_mm=350.0, mirror_separation_mm=12.0,
-        field_size_mm=(200.0, 200.0), z_range_mm=(-25.0, 25.0)))
-    (rig_dir / "head3d.ct5").write_bytes(b"\0" * 16)
-    rig = rig_dir / "rig.json"
-    rig.write_text(json.dumps({
-        "kind": "rig", "camera": "opencv", "scan_head": "rtc", "stage": "none",
-        "camera_calibration": "camera.json", "scan_head_config": "head.json",
-        "options": {"camera": {"source": "frames/%05d.png"},
-                    "rtc": {"library": os.path.relpath(library, rig_dir),
-                            "correction_file": "head3d.ct5", "k_bits_per_mm": 2000.0}}}))
-    project = folder / "part.insitu.json"
-    project.write_text(json.dumps({"format": "insitu-project/1", "schema_version": 1,
-                                   "rig": {"rig_file": "rig/rig.json"}}))
-    return project, rig
 
 
 def run_cli(*args) -> subprocess.CompletedProcess:
@@ -128,7 +103,7 @@ def test_a_bad_station_file_is_one_line(tmp_path, monkeypatch, entry, field):
 
 def test_opening_a_project_loads_nothing_and_job_run_says_why(canary, tmp_path):
     lib, marker = canary
-    project, rig = write_project(tmp_path, lib)
+    project, rig = project_naming(tmp_path, lib)
     opened = open_project(project)
     assert opened.project.rig.rig_file == rig
     assert not marker.exists()

@@ -148,8 +148,10 @@ class MainWindow(QMainWindow):
             self._action(v, f"{name.capitalize()} view", lambda _=False, n=name:
                          self.view.set_view(n), key)
         r = mb.addMenu("&Rig")
-        tb.addAction(self._action(r, "&Connect simulated rig", lambda: self.connect_rig(),
-                                  None, "connect"))
+        self.connect_action = self._action(r, "&Connect", lambda: self.connect_rig(), None,
+                                           "connect")
+        tb.addAction(self.connect_action)
+        self._rig_named()
         self._action(r, "Connect with a rig &file…", self._rig_file_dialog)
         self._update_recent()
 
@@ -168,7 +170,25 @@ class MainWindow(QMainWindow):
         self.message_label.setText(text.splitlines()[0] if text else "error")
 
     # -- rig -----------------------------------------------------------------------------
+    def _rig_named(self) -> None:
+        """Rig ▸ Connect names the rig it connects: the session's (a project's) choice."""
+        rig_file = self.session.rig_choice.rig_file
+        self.connect_action.setText("&Connect simulated rig" if rig_file is None
+                                    else f"&Connect rig {Path(rig_file).name}")
+
+    def disconnect_rig(self) -> None:
+        """Close the station (laser off, devices released); the status says so."""
+        if self.station is not None:
+            self.station.close()
+            self.station = None
+        self.camera_label.setText("camera: not connected")
+        self.head_label.setText("scan head: not connected")
+        self._plan_timer.start()
+
     def connect_rig(self, choice: RigChoice | None = None) -> None:
+        """Connect the station of ``choice`` (default: the session's), off the GUI thread.
+        Only the operator's action (or ``insitu gui`` without a project) calls this: opening a
+        project never connects its rig, so a rig file that came with it runs nothing."""
         choice = choice or self.session.rig_choice
         field = self.session.field_path
         self.runner.start("connect", lambda p, c, f: (choice, ops.connect(choice, field)),
@@ -180,6 +200,7 @@ class MainWindow(QMainWindow):
             self.station.close()
         self.station = station
         self.session.rig_choice = choice
+        self._rig_named()
         cam, head = station.describe()
         self.camera_label.setText(cam)
         self.head_label.setText(head)
@@ -306,7 +327,10 @@ class MainWindow(QMainWindow):
         s.project_path = path
         s.height_cal_path, s.height_cal = pr.height_cal, opened.height_cal
         s.field_path, s.camera_cal_path = pr.field_correction, pr.camera_cal
+        if self.station is not None and pr.rig != s.rig_choice:
+            self.disconnect_rig()                   # the project names another rig
         s.rig_choice = pr.rig
+        self._rig_named()
         self.scan_panel.show_settings(pr.scan)
         self.scan_panel.ui.heightCalEdit.setText(str(pr.height_cal or ""))
         if opened.height_cal is not None:
@@ -317,8 +341,9 @@ class MainWindow(QMainWindow):
         s.select(pr.selected)
         self._remember(path)
         self.setWindowTitle(f"insitu — {path.name}")
-        self.connect_rig(pr.rig)
-        self.show_message(f"opened {path}")
+        self.show_message(f"opened {path}" if self.station is not None else
+                          f"opened {path}; rig not connected: "
+                          f"{self.connect_action.text().replace('&', '')} (Rig menu)")
 
     def save(self, path: Path | None = None) -> bool:
         """Save the session to ``path`` (default: where it came from); True when written."""
