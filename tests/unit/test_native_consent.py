@@ -55,6 +55,17 @@ def test_a_library_not_on_the_allow_list_is_never_loaded(canary):
     assert not marker.exists()
 
 
+def test_a_genicam_producer_not_on_the_allow_list_is_never_loaded(tmp_path):
+    pytest.importorskip("harvesters")
+    from insitu.devices.camera_genicam import GenICamCamera
+
+    lib, marker = build(tmp_path, "producer.cti")
+    with pytest.raises(ConfigError, match="options.camera.producer: native library .*producer.cti"
+                                          " is not allowed by the station file"):
+        GenICamCamera(lib)
+    assert not marker.exists()
+
+
 def test_no_station_file_allows_nothing(canary, tmp_path, monkeypatch):
     lib, marker = canary
     monkeypatch.setenv("INSITU_STATION", str(tmp_path / "absent.json"))
