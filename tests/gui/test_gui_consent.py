@@ -8,6 +8,7 @@ from fakes.canary import build, project_naming
 from fakes.station import allow
 from PySide6.QtCore import QSettings
 
+from insitu.formats.project import RigChoice
 from insitu.ui.qt.main_window import MainWindow
 
 WAIT_MS = 30_000
@@ -37,4 +38,18 @@ def test_opening_a_project_runs_none_of_its_rigs_code(qtbot, tmp_path: Path):
     allow(lib)                                  # with the station's consent it is loaded
     assert "not an RTC6 library" in connect(qtbot, w)
     assert marker.exists() and w.station is None
+    w.runner.wait_all()
+
+
+def test_a_connection_under_way_when_a_project_opens_is_dropped(qtbot, tmp_path: Path):
+    lib, marker = build(tmp_path)
+    project, _ = project_naming(tmp_path, lib)
+    w = MainWindow(QSettings(str(tmp_path / "settings.ini"), QSettings.IniFormat))
+    qtbot.addWidget(w)
+    w.connect_rig(RigChoice(binning=4))         # the simulated rig, still connecting …
+    w.open_project(project)                     # … when the project opens
+    qtbot.waitUntil(lambda: w.session.project_path == project
+                    and not w.runner.running("connect"), timeout=WAIT_MS)
+    assert w.station is None and w.head_label.text() == "scan head: not connected"
+    assert w.connect_action.text() == "&Connect rig rig.json" and not marker.exists()
     w.runner.wait_all()

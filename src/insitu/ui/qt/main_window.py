@@ -59,6 +59,7 @@ class MainWindow(QMainWindow):
         self.session = Session()
         self.runner = TaskRunner(self)
         self.station: Station | None = None
+        self._rig_epoch = 0             # a connection started before a disconnect is dropped
         self.view = View3D(self)
         self.setCentralWidget(self.view)
         self.binding = SceneBinding(self.session, self.view)
@@ -178,6 +179,7 @@ class MainWindow(QMainWindow):
 
     def disconnect_rig(self) -> None:
         """Close the station (laser off, devices released); the status says so."""
+        self._rig_epoch += 1
         if self.station is not None:
             self.station.close()
             self.station = None
@@ -190,12 +192,15 @@ class MainWindow(QMainWindow):
         Only the operator's action (or ``insitu gui`` without a project) calls this: opening a
         project never connects its rig, so a rig file that came with it runs nothing."""
         choice = choice or self.session.rig_choice
-        field = self.session.field_path
-        self.runner.start("connect", lambda p, c, f: (choice, ops.connect(choice, field)),
+        field, epoch = self.session.field_path, self._rig_epoch
+        self.runner.start("connect", lambda p, c, f: (epoch, choice, ops.connect(choice, field)),
                           self._connected, lambda m, _c: self.show_error(m))
 
     def _connected(self, result) -> None:
-        choice, station = result
+        epoch, choice, station = result
+        if epoch != self._rig_epoch:    # a project was opened meanwhile: not its rig
+            station.close()
+            return
         if self.station is not None:
             self.station.close()
         self.station = station
@@ -327,8 +332,7 @@ class MainWindow(QMainWindow):
         s.project_path = path
         s.height_cal_path, s.height_cal = pr.height_cal, opened.height_cal
         s.field_path, s.camera_cal_path = pr.field_correction, pr.camera_cal
-        if self.station is not None and pr.rig != s.rig_choice:
-            self.disconnect_rig()                   # the project names another rig
+        self.disconnect_rig()           # its rig and field correction: when the operator connects
         s.rig_choice = pr.rig
         self._rig_named()
         self.scan_panel.show_settings(pr.scan)
@@ -341,8 +345,7 @@ class MainWindow(QMainWindow):
         s.select(pr.selected)
         self._remember(path)
         self.setWindowTitle(f"insitu — {path.name}")
-        self.show_message(f"opened {path}" if self.station is not None else
-                          f"opened {path}; rig not connected: "
+        self.show_message(f"opened {path}; rig not connected: "
                           f"{self.connect_action.text().replace('&', '')} (Rig menu)")
 
     def save(self, path: Path | None = None) -> bool:
