@@ -40,7 +40,8 @@ def project_naming(folder: Path, library: Path) -> tuple[Path, Path]:
     """A project naming a rig file whose RTC library is ``library``; (project, rig file)."""
     rig_dir = folder / "rig"
     rig_dir.mkdir()
-    save_json_model(rig_dir / "camera.json", CameraCalibration(camera=Sequence.open(RECORDED).camera))
+    camera = CameraCalibration(camera=Sequence.open(RECORDED).camera)
+    save_json_model(rig_dir / "camera.json", camera)
     save_json_model(rig_dir / "head.json", ScanHeadConfig(
         pivot_height_mm=350.0, mirror_distance_mm=350.0, mirror_separation_mm=12.0,
         field_size_mm=(200.0, 200.0), z_range_mm=(-25.0, 25.0)))

@@ -70,11 +70,14 @@ def read_station(path: Path | None = None) -> StationFile | None:
         raise ConfigError(validation_message(path, e)) from None
 
 
-def _sha256(path: Path) -> str:
+def _sha256(path: Path, what: str) -> str:
     h = hashlib.sha256()
-    with path.open("rb") as f:
-        while chunk := f.read(1 << 20):
-            h.update(chunk)
+    try:
+        with path.open("rb") as f:
+            while chunk := f.read(1 << 20):
+                h.update(chunk)
+    except OSError as e:
+        raise DeviceError(f"{what}: cannot read the library {path} ({e.strerror or e})") from None
     return h.hexdigest()
 
 
@@ -93,12 +96,13 @@ def allowed_library(path: str | Path, what: str) -> Path:
     entries = station.native_libraries if station is not None else []
     matches = [e for e in entries if Path(e.path).expanduser().resolve() == real]
     if not matches:
-        shown = real if Path(os.path.abspath(path)) == real else f"{path} (= {real})"
+        plain = Path(os.path.abspath(Path(path).expanduser())) == real
+        shown = real if plain else f"{path} (= {real})"
         raise ConfigError(f"{what}: native library {shown} is not allowed by the station "
                           f"file {where}{'' if station is not None else ' (none there)'}; "
                           f"nothing loaded: {how}")
     pinned = {e.sha256.lower() for e in matches if e.sha256}
-    if pinned and _sha256(real) not in pinned:
+    if pinned and _sha256(real, what) not in pinned:
         raise ConfigError(f"{what}: native library {real} differs from the sha256 the "
                           f"station file {where} allows; nothing loaded (update its sha256 "
                           "there if the library was updated on purpose)")
