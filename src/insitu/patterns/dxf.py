@@ -6,8 +6,13 @@ region. The boundary of an associative hatch is not marked again, nor a closed o
 runs along a fill's edge. Other closed shapes, and chains of open pieces whose ends meet
 within ``join_mm``, are outlines — closed lines, marked but not filled — unless ``fill="all"``
 (then filled, even-odd: a circle inside a frame is a hole); ``fill="none"`` marks every fill's
-edge as an outline instead. Units from ``$INSUNITS`` (``units=`` overrides; none: mm), said in
-``notes``. A file that ezdxf cannot read is read again through ``ezdxf.recover``.
+edge as an outline instead. A WIPEOUT masks what was drawn before it (as ezdxf's drawing
+add-on paints it in the background colour): fills lose its area, lines their part under it
+(an outline it cuts is marked as its visible pieces, also with ``fill="all"``); what comes
+after it in the file is drawn over it. Units from ``$INSUNITS`` (``units=`` overrides; none:
+mm, with ``$MEASUREMENT`` and a warning when the drawing is only a few units across, as a
+plan in metres is), said in ``notes``. A file that ezdxf cannot read is read again through
+``ezdxf.recover``.
 """
 
 from __future__ import annotations
@@ -110,7 +115,10 @@ def _scale(doc, units: str | None, path: Path) -> tuple[float, str]:
         return float(u.conversion_factor(_UNITS[units], u.MM)), f"units: {units} (given)"
     code = int(doc.header.get("$INSUNITS", 0) or 0)
     if code == 0:
-        return 1.0, "units: none in the file ($INSUNITS unset) → taken as mm (;units= to change)"
+        system = {0: ", $MEASUREMENT imperial", 1: ", $MEASUREMENT metric"}.get(
+            doc.header.get("$MEASUREMENT"), "")
+        return 1.0, (f"units: none in the file ($INSUNITS unset{system}) → taken as mm "
+                     "(;units= to change)")
     try:
         k = float(u.conversion_factor(code, u.MM))
     except Exception:  # noqa: BLE001 — an unknown code
@@ -158,6 +166,35 @@ def _check_radius(e, path: Path) -> None:
                           f"{float(e.dxf.radius):g} (must be > 0)")
 
 
+def _masked(mask, fills: list, closed: list[np.ndarray], pieces: list[np.ndarray]):
+    """What a WIPEOUT polygon ``mask`` (shapely, mm) leaves of the fills, closed outlines and
+    open pieces drawn before it: (fills, closed outlines it does not touch, open pieces)."""
+    fills = [g.difference(mask) for g in fills]
+    keep, cut = [], []
+    for r in closed:
+        (keep if not mask.intersects(shapely.LinearRing(r)) else cut).append(r)
+    lines = [shapely.LineString(np.vstack([r, r[:1]])) for r in cut]
+    lines += [shapely.LineString(q) for q in pieces]
+    out = [np.asarray(g.coords)[:, :2] for line in lines
+           for g in shapely.get_parts(line.difference(mask))
+           if g.geom_type == "LineString" and g.length > 0]
+    return fills, keep, out
+
+
+def _small_drawing(contours, paths, k: float, note: str) -> str | None:
+    """A warning when a drawing without units is only a few units across (a plan drawn in
+    metres, a part in inches), None otherwise."""
+    if not note.startswith("units: none") or not (contours or paths):
+        return None
+    pts = np.concatenate([*contours, *paths])
+    w, h = np.ptp(pts, axis=0) / k
+    if max(w, h) >= 10:
+        return None
+    return (f"warning: no units in the file and the drawing is only {w:.4g} × {h:.4g} units: "
+            f"marked {w * k:.4g} × {h * k:.4g} mm; a plan drawn in metres needs ;units=m "
+            "(inches: ;units=in)")
+
+
 def load_dxf(path: str | Path, tol_mm: float = TOL_MM, join_mm: float = 1e-3,
              fill: str = "auto", units: str | None = None) -> Pattern:
     """DXF file → Pattern (mm; model space, blocks exploded, layers that are off or frozen
@@ -180,12 +217,21 @@ def load_dxf(path: str | Path, tol_mm: float = TOL_MM, join_mm: float = 1e-3,
         hidden = {layer.dxf.name.lower() for layer in doc.layers
                   if layer.is_off() or layer.is_frozen()}
         fills, edges, closed, pieces, skip = [], [], [], [], set()
+        wipeouts = 0
         for e in _entities(doc):
             if e.dxf.get("layer", "0").lower() in hidden or e.dxf.get("invisible", 0):
                 continue
             kind = e.dxftype()
             what = f"{kind} #{e.dxf.get('handle', '?')}"
             _check_radius(e, path)
+            if kind == "WIPEOUT":
+                ring = np.array([(v.x, v.y) for v in e.boundary_path_wcs()]).reshape(-1, 2) * k
+                check_extent(ring, path, what)
+                if len(ring) >= 3:
+                    mask = shapely.make_valid(shapely.Polygon(ring))
+                    fills, closed, pieces = _masked(mask, fills, closed, pieces)
+                    wipeouts += 1
+                continue
             if kind in ("TEXT", "ATTRIB"):
                 paths = text2path.make_paths_from_entity(e)
             elif kind in ("HATCH", "MPOLYGON"):
@@ -242,7 +288,12 @@ def load_dxf(path: str | Path, tol_mm: float = TOL_MM, join_mm: float = 1e-3,
         notes.append(f"{len(loops)} closed outline(s) " + (
             "filled (fill=all)" if fill == "all" else
             f"marked as lines, {dropped} of them along a fill's edge (not marked again)"))
+    if wipeouts:
+        notes.append(f"{wipeouts} WIPEOUT(s) mask what was drawn before them")
     paths_out = [np.vstack([r, r[:1]]) for r in outlines] + opens
+    small = _small_drawing(contours, paths_out, k, unit_note)
+    if small:
+        notes.append(small)
     return _non_empty(Pattern(tuple(contours), tuple(paths_out), path.name,
                               notes=tuple(notes)), path, "drawable entities")
 
