@@ -172,3 +172,17 @@ def test_pattern_show_prints_the_warnings(tmp_path):
     assert res.exit_code == 0 and res.exception is None, res.output
     text = " ".join(re.sub(r"[│┃┌┐└┘├┤┬┴┼─━]", " ", res.output).split())
     assert "warning warning: content outside the page (26.46 × 26.46 mm) clipped" in text
+
+
+def test_a_tapered_wide_polyline_and_an_attdef_tag(tmp_path):
+    doc = ezdxf.new()
+    doc.header["$INSUNITS"] = 4
+    msp = doc.modelspace()
+    msp.add_lwpolyline([(0, 0, 2, 0), (10, 0)], format="xyse")     # 2 mm wide → 0: a triangle
+    msp.add_attdef("SERIAL", (20, 0), "0042", dxfattribs={"height": 2})
+    doc.saveas(tmp_path / "a.dxf")
+    p = load_pattern(tmp_path / "a.dxf")
+    arrow, tag = (shapely.union_all([g for g in shapely.get_parts(p.to_shapely())
+                                     if (g.bounds[0] < 15) == left]) for left in (True, False))
+    assert arrow.area == pytest.approx(10, rel=1e-9)
+    assert tag.bounds[0] == pytest.approx(20, abs=0.5) and 8 < tag.bounds[2] - 20 < 14  # 6 caps

@@ -1,8 +1,9 @@
 """DXF files (ezdxf) → :class:`Pattern` in mm, y up: fills where the file has fills.
 
-HATCH, MPOLYGON, SOLID, TRACE, wide (LW)POLYLINEs and text (TEXT, ATTRIB, MTEXT through
-ezdxf's own text-to-path with the file's style and font) are fills: the contours of the
-region. The boundary of an associative hatch is not marked again, nor a closed outline that
+HATCH, MPOLYGON, SOLID, TRACE, wide (LW)POLYLINEs (banded as ezdxf draws them: each
+segment's start and end width) and text (TEXT, ATTRIB, an ATTDEF's tag, MTEXT through ezdxf's
+own text-to-path with the file's style and font) are fills: the contours of the region. The
+boundary of an associative hatch is not marked again, nor a closed outline that
 runs along a fill's edge. Other closed shapes, and chains of open pieces whose ends meet
 within ``join_mm``, are outlines — closed lines, marked but not filled — unless ``fill="all"``
 (then filled, even-odd: a circle inside a frame is a hole); ``fill="none"`` marks every fill's
@@ -24,7 +25,7 @@ import numpy as np
 import shapely
 
 from insitu.errors import FormatError
-from insitu.patterns.model import Pattern, contours_of, region, stroke_region
+from insitu.patterns.model import Pattern, contours_of, region
 from insitu.patterns.vector import TOL_MM, _check_file, _fail, _non_empty, check_extent
 
 FILL_MODES = ("auto", "all", "none")
@@ -126,14 +127,27 @@ def _scale(doc, units: str | None, path: Path) -> tuple[float, str]:
     return k, f"units: $INSUNITS {code} ({u.unit_name(code)}) → ×{k:g} mm"
 
 
+def _attdef_text(e, doc):
+    """A TEXT of an ATTDEF's tag with its style, place and alignment."""
+    from ezdxf.entities import Text
+
+    attrs = {k: v for k, v in e.dxfattribs().items()
+             if Text.DXFATTRIBS.get(k) is not None and k not in ("handle", "owner")}
+    attrs["text"] = e.dxf.get("tag", "")
+    return Text.new(dxfattribs=attrs, doc=doc)
+
+
 def _entities(doc):
-    """Model-space entities, blocks exploded; MTEXT exploded into TEXT (its background
-    mask dropped)."""
+    """Model-space entities, blocks exploded; an ATTDEF as the TEXT of its tag; MTEXT
+    exploded into TEXT (its background mask dropped)."""
     from ezdxf import disassemble
     from ezdxf.addons.mtxpl import MTextExplode
     from ezdxf.layouts import VirtualLayout
 
     for e in disassemble.recursive_decompose(doc.modelspace()):
+        if e.dxftype() == "ATTDEF":  # shown as its tag, as ezdxf's drawing add-on does
+            yield _attdef_text(e, doc)
+            continue
         if e.dxftype() != "MTEXT":
             yield e
             continue
@@ -158,6 +172,24 @@ def _width(e) -> float:
               for v in e.vertices]
         return max(w)
     return 0.0
+
+
+def _banded(e, k: float):
+    """The area of a wide (LW)POLYLINE as ezdxf's drawing add-on fills it (its TraceBuilder:
+    each segment's own start and end width, bulges as arcs of 1/512 turn), shapely, mm."""
+    from ezdxf.math import Vec3
+    from ezdxf.render import TraceBuilder
+
+    ocs = e.ocs()
+    z = float(e.dxf.elevation) if e.dxftype() == "LWPOLYLINE" else Vec3(e.dxf.elevation).z
+    polys = []
+    for poly in TraceBuilder.from_polyline(e, segments=256).polygons():
+        if len(poly) < 3:
+            continue
+        pts = ocs.points_to_wcs(Vec3(v.x, v.y, z) for v in poly) if ocs.transform else poly
+        ring = np.array([(v.x, v.y) for v in pts], np.float64) * k
+        polys.append(shapely.make_valid(shapely.Polygon(ring)))
+    return shapely.unary_union(polys) if polys else shapely.Polygon()
 
 
 def _check_radius(e, path: Path) -> None:
@@ -267,9 +299,7 @@ def load_dxf(path: str | Path, tol_mm: float = TOL_MM, join_mm: float = 1e-3,
                     fills.append(region(rings, "evenodd"))
                     edges.extend(rings)
             elif width > 0:
-                fills.append(shapely.unary_union(
-                    [stroke_region(r, width, "butt", "miter", 4.0, True) for r in rings]
-                    + [stroke_region(q, width, "butt", "miter", 4.0) for q in lines]))
+                fills.append(_banded(e, k))
             elif e.dxf.get("handle") not in skip:
                 closed.extend(rings)
                 pieces.extend(lines)
