@@ -84,7 +84,8 @@ def test_the_viewbox_is_the_page_and_content_inside_gives_no_warning(tmp_path):
                                                            if n.startswith("warning")]
     left = load_pattern(_svg(tmp_path, '<circle cx="-10" cy="0" r="4"/>', size))
     assert left.to_shapely().area == pytest.approx(3.14159 * 16 / 2, rel=1e-3)   # half of it
-    with pytest.raises(FormatError, match=r"t\.svg: everything it draws lies outside its page"):
+    with pytest.raises(FormatError, match=r"t\.svg: everything it draws lies outside its page "
+                                          r"\(20 × 10 mm\)$"):
         load_pattern(_svg(tmp_path, '<rect x="30" y="0" width="5" height="5"/>', size))
 
 

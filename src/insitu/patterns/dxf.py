@@ -176,7 +176,7 @@ def _width(e) -> float:
 
 def _banded(e, k: float):
     """The area of a wide (LW)POLYLINE as ezdxf's drawing add-on fills it (its TraceBuilder:
-    each segment's own start and end width, bulges as arcs of 1/512 turn), shapely, mm."""
+    each segment's own start and end width, bulges in 256 chords a turn), shapely, mm."""
     from ezdxf.math import Vec3
     from ezdxf.render import TraceBuilder
 
@@ -213,17 +213,16 @@ def _masked(mask, fills: list, closed: list[np.ndarray], pieces: list[np.ndarray
     return fills, keep, out
 
 
-def _small_drawing(contours, paths, k: float, note: str) -> str | None:
-    """A warning when a drawing without units is only a few units across (a plan drawn in
-    metres, a part in inches), None otherwise."""
+def _small_drawing(contours, paths, note: str) -> str | None:
+    """A warning when a drawing without units (so read as mm) is under 10 units across (a
+    plan drawn in metres, a part in inches), None otherwise."""
     if not note.startswith("units: none") or not (contours or paths):
         return None
-    pts = np.concatenate([*contours, *paths])
-    w, h = np.ptp(pts, axis=0) / k
+    w, h = np.ptp(np.concatenate([*contours, *paths]), axis=0)
     if max(w, h) >= 10:
         return None
     return (f"warning: no units in the file and the drawing is only {w:.4g} × {h:.4g} units: "
-            f"marked {w * k:.4g} × {h * k:.4g} mm; a plan drawn in metres needs ;units=m "
+            f"marked {w:.4g} × {h:.4g} mm; a plan drawn in metres needs ;units=m "
             "(inches: ;units=in)")
 
 
@@ -321,7 +320,7 @@ def load_dxf(path: str | Path, tol_mm: float = TOL_MM, join_mm: float = 1e-3,
     if wipeouts:
         notes.append(f"{wipeouts} WIPEOUT(s) mask what was drawn before them")
     paths_out = [np.vstack([r, r[:1]]) for r in outlines] + opens
-    small = _small_drawing(contours, paths_out, k, unit_note)
+    small = _small_drawing(contours, paths_out, unit_note)
     if small:
         notes.append(small)
     return _non_empty(Pattern(tuple(contours), tuple(paths_out), path.name,

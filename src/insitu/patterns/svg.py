@@ -237,7 +237,8 @@ def load_svg(path: str | Path, tol_mm: float = TOL_MM, beam_mm: float = BEAM_MM)
         filled = shapely.unary_union(parts[shapely.area(parts) > 0.5 * tol_px
                                            * shapely.length(parts)])
         had_content = not filled.is_empty or bool(thin)
-        filled, thin, clipped = _clip_to_page(filled, thin, _page(svg), tol_px)
+        page = _page(svg)
+        filled, thin, clipped = _clip_to_page(filled, thin, page, tol_px)
         notes = [_units_note(svg)]
     except FormatError:
         raise
@@ -259,7 +260,9 @@ def load_svg(path: str | Path, tol_mm: float = TOL_MM, beam_mm: float = BEAM_MM)
                      + (" (convert text to paths)" if kind == "text" else ""))
     contours = tuple(to_mm(c) for c in contours_of(filled))
     if had_content and not contours and not thin:
-        raise FormatError(f"{path}: everything it draws lies outside its page ({clipped})")
+        w, h = (v * MM_PER_PX for v in page)
+        raise FormatError(f"{path}: everything it draws lies outside its page ({w:.4g} × "
+                          f"{h:.4g} mm)")
     return _non_empty(Pattern(contours, tuple(to_mm(p) for p in thin), path.name,
                               notes=tuple(notes), stroke_widths=tuple(sorted(widths)),
                               beam_mm=beam_mm),
