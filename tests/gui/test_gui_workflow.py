@@ -262,6 +262,29 @@ def test_a_device_fault_mid_scan_keeps_what_was_measured(qtbot, window, monkeypa
     assert window.message_label.text() == text
 
 
+def test_a_mark_in_a_codes_quiet_zone_is_refused_where_it_is_placed(qtbot, window):
+    scan_recording(qtbot, window)
+    place(qtbot, window, spec='qr:"insitu"', at=(0.0, 28.0), width=10.5)   # 0.5 mm modules
+    code_hatch = window.session.current().hatch_mm
+    place(qtbot, window, spec='text:"A"', at=(8.5, 28.0), width=3.0)   # in its 2 mm zone
+    label, s = window.place_panel.ui.statusLabel, window.session
+    assert s.selected == 1 and label.property("warning") is True
+    assert label.text().startswith("refused: text:A: its marks enter the quiet zone of "
+                                   "placement 1 (qr:insitu)")
+    assert "placement 2's marks enter its quiet zone" in s.plans[0].error
+    assert window.view.renderer.lines["warnings"][0].count > 0   # the red cross
+    s.update_selected(at_mm=(9.5, 28.0))                         # moved clear of it
+    qtbot.waitUntil(lambda: len(s.plans) == 2 and not window.runner.running("plan")
+                    and not window._plan_timer.isActive(), timeout=WAIT_MS)
+    assert all(o.plan for o in s.plans), [o.error for o in s.plans]
+    assert label.text().startswith("OK:")
+    s.select(0)
+    s.update_selected(width_mm=6.3)                              # 0.3 mm modules
+    assert s.current().hatch_mm == pytest.approx(0.05) == code_hatch
+    s.update_selected(width_mm=4.62)                             # 0.22 mm: 5 lines each
+    assert s.current().hatch_mm == pytest.approx(0.044)
+
+
 def test_pilot_preview_then_abort_stops_mid_job(qtbot, window, tmp_path):
     scan_recording(qtbot, window)
     place(qtbot, window, spec='qr:"insitu"', at=(0.0, 28.0), width=10.1)  # the symbol

@@ -108,7 +108,7 @@ def _summary(out: Path, placement, plan, field: Path | None) -> None:
         fill = "hatch {:.4g} mm at {:g}° along the modules".format(
             *placement.code_hatch(plan.pattern))
     for note in plan.pattern.notes:
-        table.add_row("loaded", note)
+        table.add_row("[yellow]warning[/]" if note.startswith("warning:") else "loaded", note)
     table.add_row("marks", f"{len(plan.job.paths):,} paths, {len(pts):,} points ({fill})")
     mode = placement.mode + (f", worst stretch {plan.projection.max_stretch:.2%}"
                              if PROJECTIONS[placement.mode].stretches else "")

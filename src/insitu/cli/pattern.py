@@ -85,7 +85,7 @@ def show(
         table.add_row("strokes", ", ".join(f"{x:.3g}" for x in p.stroke_widths[:8])
                       + (" …" if len(p.stroke_widths) > 8 else "") + f" mm wide (beam {beam:g})")
     for note in p.notes:
-        table.add_row("loaded", note)
+        table.add_row("[yellow]warning[/]" if note.startswith("warning:") else "loaded", note)
     console.print(table)
     if out is not None:
         ok, buf = cv2.imencode(".png", preview(p))
