@@ -94,6 +94,9 @@ def render_text(text: str, values: Variables, where: str = "pattern") -> str:
                 raise FormatError(f"{where}: field {shown} needs a serial number (plan it into a "
                                   "job: insitu mark ... -o JOB, with a counter)")
             value, kind = values.serial, "a serial number (an int, e.g. {serial:05d})"
+            if spec[-1:].isalpha() and spec[-1] not in "bdnoxX":
+                raise FormatError(f"{where}: field {shown}: format spec {spec!r} does not fit "
+                                  f"{kind}")
         elif name in ("date", "time"):
             fmt = spec or ("%Y-%m-%d" if name == "date" else "%H:%M")
             out.append(values.time.strftime(fmt))
