@@ -19,7 +19,6 @@ from insitu.formats.pointcloud import PointCloud, write_ply
 from insitu.geometry.beams import TwoMirrorHead
 from insitu.marking import GalvoDriver, Placement, progress_path_for, read_job, read_progress
 from insitu.marking.verify import check_code
-from insitu.services import Cancelled
 from insitu.services.mark import mark
 from insitu.services.serials import job_variables
 
