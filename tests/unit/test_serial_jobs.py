@@ -99,14 +99,17 @@ def test_refusals_take_no_serial_and_write_nothing(cloud, tmp_path):
     for pattern, more, message in (
             (QR, ("--serial-start", 5), "a serial counter exists (next 2)"),
             ('datamatrix:"(01){gtin}(21){serial}"', (), "field {gtin} has no value (give "
-                                                        "--field gtin=VALUE)"),
-            ('datamatrix:"(01){gtin}(21){serial}"', ("--field", "gtin=09506000134353"),
+                                                        "--var gtin=VALUE)"),
+            ('datamatrix:"(01){gtin}(21){serial}"', ("--var", "gtin=09506000134353"),
              "wrong check digit 3 (expected 2)"),
             ('qr:"{serial:.2f}"', (), "format spec '.2f' does not fit"),
             ("qr:PLAIN", ("--serial-start", 5), "--serial-start: no pattern uses {serial}")):
         res = _mark(cloud, out, pattern, *more)
         assert res.exit_code == 1 and message in _flat(res.output), res.output
         assert not out.exists()
+    # --var gives the text's fields; --field still names the field correction
+    res = _mark(cloud, out, 'qr:"{lot}{serial}"', "--var", "lot=A", "--field", tmp_path / "no.json")
+    assert res.exit_code == 1 and "no.json: file not found" in res.output and not out.exists()
     # outside the focus range: refused by the checks, after the serial was read, before issued
     res = _run("mark", "--cloud", cloud, "--pattern", QR, "--at", 0, -30, "--width", 60,
                "-o", out)

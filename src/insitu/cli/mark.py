@@ -54,7 +54,7 @@ def mark(
     preview: Preview = False, resume: Resume = False, inspect: Inspect = None, rig: Rig = None,
     field: Field = None, workpiece: Workpiece = "step-block", seed: Seed = 0,
     fields: Annotated[list[str] | None, typer.Option(
-        "--field", metavar="NAME=VALUE", help="A value for {NAME} in the pattern's text "
+        "--var", metavar="NAME=VALUE", help="A value for {NAME} in the pattern's text "
         "(again for more fields); {serial}, {date}, {time} are built in.")] = None,
     counter: Annotated[Path | None, typer.Option(
         help="Serial counter for {serial} (default: serial.counter.json beside the job).")] = None,
@@ -67,7 +67,7 @@ def mark(
     a hole in the cloud or over a steep wall. --run then marks it: the laser is on only while
     marking, off at once on any fault, and an interrupted job resumes with --resume.
     Variable data: a text with {serial:05d}, {date:%Y-%m-%d}, {time:%H%M} or {NAME}
-    (--field NAME=VALUE) is rendered when the job is planned; {serial} takes the counter's next
+    (--var NAME=VALUE) is rendered when the job is planned; {serial} takes the counter's next
     serial, issued once the job passed its checks, never handed out again (a resume marks the
     job's own)."""
     from insitu.marking import LaserParams, Placement, read_job

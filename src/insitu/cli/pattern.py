@@ -63,14 +63,14 @@ def show(
     beam: Annotated[float, typer.Option(help="Beam width, mm: strokes at least this wide "
                                              "are areas.")] = BEAM_MM,
     fields: Annotated[list[str] | None, typer.Option(
-        "--field", metavar="NAME=VALUE", help="A value for {NAME} in the text.")] = None,
+        "--var", metavar="NAME=VALUE", help="A value for {NAME} in the text.")] = None,
     serial: Annotated[int, typer.Option(help="The serial {serial} is shown with "
                                              "(a preview: no counter is read).")] = 1,
 ) -> None:
     """Load a pattern as insitu mark would (at its own size) and say what will be marked:
     filled area, lines, closed outlines, size in mm, units chosen, remarks. -o writes a
     preview: fills gray, lines blue, outlines red, a code's quiet zone green. A text with
-    variable data ({serial}, {date}, --field values) is shown rendered as a preview."""
+    variable data ({serial}, {date}, --var values) is shown rendered as a preview."""
     import shapely
 
     from insitu.formats.atomic import atomic_write_bytes

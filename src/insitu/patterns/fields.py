@@ -6,7 +6,7 @@ Fields, in braces (Python's format syntax; ``{{`` and ``}}`` are literal braces)
     {serial}, {serial:05d}   the part's serial number (an int; any int format spec)
     {date}, {date:%d.%m.%Y}  the local date of planning (strftime; default %Y-%m-%d)
     {time}, {time:%H%M}      the local time of planning (strftime; default %H:%M)
-    {NAME}, {NAME:>8}        a field the user gives (``--field NAME=VALUE``; str format spec)
+    {NAME}, {NAME:>8}        a field the user gives (``--var NAME=VALUE``; str format spec)
 
 Only the text of a spec source that encodes or writes text is a template (text:, qr:,
 datamatrix:, microqr:, code128:); a file or ``fiducials:`` is never rendered. A spec without
@@ -104,7 +104,7 @@ def render_text(text: str, values: Variables, where: str = "pattern") -> str:
         elif name in values.fields:
             value, kind = values.fields[name], "a text field (e.g. {NAME:>8})"
         else:
-            raise FormatError(f"{where}: field {shown} has no value (give --field "
+            raise FormatError(f"{where}: field {shown} has no value (give --var "
                               f"{name}=VALUE)")
         try:
             out.append(format(value, spec))
@@ -125,18 +125,18 @@ def render_spec(spec: str, values: Variables) -> str:
 
 
 def parse_fields(items: list[str] | tuple[str, ...]) -> dict[str, str]:
-    """``NAME=VALUE`` items (``--field``) → {name: value}; FormatError for a malformed item, a
+    """``NAME=VALUE`` items (``--var``) → {name: value}; FormatError for a malformed item, a
     built-in name (serial, date, time) or a name given twice."""
     out: dict[str, str] = {}
     for item in items:
         name, eq, value = item.partition("=")
         name = name.strip()
         if not eq or not _NAME.fullmatch(name):
-            raise FormatError(f"--field {item!r}: expected NAME=VALUE, e.g. gtin=09506000134352")
+            raise FormatError(f"--var {item!r}: expected NAME=VALUE, e.g. gtin=09506000134352")
         if name in BUILTIN:
-            raise FormatError(f"--field {name}: {{{name}}} is built in (serial from the counter, "
+            raise FormatError(f"--var {name}: {{{name}}} is built in (serial from the counter, "
                               "date and time of planning)")
         if name in out:
-            raise FormatError(f"--field {name}: given twice")
+            raise FormatError(f"--var {name}: given twice")
         out[name] = value
     return out
