@@ -188,3 +188,15 @@ def test_serial_set_refuses_going_back_without_force(tmp_path):
     assert res.exit_code == 0 and read_counter(path).next == 10
     res = _run("serial", "show", tmp_path / "missing.json")
     assert res.exit_code == 1 and "no such serial counter" in res.output
+
+
+def test_a_text_with_the_date_only_takes_no_serial(cloud, tmp_path):
+    out = tmp_path / "dated.json"
+    res = _mark(cloud, out, 'text:"{date:%Y} {lot}";size=2', "--var", "lot=L7")
+    assert res.exit_code == 0, res.output
+    rec = job_variables(read_job(out))
+    assert rec.serial is None and rec.counter is None and rec.fields == {"lot": "L7"}
+    assert rec.texts[0].text == f"{rec.time[:4]} L7"
+    assert not (tmp_path / "serial.counter.json").exists()
+    text = _flat(_run("job", "show", out).output)
+    assert "serial" not in text and f"text {rec.time[:4]} L7" in text and "lot=L7" in text
