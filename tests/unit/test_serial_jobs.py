@@ -153,7 +153,7 @@ def test_an_interrupted_job_keeps_its_serial_and_resumes_it(cloud, tmp_path, how
     res = _mark(cloud, out, QR, "--run", "--resume")
     assert res.exit_code == 0, res.output
     assert f"marked paths {done + 1}…{len(job.paths)} of {len(job.paths)} (done)" \
-        in _flat(res.output)
+        in _flat(res.output) and "serial 7 (issued from serial.counter.json)" in _flat(res.output)
     assert read_job(out).digest() == job.digest() and job_variables(read_job(out)).serial == 7
     assert read_counter(counter).next == 8
     # planning the part again takes the next serial; 7 is never handed out again

@@ -110,6 +110,7 @@ def _plan(out: Path, placement, plan_mark, resume: bool, fields, counter, start)
     """(plan, variable-data record or None): planned and written with the serial taken from
     the counter, or, with ``resume``, planned again as the job at ``out`` was (nothing
     written, no serial taken)."""
+    from insitu.marking import read_job
     from insitu.patterns.fields import parse_fields
     from insitu.services import serials
 
@@ -118,7 +119,7 @@ def _plan(out: Path, placement, plan_mark, resume: bool, fields, counter, start)
         if counter is not None or start is not None:
             fail("--resume marks the job's own serial: drop --counter and --serial-start")
         plan = serials.replan(out, [placement], lambda ps: plan_mark(ps[0]), values)
-        return plan, None
+        return plan, serials.job_variables(read_job(out), out) if out.exists() else None
     done = serials.plan_and_save(out, [placement], lambda ps: plan_mark(ps[0]),
                                  lambda plan: plan.job, counter=counter, fields=values,
                                  start=start)
