@@ -200,3 +200,16 @@ def test_a_text_with_the_date_only_takes_no_serial(cloud, tmp_path):
     assert not (tmp_path / "serial.counter.json").exists()
     text = _flat(_run("job", "show", out).output)
     assert "serial" not in text and f"text {rec.time[:4]} L7" in text and "lot=L7" in text
+
+
+@pytest.mark.parametrize("record, message", [
+    ({"serial": "x", "time": "2026-01-01T00:00:00"}, "variable_data.serial: expected an integer"),
+    ({"serial": 1}, "variable_data.time: missing (required)"),
+    ({"serial": 1, "time": "yesterday"}, "variable_data.time: expected an ISO 8601 time"),
+])
+def test_a_bad_variable_data_record_is_one_line(tmp_path, record, message):
+    path = tmp_path / "job.json"
+    path.write_text(json.dumps({"paths": [{"points": [[0, 0, 0], [1, 0, 0]]}],
+                                "variable_data": record}))
+    res = _run("job", "show", path)
+    assert res.exit_code == 1 and f"{path}: {message}" in _flat(res.output), res.output
