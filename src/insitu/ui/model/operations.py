@@ -113,8 +113,8 @@ def mark_serial(items, cloud, laser, station: Station, job_path: Path | None,
         raise InsituError("save the project first: the serial counter is kept beside it")
     counter = default_counter(job_path)
     if not counter.exists():
-        raise InsituError(f"{counter}: no serial counter; create it with insitu serial set "
-                          f"{counter} FIRST_SERIAL")
+        raise InsituError(f"no serial counter beside the project: in its folder, insitu serial "
+                          f"set {counter.name} FIRST_SERIAL creates it")
 
     def job_of(outcomes) -> MarkJob:
         job = joined(outcomes)
