@@ -213,3 +213,19 @@ def test_a_bad_variable_data_record_is_one_line(tmp_path, record, message):
                                 "variable_data": record}))
     res = _run("job", "show", path)
     assert res.exit_code == 1 and f"{path}: {message}" in _flat(res.output), res.output
+
+
+def test_the_screen_plans_with_the_next_serial_and_refuses_a_bad_template(cloud, tmp_path):
+    from insitu.formats.pointcloud import read_ply
+    from insitu.ui.model.operations import plan_preview
+
+    with locked(tmp_path / "serial.counter.json") as c:
+        c.create(12)
+    items = (Placement('qr:"{serial"', (0.0, -36.0), 4.0),
+             Placement('qr:"{serial}";ec=H', (0.0, -28.0), 6.0),
+             Placement("qr:PLAIN", (7.0, -36.0), 4.0))
+    out = plan_preview(read_ply(cloud), items, GalvoDriver(TwoMirrorHead(350.0, 12.0)),
+                       tmp_path / "p.job.json")
+    assert out[0].plan is None and "expected '}' before end of string" in out[0].error
+    assert out[1].plan.pattern.code.text == "12" and out[2].plan.pattern.code.text == "PLAIN"
+    assert read_counter(tmp_path / "serial.counter.json").next == 12    # a preview takes none

@@ -65,6 +65,12 @@ def _parse(text: str, where: str) -> list[tuple[str, str | None, str]]:
     return out
 
 
+def is_template(spec: str) -> bool:
+    """The spec's text may hold fields (it has a brace); never raises, even when malformed."""
+    parts = _template(spec)
+    return parts is not None and bool(re.search(r"[{}]", parts[1]))
+
+
 def template_fields(spec: str) -> tuple[str, ...]:
     """The field names a spec's text uses, in order, each once (() for a file or a text
     without fields)."""

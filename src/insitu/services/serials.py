@@ -28,7 +28,8 @@ from insitu.errors import FormatError
 from insitu.formats.counter import locked, read_counter
 from insitu.formats.validation import validation_message
 from insitu.marking import MarkJob, Placement
-from insitu.patterns.fields import Variables, render_spec, template_fields, uses_serial
+from insitu.patterns.fields import (Variables, is_template, render_spec, template_fields,
+                                    uses_serial)
 from insitu.patterns.load import spec_parts
 from insitu.services.mark import save_job
 
@@ -70,8 +71,8 @@ def default_counter(job_path: str | Path) -> Path:
 
 
 def is_templated(placements: Sequence[Placement]) -> bool:
-    """Any placement's text holds fields."""
-    return any(template_fields(p.pattern) for p in placements)
+    """Any placement's text holds fields (or braces, even malformed: rendering says why)."""
+    return any(is_template(p.pattern) for p in placements)
 
 
 def render_placement(p: Placement, values: Variables) -> Placement:

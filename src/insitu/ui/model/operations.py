@@ -84,22 +84,23 @@ def preview_serial(job_path: Path | None) -> int:
     return 1 if nxt is None else nxt
 
 
-def preview_placements(items, job_path: Path | None) -> list:
-    """The placements with their texts rendered for planning on screen: the next serial (a
-    preview — marking takes it), the date and time now."""
+def plan_preview(cloud, items, driver, job_path: Path | None) -> list:
+    """:func:`insitu.services.mark.plan_all` of ``items`` with their texts rendered for the
+    screen: the next serial (a preview — marking takes it), the date and time now; a text that
+    cannot be rendered is refused with its one-line message."""
     from insitu.patterns.fields import Variables
     from insitu.services.serials import is_templated, render_placement
 
     if not is_templated(items):
-        return list(items)
-    values = Variables(preview_serial(job_path))
-    out = []
-    for p in items:
+        return mark_svc.plan_all(cloud, items, driver)
+    values, rendered, errors = Variables(preview_serial(job_path)), [], {}
+    for i, p in enumerate(items):
         try:
-            out.append(render_placement(p, values))
-        except InsituError:
-            out.append(p)                     # refused when planned, with its message
-    return out
+            rendered.append(render_placement(p, values))
+        except InsituError as e:
+            errors[i] = mark_svc.PlanOutcome(error=str(e))
+    planned = iter(mark_svc.plan_all(cloud, rendered, driver))
+    return [errors[i] if i in errors else next(planned) for i in range(len(items))]
 
 
 def mark_serial(items, cloud, laser, station: Station, job_path: Path | None,

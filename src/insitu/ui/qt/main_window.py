@@ -15,7 +15,7 @@ from insitu.errors import InsituError
 from insitu.formats.project import SUFFIX, Project, RigChoice, beside
 from insitu.patterns import FILE_SUFFIXES
 from insitu.services import load_height_calibration
-from insitu.services.mark import PlanOutcome, plan_all
+from insitu.services.mark import PlanOutcome
 from insitu.services.project import OpenedProject, open_project, save_project
 from insitu.services.serials import is_templated
 from insitu.services.station import Station
@@ -265,8 +265,8 @@ class MainWindow(QMainWindow):
             self._plan_again = True
             return
         driver, path = self.station.driver, self.job_path()
-        self.runner.start("plan", lambda p, c, f: (items, plan_all(
-                              cloud, ops.preview_placements(items, path), driver)),
+        self.runner.start("plan", lambda p, c, f: (items, ops.plan_preview(cloud, items, driver,
+                                                                            path)),
                           self._planned, lambda m, _c: self.show_error(m))
 
     def _planned(self, result) -> None:
