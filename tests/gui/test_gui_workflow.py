@@ -312,3 +312,35 @@ def test_pilot_preview_then_abort_stops_mid_job(qtbot, window, tmp_path):
     record = json.loads((tmp_path / "a.job.progress.json").read_text())
     assert record["state"] in ("interrupted", "cancelled") and 5 <= record["completed"] < total
     assert not mark.abortButton.isEnabled() and mark.markButton.isEnabled()
+
+
+def test_variable_data_previews_the_next_serial_and_marking_takes_it(qtbot, window, tmp_path):
+    from insitu.formats.counter import locked, read_counter
+    from insitu.marking import read_job
+
+    scan_recording(qtbot, window)
+    place(qtbot, window, 'qr:"SN{serial:04d}";ec=H', width=8.0)
+    mark = window.mark_panel.ui
+    qtbot.waitUntil(lambda: window.mark_panel.job() is not None, timeout=WAIT_MS)
+    assert window.session.plans[0].plan.pattern.code.text == "SN0001"   # no counter yet
+    assert window.save(tmp_path / "m.insitu.json")
+    assert not (tmp_path / "m.job.json").exists()             # written when marked, not saved
+    qtbot.waitUntil(mark.markButton.isEnabled, timeout=WAIT_MS)
+    window.mark_panel.mark()                                          # refused: no counter
+    qtbot.waitUntil(lambda: "no serial counter" in mark.resultLabel.text(), timeout=WAIT_MS)
+    assert window.mark_panel.last_result is None
+    counter = tmp_path / "serial.counter.json"
+    with locked(counter) as c:
+        c.create(5)
+    window.mark_panel.refresh()
+    assert "serial 5 shown as a preview (taken when marked)" in mark.jobLabel.text()
+    for serial in (5, 6):
+        window.mark_panel.last_result = None
+        qtbot.waitUntil(lambda: mark.markButton.isEnabled()
+                        and not window.runner.running("mark"), timeout=WAIT_MS)
+        window.mark_panel.mark()
+        qtbot.waitUntil(lambda: window.mark_panel.last_result is not None, timeout=WAIT_MS)
+        assert window.mark_panel.last_result.state == "done"
+        rec = read_job(tmp_path / "m.job.json").model_extra["variable_data"]
+        assert rec["serial"] == serial and rec["texts"][0]["text"] == f"SN{serial:04d}"
+    assert read_counter(counter).next == 7

@@ -70,7 +70,28 @@ def show(job_path: Annotated[Path, typer.Argument(metavar="JOB.json", help="Mark
     if rec is not None:
         table.add_row("last run", f"{rec['state']}: {rec['completed']} of {rec['paths_total']} "
                                   f"paths ({rec['updated']})")
+    _variable_rows(table, job, job_path)
     console.print(table)
+
+
+def _variable_rows(table: Table, job, job_path: Path) -> None:
+    """The job's serial, rendered texts and the counter's next serial (variable data)."""
+    from rich.markup import escape
+
+    from insitu.services.serials import counter_next, job_variables
+
+    var = job_variables(job, job_path)
+    if var is None:
+        return
+    if var.serial is not None:
+        path = var.counter_path(job_path)
+        nxt = counter_next(path)
+        table.add_row("serial", f"{var.serial}; counter {escape(str(path))}: next "
+                                + (f"{nxt}" if nxt is not None else "(counter not found)"))
+    for t in var.texts:
+        table.add_row("text", f"{escape(t.text)}  ← {escape(t.spec)}")
+    table.add_row("planned", var.time + "".join(f", {k}={escape(v)}"
+                                                for k, v in var.fields.items()))
 
 
 @app.command("run")

@@ -18,6 +18,7 @@ from insitu.cli import mark as mark_cmd
 from insitu.cli import pattern as pattern_cmd
 from insitu.cli import record as record_cmd
 from insitu.cli import scan as scan_cmd
+from insitu.cli import serial as serial_cmd
 from insitu.cli import sim as sim_cmd
 from insitu.cli.common import err_console, fail
 
@@ -39,6 +40,7 @@ galvo_app.command("check")(field_cmd.check)
 app.add_typer(galvo_app, name="galvo")
 app.add_typer(job_cmd.app, name="job")
 app.add_typer(pattern_cmd.app, name="pattern")
+app.add_typer(serial_cmd.app, name="serial")
 app.add_typer(sim_cmd.app, name="sim")
 
 

@@ -6,6 +6,7 @@ from pathlib import Path
 from typing import Annotated
 
 import typer
+from rich.markup import escape
 from rich.table import Table
 
 from insitu.cli.common import check_output, console, fail, one_line_errors, progress_bar
@@ -52,12 +53,23 @@ def mark(
                                            "--resume, --inspect).")] = False,
     preview: Preview = False, resume: Resume = False, inspect: Inspect = None, rig: Rig = None,
     field: Field = None, workpiece: Workpiece = "step-block", seed: Seed = 0,
+    fields: Annotated[list[str] | None, typer.Option(
+        "--var", metavar="NAME=VALUE", help="A value for {NAME} in the pattern's text "
+        "(again for more fields); {serial}, {date}, {time} are built in.")] = None,
+    counter: Annotated[Path | None, typer.Option(
+        help="Serial counter for {serial} (default: serial.counter.json beside the job).")] = None,
+    serial_start: Annotated[int | None, typer.Option(
+        help="Create the serial counter, its first serial this.")] = None,
 ) -> None:
     """Place a pattern with its centre at X Y, WIDTH mm wide, turned by --rotate; project it
     onto the measured surface (--mode) and write the mark job. The job is refused,
     and nothing is written, when any point lies outside the scan field or the focus range, over
     a hole in the cloud or over a steep wall. --run then marks it: the laser is on only while
-    marking, off at once on any fault, and an interrupted job resumes with --resume."""
+    marking, off at once on any fault, and an interrupted job resumes with --resume.
+    Variable data: a text with {serial:05d}, {date:%Y-%m-%d}, {time:%H%M} or {NAME}
+    (--var NAME=VALUE) is rendered when the job is planned; {serial} takes the counter's next
+    serial, issued once the job passed its checks, never handed out again (a resume marks the
+    job's own)."""
     from insitu.marking import LaserParams, Placement, read_job
     from insitu.services import mark as svc
     from insitu.services.station import connect
@@ -85,17 +97,36 @@ def mark(
     with connect(rig, workpiece, seed, field=field) as station:
         with progress_bar("projecting") as progress:
             progress(0, 1)
-            plan = svc.plan_mark(cloud, placement, station.driver, laser, force)
+            plan, rec = _plan(out, placement, lambda p: svc.plan_mark(
+                cloud, p, station.driver, laser, force), resume, fields, counter, serial_start)
         if resume and (not out.exists() or read_job(out).digest() != plan.job.digest()):
             fail(f"--resume: {out} does not hold this job; run without --resume to start it")
-        if not resume:
-            svc.save_job(out, plan.job)
-        _summary(out, placement, plan, station.field)
+        _summary(out, placement, plan, station.field, rec)
         if run:
             run_on_station(station, plan.job, out, resume, preview, inspect)
 
 
-def _summary(out: Path, placement, plan, field: Path | None) -> None:
+def _plan(out: Path, placement, plan_mark, resume: bool, fields, counter, start):
+    """(plan, variable-data record or None): planned and written with the serial taken from
+    the counter, or, with ``resume``, planned again as the job at ``out`` was (nothing
+    written, no serial taken)."""
+    from insitu.marking import read_job
+    from insitu.patterns.fields import parse_fields
+    from insitu.services import serials
+
+    values = parse_fields(fields or [])
+    if resume:
+        if counter is not None or start is not None:
+            fail("--resume marks the job's own serial: drop --counter and --serial-start")
+        plan = serials.replan(out, [placement], lambda ps: plan_mark(ps[0]), values)
+        return plan, serials.job_variables(read_job(out), out) if out.exists() else None
+    done = serials.plan_and_save(out, [placement], lambda ps: plan_mark(ps[0]),
+                                 lambda plan: plan.job, counter=counter, fields=values,
+                                 start=start)
+    return done.result, done.record
+
+
+def _summary(out: Path, placement, plan, field: Path | None, rec=None) -> None:
     pts = plan.projection.points
     (cx, cy), (w, h) = plan.pattern.centre, plan.pattern.size
     e = plan.estimate
@@ -108,7 +139,13 @@ def _summary(out: Path, placement, plan, field: Path | None) -> None:
         fill = "hatch {:.4g} mm at {:g}° along the modules".format(
             *placement.code_hatch(plan.pattern))
     for note in plan.pattern.notes:
-        table.add_row("[yellow]warning[/]" if note.startswith("warning:") else "loaded", note)
+        table.add_row("[yellow]warning[/]" if note.startswith("warning:") else "loaded",
+                      escape(note))
+    if rec is not None:
+        for t in rec.texts:
+            table.add_row("renders", escape(t.text))
+        if rec.serial is not None:
+            table.add_row("serial", f"{rec.serial} (issued from {rec.counter})")
     table.add_row("marks", f"{len(plan.job.paths):,} paths, {len(pts):,} points ({fill})")
     mode = placement.mode + (f", worst stretch {plan.projection.max_stretch:.2%}"
                              if PROJECTIONS[placement.mode].stretches else "")

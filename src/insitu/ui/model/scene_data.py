@@ -12,6 +12,7 @@ import numpy as np
 
 from insitu.errors import InsituError
 from insitu.patterns import Pattern, load_pattern
+from insitu.patterns.fields import Variables, render_spec
 from insitu.marking import Placement
 
 # height colour map stops (t in 0…1 → RGB): blue, cyan, green, yellow, red
@@ -68,8 +69,9 @@ def cross(x: float, y: float, z: float, size_mm: float) -> np.ndarray:
 
 @lru_cache(maxsize=32)
 def base_pattern(spec: str) -> Pattern:
-    """The pattern of a file or spec, loaded once (FormatError if it cannot be)."""
-    return load_pattern(spec)
+    """The pattern of a file or spec, loaded once (FormatError if it cannot be); variable
+    data is drawn with serial 1, the date and time now (a placeholder of its size)."""
+    return load_pattern(render_spec(spec, Variables(1)))
 
 
 def placed_pattern(p: Placement) -> Pattern:

@@ -148,10 +148,8 @@ class Session:
     def job(self) -> MarkJob | None:
         """One job marking every placement in order (each was checked by ``plan_mark``), or
         None while any is refused or not yet planned."""
-        if not self.plans or len(self.plans) != len(self.placements.items):
+        from insitu.ui.model.operations import joined
+
+        if len(self.plans) != len(self.placements.items):
             return None
-        if any(p.plan is None for p in self.plans):
-            return None
-        first = self.plans[0].plan.job
-        return first.model_copy(update={"paths": [path for p in self.plans
-                                                  for path in p.plan.job.paths]})
+        return joined(self.plans)

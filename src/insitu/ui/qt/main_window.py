@@ -15,8 +15,9 @@ from insitu.errors import InsituError
 from insitu.formats.project import SUFFIX, Project, RigChoice, beside
 from insitu.patterns import FILE_SUFFIXES
 from insitu.services import load_height_calibration
-from insitu.services.mark import PlanOutcome, plan_all
+from insitu.services.mark import PlanOutcome
 from insitu.services.project import OpenedProject, open_project, save_project
+from insitu.services.serials import is_templated
 from insitu.services.station import Station
 from insitu.ui.model import operations as ops
 from insitu.ui.model.session import Session
@@ -289,8 +290,9 @@ class MainWindow(QMainWindow):
         if self.runner.running("plan"):
             self._plan_again = True
             return
-        driver = self.station.driver
-        self.runner.start("plan", lambda p, c, f: (items, plan_all(cloud, items, driver)),
+        driver, path = self.station.driver, self.job_path()
+        self.runner.start("plan", lambda p, c, f: (items, ops.plan_preview(cloud, items, driver,
+                                                                            path)),
                           self._planned, lambda m, _c: self.show_error(m))
 
     def _planned(self, result) -> None:
@@ -358,8 +360,10 @@ class MainWindow(QMainWindow):
         project = Project(s.rig_choice, s.height_cal_path, s.field_path, s.camera_cal_path,
                           self.scan_panel.settings(), s.cloud_path, s.placements.items,
                           s.selected, None)
+        # a job with variable data is written when it is marked, with the serial it takes
+        job = None if is_templated(s.placements.items) else self.mark_panel.job()
         try:
-            written = save_project(path, project, s.cloud, self.mark_panel.job())
+            written = save_project(path, project, s.cloud, job)
         except InsituError as e:
             self.show_error(str(e))
             return False
