@@ -64,7 +64,7 @@ def test_scan_live_on_the_simulated_rig(tmp_path):
     (("scan", "-o", "{tmp}/c.txt"), ".ply"),
     (("scan", "-o", "{tmp}/c.ply", "--region", 0, 300, -10, 10), "outside the scan field"),
     (("scan", "-o", "{tmp}/c.ply", "--method", "magic"), "--method"),
-    (("scan", "-o", "{tmp}/c.ply", "--line-speed", 0), "line speed 0 mm/s: expected > 0"),
+    (("scan", "-o", "{tmp}/c.ply", "--line-speed", 0), "--line-speed: 0 is outside 0.1 … 20000 mm/s"),
     (("sim", "record", "bogus", "-o", "{tmp}/r"), "KIND"),
     (("scan", "-o", "{tmp}/c.ply", "--workpiece", "{tmp}/nothing.stl"), "nothing.stl"),
 ])

@@ -72,7 +72,7 @@ def test_a_shifted_field_fails_naming_the_worst_point(field, tmp_path):
 @pytest.mark.parametrize("case, message", [
     ("no-field", "nofile.json"),
     ("not-spots", "a 'height-calibration' sequence, not a field calibration"),
-    ("tolerance", "--tolerance 0: expected a positive number of mm"),
+    ("tolerance", "--tolerance: 0 is outside 1e-06 … 100 mm"),
 ])
 def test_bad_input_one_line_error(field, tmp_path, case, message):
     fc, rig = field

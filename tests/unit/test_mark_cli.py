@@ -74,9 +74,9 @@ def test_job_is_placed_scaled_and_turned_as_asked(files, tmp_path):
 @pytest.mark.parametrize("args, message", [
     (("--at", 1.0, -30.0, "--width", 30), "over a hole in the point cloud"),
     (("--at", 1.0, -30.0, "--width", 8, "--mode", "cone"), "--mode 'cone'"),
-    (("--at", 1.0, -30.0, "--width", -2), "width must be > 0 mm"),
+    (("--at", 1.0, -30.0, "--width", -2), "--width: -2 is outside 0.001 … 2000 mm"),
     (("--at", 1.0, -30.0, "--width", 8, "--preview"), "go with --run"),
-    (("--at", 1.0, -30.0, "--width", 8, "--power", 120), "--power 120"),
+    (("--at", 1.0, -30.0, "--width", 8, "--power", 120), "--power: 120 is outside 0 … 100 %"),
 ])
 def test_refusals_name_the_problem_and_keep_the_old_job(files, tmp_path, args, message):
     out = tmp_path / "job.json"

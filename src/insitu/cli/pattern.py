@@ -11,7 +11,7 @@ import numpy as np
 import typer
 from rich.table import Table
 
-from insitu.cli.common import check_output, console, fail, one_line_errors
+from insitu.cli.common import bounded, check_output, console, fail, one_line_errors
 from insitu.patterns.dxf import FILL_MODES
 from insitu.patterns.load import sources_help
 from insitu.patterns.vector import BEAM_MM
@@ -52,8 +52,9 @@ def show(
                                              help="Preview picture to write (.png).")] = None,
     fill: Annotated[str, typer.Option(help="A DXF's closed outlines: auto, all or "
                                            "none.")] = "auto",
-    beam: Annotated[float, typer.Option(help="Beam width, mm: strokes at least this wide "
-                                             "are areas.")] = BEAM_MM,
+    beam: Annotated[float, typer.Option(
+        callback=bounded("length_mm"), help="Beam width, mm: strokes at least this wide "
+                                            "are areas.")] = BEAM_MM,
 ) -> None:
     """Load a pattern as insitu mark would (at its own size) and say what will be marked:
     filled area, lines, closed outlines, size in mm, units chosen, remarks. -o writes a

@@ -73,6 +73,8 @@ def _build(cfg, block: str, target, **fixed):
         return target(**opts, **fixed)
     except TypeError as e:
         raise ConfigError(f"{cfg.path}: options.{block}: {e}") from None
+    except ConfigError as e:               # a value out of its bounds, named options.<block>.<key>
+        raise ConfigError(f"{cfg.path}: {e}") from None
 
 
 def open_camera(cfg, sim: Devices | None = None) -> Camera:
