@@ -4,6 +4,7 @@ import json
 
 import numpy as np
 import pytest
+from pydantic import ValidationError
 
 from insitu.errors import FormatError
 from insitu.marking import (LaserOverride, LaserParams, MarkJob, Timing, estimate_time, make_job,
@@ -160,5 +161,5 @@ def test_points_from_arrays_are_rounded_and_read_only():
     job = make_job([np.array([[0.1234567891, 0, 0], [1, 1, 1]])])
     assert job.paths[0].points[0, 0] == 0.123457
     assert not job.paths[0].points.flags.writeable
-    with pytest.raises(Exception):
+    with pytest.raises(ValidationError, match=r"expected \(N, 3\) numbers"):
         MarkJob(paths=[{"points": np.zeros((3, 2))}])
