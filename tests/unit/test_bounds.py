@@ -204,3 +204,52 @@ def test_a_pattern_spec_is_printed_as_it_is(tmp_path):
                               "--at", "0", "-30", "--width", "8", "-o", str(tmp_path / "j.json")])
     assert res.exit_code == 0 and res.exception is None, res.output
     assert "qr:x:" in res.output and "❌" not in res.output
+
+
+# -- the other files and options -----------------------------------------------------------
+
+@pytest.mark.parametrize("edit, words", [
+    (lambda p: p["placements"][0].update(width_mm=1e300),
+     "placements[0].width_mm: 1e+300 is outside"),
+    (lambda p: p["placements"][0].update(at_mm=[0, -1e9]),
+     "placements[0].at_mm[1]: -1e+09 is outside"),
+    (lambda p: p["scan"].update(spacing_mm=1e-300), "scan.spacing_mm: 1e-300 is outside"),
+    (lambda p: p["rig"].update(binning=0), "rig.binning: 0 is outside 1 … 16"),
+    (lambda p: p["rig"].update(seed=-1), "rig.seed: -1 is outside"),
+])
+def test_project_file_out_of_bounds(tmp_path, edit, words):
+    from insitu.errors import FormatError
+    from insitu.formats.project import read_project
+
+    project = {"format": "insitu-project/1", "schema_version": 1, "rig": {}, "scan": {},
+               "placements": [{"pattern": "qr:x", "at_mm": [0, 0], "width_mm": 8}]}
+    path = tmp_path / "p.insitu.json"
+    path.write_text(json.dumps(project))
+    assert read_project(path, dict, ["planar"]).placements[0]["width_mm"] == 8
+    edit(project)
+    path.write_text(json.dumps(project))
+    with pytest.raises(FormatError) as info:
+        read_project(path, dict, ["planar"])
+    assert "\n" not in str(info.value) and words in str(info.value), str(info.value)
+
+
+def test_stage_and_projection_options_out_of_bounds():
+    from insitu.devices.projection import GalvoLineProjector
+    from insitu.devices.stage_grbl import GrblStage
+    from insitu.errors import ConfigError
+    from insitu.geometry.beams import TwoMirrorHead
+
+    with pytest.raises(ConfigError, match=r"^options.stage.feed_mm_min: 0 is outside 1 … "):
+        GrblStage("loop://", feed_mm_min=0, open_port=None)        # refused before the port
+    head = TwoMirrorHead(350.0, 12.0)
+    with pytest.raises(ConfigError, match=r"^options.projection.speed_mm_s: 1e-300 is outside"):
+        GalvoLineProjector(None, head, (100, 100), (-5, 5), speed_mm_s=1e-300)
+
+
+def test_checkerboard_out_of_bounds():
+    from insitu.formats.sequence import CheckerboardSpec
+    from pydantic import ValidationError
+
+    assert CheckerboardSpec(cols=9, rows=6, square_mm=10).cols == 9
+    with pytest.raises(ValidationError, match=r"square_mm\n  1e-300 is outside 0.001 … 2000 mm"):
+        CheckerboardSpec(cols=9, rows=6, square_mm=1e-300)

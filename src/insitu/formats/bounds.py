@@ -86,6 +86,7 @@ BOUNDS: dict[str, Bound] = {
                                 "field is a few mm"),
     "timeout_s": Bound(0.01, 3600, "s", "no list or move takes an hour"),
     "heartbeat_s": Bound(0.001, 60, "s", "the watchdog's ping interval"),
+    "feed_mm_min": Bound(1, 100000, "mm/min", "a Z stage moves at 1 mm/min … 1.7 m/s"),
     "usb_timeout_ms": Bound(1, 60000, "ms", "a USB transfer"),
     "pulse_length_us": Bound(0, 10000, "µs", "a laser pulse or its trigger"),
     "board_index": Bound(0, 64, "", "boards, cards, pins and tables are numbered from 0 or 1 "
@@ -111,6 +112,7 @@ BOUNDS: dict[str, Bound] = {
     "seed": Bound(0, 2**32 - 1, "", "numpy's seeds are 0 … 2³²-1"),
     "length_mm": Bound(0.001, 2000, "mm", "a width, hatch distance or beam: 1 µm … the field"),
     "count": Bound(1, 1000, "", "views or spots per side of a recording"),
+    "board_corners": Bound(2, 200, "", "inner corners of a checkerboard along a side"),
     "move_mm": Bound(-1000, 1000, "mm", "a simulated knock of the camera"),
 }
 

@@ -28,6 +28,7 @@ KINDS: tuple[str, ...] = Kind.__args__
 FRAME_NAME = "frames/{:05d}.png"
 _CONFIG = ConfigDict(extra="allow", allow_inf_nan=False)
 ImagePx, Pivot, Position = within("image_px", int), within("pivot_height_mm"), within("position_mm")
+Corners, Square = within("board_corners", int), within("length_mm")
 _DIST_NAMES = ("k1", "k2", "p1", "p2", "k3", "k4", "k5", "k6", "s1", "s2", "s3", "s4", "tx", "ty")
 _DIST_BOUND = {"k1": "dist_k1", "p1": "dist_tangential", "p2": "dist_tangential"}
 
@@ -136,9 +137,9 @@ class CheckerboardSpec(BaseModel):
     """Inner-corner counts (as OpenCV's patternSize) and square side, mm."""
 
     model_config = _CONFIG
-    cols: int = Field(ge=2)
-    rows: int = Field(ge=2)
-    square_mm: Positive
+    cols: Corners
+    rows: Corners
+    square_mm: Square
 
 
 def frame_problems(kind: str, frame: FrameSpec) -> list[tuple[str, str]]:

@@ -25,6 +25,7 @@ from insitu.geometry.beams import TwoMirrorHead
 M = TypeVar("M", bound=BaseModel)
 Pivot = within("pivot_height_mm")
 MirrorDistance, MirrorSeparation = within("mirror_distance_mm"), within("mirror_separation_mm")
+Seed = within("seed", int)
 
 
 def utc_now() -> str:
@@ -220,7 +221,7 @@ class RigConfig(JsonFile):
     scan_head_config: str | None = None
     height_calibration: str | None = None
     field_correction: str | None = None
-    sim_seed: int = 0
+    sim_seed: Seed = 0
     options: dict[str, Any] = {}
 
     @property
