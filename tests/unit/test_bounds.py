@@ -253,3 +253,18 @@ def test_checkerboard_out_of_bounds():
     assert CheckerboardSpec(cols=9, rows=6, square_mm=10).cols == 9
     with pytest.raises(ValidationError, match=r"square_mm\n  1e-300 is outside 0.001 … 2000 mm"):
         CheckerboardSpec(cols=9, rows=6, square_mm=1e-300)
+
+
+@pytest.mark.parametrize("board, charuco, words", [
+    ("99999x6x25", None, "--board '99999x6x25': columns 99999 is outside 2 … 200"),
+    ("9x6x0", None, "--board '9x6x0': square side 0 is outside 0.001 … 2000 mm"),
+    ("9x6x25", "DICT_4X4_50:1e300", "--charuco 'DICT_4X4_50:1e300': marker side 1e+300 is outside"),
+])
+def test_board_text_out_of_bounds(board, charuco, words):
+    from insitu.calibrate.photos import parse_board
+    from insitu.errors import CalibrationError
+
+    assert parse_board("9x6x25").cols == 9
+    with pytest.raises(CalibrationError) as info:
+        parse_board(board, charuco)
+    assert str(info.value).startswith(words), str(info.value)
