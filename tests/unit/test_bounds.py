@@ -50,6 +50,7 @@ def test_the_table_is_sound_and_the_defaults_lie_within_it():
     for model in (LaserParams(), Timing(), NOMINAL_HEAD):       # validated on construction
         assert model.model_dump()
     assert check("power_pct", 100, "x") == 100
+    assert BOUNDS["seed"].problem(10**400) == "inf is outside 0 … 4294967295"
     with pytest.raises(InsituError, match=r"^--x: nan is outside 0 … 100 %$"):
         check("power_pct", float("nan"), "--x")
 

@@ -33,11 +33,13 @@ class Bound:
         unit``."""
         try:
             v = float(value)
-        except (TypeError, ValueError, OverflowError):
+        except OverflowError:                                   # an int beyond any float
+            v = math.inf if value > 0 else -math.inf
+        except (TypeError, ValueError):
             return f"{value!r} is not a number (expected {self.range_text()})"
         if math.isfinite(v) and self.lo <= v <= self.hi:
             return None
-        shown = str(value) if isinstance(value, int) else f"{v:g}"
+        shown = str(value) if isinstance(value, int) and abs(value) < 1e15 else f"{v:g}"
         return f"{shown} is outside {self.range_text()}"
 
     def range_text(self) -> str:
