@@ -269,3 +269,16 @@ def test_board_text_out_of_bounds(board, charuco, words):
     with pytest.raises(CalibrationError) as info:
         parse_board(board, charuco)
     assert str(info.value).startswith(words), str(info.value)
+
+
+def test_camera_options_out_of_bounds_before_anything_opens(tmp_path):
+    from insitu.devices.camera_genicam import GenICamCamera
+    from insitu.devices.camera_opencv import OpenCVCamera
+    from insitu.errors import ConfigError
+
+    with pytest.raises(ConfigError, match=r"^options.camera.exposure_ms: 1e\+300 is outside"):
+        OpenCVCamera(str(tmp_path / "none.png"), exposure_ms=1e300)
+    with pytest.raises(ConfigError, match=r"^options.camera.resolution: 0 is outside 1 … "):
+        OpenCVCamera(str(tmp_path / "none.png"), resolution=(0, 480))
+    with pytest.raises(ConfigError, match=r"^options.camera.gain_db: 1000 is outside -20 … 60"):
+        GenICamCamera(tmp_path / "none.cti", gain_db=1000)

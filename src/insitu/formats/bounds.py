@@ -89,6 +89,8 @@ BOUNDS: dict[str, Bound] = {
     "timeout_s": Bound(0.01, 3600, "s", "no list or move takes an hour"),
     "heartbeat_s": Bound(0.001, 60, "s", "the watchdog's ping interval"),
     "feed_mm_min": Bound(1, 100000, "mm/min", "a Z stage moves at 1 mm/min … 1.7 m/s"),
+    "exposure_ms": Bound(0.001, 10000, "ms", "a camera exposure: 1 µs … 10 s"),
+    "gain_db": Bound(-20, 60, "dB", "industrial camera gains span about 0 … 48 dB"),
     "usb_timeout_ms": Bound(1, 60000, "ms", "a USB transfer"),
     "pulse_length_us": Bound(0, 10000, "µs", "a laser pulse or its trigger"),
     "board_index": Bound(0, 64, "", "boards, cards, pins and tables are numbered from 0 or 1 "
