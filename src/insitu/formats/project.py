@@ -73,7 +73,7 @@ class _Strict(BaseModel):
 Seed, Binning = within("seed", int), within("binning", int)
 Region = Annotated[tuple[float, float, float, float], each_within("position_mm")]
 Spacing, Speed, Length = within("spacing_mm"), within("mark_speed_mm_s"), within("length_mm")
-Angle = within("angle_deg")
+Angle, Exposure = within("angle_deg"), within("exposure_ms")
 
 
 class _Rig(_Strict):
@@ -92,7 +92,7 @@ class _Calibration(_Strict):
 class _Scan(_Strict):
     region: Region | None = None
     spacing_mm: Spacing = 0.5
-    exposure_ms: float = Field(10.0, gt=0)
+    exposure_ms: Exposure = 10.0
     replay: str | None = None
     speed_mm_s: Speed = 2000.0
 

@@ -18,7 +18,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_valida
 from insitu.errors import FormatError
 from insitu.formats.atomic import atomic_folder, atomic_write_text
 from insitu.formats.bounds import BOUNDS, each_within, within
-from insitu.formats.validation import (Finite, Matrix3, Positive, PositivePair, Range, Vec2, Vec3,
+from insitu.formats.validation import (Finite, Matrix3, PositivePair, Range, Vec2, Vec3,
                                        bad, dump_json, numbers, plain, read_json, show,
                                        validation_message)
 
@@ -29,6 +29,7 @@ FRAME_NAME = "frames/{:05d}.png"
 _CONFIG = ConfigDict(extra="allow", allow_inf_nan=False)
 ImagePx, Pivot, Position = within("image_px", int), within("pivot_height_mm"), within("position_mm")
 Corners, Square = within("board_corners", int), within("length_mm")
+Exposure, Point = within("exposure_ms"), Annotated[Vec2, each_within("position_mm")]
 _DIST_NAMES = ("k1", "k2", "p1", "p2", "k3", "k4", "k5", "k6", "s1", "s2", "s3", "s4", "tx", "ty")
 _DIST_BOUND = {"k1": "dist_k1", "p1": "dist_tangential", "p2": "dist_tangential"}
 
@@ -118,11 +119,11 @@ class FrameSpec(BaseModel):
     model_config = _CONFIG
     file: str
     line: LineSpec | None = None
-    spot: Vec2 | None = None
-    fiducials: Annotated[list[Vec2], Field(min_length=1)] | None = None
-    fiducial_diameter_mm: Positive | None = None
+    spot: Point | None = None
+    fiducials: Annotated[list[Point], Field(min_length=1)] | None = None
+    fiducial_diameter_mm: Square | None = None
     plate_z_mm: Position | None = None
-    exposure_ms: Positive | None = None
+    exposure_ms: Exposure | None = None
 
     @field_validator("file")
     @classmethod
