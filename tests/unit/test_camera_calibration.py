@@ -55,7 +55,8 @@ def test_synthetic_corners_recover_the_true_camera_within_its_uncertainty():
     truth = np.array([cam.K[0, 0], cam.K[1, 1], cam.K[0, 2], cam.K[1, 2]])
     got = np.array([res.K[0, 0], res.K[1, 1], res.K[0, 2], res.K[1, 2]])
     err = got - truth
-    assert abs(err[0]) / truth[0] < 1e-3 and abs(err[1]) / truth[1] < 1e-3
+    # 1.5 × today's 0.012 % / 0.015 % (15 synthetic views, 0.05 px noise)
+    assert abs(err[0]) / truth[0] < 1.8e-4 and abs(err[1]) / truth[1] < 2.3e-4, err
     assert np.all(np.abs(err) < 4 * res.std[:4] + 1e-9), (err, res.std[:4])
     assert np.all(np.abs(res.dist - cam.dist) < 4 * res.std[4:9] + 1e-4)
     # the board poses too: the first view's pose reproduces its corners
@@ -126,13 +127,15 @@ def test_cli_calibrates_intrinsics_and_the_world_pose(rec, tmp_path):
     assert res.exit_code == 0, res.output
     cal = load_json_model(out, CameraCalibration)
     K, true = np.array(cal.camera.K), rig.camera
-    assert abs(K[0, 0] / true.K[0, 0] - 1) < 3e-3
+    # 1.5 × today's figures from 4 rendered views at binning 2: fx 0.124 %, fy 0.122 %, the
+    # pose 0.152° and 0.56 mm (benchmarks/camera_calibration.py: 0.004 % at full size, 15 views)
+    assert abs(K[0, 0] / true.K[0, 0] - 1) < 1.9e-3 and abs(K[1, 1] / true.K[1, 1] - 1) < 1.9e-3
     assert len(cal.per_view_rms_px) == 5 and cal.rms_px < 0.1 and len(cal.std_intrinsics) == 9
     assert cal.residuals["views_used"] == 5 and abs(cal.residuals["alignment_angle_deg"] - 90) < 0.5
     R = np.array(cal.camera.R)
     angle = np.degrees(np.arccos(np.clip((np.trace(R @ true.R.T) - 1) / 2, -1, 1)))
     centre = -R.T @ np.array(cal.camera.t)
-    assert angle < 0.3 and np.linalg.norm(centre - true.centre_world) < 2.0
+    assert angle < 0.23 and np.linalg.norm(centre - true.centre_world) < 0.84
     assert "world pose" in cal.notes and cal.inputs == [str(folder)]
     assert cv2.imread(str(out.with_suffix(".png"))).shape[1] >= 500    # the per-view bars
 
@@ -186,7 +189,7 @@ def test_cli_bad_input_one_line_error_and_no_file(rec, tmp_path, case, message):
     assert res.exit_code == 1, res.output
     lines = [ln for ln in res.output.splitlines() if ln.strip()]
     assert len(lines) == 1 and message in lines[0], res.output
-    assert "Traceback" not in res.output
+    assert isinstance(res.exception, SystemExit), res.exception                # not an uncaught error
     assert not out.exists() and not list(tmp_path.glob(".*camera*"))
 
 

@@ -175,12 +175,13 @@ def test_the_cli_starts_without_qt_and_offers_gui():
             "assert not [k for k in sys.modules if k.startswith(('PySide6', 'OpenGL'))]; "
             "r = CliRunner().invoke(m.app, ['gui', '--help']); print(r.output); "
             "r = CliRunner().invoke(m.app, ['gui', 'nowhere.insitu.json']); "
-            "print(r.exit_code, r.output)")
+            "print(r.exit_code, type(r.exception).__name__, r.output)")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                          timeout=60)
     assert out.returncode == 0, out.stderr
     assert "Open the operator's application" in out.stdout
-    assert "1 error: nowhere.insitu.json: project file not found" in " ".join(out.stdout.split())
+    assert ("1 SystemExit error: nowhere.insitu.json: project file not found"
+            in " ".join(out.stdout.split()))
 
 
 def test_the_gui_command_without_the_gui_packages_names_the_fix():
@@ -189,12 +190,12 @@ def test_the_gui_command_without_the_gui_packages_names_the_fix():
 
     code = ("import sys; sys.modules['PySide6'] = None; from typer.testing import CliRunner; "
             "import insitu.cli.main as m; r = CliRunner().invoke(m.app, ['gui']); "
-            "print(r.exit_code, r.output)")
+            "print(r.exit_code, type(r.exception).__name__, r.output)")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                          timeout=60)
     assert out.returncode == 0, out.stderr
     lines = out.stdout.split("\n")
-    assert lines[0] == ("1 error: the GUI needs PySide6 and PyOpenGL (PySide6 is not "
+    assert lines[0] == ("1 SystemExit error: the GUI needs PySide6 and PyOpenGL (PySide6 is not "
                         "installed): pip install 'insitu[gui]'"), out.stdout
     assert "Traceback" not in out.stdout and not "".join(lines[1:]).strip()
 

@@ -9,7 +9,7 @@ import numpy as np
 import typer
 from rich.table import Table
 
-from insitu.cli.common import check_output, console, one_line_errors, progress_bar
+from insitu.cli.common import bounded, check_output, console, one_line_errors, progress_bar
 
 app = typer.Typer(help="Mark jobs: show one, or mark it on the rig.", no_args_is_help=True,
                   rich_markup_mode="markdown")
@@ -24,7 +24,7 @@ Rig = Annotated[Path | None, typer.Option(help="Rig file (default: the simulated
 Field = Annotated[Path | None, typer.Option(help="Field correction (FIELD.json) to apply "
                                                  "(default: the rig file's).")]
 Workpiece = Annotated[str, typer.Option(help="Simulated rig: the part on the table.")]
-Seed = Annotated[int, typer.Option(help="Simulated rig: seed.")]
+Seed = Annotated[int, typer.Option(help="Simulated rig: seed.", callback=bounded("seed"))]
 
 
 def run_on_station(station, job, job_path: Path, resume: bool, preview: bool,

@@ -9,7 +9,7 @@ import typer
 from rich.markup import escape
 from rich.table import Table
 
-from insitu.cli.common import check_output, console, fail, one_line_errors, progress_bar
+from insitu.cli.common import bounded, check_output, console, fail, one_line_errors, progress_bar
 from insitu.cli.job import (Field, Inspect, Preview, Resume, Rig, Seed, Workpiece,
                             run_on_station)
 from insitu.marking.modes import PROJECTIONS, projection_mode
@@ -22,33 +22,43 @@ from insitu.patterns.vector import BEAM_MM
 def mark(
     cloud: Annotated[Path, typer.Option(help="Measured point cloud (.ply) of the part.")],
     pattern: Annotated[str, typer.Option(help=f"A file or spec: {sources_help()}.")],
-    at: Annotated[tuple[float, float], typer.Option(help="Centre of the pattern X Y, mm, "
-                                                         "world frame.")],
+    at: Annotated[tuple[float, float], typer.Option(
+        callback=bounded("position_mm"), help="Centre of the pattern X Y, mm, "
+                                              "world frame.")],
     out: Annotated[Path, typer.Option("-o", "--output", help="Mark job to write (.json).")],
     width: Annotated[float | None, typer.Option(
+        callback=bounded("length_mm"),
         help="Width of the pattern, mm (before --rotate; a code's without its quiet zone; "
              "default: the size it loads at, e.g. a code's ;module=).")] = None,
-    rotate: Annotated[float, typer.Option(help="Rotation, degrees CCW about +z.")] = 0.0,
+    rotate: Annotated[float, typer.Option(
+        callback=bounded("angle_deg"), help="Rotation, degrees CCW about +z.")] = 0.0,
     mode: Annotated[str, typer.Option(help="; ".join(f"{k}: {m.description}" for k, m in
                                                      PROJECTIONS.items()) + ".")] = "planar",
-    hatch: Annotated[float | None, typer.Option(help="Fill filled regions with hatch lines this "
-                                                     "far apart, mm (default: outlines "
-                                                     "only).")] = None,
-    hatch_angle: Annotated[float, typer.Option(help="Hatch direction, degrees from +x.")] = 0.0,
+    hatch: Annotated[float | None, typer.Option(
+        callback=bounded("length_mm"), help="Fill filled regions with hatch lines this "
+                                            "far apart, mm (default: outlines "
+                                            "only).")] = None,
+    hatch_angle: Annotated[float, typer.Option(
+        callback=bounded("angle_deg"), help="Hatch direction, degrees from +x.")] = 0.0,
     cross: Annotated[bool, typer.Option(help="Cross-hatch (a second hatch at +90°).")] = False,
     fill: Annotated[str, typer.Option(help="A DXF's closed outlines: auto (fills where the "
                                            "file has hatches, solids, wide polylines, text; "
                                            "other outlines as lines), all (fill every closed "
                                            "outline), none (outlines only).")] = "auto",
-    beam: Annotated[float, typer.Option(help="Beam width, mm: strokes at least this wide are "
-                                             "marked as their area, thinner ones as lines; a "
-                                             "code's default hatch is no coarser.")] = BEAM_MM,
+    beam: Annotated[float, typer.Option(
+        callback=bounded("length_mm"), help="Beam width, mm: strokes at least this wide are "
+                                            "marked as their area, thinner ones as lines; a "
+                                            "code's default hatch is no coarser.")] = BEAM_MM,
     force: Annotated[bool, typer.Option(help="Write the job even when a code would not decode "
                                              "from the planned marks.")] = False,
-    power: Annotated[float, typer.Option(help="Laser power, % of full.")] = 30.0,
-    frequency: Annotated[float, typer.Option(help="Pulse frequency, kHz.")] = 20.0,
-    speed: Annotated[float, typer.Option(help="Mark speed, mm/s.")] = 500.0,
-    jump_speed: Annotated[float, typer.Option(help="Jump speed, mm/s.")] = 3000.0,
+    power: Annotated[float, typer.Option(
+        callback=bounded("power_pct"), help="Laser power, % of full.")] = 30.0,
+    frequency: Annotated[float, typer.Option(
+        callback=bounded("frequency_khz"), help="Pulse frequency, kHz.")] = 20.0,
+    speed: Annotated[float, typer.Option(
+        callback=bounded("mark_speed_mm_s"), help="Mark speed, mm/s.")] = 500.0,
+    jump_speed: Annotated[float, typer.Option(
+        callback=bounded("jump_speed_mm_s"), help="Jump speed, mm/s.")] = 3000.0,
     run: Annotated[bool, typer.Option(help="Also mark the job on the rig (with --preview, "
                                            "--resume, --inspect).")] = False,
     preview: Preview = False, resume: Resume = False, inspect: Inspect = None, rig: Rig = None,
@@ -80,16 +90,8 @@ def mark(
         check_output(inspect, ".png")
     if (preview or resume or inspect is not None) and not run:
         fail("--preview, --resume and --inspect go with --run")
-    if not 0 <= power <= 100:
-        fail(f"--power {power:g}: expected 0 … 100 %")
-    for name, value in (("--frequency", frequency), ("--speed", speed),
-                        ("--jump-speed", jump_speed)):
-        if not value > 0:
-            fail(f"{name} {value:g}: expected a positive number")
     if fill not in FILL_MODES:
         fail(f"--fill {fill!r}: expected one of {', '.join(FILL_MODES)}")
-    if not beam > 0:
-        fail(f"--beam {beam:g}: expected a positive number")
     placement = Placement(pattern, at, width, rotate, mode, hatch, hatch_angle, cross, fill,
                           beam)
     laser = LaserParams(power_pct=power, frequency_khz=frequency, mark_speed_mm_s=speed,

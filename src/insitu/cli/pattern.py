@@ -12,7 +12,7 @@ import typer
 from rich.markup import escape
 from rich.table import Table
 
-from insitu.cli.common import check_output, console, fail, one_line_errors
+from insitu.cli.common import bounded, check_output, console, fail, one_line_errors
 from insitu.patterns.dxf import FILL_MODES
 from insitu.patterns.load import sources_help
 from insitu.patterns.vector import BEAM_MM
@@ -60,8 +60,9 @@ def show(
                                              help="Preview picture to write (.png).")] = None,
     fill: Annotated[str, typer.Option(help="A DXF's closed outlines: auto, all or "
                                            "none.")] = "auto",
-    beam: Annotated[float, typer.Option(help="Beam width, mm: strokes at least this wide "
-                                             "are areas.")] = BEAM_MM,
+    beam: Annotated[float, typer.Option(
+        callback=bounded("length_mm"), help="Beam width, mm: strokes at least this wide "
+                                            "are areas.")] = BEAM_MM,
     fields: Annotated[list[str] | None, typer.Option(
         "--var", metavar="NAME=VALUE", help="A value for {NAME} in the text.")] = None,
     serial: Annotated[int, typer.Option(help="The serial {serial} is shown with "

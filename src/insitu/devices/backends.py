@@ -76,6 +76,8 @@ def _build(cfg, block: str, target, **fixed):
         return target(**opts, **fixed)
     except TypeError as e:
         raise ConfigError(f"{cfg.path}: options.{block}: {e}") from None
+    except ConfigError as e:               # a value out of its bounds, named options.<block>.<key>
+        raise ConfigError(f"{cfg.path}: {e}") from None
 
 
 def open_camera(cfg, sim: Devices | None = None) -> Camera:
@@ -87,7 +89,10 @@ def open_camera(cfg, sim: Devices | None = None) -> Camera:
                               "camera (a device index such as 0, or a path)")
         if isinstance(opts["source"], str) and "://" not in opts["source"]:
             opts["source"] = str(cfg.resolve(opts["source"]))      # file, sequence, device
-        return OpenCVCamera(**opts)
+        try:
+            return OpenCVCamera(**opts)
+        except ConfigError as e:           # a value out of its bounds, named options.camera.<key>
+            raise ConfigError(f"{cfg.path}: {e}") from None
     if cfg.camera == "genicam":
         from insitu.devices.camera_genicam import GenICamCamera
         if "producer" not in cfg.options.get("camera", {}):

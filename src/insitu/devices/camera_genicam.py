@@ -25,6 +25,7 @@ from harvesters.core import Harvester
 
 from insitu.devices.native import allowed_library
 from insitu.errors import ConfigError, DeviceError
+from insitu.formats.bounds import check
 
 PIXEL_FORMATS = ("Mono8", "Mono10", "Mono12", "Mono16", "Mono10p", "Mono12p", "Mono12Packed")
 TRIGGERS = ("free", "software", "hardware")
@@ -44,6 +45,12 @@ class GenICamCamera:
         if trigger not in TRIGGERS:
             raise ConfigError(f"options.camera.trigger: expected one of {', '.join(TRIGGERS)}, "
                               f"got {trigger!r}")
+        for key, bound, value in (("exposure_ms", "exposure_ms", exposure_ms),
+                                  ("gain_db", "gain_db", gain_db),
+                                  ("num_buffers", "count", num_buffers),
+                                  ("timeout_s", "timeout_s", timeout_s)):
+            if value is not None:
+                check(bound, value, f"options.camera.{key}", ConfigError)
         producer = Path(producer)
         if not producer.is_file():
             raise DeviceError(f"GenICam: GenTL producer {producer} not found (install the "

@@ -33,6 +33,7 @@ from insitu.devices.galvo import Command, focus_points
 from insitu.devices.native import allowed_library
 from insitu.devices.watchdog import Heartbeat
 from insitu.errors import ConfigError, DeviceError, SafetyError
+from insitu.formats.bounds import check_fields
 from insitu.geometry.beams import TwoMirrorHead
 
 BITS_MAX = 2**19 - 1                 # 20-bit signed coordinates (RTC5 and RTC6)
@@ -87,9 +88,18 @@ class RtcSettings:
     timeout_s: float = 30.0
     heartbeat_s: float = 0.25
 
+    def __post_init__(self):
+        check_fields(self, _RTC_BOUNDS, "options.rtc", ConfigError)
+
     @property
     def kz(self) -> float:
         return self.kz_bits_per_mm if self.kz_bits_per_mm is not None else self.k_bits_per_mm
+
+
+_RTC_BOUNDS = {"k_bits_per_mm": "k_bits_per_mm", "kz_bits_per_mm": "k_bits_per_mm",
+               "card": "board_index", "correction_table": "board_index",
+               "laser_mode": "board_index", "pulse_length_us": "pulse_length_us",
+               "pilot_bit": "board_index", "timeout_s": "timeout_s", "heartbeat_s": "heartbeat_s"}
 
 
 class RtcListBuilder:
