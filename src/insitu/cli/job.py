@@ -76,8 +76,7 @@ def show(job_path: Annotated[Path, typer.Argument(metavar="JOB.json", help="Mark
 
 def _variable_rows(table: Table, job, job_path: Path) -> None:
     """The job's serial, rendered texts and the counter's next serial (variable data)."""
-    from rich.markup import escape
-
+    
     from insitu.services.serials import counter_next, job_variables
 
     var = job_variables(job, job_path)
@@ -86,11 +85,11 @@ def _variable_rows(table: Table, job, job_path: Path) -> None:
     if var.serial is not None:
         path = var.counter_path(job_path)
         nxt = counter_next(path)
-        table.add_row("serial", f"{var.serial}; counter {escape(str(path))}: next "
+        table.add_row("serial", f"{var.serial}; counter {path}: next "
                                 + (f"{nxt}" if nxt is not None else "(counter not found)"))
     for t in var.texts:
-        table.add_row("text", f"{escape(t.text)}  ← {escape(t.spec)}")
-    table.add_row("planned", var.time + "".join(f", {k}={escape(v)}"
+        table.add_row("text", f"{t.text}  ← {t.spec}")
+    table.add_row("planned", var.time + "".join(f", {k}={v}"
                                                 for k, v in var.fields.items()))
 
 

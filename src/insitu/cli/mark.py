@@ -6,8 +6,8 @@ from pathlib import Path
 from typing import Annotated
 
 import typer
-from rich.markup import escape
 from rich.table import Table
+from rich.text import Text
 
 from insitu.cli.common import bounded, check_output, console, fail, one_line_errors, progress_bar
 from insitu.cli.job import (Field, Inspect, Preview, Resume, Rig, Seed, Workpiece,
@@ -141,11 +141,11 @@ def _summary(out: Path, placement, plan, field: Path | None, rec=None) -> None:
         fill = "hatch {:.4g} mm at {:g}° along the modules".format(
             *placement.code_hatch(plan.pattern))
     for note in plan.pattern.notes:
-        table.add_row("[yellow]warning[/]" if note.startswith("warning:") else "loaded",
-                      escape(note))
+        table.add_row(Text("warning", "yellow") if note.startswith("warning:") else "loaded",
+                      note)
     if rec is not None:
         for t in rec.texts:
-            table.add_row("renders", escape(t.text))
+            table.add_row("renders", t.text)
         if rec.serial is not None:
             table.add_row("serial", f"{rec.serial} (issued from {rec.counter})")
     table.add_row("marks", f"{len(plan.job.paths):,} paths, {len(pts):,} points ({fill})")

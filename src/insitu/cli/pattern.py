@@ -9,8 +9,8 @@ from typing import Annotated
 import cv2
 import numpy as np
 import typer
-from rich.markup import escape
 from rich.table import Table
+from rich.text import Text
 
 from insitu.cli.common import bounded, check_output, console, fail, one_line_errors
 from insitu.patterns.dxf import FILL_MODES
@@ -87,10 +87,10 @@ def show(
     lines = len(p.paths) - closed
     length = sum(float(np.linalg.norm(np.diff(q, axis=0), axis=1).sum()) for q in p.paths)
     (w, h), (x0, y0, _, _) = p.size, p.bounds()
-    table = Table(title=f"pattern {escape(p.name)}", show_header=False)
+    table = Table(title=f"pattern {p.name}", show_header=False)
     if rendered != spec:
-        table.add_row("preview", escape(f"{rendered} (variable data; serial {serial} as an "
-                                        "example)"))
+        table.add_row("preview", f"{rendered} (variable data; serial {serial} as an "
+                                 "example)")
     table.add_row("size", f"{w:.4g} × {h:.4g} mm (from {x0:.4g}, {y0:.4g})")
     table.add_row("fills", f"{len(p.contours):,} contours, {shapely.area(p.to_shapely()):.4g} "
                            "mm² (hatched when marked)")
@@ -103,7 +103,8 @@ def show(
         table.add_row("strokes", ", ".join(f"{x:.3g}" for x in p.stroke_widths[:8])
                       + (" …" if len(p.stroke_widths) > 8 else "") + f" mm wide (beam {beam:g})")
     for note in p.notes:
-        table.add_row("[yellow]warning[/]" if note.startswith("warning:") else "loaded", note)
+        table.add_row(Text("warning", "yellow") if note.startswith("warning:") else "loaded",
+                      note)
     console.print(table)
     if out is not None:
         ok, buf = cv2.imencode(".png", preview(p))

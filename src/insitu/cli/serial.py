@@ -6,7 +6,6 @@ from pathlib import Path
 from typing import Annotated
 
 import typer
-from rich.markup import escape
 from rich.table import Table
 
 from insitu.cli.common import console, one_line_errors
@@ -28,8 +27,8 @@ def show(counter: CounterArg = Path("serial.counter.json")) -> None:
     table = Table(title=str(counter), show_header=False)
     table.add_row("next", str(c.next))
     for i in reversed(c.issued):
-        table.add_row(f"issued {i.serial}", escape(f"{i.time}  {i.job or '-'}"
-                                                   + (f"  {i.digest[:12]}" if i.digest else "")))
+        table.add_row(f"issued {i.serial}", f"{i.time}  {i.job or '-'}"
+                      + (f"  {i.digest[:12]}" if i.digest else ""))
     console.print(table)
 
 
