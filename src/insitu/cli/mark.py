@@ -9,8 +9,8 @@ import typer
 from rich.table import Table
 
 from insitu.cli.common import check_output, console, fail, one_line_errors, progress_bar
-from insitu.cli.job import (Field, Inspect, Preview, Resume, Rig, Seed, Workpiece,
-                            run_on_station)
+from insitu.cli.job import (CutPath, Field, Inspect, Preview, Restart, Resume, Rig, Seed,
+                            Workpiece, run_on_station)
 from insitu.marking.modes import PROJECTIONS, projection_mode
 from insitu.patterns.dxf import FILL_MODES
 from insitu.patterns.load import sources_help
@@ -48,9 +48,10 @@ def mark(
     frequency: Annotated[float, typer.Option(help="Pulse frequency, kHz.")] = 20.0,
     speed: Annotated[float, typer.Option(help="Mark speed, mm/s.")] = 500.0,
     jump_speed: Annotated[float, typer.Option(help="Jump speed, mm/s.")] = 3000.0,
-    run: Annotated[bool, typer.Option(help="Also mark the job on the rig (with --preview, "
-                                           "--resume, --inspect).")] = False,
-    preview: Preview = False, resume: Resume = False, inspect: Inspect = None, rig: Rig = None,
+    run: Annotated[bool, typer.Option(help="Also mark the job on the rig (with --preview, --restart, "
+                                           "--resume, --cut-path, --inspect).")] = False,
+    preview: Preview = False, resume: Resume = False, restart: Restart = False,
+    cut_path: CutPath = None, inspect: Inspect = None, rig: Rig = None,
     field: Field = None, workpiece: Workpiece = "step-block", seed: Seed = 0,
 ) -> None:
     """Place a pattern with its centre at X Y, WIDTH mm wide, turned by --rotate; project it
@@ -66,8 +67,8 @@ def mark(
     projection_mode(mode)
     if inspect is not None:
         check_output(inspect, ".png")
-    if (preview or resume or inspect is not None) and not run:
-        fail("--preview, --resume and --inspect go with --run")
+    if (preview or resume or restart or cut_path or inspect is not None) and not run:
+        fail("--preview, --resume, --restart, --cut-path and --inspect go with --run")
     if not 0 <= power <= 100:
         fail(f"--power {power:g}: expected 0 … 100 %")
     for name, value in (("--frequency", frequency), ("--speed", speed),
@@ -92,7 +93,7 @@ def mark(
             svc.save_job(out, plan.job)
         _summary(out, placement, plan, station.field)
         if run:
-            run_on_station(station, plan.job, out, resume, preview, inspect)
+            run_on_station(station, plan.job, out, resume, preview, inspect, restart, cut_path)
 
 
 def _summary(out: Path, placement, plan, field: Path | None) -> None:
