@@ -17,7 +17,7 @@ the same marks and :class:`SimInspectionCamera` sees them all.
 Test instrumentation: when ``INSITU_SIM_MARK_LOG`` names a file, the controller appends what it
 executes there — ``L digest n`` when a list of n commands starts, ``J i`` / ``M i x0 y0 z0 x1
 y1 z1`` for each jump / move with the laser on (command index, joint from → to), ``E digest
-n`` when the list ends (fsync'ed at every list end and laser-off) — and, like a board that
+n`` when the list ends, ``O`` at every laser-off (fsync'ed at every list end and laser-off) — and, like a board that
 outlives the program driving it, reports the last list's position from that file after a
 restart.
 """
@@ -162,7 +162,7 @@ class SimController:
         self._close_burn()
         self.laser_is_on = self.pilot_is_on = False
         self.world.laser = LaserState()
-        self._note("", sync=True)
+        self._note("O", sync=True)
 
     def check(self, lists) -> None:
         """No limits beyond the driver's."""
