@@ -183,6 +183,8 @@ def main() -> None:
     Console().print(table)
     for p in problems:
         print(p)
+    print("RESULT " + " ".join(f"{k.replace(' ', '_')}={stats[k]}" for k in (
+        "kills", "cut mid-path", "cut paths reported", "marked twice in full", "skipped")))
     print(f"total {time.perf_counter() - t_start:.0f} s; files in {folder}")
     sys.exit(1 if problems else 0)
 

@@ -299,3 +299,18 @@ def test_sigterm_and_sighup_leave_the_laser_off_and_the_record_interrupted(tmp_p
     assert res.returncode == 1 and "--resume to continue it or --restart" in err
     shown = _cli("job", "show", job_path).communicate(timeout=60)[0]
     assert "interrupted" in shown and f"{len(s.done)} of 400 paths done" in shown
+
+
+@pytest.mark.slow
+def test_kill_and_resume_marks_every_path_once(tmp_path):
+    """benchmarks/kill_resume.py with 5 SIGKILLs: no path twice in full, none skipped, every
+    kill mid-path reported as a cut path."""
+    bench = Path(__file__).parents[2] / "benchmarks" / "kill_resume.py"
+    res = subprocess.run([sys.executable, str(bench), "--kills", "5", "--paths", "200",
+                          "--seed", "3", "--folder", str(tmp_path)], capture_output=True,
+                         text=True, env={**os.environ, "PYTHONPATH": str(SRC)}, timeout=600)
+    assert res.returncode == 0, res.stdout[-2000:] + res.stderr[-2000:]
+    result = dict(w.split("=") for w in res.stdout.split("RESULT ")[1].splitlines()[0].split())
+    assert result["kills"] == "5" and result["marked_twice_in_full"] == "0"
+    assert result["skipped"] == "0"
+    assert int(result["cut_paths_reported"]) >= int(result["cut_mid-path"])
