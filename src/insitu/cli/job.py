@@ -40,15 +40,16 @@ class Stopped(InsituError):
 
 
 @contextlib.contextmanager
-def stop_on_signals():
-    """SIGTERM and SIGHUP end the marking as Ctrl-C does: :class:`Stopped` is raised where the
+def stop_on_signals(what: str = "marking", hint: str = " (insitu job show JOB.json says how "
+                                                       "far it got)"):
+    """SIGTERM and SIGHUP end ``what`` as Ctrl-C does: :class:`Stopped` is raised where the
     program is, so the laser goes off and the journal records "interrupted"; further signals
     are ignored while that happens."""
     def stop(signum, _frame):
         for sig in (signal.SIGTERM, signal.SIGHUP):
             signal.signal(sig, signal.SIG_IGN)
-        raise Stopped(f"marking stopped by {signal.Signals(signum).name}; the laser is off "
-                      "(insitu job show JOB.json says how far it got)")
+        raise Stopped(f"{what} stopped by {signal.Signals(signum).name}; the laser is off"
+                      + hint)
 
     old = {sig: signal.signal(sig, stop) for sig in (signal.SIGTERM, signal.SIGHUP)}
     try:
