@@ -314,3 +314,37 @@ def test_kill_and_resume_marks_every_path_once(tmp_path):
     assert result["kills"] == "5" and result["marked_twice_in_full"] == "0"
     assert result["skipped"] == "0"
     assert int(result["cut_paths_reported"]) >= int(result["cut_mid-path"])
+
+
+@pytest.mark.parametrize("args, message", [
+    (["--cut-path", "redo", "--resume"], "--cut-path 'redo': expected one of remark, skip, "
+                                         "continue"),
+    (["--cut-path", "skip"], "--cut-path goes with --resume"),
+    (["--resume", "--restart"], "--resume and --restart: choose one")])
+def test_run_options_that_do_not_go_together(tmp_path, args, message):
+    from typer.testing import CliRunner
+
+    from insitu.cli.main import app
+    job_path = tmp_path / "job.json"
+    write_job(job_path, job_of())
+    res = CliRunner().invoke(app, ["job", "run", str(job_path), *args])
+    assert res.exit_code == 1 and isinstance(res.exception, SystemExit)
+    assert message in " ".join(res.output.split())
+    assert not (tmp_path / "job.journal.jsonl").exists()
+
+
+def test_job_show_prints_the_journal_summary_with_the_cut_path(tmp_path):
+    from typer.testing import CliRunner
+
+    from insitu.cli.main import app
+    job = job_of()
+    job_path = tmp_path / "job.json"
+    write_job(job_path, job)
+    lists = GalvoDriver(HEAD).compile(job)
+    prog, _ = cut_run(tmp_path, job, sum(map(len, lists[:2])) + 12)
+    res = CliRunner().invoke(app, ["job", "show", str(job_path)])
+    text = " ".join(res.output.split())
+    m = history(job, prog).cut_position
+    assert res.exit_code == 0 and "interrupted: 2 of 5 paths done" in text
+    assert f"cut path 3 ({m} of 5 marks done)" in text.replace("│", "").replace("  ", " ")
+    assert "injected fault" in text

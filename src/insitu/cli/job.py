@@ -59,18 +59,26 @@ def stop_on_signals(what: str = "marking", hint: str = " (insitu job show JOB.js
             signal.signal(sig, handler)
 
 
-def run_on_station(station, job, job_path: Path, resume: bool, preview: bool,
-                   inspect: Path | None, restart: bool = False,
-                   cut_path: str | None = None) -> None:
-    """:func:`insitu.services.mark.mark_on_station` with a progress bar (SIGTERM and SIGHUP
-    stop it like Ctrl-C), then say how far it got and where the camera's image went."""
-    from insitu.marking import CUT_CHOICES, journal_path_for
-    from insitu.services.mark import mark_on_station
+def check_run_options(resume: bool, restart: bool, cut_path: str | None) -> None:
+    """One line for options of a marking run that do not go together."""
+    from insitu.marking import CUT_CHOICES
 
     if cut_path is not None and cut_path not in CUT_CHOICES:
         raise InsituError(f"--cut-path {cut_path!r}: expected one of {', '.join(CUT_CHOICES)}")
     if cut_path is not None and not resume:
         raise InsituError("--cut-path goes with --resume")
+    if resume and restart:
+        raise InsituError("--resume and --restart: choose one")
+
+
+def run_on_station(station, job, job_path: Path, resume: bool, preview: bool,
+                   inspect: Path | None, restart: bool = False,
+                   cut_path: str | None = None) -> None:
+    """:func:`insitu.services.mark.mark_on_station` with a progress bar (SIGTERM and SIGHUP
+    stop it like Ctrl-C), then say how far it got and where the camera's image went."""
+    from insitu.marking import journal_path_for
+    from insitu.services.mark import mark_on_station
+
     with stop_on_signals(), progress_bar("marking") as progress:
         run = mark_on_station(station, job, job_path, resume=resume, restart=restart,
                               cut_path=cut_path, preview=preview, inspect=inspect,
@@ -138,6 +146,7 @@ def run(
     from insitu.marking import read_job
     from insitu.services.station import connect
 
+    check_run_options(resume, restart, cut_path)
     if inspect is not None:
         check_output(inspect, ".png")
     job = read_job(job_path)

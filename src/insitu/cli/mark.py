@@ -10,7 +10,7 @@ from rich.table import Table
 
 from insitu.cli.common import check_output, console, fail, one_line_errors, progress_bar
 from insitu.cli.job import (CutPath, Field, Inspect, Preview, Restart, Resume, Rig, Seed,
-                            Workpiece, run_on_station)
+                            Workpiece, check_run_options, run_on_station)
 from insitu.marking.modes import PROJECTIONS, projection_mode
 from insitu.patterns.dxf import FILL_MODES
 from insitu.patterns.load import sources_help
@@ -69,6 +69,7 @@ def mark(
         check_output(inspect, ".png")
     if (preview or resume or restart or cut_path or inspect is not None) and not run:
         fail("--preview, --resume, --restart, --cut-path and --inspect go with --run")
+    check_run_options(resume, restart, cut_path)
     if not 0 <= power <= 100:
         fail(f"--power {power:g}: expected 0 … 100 %")
     for name, value in (("--frequency", frequency), ("--speed", speed),
