@@ -8,13 +8,15 @@ Lists: path k is sent as ``compile(job, first_path=f)[k − f]`` of the run's ``
 a continued path as :func:`resume_list` of its fresh list (``first`` = k) without its first
 ``skip_marks`` marks. Both are recorded in the ``started`` line, so that the list can be made
 again to read a board's position after a restart. The progress record
-(``<job>.progress.json``, formats of :func:`~insitu.marking.journal.write_progress`) is kept
-consistent with the journal after every path; the journal is the truth for resume.
+(``<job>.progress.json``, :func:`~insitu.marking.journal.write_progress`) is written when a run
+begins and ends, and every ``PROGRESS_EVERY_S`` in between (an atomic rewrite per path would
+cost more than the journal's appends); the journal is the truth for resume.
 """
 
 from __future__ import annotations
 
 import threading
+import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -27,6 +29,7 @@ from insitu.marking.journal import (Journal, JournalSummary, journal_beside, pro
                                     read_journal, read_progress, write_progress)
 
 CUT_CHOICES = ("remark", "skip", "continue")
+PROGRESS_EVERY_S = 0.5          # the progress record is rewritten at most this often mid-run
 
 __all__ = ["CUT_CHOICES", "RunResult", "history", "progress_path_for", "read_progress",
            "resume_list", "resume_point", "run_job", "run_preview"]
@@ -211,7 +214,7 @@ def _send(job, controller, items, jr: Journal | None, s: JournalSummary, ppath, 
     note = jr.write if jr is not None else (lambda *a, **k: None)
     total = len(job.paths)
     write_progress(ppath, s, "running")
-    current, err = None, None
+    current, err, last = None, None, time.monotonic()
     try:
         for k, cmds, first, skip in items:
             if cancel is not None and cancel.is_set():
@@ -224,7 +227,9 @@ def _send(job, controller, items, jr: Journal | None, s: JournalSummary, ppath, 
             note("done", path=k)
             s.done.add(k)
             current = None
-            write_progress(ppath, s, "running")
+            if time.monotonic() - last >= PROGRESS_EVERY_S:
+                write_progress(ppath, s, "running")
+                last = time.monotonic()
             if progress:
                 progress(len(s.done | s.skipped), total)
         note("end", state="done", error=None)
