@@ -120,30 +120,6 @@ def position_of(controller, commands: Sequence[Command]) -> int | None:
     return min(max(pos.done, 0), len(commands))
 
 
-def continuation(commands: Sequence[Command], done: int) -> list[Command]:
-    """The rest of a list whose first ``done`` commands were executed: the settings and delays
-    it had made, a jump (laser off) to where it stopped, the laser on again if it was on, then
-    ``commands[done:]``. Empty when nothing is left."""
-    rest = list(commands[done:])
-    if not rest:
-        return []
-    settings: dict[str, Command] = {}
-    where, lasing = None, False
-    for c in commands[:done]:
-        if c.op in SETTINGS or c.op in DELAYS:
-            settings[c.op] = c
-        elif c.op in MOVES:
-            where = c.args
-        elif c.op in ("laser_on", "laser_off"):
-            lasing = c.op == "laser_on"
-    head = list(settings.values())
-    if where is not None:
-        head.append(Command("jump_abs_3d", where))
-    if lasing:
-        head.append(Command("laser_on"))
-    return head + rest
-
-
 class RecordingController:
     """Records every command (for golden listings and tests); tracks the laser state."""
 
