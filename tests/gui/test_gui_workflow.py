@@ -187,8 +187,10 @@ def test_save_and_reopen_the_project(qtbot, window, tmp_path):
     qtbot.addWidget(other)
     assert other.recent_files() == [str(path)]
     other.open_project(path)
-    qtbot.waitUntil(lambda: other.session.cloud is not None and other.station is not None,
-                    timeout=WAIT_MS)
+    qtbot.waitUntil(lambda: other.session.cloud is not None, timeout=WAIT_MS)
+    assert other.station is None and "not connected" in other.head_label.text()
+    other.connect_action.trigger()                  # the operator connects the project's rig
+    qtbot.waitUntil(lambda: other.station is not None, timeout=WAIT_MS)
     s0, s1 = window.session, other.session
     assert np.allclose(s1.cloud.points, s0.cloud.points)
     assert s1.placements.items == s0.placements.items and s1.selected == s0.selected == 1

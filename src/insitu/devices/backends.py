@@ -13,6 +13,9 @@ naming ``options.<block>.<key>``); relative paths in them are relative to the ri
   power_pct, frequency_khz}
 - stage ``grbl``: ``options.stage`` = {port, baudrate, axis, sign, offset_mm, feed_mm_min,
   z_range_mm, timeout_s, home_on_open}
+
+A native library these name (``options.rtc.library``, ``options.camera.producer``) is loaded
+only if the station file allows it (:mod:`.native`), never because the rig file names it.
 """
 
 from __future__ import annotations

@@ -30,6 +30,7 @@ from pathlib import Path
 import numpy as np
 
 from insitu.devices.galvo import Command, ListPosition, check_setting, focus_points, list_digest
+from insitu.devices.native import allowed_library
 from insitu.devices.watchdog import Heartbeat
 from insitu.errors import ConfigError, DeviceError, SafetyError
 from insitu.geometry.beams import TwoMirrorHead
@@ -169,14 +170,16 @@ def _clip(v: float, hi: int) -> int:
 
 
 class RtcLibrary:
-    """The RTC DLL with declared ctypes signatures; every call is checked for existence."""
+    """The RTC DLL with declared ctypes signatures; every call is checked for existence.
+    Loaded only if the station file allows it (:mod:`.native`)."""
 
     def __init__(self, path: Path, generation: int):
         if generation not in (5, 6):
             raise ConfigError(f"options.rtc.generation: expected 5 or 6, got {generation!r}")
+        real = allowed_library(path, "options.rtc.library")   # the station's consent first
         try:
             loader = ctypes.WinDLL if os.name == "nt" else ctypes.CDLL   # __stdcall on Windows
-            self.dll = loader(str(path))
+            self.dll = loader(str(real))
         except OSError as e:
             raise DeviceError(f"RTC: cannot load the library {path} ({e})") from None
         sigs = dict(SIGNATURES)
