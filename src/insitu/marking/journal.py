@@ -45,10 +45,11 @@ def now() -> str:
 @dataclass
 class JournalSummary:
     """What a journal says. ``done``: paths confirmed (or skipped: ``skipped``); ``cut``: the
-    path started and not confirmed (None: none) and ``cut_position`` the commands of its list
-    the board reported done (None: not known), ``cut_list`` its ``started`` line (how its list was
-made: ``first``, ``skip_marks``, ``list`` digest); ``state``: the last run's end, or "killed" when
-    it has none; ``updated``: time of the last line."""
+    path started and not confirmed (None: none), ``cut_position`` the marks of it the board
+    reported done (None: not known) and ``cut_list`` its ``started`` line (how its list was
+    made: ``first``, ``skip_marks``, ``list`` digest); ``state``: the last run's end, or
+    "killed" when it has none; ``updated``: time of the last line; ``runs``: runs recorded
+    since the last start or restart."""
 
     job_sha256: str
     paths_total: int
