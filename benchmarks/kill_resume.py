@@ -180,7 +180,7 @@ def main() -> None:
                                             "cut paths reported", "continue", "remark",
                                             "marked twice in full", "skipped")),
                   f"{np.mean(times):.2f}")
-    Console().print(table)
+    Console(width=150).print(table)
     for p in problems:
         print(p)
     print("RESULT " + " ".join(f"{k.replace(' ', '_')}={stats[k]}" for k in (
