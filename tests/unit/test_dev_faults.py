@@ -1,9 +1,11 @@
 """A job that survives faults: the device stops answering at a random point of a long job
 (the fake RTC library stops answering after n calls; the fake LMC board is unplugged after n
-USB transfers), hundreds of times. Each time: the laser is off, the progress file records
-the last completed path, and resuming on the reconnected device completes the pattern
-exactly — every segment marked, no completed path marked again, nothing beyond the path the
-fault cut short marked before the resume."""
+USB transfers), hundreds of times. Each time: the laser is off, the journal records the paths
+done and the cut one (with the marks the board reported done), a resume without a choice for
+the cut path refuses, and resuming on the reconnected device (the cut path marked again, or
+continued from the reported mark on the RTC) completes the pattern exactly — every segment
+marked, no completed path marked again, nothing beyond the cut path marked before the resume.
+"""
 
 import os
 import shutil
@@ -19,9 +21,9 @@ from fakes.station import allow
 
 from insitu.devices.lmc import LmcController, LmcSettings
 from insitu.devices.rtc import RtcController, RtcSettings
-from insitu.errors import DeviceError
+from insitu.errors import DeviceError, SafetyError
 from insitu.geometry.beams import TwoMirrorHead
-from insitu.marking import GalvoDriver, make_job, read_progress, run_job
+from insitu.marking import GalvoDriver, history, make_job, read_progress, run_job
 
 HEAD = TwoMirrorHead(350.0, 12.0)
 RUNS_PER_DEVICE = 200
@@ -111,7 +113,7 @@ def per_path(segments, first_path):
     return out
 
 
-def inject_faults(rig, tmp_path, runs, seed):
+def inject_faults(rig, tmp_path, runs, seed, choices=("remark",)):
     job, driver = long_job(), GalvoDriver(HEAD)
     clean = rig.connect()
     opened = rig.activity()
@@ -132,40 +134,60 @@ def inject_faults(rig, tmp_path, runs, seed):
             pass
         assert rig.laser_off(), f"run {k}: laser left on"
         ctrl.close()
-        rec = read_progress(prog)
+        rec, journal = read_progress(prog), history(job, prog)
         if rec["state"] == "done":
-            assert per_path(rig.segments(), 0) == want
+            assert per_path(rig.segments(), 0) == want and journal.done == set(range(40))
             continue
         done = rec["completed"]
         assert rec["state"] == "interrupted" and rec["last_completed_path"] == (done - 1 if done
                                                                                 else None)
+        # the journal: paths before the cut one done, the cut one started and not confirmed
+        assert journal.state == "interrupted" and journal.done == set(range(done))
+        assert journal.cut == done == rec["cut_path"], f"run {k}: cut path not reported"
         first = per_path(rig.segments(), 0)
         for p in range(done):                           # completed paths: all of them
             assert first.get(p) == want[p], f"run {k}: path {p} not marked as recorded"
         cut = first.get(done, [])
         assert cut == want.get(done, [])[:len(cut)], f"run {k}: path {done} marked wrongly"
         assert max(first, default=-1) <= done, f"run {k}: marked beyond the cut path"
-        stats["cut mid-path" if cut else "between paths"] += 1
+        marks = journal.cut_position                    # marks the board reported done
+        assert marks is None or marks <= len(cut), f"run {k}: position beyond what was marked"
+        stats["cut mid-path" if cut else "cut before its first mark"] += 1
         assert "does not respond" in rec["error"] or "unplugged" in rec["error"]
-        # reconnect (the device answers again) and resume
+        # without a choice the resume refuses, naming the cut path; nothing is sent
         ctrl = rig.connect()
-        result = run_job(job, driver, ctrl, prog, resume=True)
+        with pytest.raises(SafetyError, match=f"path {done + 1} of 40 was started"):
+            run_job(job, driver, ctrl, prog, resume=True)
+        assert rig.segments() == []
+        choice = choices[k % len(choices)] if marks is not None else "remark"
+        stats[choice] += 1
+        result = run_job(job, driver, ctrl, prog, resume=True, cut_path=choice)
         ctrl.close()
-        assert result.state == "done" and result.start_path == done
-        second = per_path(rig.segments(), done)
+        assert result.state == "done" and result.cut == done and result.cut_choice == choice
+        second = per_path(rig.segments(), result.start_path)
         assert min(second, default=done) >= done, f"run {k}: a completed path marked again"
         union = {p: (first.get(p, []) if p < done else second.get(p, []))
                  for p in range(len(job.paths))}
+        if choice == "continue":                        # from the reported mark on
+            assert second.get(done, []) == want[done][marks:], f"run {k}: not continued"
+            union[done] = cut[:marks] + second.get(done, [])
         assert union == want, f"run {k}: the pattern is not complete after resuming"
-        assert read_progress(prog)["state"] == "done"
+        assert read_progress(prog)["state"] == "done" and history(job, prog).finished
     return stats
 
 
+def _runs(stats):
+    return stats["only the final laser-off lost"] + stats["cut mid-path"] + stats[
+        "cut before its first mark"]
+
+
 def test_rtc_board_stops_answering_at_random_points(rtc_lib, tmp_path, progress_dir):
-    stats = inject_faults(RtcRig(rtc_lib, tmp_path), progress_dir, RUNS_PER_DEVICE, seed=1)
-    assert sum(stats.values()) == RUNS_PER_DEVICE and stats["cut mid-path"] > 10
+    stats = inject_faults(RtcRig(rtc_lib, tmp_path), progress_dir, RUNS_PER_DEVICE, seed=1,
+                          choices=("remark", "continue"))
+    assert _runs(stats) == RUNS_PER_DEVICE and stats["cut mid-path"] > 10
+    assert stats["continue"] > 10 and stats["remark"] > 10
 
 
 def test_lmc_board_unplugged_at_random_points(progress_dir):
     stats = inject_faults(LmcRig(), progress_dir, RUNS_PER_DEVICE, seed=2)
-    assert sum(stats.values()) == RUNS_PER_DEVICE and stats["cut mid-path"] > 10
+    assert _runs(stats) == RUNS_PER_DEVICE and stats["cut mid-path"] > 10

@@ -160,3 +160,33 @@ def test_the_abortable_service_marks_with_the_laser_on(lmc, board):
     assert result.state == "done"
     assert len(board.marks) == 4            # the fake records a mark only with the laser on
     assert not board.laser_output() and board.mo == 0 and board.port == 0
+
+
+def test_a_job_whose_last_path_needs_focus_sends_nothing(lmc, board, tmp_path):
+    n0 = len(board.writes)
+    job = make_job([np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0]]),
+                    np.array([[2.0, 0.0, 0.0], [3.0, 0.0, 0.0]]),
+                    np.array([[0.0, 0.0, 3.0], [1.0, 0.0, 3.0]])])
+    with pytest.raises(SafetyError, match="no dynamic focus"):
+        run_job(job, GalvoDriver(HEAD), lmc, tmp_path / "job.progress.json")
+    assert all(len(w) == 12 for w in board.writes[n0:])     # no list packet
+    assert board.runs == 0 and board.marks == []
+    assert not (tmp_path / "job.journal.jsonl").exists()
+
+
+def test_a_cut_path_on_the_lmc_cannot_be_continued(lmc, board, tmp_path):
+    from insitu.marking import history
+    job, prog = flat_job(3), tmp_path / "job.progress.json"
+    board.unplug_after(40)
+    with pytest.raises(DeviceError):
+        run_job(job, GalvoDriver(HEAD), lmc, prog)
+    s = history(job, prog)
+    assert s.cut is not None and s.cut_position is None        # the board reports no position
+    ok = LmcController(HEAD, settings(), backend=FakeLmcBoard())
+    try:
+        with pytest.raises(SafetyError, match="did not report how far path"):
+            run_job(job, GalvoDriver(HEAD), ok, prog, resume=True, cut_path="continue")
+        assert run_job(job, GalvoDriver(HEAD), ok, prog, resume=True,
+                       cut_path="remark").state == "done"
+    finally:
+        ok.close()

@@ -173,3 +173,39 @@ def test_watchdog_turns_the_laser_off_when_the_idle_board_dies(lib_path, tmp_pat
         assert not any("set_start_list" in c for c in board.calls()[n:])
     finally:
         rtc.close()
+
+
+def test_a_job_whose_last_path_is_out_of_the_bit_range_sends_nothing(lib_path, tmp_path, board):
+    """At 10,000 bits/mm the board reaches ±52 mm: the driver's field passes x = 80 mm, the
+    board's check of the whole job refuses it before path 0 is sent."""
+    rtc = RtcController(HEAD, settings(lib_path, tmp_path, k_bits_per_mm=1e4, kz_bits_per_mm=1e4))
+    try:
+        board.reset()
+        job = make_job([np.array([[0.0, 0.0, 0.0], [5.0, 0.0, 0.0]]),
+                        np.array([[10.0, 0.0, 0.0], [80.0, 0.0, 0.0]])])
+        with pytest.raises(SafetyError, match="outside the board's"):
+            run_job(job, GalvoDriver(HEAD), rtc, tmp_path / "job.progress.json")
+        assert not any(c.startswith(("set_start_list", "execute_list", "enable_laser"))
+                       for c in board.calls())
+        assert board.marks().size == 0 and not (tmp_path / "job.journal.jsonl").exists()
+    finally:
+        rtc.close()
+
+
+def test_the_list_pointer_says_how_far_a_cut_path_got(rtc, board, tmp_path):
+    job = make_job([np.array([[0.0, 0.0, 0.0], [5.0, 0.0, 0.0]]),
+                    np.column_stack([np.linspace(-5, 5, 12), np.zeros(12), np.zeros(12)])])
+    board.reset()
+    board.set_step(1)
+    run_job(job, GalvoDriver(HEAD), rtc)
+    start = [i for i, c in enumerate(board.calls()) if c == "execute_list 1"][1]
+    board.reset()
+    board.set_step(1)
+    board.fail_after(start + 12)                    # some polls into path 1's execution
+    with pytest.raises(DeviceError):
+        run_job(job, GalvoDriver(HEAD), rtc, tmp_path / "job.progress.json")
+    from insitu.marking import history
+    s = history(job, tmp_path / "job.progress.json")
+    assert s.done == {0} and s.cut == 1 and s.cut_position is not None
+    marked_in_path_1 = sum(int(r[0]) == 2 for r in board.marks())
+    assert 0 < s.cut_position <= marked_in_path_1, (s.cut_position, marked_in_path_1)

@@ -127,12 +127,12 @@ def test_resume_completes_every_path_exactly_once(tmp_path):
     done = []
     for fail_at in (sum(map(len, lists[:3])) + 5, 17):      # two faults, then a clean run
         fc = FaultyController(fail_at=fail_at)
-        with pytest.raises(DeviceError):
-            run_job(job, GalvoDriver(HEAD), fc, prog, resume=True)
+        with pytest.raises(DeviceError):       # the path a fault cuts is marked again whole
+            run_job(job, GalvoDriver(HEAD), fc, prog, resume=True, cut_path="remark")
         done += fc.completed_lists
         assert not fc.laser_is_on
     fc = FaultyController()
-    result = run_job(job, GalvoDriver(HEAD), fc, prog, resume=True)
+    result = run_job(job, GalvoDriver(HEAD), fc, prog, resume=True, cut_path="remark")
     done += fc.completed_lists
     assert result.state == "done" and result.completed == 8
     firsts = [_jump(lst) for lst in lists]

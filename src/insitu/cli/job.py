@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import contextlib
+import signal
 from pathlib import Path
 from typing import Annotated
 
@@ -10,13 +12,19 @@ import typer
 from rich.table import Table
 
 from insitu.cli.common import bounded, check_output, console, one_line_errors, progress_bar
+from insitu.errors import InsituError
 
 app = typer.Typer(help="Mark jobs: show one, or mark it on the rig.", no_args_is_help=True,
                   rich_markup_mode="markdown")
 
 # options of every command that marks on the rig (``insitu job run``, ``insitu mark --run``)
-Resume = Annotated[bool, typer.Option(help="Continue an interrupted job after its last "
-                                           "completed path.")]
+Resume = Annotated[bool, typer.Option(help="Continue an interrupted job: the paths its "
+                                           "journal does not record as done.")]
+Restart = Annotated[bool, typer.Option(help="Mark an interrupted job again from its first "
+                                            "path (the journal keeps the earlier runs).")]
+CutPath = Annotated[str | None, typer.Option(
+    help="With --resume, the path started but not confirmed: remark (mark it again whole), "
+         "skip (leave it as it is) or continue (from where the board reported it stopped).")]
 Preview = Annotated[bool, typer.Option(help="First draw the outline with the pilot laser.")]
 Inspect = Annotated[Path | None, typer.Option(help="Write the camera's image of the marked "
                                                    "part (.png).")]
@@ -27,20 +35,61 @@ Workpiece = Annotated[str, typer.Option(help="Simulated rig: the part on the tab
 Seed = Annotated[int, typer.Option(help="Simulated rig: seed.", callback=bounded("seed"))]
 
 
+class Stopped(InsituError):
+    """A signal (SIGTERM, SIGHUP) stopped the marking."""
+
+
+@contextlib.contextmanager
+def stop_on_signals(what: str = "marking", hint: str = " (insitu job show JOB.json says how "
+                                                       "far it got)"):
+    """SIGTERM and SIGHUP end ``what`` as Ctrl-C does: :class:`Stopped` is raised where the
+    program is, so the laser goes off and the journal records "interrupted"; further signals
+    are ignored while that happens."""
+    def stop(signum, _frame):
+        for sig in (signal.SIGTERM, signal.SIGHUP):
+            signal.signal(sig, signal.SIG_IGN)
+        raise Stopped(f"{what} stopped by {signal.Signals(signum).name}; the laser is off"
+                      + hint)
+
+    old = {sig: signal.signal(sig, stop) for sig in (signal.SIGTERM, signal.SIGHUP)}
+    try:
+        yield
+    finally:
+        for sig, handler in old.items():
+            signal.signal(sig, handler)
+
+
+def check_run_options(resume: bool, restart: bool, cut_path: str | None) -> None:
+    """One line for options of a marking run that do not go together."""
+    from insitu.marking import CUT_CHOICES
+
+    if cut_path is not None and cut_path not in CUT_CHOICES:
+        raise InsituError(f"--cut-path {cut_path!r}: expected one of {', '.join(CUT_CHOICES)}")
+    if cut_path is not None and not resume:
+        raise InsituError("--cut-path goes with --resume")
+    if resume and restart:
+        raise InsituError("--resume and --restart: choose one")
+
+
 def run_on_station(station, job, job_path: Path, resume: bool, preview: bool,
-                   inspect: Path | None) -> None:
-    """:func:`insitu.services.mark.mark_on_station` with a progress bar, then say how far it
-    got and where the camera's image of the result went."""
+                   inspect: Path | None, restart: bool = False,
+                   cut_path: str | None = None) -> None:
+    """:func:`insitu.services.mark.mark_on_station` with a progress bar (SIGTERM and SIGHUP
+    stop it like Ctrl-C), then say how far it got and where the camera's image went."""
+    from insitu.marking import journal_path_for
     from insitu.services.mark import mark_on_station
 
-    with progress_bar("marking") as progress:
-        run = mark_on_station(station, job, job_path, resume=resume, preview=preview,
-                              inspect=inspect, progress=progress)
+    with stop_on_signals(), progress_bar("marking") as progress:
+        run = mark_on_station(station, job, job_path, resume=resume, restart=restart,
+                              cut_path=cut_path, preview=preview, inspect=inspect,
+                              progress=progress)
     r = run.result
     done = (f"marked paths {r.start_path + 1}…{r.completed} of {r.total}"
-            if r.completed > r.start_path else
+            if r.start_path < r.total else
             f"nothing left to mark: {r.completed} of {r.total} paths were marked")
-    console.print(f"{done} ({r.state}); progress in {run.progress_path}", highlight=False)
+    cut = f", cut path {r.cut + 1}: {r.cut_choice}" if r.cut is not None else ""
+    console.print(f"{done} ({r.state}{cut}); journal in {journal_path_for(job_path)}",
+                  highlight=False)
     if inspect is not None:
         console.print(f"wrote {inspect}", highlight=False)
 
@@ -50,8 +99,7 @@ def run_on_station(station, job, job_path: Path, resume: bool, preview: bool,
 def show(job_path: Annotated[Path, typer.Argument(metavar="JOB.json", help="Mark job.")]) -> None:
     """What a job holds: paths, extent, heights, laser, estimated time, and how far an earlier
     run got."""
-    from insitu.marking import estimate_time, read_job, read_progress
-    from insitu.services.mark import progress_path_for
+    from insitu.marking import estimate_time, history, progress_path_for, read_job
 
     job = read_job(job_path)
     pts = np.vstack([p.points for p in job.paths])
@@ -66,10 +114,18 @@ def show(job_path: Annotated[Path, typer.Argument(metavar="JOB.json", help="Mark
                            f"{las.mark_speed_mm_s:g} mm/s, jump {las.jump_speed_mm_s:g} mm/s")
     table.add_row("estimated time", f"{e.total_s:.1f} s (mark {e.mark_mm:.0f} mm, jump "
                                     f"{e.jump_mm:.0f} mm)")
-    rec = read_progress(progress_path_for(job_path))
-    if rec is not None:
-        table.add_row("last run", f"{rec['state']}: {rec['completed']} of {rec['paths_total']} "
-                                  f"paths ({rec['updated']})")
+    s = history(job, progress_path_for(job_path))
+    if s is not None:
+        table.add_row("last run", f"{s.state}: {len(s.done)} of {s.paths_total} paths done"
+                                  + (f", {len(s.skipped)} skipped" if s.skipped else "")
+                                  + f" ({s.updated}; {s.runs} run{'s' * (s.runs != 1)})")
+        if s.error:
+            table.add_row("error", s.error)
+        if s.cut is not None:
+            pos = ("the board reported no position" if s.cut_position is None else
+                   f"{s.cut_position} of {max(len(job.paths[s.cut].points) - 1, 1)} marks done")
+            table.add_row("cut path", f"{s.cut + 1} ({pos}): --resume --cut-path "
+                                      "remark|skip|continue")
     _variable_rows(table, job, job_path)
     console.print(table)
 
@@ -97,18 +153,22 @@ def _variable_rows(table: Table, job, job_path: Path) -> None:
 @one_line_errors
 def run(
     job_path: Annotated[Path, typer.Argument(metavar="JOB.json", help="Mark job.")],
-    resume: Resume = False, preview: Preview = False, inspect: Inspect = None, rig: Rig = None,
+    resume: Resume = False, restart: Restart = False, cut_path: CutPath = None,
+    preview: Preview = False, inspect: Inspect = None, rig: Rig = None,
     field: Field = None, workpiece: Workpiece = "step-block", seed: Seed = 0,
 ) -> None:
-    """Mark a job file on the rig. Every target is checked against the scan field and the focus
-    range (after the field correction) before the first command; the laser is on only while
-    marking and off at once on any fault; the progress file beside the job records the last
-    completed path, so --resume continues an interrupted job."""
+    """Mark a job file on the rig. Every target is checked against the scan field, the focus
+    range (after the field correction) and the board's limits before the first command; the
+    laser is on only while marking and off at once on any fault or SIGINT/SIGTERM/SIGHUP. The
+    journal beside the job records each path started and done: an interrupted job is not run
+    again without --resume (the paths not done; a path cut short as --cut-path says) or
+    --restart."""
     from insitu.marking import read_job
     from insitu.services.station import connect
 
+    check_run_options(resume, restart, cut_path)
     if inspect is not None:
         check_output(inspect, ".png")
     job = read_job(job_path)
     with connect(rig, workpiece, seed, field=field) as station:
-        run_on_station(station, job, job_path, resume, preview, inspect)
+        run_on_station(station, job, job_path, resume, preview, inspect, restart, cut_path)

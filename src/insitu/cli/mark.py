@@ -10,8 +10,8 @@ from rich.table import Table
 from rich.text import Text
 
 from insitu.cli.common import bounded, check_output, console, fail, one_line_errors, progress_bar
-from insitu.cli.job import (Field, Inspect, Preview, Resume, Rig, Seed, Workpiece,
-                            run_on_station)
+from insitu.cli.job import (CutPath, Field, Inspect, Preview, Restart, Resume, Rig, Seed,
+                            Workpiece, check_run_options, run_on_station)
 from insitu.marking.modes import PROJECTIONS, projection_mode
 from insitu.patterns.dxf import FILL_MODES
 from insitu.patterns.load import sources_help
@@ -59,9 +59,10 @@ def mark(
         callback=bounded("mark_speed_mm_s"), help="Mark speed, mm/s.")] = 500.0,
     jump_speed: Annotated[float, typer.Option(
         callback=bounded("jump_speed_mm_s"), help="Jump speed, mm/s.")] = 3000.0,
-    run: Annotated[bool, typer.Option(help="Also mark the job on the rig (with --preview, "
-                                           "--resume, --inspect).")] = False,
-    preview: Preview = False, resume: Resume = False, inspect: Inspect = None, rig: Rig = None,
+    run: Annotated[bool, typer.Option(help="Also mark the job on the rig (with --preview, --restart, "
+                                           "--resume, --cut-path, --inspect).")] = False,
+    preview: Preview = False, resume: Resume = False, restart: Restart = False,
+    cut_path: CutPath = None, inspect: Inspect = None, rig: Rig = None,
     field: Field = None, workpiece: Workpiece = "step-block", seed: Seed = 0,
     fields: Annotated[list[str] | None, typer.Option(
         "--var", metavar="NAME=VALUE", help="A value for {NAME} in the pattern's text "
@@ -88,8 +89,9 @@ def mark(
     projection_mode(mode)
     if inspect is not None:
         check_output(inspect, ".png")
-    if (preview or resume or inspect is not None) and not run:
-        fail("--preview, --resume and --inspect go with --run")
+    if (preview or resume or restart or cut_path or inspect is not None) and not run:
+        fail("--preview, --resume, --restart, --cut-path and --inspect go with --run")
+    check_run_options(resume, restart, cut_path)
     if fill not in FILL_MODES:
         fail(f"--fill {fill!r}: expected one of {', '.join(FILL_MODES)}")
     placement = Placement(pattern, at, width, rotate, mode, hatch, hatch_angle, cross, fill,
@@ -105,7 +107,7 @@ def mark(
             fail(f"--resume: {out} does not hold this job; run without --resume to start it")
         _summary(out, placement, plan, station.field, rec)
         if run:
-            run_on_station(station, plan.job, out, resume, preview, inspect)
+            run_on_station(station, plan.job, out, resume, preview, inspect, restart, cut_path)
 
 
 def _plan(out: Path, placement, plan_mark, resume: bool, fields, counter, start):

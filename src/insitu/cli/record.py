@@ -11,6 +11,7 @@ import typer
 
 from insitu.cli.common import (bounded, check_output, console, fail, one_line_errors,
                                parse_heights, progress_bar)
+from insitu.cli.job import stop_on_signals
 from insitu.services import record as svc
 
 
@@ -49,7 +50,8 @@ def record(
         fail("camera-calibration: the operator moves the board between views; run it at a "
              "terminal")
     check_output(out)
-    with connect(rig) as station, progress_bar(f"recording {kind}") as progress:
+    with (connect(rig) as station, stop_on_signals(f"recording {kind}", ""),
+          progress_bar(f"recording {kind}") as progress):
         svc.record(station, kind, out, spacing=spacing, region=region, grid=grid,
                    heights=plate_z, marked=marked, next_view=_ask_for_view, views=views,
                    progress=progress)

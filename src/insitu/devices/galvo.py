@@ -14,12 +14,15 @@ Commands (``Command.op``, ``args``):
 
 from __future__ import annotations
 
+import hashlib
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Callable, Protocol, runtime_checkable
 
 import numpy as np
 
+from insitu.errors import SafetyError
 from insitu.geometry.beams import TwoMirrorHead
 
 MOVES = ("jump_abs_3d", "mark_abs_3d")
@@ -60,6 +63,62 @@ class Controller(Protocol):
         """Marking laser and pilot off, at once. Never raises."""
         ...
 
+    def check(self, lists: Sequence[Sequence[Command]]) -> None:
+        """Convert every list as :meth:`execute` would, sending nothing: SafetyError for the
+        first command outside the device's limits (bit range, focus, speeds, power)."""
+        ...
+
+    def position(self) -> ListPosition | None:
+        """How far the board got in the last list it ran, as it last reported (None: it
+        reports nothing)."""
+        ...
+
+
+@dataclass(frozen=True)
+class ListPosition:
+    """``digest``: :func:`list_digest` of the list; ``done``: its first ``done`` commands were
+    executed by the board."""
+
+    digest: str
+    done: int
+
+
+def check_setting(device: str, command: Command) -> None:
+    """SafetyError for a speed or frequency that is not a finite number > 0, a power outside
+    0 … 100 % or a non-finite move (``device`` names the board in the message)."""
+    op, args = command.op, command.args
+    if op in MOVES and not all(math.isfinite(a) for a in args):
+        raise SafetyError(f"{device}: {op} {args}: not a finite position")
+    if op == "set_power" and not 0.0 <= args[0] <= 100.0:
+        raise SafetyError(f"{device}: power {args[0]:g} %: expected 0 … 100 %")
+    if op in ("set_frequency", "set_mark_speed", "set_jump_speed") and not (
+            math.isfinite(args[0]) and args[0] > 0):
+        unit = "kHz" if op == "set_frequency" else "mm/s"
+        raise SafetyError(f"{device}: {op[4:].replace('_', ' ')} {args[0]:g} {unit}: expected "
+                          "a finite number > 0")
+
+
+def list_digest(commands: Sequence[Command]) -> str:
+    """SHA-256 of a command list's golden listing (identifies a list across processes)."""
+    return hashlib.sha256("".join(c.text() + "\n" for c in commands).encode()).hexdigest()
+
+
+def check_lists(controller, lists: Sequence[Sequence[Command]]) -> None:
+    """``controller.check(lists)`` for a controller that has device limits (no-op otherwise)."""
+    check = getattr(controller, "check", None)
+    if check is not None:
+        check(lists)
+
+
+def position_of(controller, commands: Sequence[Command]) -> int | None:
+    """Commands of ``commands`` the controller reports done when its last list was this one
+    (None: it reports no position, or its last list was another)."""
+    get = getattr(controller, "position", None)
+    pos = get() if get is not None else None
+    if pos is None or pos.digest != list_digest(commands):
+        return None
+    return min(max(pos.done, 0), len(commands))
+
 
 class RecordingController:
     """Records every command (for golden listings and tests); tracks the laser state."""
@@ -81,6 +140,12 @@ class RecordingController:
     def laser_off(self) -> None:
         self.laser_is_on = self.pilot_is_on = False
         self.off_calls += 1
+
+    def check(self, lists: Sequence[Sequence[Command]]) -> None:
+        """No device limits."""
+
+    def position(self) -> ListPosition | None:
+        return None
 
     def listing(self) -> str:
         """The recorded commands, one per line."""

@@ -28,7 +28,7 @@ from dataclasses import dataclass
 import usb.core
 import usb.util
 
-from insitu.devices.galvo import Command
+from insitu.devices.galvo import Command, ListPosition, check_setting
 from insitu.devices.watchdog import Heartbeat
 from insitu.errors import ConfigError, DeviceError, SafetyError
 from insitu.formats.bounds import check_fields
@@ -112,7 +112,9 @@ class LmcListBuilder:
         return min(int(round(mm_s * self.units_per_mm / 1000.0)), 0xFFFF)
 
     def commands(self, commands: Sequence[Command]) -> tuple[list[tuple], bool]:
-        """The list for ``commands`` and whether the marking laser is switched on."""
+        """The list for ``commands`` and whether the marking laser is switched on. SafetyError
+        for a focus shift beyond the tolerance, angles beyond the galvo range, a speed or
+        frequency not > 0, a power outside 0 … 100 %."""
         waits = {"laser_on_delay": L_ON_DELAY, "laser_off_delay": L_OFF_DELAY,
                  "jump_delay": L_JUMP_DELAY, "polygon_delay": L_POLY_DELAY}
         longest = {op: 0.0 for op in waits}
@@ -120,6 +122,7 @@ class LmcListBuilder:
         marking, port = False, 0
         for c in commands:
             op = c.op
+            check_setting("LMC", c)
             if op in waits:
                 longest[op] = max(longest[op], float(c.args[0]))
             elif op in ("jump_abs_3d", "mark_abs_3d"):
@@ -214,6 +217,7 @@ class LmcController:
                  poll_s: float = 0.002):
         self.s, self.poll_s = settings, poll_s
         self.builder = LmcListBuilder(head, settings)
+        self.head = head
         self.usb = LmcConnection(settings.index, settings.usb_timeout_ms, backend)
         self._lock = threading.RLock()
         self._init_board()
@@ -232,6 +236,17 @@ class LmcController:
 
     def status(self) -> int:
         return self.usb.command(GET_VERSION)[3]
+
+    def check(self, lists: Sequence[Sequence[Command]]) -> None:
+        """Every list through a fresh list builder, nothing sent (SafetyError as execute)."""
+        builder = LmcListBuilder(self.head, self.s)
+        for commands in lists:
+            builder.commands(commands)
+
+    def position(self) -> ListPosition | None:
+        """None: insitu does not read the board's list position (a cut path is marked again
+        or skipped, never continued)."""
+        return None
 
     def execute(self, commands: Sequence[Command]) -> None:
         with self._lock:

@@ -29,7 +29,7 @@ from pathlib import Path
 
 import numpy as np
 
-from insitu.devices.galvo import Command, focus_points
+from insitu.devices.galvo import Command, ListPosition, check_setting, focus_points, list_digest
 from insitu.devices.native import allowed_library
 from insitu.devices.watchdog import Heartbeat
 from insitu.errors import ConfigError, DeviceError, SafetyError
@@ -109,26 +109,33 @@ class RtcListBuilder:
     def __init__(self, head: TwoMirrorHead, settings: RtcSettings):
         self.head, self.s = head, settings
         self._delays: dict[str, tuple] = {}
+        self.origin: list[int] = []
 
     def bits(self, joint: np.ndarray) -> tuple[int, int, int]:
         """(3,) [alpha_x_deg, alpha_y_deg, focus_mm] → (x, y, z) bits of the focus point."""
         p = focus_points(self.head, np.asarray(joint, float))[0]
         b = np.rint(p * [self.s.k_bits_per_mm, self.s.k_bits_per_mm, self.s.kz])
-        if np.any(np.abs(b) > BITS_MAX):
+        if not np.all(np.abs(b) <= BITS_MAX):
             raise SafetyError(f"RTC: point ({p[0]:.3f}, {p[1]:.3f}, {p[2]:.3f}) mm is "
                               f"outside the board's ±{BITS_MAX} bit range at "
                               f"{self.s.k_bits_per_mm:g} bits/mm", where_mm=(p[0], p[1]))
         return int(b[0]), int(b[1]), int(b[2])
 
     def calls(self, commands: Sequence[Command]) -> tuple[list[tuple[str, tuple]], bool]:
-        """The list calls for ``commands`` and whether the marking laser is switched on."""
+        """The list calls for ``commands`` and whether the marking laser is switched on;
+        ``origin`` becomes, for each call, the index of the command it comes from. SafetyError
+        for a point outside the bit range, a speed or frequency not > 0, a power outside
+        0 … 100 %."""
         waits = {op: 0.0 for op in ("laser_on_delay", "laser_off_delay", "jump_delay",
                                     "mark_delay", "polygon_delay")}
         out: list[tuple[str, tuple]] = []
+        origin: list[int] = []
         marking = False
         k, pilot = self.s.k_bits_per_mm, 1 << self.s.pilot_bit
-        for c in commands:
+        for i, c in enumerate(commands):
             op = c.op
+            check_setting("RTC", c)
+            origin += [i - 1] * (len(out) - len(origin))
             if op in waits:
                 waits[op] = max(waits[op], float(c.args[0]))
             elif op in ("jump_abs_3d", "mark_abs_3d"):
@@ -147,6 +154,7 @@ class RtcListBuilder:
                 marking = True
             elif op != "laser_off":
                 raise DeviceError(f"RTC: unknown command {op!r}")
+        origin += [len(commands) - 1] * (len(out) - len(origin))
         head = []
         laser = (int(round(waits["laser_on_delay"] * 2)), int(round(waits["laser_off_delay"] * 2)))
         scanner = tuple(int(round(waits[w] / 10.0)) for w in
@@ -155,11 +163,16 @@ class RtcListBuilder:
             if self._delays.get(name) != args:
                 self._delays[name] = args
                 head.append((name, args))
+        self.origin = [0] * len(head) + origin
         return head + out, marking
 
     def forget(self) -> None:
         """The board's state is unknown (after a fault): send every setting again."""
         self._delays.clear()
+
+    def commands_done(self, pointer: int, n_commands: int) -> int:
+        """The board's list pointer (calls executed) → commands of the list fully done."""
+        return self.origin[pointer] if pointer < len(self.origin) else n_commands
 
 
 def _clip(v: float, hi: int) -> int:
@@ -212,6 +225,8 @@ class RtcController:
     def __init__(self, head: TwoMirrorHead, settings: RtcSettings, poll_s: float = 0.002):
         self.s, self.poll_s = settings, float(poll_s)
         self.builder = RtcListBuilder(head, settings)
+        self.head = head
+        self._position: ListPosition | None = None
         self.lib = RtcLibrary(settings.library, settings.generation)
         self._lock = threading.RLock()
         self._open()
@@ -253,18 +268,33 @@ class RtcController:
         self._check("status")
 
     # -- Controller ---------------------------------------------------------------------------
+    def check(self, lists: Sequence[Sequence[Command]]) -> None:
+        """Every list through a fresh list builder, nothing sent (SafetyError as execute)."""
+        builder = RtcListBuilder(self.head, self.s)
+        for commands in lists:
+            builder.calls(commands)
+
+    def position(self) -> ListPosition | None:
+        """The list pointer the board last reported, in commands of the last list."""
+        return self._position
+
     def execute(self, commands: Sequence[Command]) -> None:
         with self._lock:
             self.heartbeat.check()
             calls, marking = self.builder.calls(commands)
+            digest, n = list_digest(commands), len(commands)
+            self._position = ListPosition(digest, 0)
+
+            def at(pointer: int) -> None:
+                self._position = ListPosition(digest, self.builder.commands_done(pointer, n))
             try:
-                self._run(calls, marking)
+                self._run(calls, marking, at)
             except DeviceError as e:
                 self.builder.forget()
                 self.heartbeat.fail(str(e))
                 raise
 
-    def _run(self, calls: list[tuple[str, tuple]], marking: bool) -> None:
+    def _run(self, calls: list[tuple[str, tuple]], marking: bool, at) -> None:
         lib = self.lib
         lib.set_start_list(1)
         for name, args in calls:
@@ -276,8 +306,9 @@ class RtcController:
         lib.execute_list(1)
         t_end = time.monotonic() + self.s.timeout_s
         while True:
-            busy, _ = lib.status()
+            busy, pointer = lib.status()
             self._check("executing the list")
+            at(pointer if busy else len(calls))
             self.heartbeat.feed()
             if not busy:
                 return

@@ -14,11 +14,13 @@ from insitu.marking.plan import plan_job
 from insitu.marking.modes import PROJECTIONS, ProjectionMode, project, projection_mode
 from insitu.marking.placement import Placement
 from insitu.marking.project import Projection, densify, project_planar, project_wrap
-from insitu.marking.run import (RunResult, progress_path_for, read_progress, resume_point,
-                                run_job, run_preview)
+from insitu.marking.journal import JournalSummary, journal_path_for, read_journal
+from insitu.marking.run import (CUT_CHOICES, RunResult, history, progress_path_for,
+                                read_progress, resume_point, run_job, run_preview)
 from insitu.marking.surface import Surface, SurfaceSample
 
 __all__ = [
+    "CUT_CHOICES", "JournalSummary", "history", "journal_path_for", "read_journal",
     "GalvoDriver", "LaserOverride", "LaserParams", "Limits", "MarkJob", "MarkPath", "PROJECTIONS",
     "Placement", "Projection", "ProjectionMode", "RunResult", "Surface", "SurfaceSample", "TimeEstimate",
     "Timing", "check_projection", "check_targets", "densify", "estimate_time", "make_job",

@@ -1,85 +1,165 @@
-"""Executing a compiled job on a controller: the laser is off whenever anything raises, and
-an interrupted job records how far it got so that it can resume from the next path.
+"""Executing a compiled job on a controller: every list is checked against the device before
+the first is sent; the laser is off whenever anything raises; the journal beside the job
+(:mod:`insitu.marking.journal`) records each path started and done, so that a resume never
+marks a done path again and a path cut short is shown, to be marked again, skipped or
+continued from where the board stopped.
 
-Progress file (beside the job, ``<job>.progress.json``, written atomically after every path):
-``{"format": "insitu-job-progress/1", "job_sha256": …, "paths_total": N, "completed": k,
-"last_completed_path": k − 1 or null, "state": "running" | "interrupted" | "cancelled" |
-"done", "error": …, "updated": ISO-8601 UTC}``. ``completed`` paths 0 … k − 1 are done;
-resuming starts at path k (a path cut short is marked again from its start).
+Lists: path k is sent as ``compile(job, first_path=f)[k − f]`` of the run's ``first`` path f;
+a continued path as :func:`resume_list` of its fresh list (``first`` = k) without its first
+``skip_marks`` marks. Both are recorded in the ``started`` line, so that the list can be made
+again to read a board's position after a restart. The progress record
+(``<job>.progress.json``, :func:`~insitu.marking.journal.write_progress`) is written when a run
+begins and ends, and every ``PROGRESS_EVERY_S`` in between (an atomic rewrite per path would
+cost more than the journal's appends); the journal is the truth for resume.
 """
 
 from __future__ import annotations
 
-import json
 import threading
-from contextlib import suppress
+import time
 from collections.abc import Callable
 from dataclasses import dataclass
-from datetime import datetime, timezone
 from pathlib import Path
 
-from insitu.devices.galvo import Controller
-from insitu.errors import DeviceError, FormatError
-from insitu.formats.atomic import atomic_write_text
-from insitu.formats.validation import read_json
+from insitu.devices.galvo import Command, check_lists, list_digest, position_of
+from insitu.errors import ConfigError, DeviceError, FormatError, SafetyError
 from insitu.marking.driver import GalvoDriver
 from insitu.marking.job import MarkJob
+from insitu.marking.journal import (Journal, JournalSummary, journal_beside, progress_path_for,
+                                    read_journal, read_progress, write_progress)
 
-PROGRESS_FORMAT = "insitu-job-progress/1"
+CUT_CHOICES = ("remark", "skip", "continue")
+PROGRESS_EVERY_S = 0.5          # the progress record is rewritten at most this often mid-run
+
+__all__ = ["CUT_CHOICES", "RunResult", "history", "progress_path_for", "read_progress",
+           "resume_list", "resume_point", "run_job", "run_preview"]
 
 
 @dataclass(frozen=True)
 class RunResult:
-    """state: "done" | "cancelled"; paths [start_path, completed) were marked by this run."""
+    """state: "done" | "cancelled"; ``completed``: paths done or skipped in all runs;
+    ``start_path``: the first path this run sent (``total``: none); ``cut``: the cut path
+    this run found and ``cut_choice`` what it did with it."""
 
     state: str
     completed: int
     total: int
     start_path: int
+    cut: int | None = None
+    cut_choice: str | None = None
 
 
-def progress_path_for(job_path: str | Path) -> Path:
-    """``parts/job.json`` → ``parts/job.progress.json``."""
-    p = Path(job_path)
-    return p.with_name(p.stem + ".progress.json")
+def _marks(commands) -> int:
+    return sum(c.op == "mark_abs_3d" for c in commands)
 
 
-def read_progress(path: str | Path) -> dict | None:
-    """The progress record, or None when there is none."""
-    path = Path(path)
-    if not path.exists():
+def resume_list(commands: list[Command], skip_marks: int) -> list[Command]:
+    """A path's list without its first ``skip_marks`` marks: its settings, the jump going to
+    where the last skipped mark ended, then the laser on and the remaining marks. Empty when
+    no mark is left."""
+    out: list[Command] = []
+    seen = 0
+    for c in commands:
+        if c.op != "mark_abs_3d":
+            out.append(c)
+            continue
+        seen += 1
+        if seen <= skip_marks:
+            jump = next(j for j, d in enumerate(out) if d.op == "jump_abs_3d")
+            out[jump] = Command("jump_abs_3d", c.args)
+            continue
+        out.append(c)
+    return out if seen > skip_marks else []
+
+
+def history(job: MarkJob, progress_path: str | Path | None,
+            strict: bool = False) -> JournalSummary | None:
+    """What earlier runs of ``job`` did, from the journal beside ``progress_path`` (or, for a
+    record written before journals, its progress file); None: nothing, or another job there
+    (``strict``: FormatError then). FormatError for a malformed journal or progress file."""
+    if progress_path is None:
         return None
-    d = read_json(path)
-    if not isinstance(d, dict) or d.get("format") != PROGRESS_FORMAT or not isinstance(
-            d.get("completed"), int):
-        raise FormatError(f"{path}: not a job progress file ({PROGRESS_FORMAT})")
-    return d
-
-
-def _write(path: Path | None, job_sha: str, total: int, completed: int, state: str,
-           error: str | None = None) -> None:
-    if path is None:
-        return
-    rec = {"format": PROGRESS_FORMAT, "job_sha256": job_sha, "paths_total": total,
-           "completed": completed, "last_completed_path": completed - 1 if completed else None,
-           "state": state, "error": error,
-           "updated": datetime.now(timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ")}
-    atomic_write_text(path, json.dumps(rec, indent=1) + "\n")
+    ppath, jpath = Path(progress_path), journal_beside(progress_path)
+    total, sha = len(job.paths), job.digest()
+    s = read_journal(jpath)
+    if s is None:
+        rec = read_progress(ppath)
+        if rec is None or (rec.get("job_sha256") != sha and not strict):
+            return None
+        read_progress(ppath, sha, total)
+        s = JournalSummary(sha, total, done=set(range(rec["completed"])), state=rec["state"],
+                           updated=rec.get("updated", ""))
+    if s.job_sha256 != sha:
+        if strict:
+            raise FormatError(f"{jpath}: job_sha256: records another job; run without "
+                              "--resume to start this job from the beginning")
+        return None
+    if s.paths_total != total:
+        raise FormatError(f"{journal_beside(ppath)}: paths_total: {s.paths_total}, but the "
+                          f"job has {total} paths")
+    return s
 
 
 def resume_point(job: MarkJob, progress_path: str | Path) -> int:
-    """The first path still to mark according to the progress file (0 without one).
-    FormatError if the file records another job."""
-    rec = read_progress(progress_path)
-    if rec is None:
-        return 0
-    if rec.get("job_sha256") != job.digest():
-        raise FormatError(f"{progress_path}: job_sha256: records another job; delete it to "
-                          "start this job from the beginning")
-    return min(max(rec["completed"], 0), len(job.paths))
+    """The first path a resume would mark (0 without a record; FormatError for a malformed
+    record or one of another job)."""
+    s = history(job, progress_path, strict=True)
+    todo = [] if s is None else sorted(([s.cut] if s.cut is not None else []) + s.next_paths())
+    return 0 if s is None else (todo[0] if todo else len(job.paths))
 
 
-def _safe_off(controller: Controller, primary: BaseException | None) -> None:
+def _board_marks(job, driver, controller, s: JournalSummary) -> int | None:
+    """Marks of the cut path the board reports done (its last list being that path's)."""
+    rec = s.cut_list or {}
+    first, skip = rec.get("first"), rec.get("skip_marks", 0)
+    if type(first) is not int or not 0 <= first <= s.cut or type(skip) is not int:
+        return None
+    cmds = driver.compile(job, first_path=first)[s.cut - first]
+    if skip:
+        cmds = resume_list(driver.compile(job, first_path=s.cut)[0], skip)
+    done = position_of(controller, cmds)
+    return None if done is None else skip + _marks(cmds[:done])
+
+
+def _plan(job, driver, controller, s: JournalSummary | None, choice: str | None, where: Path):
+    """[(path, list, first, skip_marks)] to send and the cut path's (index, marks) when it is
+    left (skip) or found complete (continue)."""
+    items, settled = [], None
+    todo = s.next_paths() if s is not None else list(range(len(job.paths)))
+    if s is not None and s.cut is not None:
+        k, total = s.cut, len(job.paths)
+        marks = s.cut_position
+        if marks is None:
+            marks = _board_marks(job, driver, controller, s)
+        pos = f" (the board reported {marks} marks done)" if marks is not None else ""
+        if choice is None:
+            raise SafetyError(f"{where}: path {k + 1} of {total} was started but not confirmed"
+                              f"{pos}: choose --cut-path remark (mark it again whole), skip "
+                              "(leave it) or continue (from where the board stopped)")
+        if choice not in CUT_CHOICES:
+            raise ConfigError(f"--cut-path {choice!r}: expected one of {', '.join(CUT_CHOICES)}")
+        if choice == "remark":
+            todo = sorted([k, *todo])
+        elif choice == "skip":
+            settled = (k, "skipped")
+        else:
+            if marks is None:
+                raise SafetyError(f"--cut-path continue: the board did not report how far path "
+                                  f"{k + 1} got; choose remark or skip")
+            rest = resume_list(driver.compile(job, first_path=k)[0], marks)
+            if rest:
+                items.append((k, rest, k, marks))
+            else:
+                settled = (k, "done")
+    run_start = None
+    for i, k in enumerate(todo):                      # contiguous runs compiled together
+        if run_start is None or k != todo[i - 1] + 1:
+            run_start, lists = k, driver.compile(job, first_path=k)
+        items.append((k, lists[k - run_start], run_start, 0))
+    return items, settled
+
+
+def _off(controller, primary: BaseException | None) -> None:
     try:
         controller.laser_off()
     except Exception as e:                          # noqa: BLE001 — a broken controller
@@ -87,55 +167,101 @@ def _safe_off(controller: Controller, primary: BaseException | None) -> None:
             raise DeviceError(f"scan head: could not turn the laser off ({e})") from e
 
 
-def run_job(job: MarkJob, driver: GalvoDriver, controller: Controller,
-            progress_path: str | Path | None = None, resume: bool = False,
-            cancel: threading.Event | None = None,
-            progress: Callable[[int, int], None] | None = None) -> RunResult:
-    """Mark ``job``: compile (SafetyError before any command), then send one path at a time.
+def run_job(job: MarkJob, driver: GalvoDriver, controller, progress_path: str | Path | None = None,
+            resume: bool = False, cancel: threading.Event | None = None,
+            progress: Callable[[int, int], None] | None = None, *, restart: bool = False,
+            cut_path: str | None = None) -> RunResult:
+    """Mark ``job``, journaled beside ``progress_path`` (None: not recorded).
 
-    ``resume``: start after the last path the progress file records (a job already "done"
-    sends nothing); otherwise start at path 0 and overwrite the record. ``cancel``: checked
-    between paths. The controller's ``laser_off`` is called however this ends; on an
-    exception the record says "interrupted" with the error, and the exception propagates.
+    Refusals before anything is sent: SafetyError from the driver or the controller's
+    :meth:`check` of every list; without ``resume`` or ``restart``, a job whose last run was
+    interrupted or cancelled; with ``resume``, a cut path without ``cut_path`` (remark | skip
+    | continue; continue only where the board reported its position). ``resume`` marks the
+    paths not done; ``restart`` starts again at path 0 (the journal says so). ``cancel``:
+    checked between paths. The laser is off however this ends; on an exception the journal
+    records the cut path and "interrupted", and the exception propagates.
     """
+    if resume and restart:
+        raise ConfigError("--resume and --restart: choose one")
     ppath = Path(progress_path) if progress_path is not None else None
-    start = resume_point(job, ppath) if (resume and ppath is not None) else 0
+    jpath = journal_beside(ppath) if ppath is not None else None
     total, sha = len(job.paths), job.digest()
-    if start >= total and resume:
-        _write(ppath, sha, total, total, "done")
-        return RunResult("done", total, total, start)
-    paths = driver.compile(job, first_path=start)
-    done, err = start, None
-    _write(ppath, sha, total, done, "running")
+    s = history(job, ppath, strict=resume)
+    if not (resume or restart) and s is not None and s.state != "done" and not s.finished:
+        raise SafetyError(f"{jpath}: the last run was {s.state} after {len(s.done)} of {total} "
+                          "paths: --resume to continue it or --restart to mark it again from "
+                          "the start")
+    s = s if resume else None
+    items, settled = _plan(job, driver, controller, s, cut_path, jpath)
+    check_lists(controller, [cmds for _, cmds, _, _ in items])
+    s = s or JournalSummary(sha, total)
+    cut = (s.cut, cut_path) if s.cut is not None else (None, None)
+    start = items[0][0] if items else total
+    if jpath is None:
+        return _send(job, controller, items, None, s, None, cancel, progress, start, cut)
+    with Journal(jpath) as jr:
+        jr.write("begin", job_sha256=sha, paths_total=total,
+                 mode="resume" if resume else "restart" if restart else "start")
+        if settled is not None:
+            (s.done if settled[1] == "done" else s.skipped).add(settled[0])
+            jr.write(settled[1], path=settled[0])
+        s.cut = s.cut_position = None
+        return _send(job, controller, items, jr, s, ppath, cancel, progress, start, cut)
+
+
+def _send(job, controller, items, jr: Journal | None, s: JournalSummary, ppath, cancel,
+          progress, start: int, cut) -> RunResult:
+    note = jr.write if jr is not None else (lambda *a, **k: None)
+    total = len(job.paths)
+    write_progress(ppath, s, "running")
+    current, err, last = None, None, time.monotonic()
     try:
-        for cmds in paths:
+        for k, cmds, first, skip in items:
             if cancel is not None and cancel.is_set():
-                _write(ppath, sha, total, done, "cancelled")
-                return RunResult("cancelled", done, total, start)
+                note("end", state="cancelled", error=None)
+                write_progress(ppath, s, "cancelled")
+                return RunResult("cancelled", len(s.done | s.skipped), total, start, *cut)
+            note("started", path=k, list=list_digest(cmds), first=first, skip_marks=skip)
+            current = (k, cmds, skip)
             controller.execute(cmds)
-            done += 1
-            _write(ppath, sha, total, done, "running" if done < total else "done")
+            note("done", path=k)
+            s.done.add(k)
+            current = None
+            if time.monotonic() - last >= PROGRESS_EVERY_S:
+                write_progress(ppath, s, "running")
+                last = time.monotonic()
             if progress:
-                progress(done, total)
-        return RunResult("done", done, total, start)
+                progress(len(s.done | s.skipped), total)
+        note("end", state="done", error=None)
+        write_progress(ppath, s, "done")
+        return RunResult("done", len(s.done | s.skipped), total, start, *cut)
     except BaseException as e:
         err = e
+        _off(controller, e)
+        msg = f"{type(e).__name__}: {e}"
         try:
-            with suppress(Exception):           # the original error matters more
-                _write(ppath, sha, total, done, "interrupted", f"{type(e).__name__}: {e}")
-        finally:
-            _safe_off(controller, err)
+            if current is not None:
+                k, cmds, skip = current
+                done = position_of(controller, cmds)
+                marks = None if done is None else skip + _marks(cmds[:done])
+                note("cut", path=k, position=marks)
+                s.cut, s.cut_position = k, marks
+            note("end", state="interrupted", error=msg)
+            write_progress(ppath, s, "interrupted", msg)
+        except Exception:                           # noqa: BLE001 — the original error matters
+            pass
         raise
     finally:
         if err is None:
-            _safe_off(controller, None)
+            _off(controller, None)
 
 
-def run_preview(job: MarkJob, driver: GalvoDriver, controller: Controller,
+def run_preview(job: MarkJob, driver: GalvoDriver, controller,
                 outline: str = "hull", speed_mm_s: float = 1000.0, repeat: int = 1) -> None:
     """Draw the job's outline with the pilot laser (see :meth:`GalvoDriver.preview`); the
     laser is off when this returns or raises."""
     cmds = driver.preview(job, outline, speed_mm_s, repeat)
+    check_lists(controller, [cmds])
     err = None
     try:
         controller.execute(cmds)
@@ -143,4 +269,4 @@ def run_preview(job: MarkJob, driver: GalvoDriver, controller: Controller,
         err = e
         raise
     finally:
-        _safe_off(controller, err)
+        _off(controller, err)

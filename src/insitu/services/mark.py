@@ -12,12 +12,13 @@ from typing import TYPE_CHECKING
 import cv2
 import numpy as np
 
+from insitu.devices.galvo import check_lists
 from insitu.errors import FormatError, InsituError, SafetyError
 from insitu.formats.atomic import atomic_write_bytes
 from insitu.formats.pointcloud import PointCloud, read_ply
-from insitu.marking import (GalvoDriver, LaserParams, MarkJob, Placement, Projection,
-                            RunResult, TimeEstimate, estimate_time, plan_job, progress_path_for,
-                            run_job, run_preview, write_job)
+from insitu.marking import (GalvoDriver, JournalSummary, LaserParams, MarkJob, Placement,
+                            Projection, RunResult, TimeEstimate, estimate_time, history,
+                            plan_job, progress_path_for, run_job, run_preview, write_job)
 from insitu.marking.verify import CodeCheck, check_code, unrolled
 from insitu.patterns import Pattern
 from insitu.services.common import Progress
@@ -132,6 +133,13 @@ def _quiet_zones_clear(outcomes: list[PlanOutcome]) -> list[PlanOutcome]:
     return out
 
 
+def unfinished(job: MarkJob, job_path: str | Path) -> JournalSummary | None:
+    """The record of an earlier run of ``job`` at ``job_path`` that did not finish (None:
+    none, finished, or another job's)."""
+    s = history(job, progress_path_for(job_path))
+    return None if s is None or s.state == "done" or s.finished else s
+
+
 def save_job(path: str | Path, job: MarkJob) -> Path:
     """Write ``job`` atomically and drop a progress record of an older job at the same place
     (a new job starts from its first path). Returns the progress file's path."""
@@ -174,20 +182,30 @@ class _Abortable:
     def laser_off(self) -> None:
         self.inner.laser_off()
 
+    def check(self, lists) -> None:
+        check_lists(self.inner, lists)
+
+    def position(self):
+        get = getattr(self.inner, "position", None)
+        return get() if get is not None else None
+
 
 def mark(job: MarkJob, driver: GalvoDriver, controller, progress_path: str | Path | None,
          resume: bool = False, preview: bool = False, cancel: threading.Event | None = None,
-         progress: Progress | None = None) -> RunResult:
-    """Optionally draw the job's outline with the pilot laser, then mark it (resuming after
-    the last completed path with ``resume``). The laser is off when this returns or raises;
-    the progress file records how far the job got. Once ``cancel`` is set the board stops at
-    once: between paths the run ends "cancelled"; within one, the laser goes off and
-    Cancelled is raised (that path is recorded as not completed, so a resume marks it)."""
+         progress: Progress | None = None, restart: bool = False,
+         cut_path: str | None = None) -> RunResult:
+    """Optionally draw the job's outline with the pilot laser, then mark it (``resume``: the
+    paths not done, the cut path as ``cut_path`` says; ``restart``: again from the start; see
+    :func:`~insitu.marking.run_job`). The laser is off when this returns or raises; the
+    journal records what the laser did. Once ``cancel`` is set the board stops at once:
+    between paths the run ends "cancelled"; within one, the laser goes off and Cancelled is
+    raised (that path is recorded as cut, with the board's position when it reports one)."""
     if cancel is not None:
         controller = _Abortable(controller, cancel)
     if preview:
         run_preview(job, driver, controller)
-    return run_job(job, driver, controller, progress_path, resume, cancel, progress)
+    return run_job(job, driver, controller, progress_path, resume, cancel, progress,
+                   restart=restart, cut_path=cut_path)
 
 
 @dataclass(frozen=True)
@@ -201,16 +219,17 @@ class StationRun:
 
 
 def mark_on_station(station: Station, job: MarkJob, job_path: str | Path | None = None, *,
-                    resume: bool = False, preview: bool = False,
+                    resume: bool = False, restart: bool = False, cut_path: str | None = None,
+                    preview: bool = False,
                     inspect: str | Path | None = None, image: bool = False,
                     cancel: threading.Event | None = None,
                     progress: Progress | None = None) -> StationRun:
-    """:func:`mark` ``job`` with the station's driver and controller, its progress recorded
-    beside ``job_path`` (the job file; None: not recorded); then image the marked part when
-    ``image`` is set or ``inspect`` names the .png to write."""
+    """:func:`mark` ``job`` with the station's driver and controller, its journal and progress
+    recorded beside ``job_path`` (the job file; None: not recorded); then image the marked part
+    when ``image`` is set or ``inspect`` names the .png to write."""
     ppath = progress_path_for(job_path) if job_path is not None else None
     result = mark(job, station.driver, station.devices.controller, ppath, resume, preview,
-                  cancel, progress)
+                  cancel, progress, restart, cut_path)
     picture = station.devices.camera.grab() if image or inspect is not None else None
     if inspect is not None:
         save_image(inspect, picture)

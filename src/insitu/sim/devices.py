@@ -13,16 +13,25 @@ beam. The laser burns on any move while it is on (a jump with the laser on would
 
 Burns are kept on the world (``SimWorld.burns``), so a resumed job on a new controller adds to
 the same marks and :class:`SimInspectionCamera` sees them all.
+
+Test instrumentation: when ``INSITU_SIM_MARK_LOG`` names a file, the controller appends what it
+executes there — ``L digest n`` when a list of n commands starts, ``J i`` / ``M i x0 y0 z0 x1
+y1 z1`` for each jump / move with the laser on (command index, joint from → to), ``E digest
+n`` when the list ends, ``O`` at every laser-off (fsync'ed at every list end and laser-off) — and, like a board that
+outlives the program driving it, reports the last list's position from that file after a
+restart.
 """
 
 from __future__ import annotations
 
+import os
 from collections.abc import Sequence
 
 import numpy as np
 
 from insitu.devices.backends import Devices
-from insitu.devices.galvo import Command, focus_points, nominal_commands
+from insitu.devices.galvo import (Command, ListPosition, focus_points, list_digest,
+                                  nominal_commands)
 from insitu.devices.protocols import check_in_field
 from insitu.errors import DeviceError, SafetyError
 from insitu.sim.marks import Burn, render_inspection
@@ -120,6 +129,13 @@ class SimController:
         self.elapsed_s = 0.0
         self._open: list[tuple[np.ndarray, np.ndarray]] = []
         self._stopped = False
+        self._position: ListPosition | None = None
+        self._index = 0
+        log = os.environ.get(MARK_LOG_ENV)
+        self._log = -1
+        if log:
+            self._position = last_position(log)
+            self._log = os.open(log, os.O_WRONLY | os.O_APPEND | os.O_CREAT, 0o644)
 
     @property
     def scene(self) -> Scene:
@@ -129,16 +145,39 @@ class SimController:
     # -- Controller --------------------------------------------------------------------------
     def execute(self, commands: Sequence[Command]) -> None:
         self._stopped = False
-        for c in commands:
+        digest = list_digest(commands)
+        self._position = ListPosition(digest, 0)
+        self._note(f"L {digest} {len(commands)}")
+        for i, c in enumerate(commands):
             if self._stopped:               # laser_off (from any thread) stops the list
                 break
+            self._index = i
             self._do(c)
+            self._position = ListPosition(digest, i + 1)
+        if not self._stopped:
+            self._note(f"E {digest} {len(commands)}", sync=True)
 
     def laser_off(self) -> None:
         self._stopped = True
         self._close_burn()
         self.laser_is_on = self.pilot_is_on = False
         self.world.laser = LaserState()
+        self._note("O", sync=True)
+
+    def check(self, lists) -> None:
+        """No limits beyond the driver's."""
+
+    def position(self) -> ListPosition | None:
+        """Commands of the last list executed (from the mark log after a restart)."""
+        return self._position
+
+    def _note(self, line: str, sync: bool = False) -> None:
+        if self._log < 0:
+            return
+        if line:
+            os.write(self._log, (line + "\n").encode())
+        if sync:
+            os.fsync(self._log)
 
     # -- execution ---------------------------------------------------------------------------
     def _do(self, c: Command) -> None:
@@ -167,6 +206,9 @@ class SimController:
         a, b = focus_points(self.nominal, np.vstack([self.joint, target]))
         length = float(np.linalg.norm(b - a))
         self.elapsed_s += length / self.speed[kind]
+        if self._log >= 0:
+            self._note(f"M {self._index} " + " ".join(f"{v:.6f}" for v in (*self.joint, *target))
+                       if self.laser_is_on else f"J {self._index}")
         if self.laser_is_on:
             # the head interpolates straight in command space (like an RTC's micro-vectors)
             n = max(int(np.ceil(length / self.sample_mm)), 1)
@@ -206,6 +248,34 @@ class SimController:
             self.burns.append(burn)
             self.world.burns.append(burn)
         self._open = []
+
+
+MARK_LOG_ENV = "INSITU_SIM_MARK_LOG"
+
+
+def last_position(log: str | os.PathLike) -> ListPosition | None:
+    """The position of the last list in a mark log (see the module docstring), or None."""
+    try:
+        with open(log, "rb") as f:
+            f.seek(max(f.seek(0, os.SEEK_END) - (1 << 20), 0))
+            lines = f.read().decode(errors="replace").splitlines()
+    except FileNotFoundError:
+        return None
+    done = 0
+    for line in reversed(lines):
+        w = line.split()
+        if not w:
+            continue
+        try:
+            if w[0] == "E":
+                return ListPosition(w[1], int(w[2]))
+            if w[0] in ("M", "J") and not done:
+                done = int(w[1]) + 1
+            if w[0] == "L":
+                return ListPosition(w[1], done)
+        except (IndexError, ValueError):            # a line a kill cut short
+            continue
+    return None
 
 
 class SimInspectionCamera(SimCamera):

@@ -58,12 +58,16 @@ def preview(job: MarkJob, station: Station) -> list[np.ndarray]:
 
 
 def mark(job: MarkJob, station: Station, job_path: Path | None, progress: Progress,
-         cancel: threading.Event) -> mark_svc.StationRun:
-    """Write ``job`` to ``job_path`` (when given; its progress is recorded beside it), mark
-    it and image the part. Setting ``cancel`` stops the laser before the next command."""
-    if job_path is not None:
+         cancel: threading.Event, resume: bool = False, restart: bool = False,
+         cut_path: str | None = None) -> mark_svc.StationRun:
+    """Write ``job`` to ``job_path`` (when given, unless resuming; its journal is kept beside
+    it), mark it (``resume`` / ``restart`` / ``cut_path`` as
+    :func:`~insitu.marking.run_job`) and image the part. Setting ``cancel`` stops the laser
+    before the next command."""
+    if job_path is not None and not resume:
         mark_svc.save_job(job_path, job)
-    return mark_svc.mark_on_station(station, job, job_path, image=True, cancel=cancel,
+    return mark_svc.mark_on_station(station, job, job_path, resume=resume, restart=restart,
+                                    cut_path=cut_path, image=True, cancel=cancel,
                                     progress=progress)
 
 
@@ -128,6 +132,12 @@ def mark_serial(items, cloud, laser, station: Station, job_path: Path | None,
                          job_of, counter=counter)
     return mark_svc.mark_on_station(station, done.job, job_path, image=True, cancel=cancel,
                                     progress=progress)
+
+
+def unfinished(job: MarkJob, job_path: Path | None):
+    """The journal summary of an unfinished earlier run of ``job`` at ``job_path`` (None:
+    none)."""
+    return None if job_path is None else mark_svc.unfinished(job, job_path)
 
 
 @dataclass(frozen=True)

@@ -6,7 +6,9 @@ from __future__ import annotations
 
 import time
 
-from PySide6.QtWidgets import QVBoxLayout, QWidget
+from PySide6.QtWidgets import QMessageBox, QVBoxLayout, QWidget
+
+from insitu.errors import InsituError
 
 from insitu.marking import LaserParams, MarkJob, estimate_time
 from insitu.services.mark import StationRun
@@ -86,20 +88,52 @@ class MarkPanel(QWidget):
         if job is None or station is None:
             return
         path, items = self.window_.job_path(), self.session.placements.items
-        if is_templated(items):           # planned again with the serial it takes
+        if is_templated(items):           # a new part: planned again with the serial it takes
             cloud, laser = self.session.cloud, self.laser()
 
             def work(progress, cancel, _f):
                 return ops.mark_serial(items, cloud, laser, station, path, progress, cancel)
         else:
+            try:
+                choice = self.ask_resume(ops.unfinished(job, path))
+            except InsituError as e:
+                self.window_.show_error(str(e))
+                return
+            if choice is None:
+                return
+
             def work(progress, cancel, _f):
-                return ops.mark(job, station, path, progress, cancel)
+                return ops.mark(job, station, path, progress, cancel, **choice)
         task = self.window_.runner.start("mark", work, self._marked, self._failed)
         if task is not None:
             self._t0 = time.perf_counter()
             self.ui.progressBar.setValue(0)
             self.ui.resultLabel.setText("marking…")
             task.progress.connect(self._progress)
+
+    def ask_resume(self, s) -> dict | None:
+        """For an unfinished earlier run ``s`` of this job (a journal summary; None: none), ask
+        how to go on: resume (a cut path marked again, skipped or continued) or start over.
+        Returns the keywords of :func:`ops.mark`, or None when the operator cancels."""
+        if s is None:
+            return {}
+        box = QMessageBox(QMessageBox.Icon.Question, "Unfinished job",
+                          f"This job was {s.state} after {len(s.done)} of {s.paths_total} "
+                          "paths.", QMessageBox.StandardButton.Cancel, self)
+        if s.cut is None:
+            choices = {"Resume": {"resume": True}}
+        else:
+            pos = ("the board reported no position" if s.cut_position is None else
+                   f"the board reported {s.cut_position} marks done")
+            box.setInformativeText(f"Path {s.cut + 1} was started but not confirmed ({pos}).")
+            choices = {"Mark the cut path again": {"resume": True, "cut_path": "remark"},
+                       "Skip the cut path": {"resume": True, "cut_path": "skip"},
+                       "Continue the cut path": {"resume": True, "cut_path": "continue"}}
+        choices["Start over"] = {"restart": True}
+        buttons = {box.addButton(text, QMessageBox.ButtonRole.AcceptRole): kw
+                   for text, kw in choices.items()}
+        box.exec()
+        return buttons.get(box.clickedButton())
 
     def abort(self) -> None:
         self.window_.runner.cancel("mark")
