@@ -149,10 +149,12 @@ def test_an_interrupted_job_keeps_its_serial_and_resumes_it(cloud, tmp_path, how
     assert 0 < done < len(job.paths)
     counter = tmp_path / "serial.counter.json"
     assert read_counter(counter).next == 8                  # 7 stays issued
-    # insitu mark --run --resume plans it again with the job's own serial and goes on
-    res = _mark(cloud, out, QR, "--run", "--resume")
+    # insitu mark --run --resume plans it again with the job's own serial and goes on (the
+    # path the fault cut is marked again)
+    cut = ["--cut-path", "remark"] if how == "fault" else []
+    res = _mark(cloud, out, QR, "--run", "--resume", *cut)
     assert res.exit_code == 0, res.output
-    assert f"marked paths {done + 1}…{len(job.paths)} of {len(job.paths)} (done)" \
+    assert f"marked paths {done + 1}…{len(job.paths)} of {len(job.paths)} (done" \
         in _flat(res.output) and "serial 7 (issued from serial.counter.json)" in _flat(res.output)
     assert read_job(out).digest() == job.digest() and job_variables(read_job(out)).serial == 7
     assert read_counter(counter).next == 8
@@ -168,8 +170,8 @@ def test_job_run_resume_marks_the_recorded_serial(cloud, tmp_path):
     job = read_job(out)
     with pytest.raises(DeviceError):
         mark(job, GalvoDriver(TwoMirrorHead(350.0, 12.0)), FaultAt(200), progress_path_for(out))
-    res = _run("job", "run", out, "--resume")
-    assert res.exit_code == 0 and "(done)" in res.output, res.output
+    res = _run("job", "run", out, "--resume", "--cut-path", "remark")
+    assert res.exit_code == 0 and "(done, cut path" in res.output, res.output
     assert "serial 3;" in _flat(_run("job", "show", out).output)
     assert json.loads(out.read_text())["variable_data"]["serial"] == 3
     assert read_counter(tmp_path / "serial.counter.json").next == 4
