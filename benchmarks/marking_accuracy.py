@@ -30,6 +30,7 @@ from insitu.services.station import simulated
 from insitu.errors import SafetyError
 from insitu.marking import (GalvoDriver, Limits, check_projection, estimate_time, make_job,
                             plan_job, project, run_job, write_job)
+from insitu.marking import Placement
 from insitu.marking.project import densify
 from insitu.services import calibrate_height
 from insitu.services.scan import scan_live
@@ -157,6 +158,14 @@ def focus(worlds, clouds, rig) -> None:
         tab.add_row(name, label, mode, str(len(p)), f"{e.mean():+.4f}",
                     f"{np.sqrt(np.mean(e**2)):.4f}", f"{np.abs(e).max():.4f}",
                     "[green]yes[/]" if ok else "[red]no[/]")
+    qr = Placement('qr:"insitu"', (0.0, -20.0), 10.0, mode="planar")     # issue 11
+    job, _ = plan_job(qr.polylines(qr.placed()), clouds["step-block"], limits, mode="planar")
+    p = np.vstack([path.points for path in job.paths])                   # laser on
+    e = p[:, 2] - worlds["step-block"].parts[0].height(p[:, 0], p[:, 1])
+    tab.add_row("step-block", "10 mm QR across the 3/5 mm edge (marked points)", "planar",
+                str(len(p)), f"{e.mean():+.4f}", f"{np.sqrt(np.mean(e**2)):.4f}",
+                f"{np.abs(e).max():.4f}",
+                "[green]yes[/]" if np.abs(e).max() < 0.1 else "[red]no[/]")
     console.print(tab)
 
 
