@@ -189,15 +189,15 @@ def coverage(part, cloud, step=0.25):
 
 def lateral_shift(part, p, e, h=0.05):
     """The cloud's constant shift (dx, dy) mm in x, y, fitted to the height errors ``e`` (N,)
-    of its points ``p`` (N, 3) over the top as e ≈ dz − ∇z_true · (dx, dy), and the RMS of
-    what is left: the error a lateral offset of the whole cloud (the operator's camera
-    calibration, shared with the placed patterns) makes on slopes."""
+    of its points ``p`` (N, 3) over the top as e ≈ −∇z_true · (dx, dy), and the RMS of what
+    is left: the error a lateral offset of the whole cloud (the operator's camera
+    calibration, shared with the placed patterns) makes on slopes (0 on flat tops)."""
     gx = (part.height(p[:, 0] + h, p[:, 1]) - part.height(p[:, 0] - h, p[:, 1])) / (2 * h)
     gy = (part.height(p[:, 0], p[:, 1] + h) - part.height(p[:, 0], p[:, 1] - h)) / (2 * h)
     ok = np.isfinite(gx) & np.isfinite(gy)
-    A = np.column_stack([np.ones(ok.sum()), -gx[ok], -gy[ok]])
+    A = np.column_stack([-gx[ok], -gy[ok]])
     c, *_ = np.linalg.lstsq(A, e[ok], rcond=None)
-    return c[1:], float(np.sqrt(np.mean((e[ok] - A @ c) ** 2)))
+    return c, float(np.sqrt(np.mean((e[ok] - A @ c) ** 2)))
 
 
 def error_table(title, parts_clouds):
