@@ -177,8 +177,9 @@ def test_saturated_with_noise():
 def test_saturated_line_beside_an_edge(name):
     """A clipped line a few px from a part's edge: the lit top (18 DN) above it, the dark side
     face (5 DN) from 5 px below it. The plateau's flanks are fitted above the column's sloping
-    background: max |error| 0.28 px, mean +0.09 (one level for both sides: 5.0 px and +0.35,
-    1.2 px where this happened on the step block, 0.24 mm)."""
+    background, where they stand above it by more than its change across the line: max |error|
+    0.10 px, mean +0.02 (one level for both sides: 5.0 px and +0.35; 1 px where this happened
+    on the step block, 0.24 mm)."""
     rng = np.random.default_rng(3)
     v0 = centre_curve(a=120.3, b=0.002, c=0.0)
     rows = np.arange(H)[:, None]
@@ -187,7 +188,7 @@ def test_saturated_line_beside_an_edge(name):
     res = METHODS[name](img)
     e = errors(res, v0)
     assert res.saturated.all() and len(e) > W - 30
-    assert np.abs(e).max() < 0.4 and abs(e.mean()) < 0.15
+    assert np.abs(e).max() < 0.25 and abs(e.mean()) < 0.1
 
 
 # ---------------------------------------------------------------- ghosts

@@ -9,10 +9,12 @@ Saturated columns (both methods): the clipped plateau's centre is the vertex of 
 log-parabola fitted to its unsaturated flanks (weights ∝ value), else the centroid of the
 pixels above half the maximum. Clipping breaks the Gaussian model, and for Steger the sampled
 plateau's sharp corners alias into a phase-dependent bias of ≈ 0.05–0.1 px. The flanks are
-taken above the column's own sloping background (:func:`~insitu.vision.detect.band_background`)
-and above ``_FLANK_FLOOR`` of the contrast: beside a wall or a part's edge, where one side of
-the line is lit and the other dark, one background level for both put background pixels on
-the lit flank and moved the vertex by about 1 px (0.24 mm on the step block).
+taken above the column's own sloping background (:func:`~insitu.vision.detect.band_background`),
+and only where they stand above it by more than the background changes from one side of the
+line to the other (how wrong a straight background can be under the line): beside a wall or
+a part's edge, where one side is lit and the other dark, one background level for both put
+background pixels on the lit flank and moved the vertex by about 1 px (0.24 mm on the step
+block).
 """
 
 from __future__ import annotations
@@ -26,7 +28,6 @@ from insitu.vision.detect import (FWHM_PER_SIGMA, LineCentres, as_image, band_ba
 
 _M = 3          # candidate rows: the detected peak ± _M
 _T_MAX = 0.6    # |t·n| ≤ 0.5 px, plus room for the Taylor step's overshoot near pixel borders
-_FLANK_FLOOR = 0.03  # flank pixels of a clipped plateau: above this fraction of the contrast
 
 
 def _flank_fit(g, inside, x, sat_mask, floor):
@@ -56,9 +57,11 @@ def _flank_fit(g, inside, x, sat_mask, floor):
 def _plateau_centre(raw, inside, x, sat_mask, noise):
     """Offsets (n,) of saturated plateaus' centres: flank fit, else the centroid of the pixels
     above half the maximum (weights: value minus half maximum). raw: (k, n) band of the image
-    centred on the peak; the fit is made above its sloping background."""
-    g = np.where(inside, raw - band_background(raw), 0)
-    floor = np.maximum(max(3.0, 3.0 * noise), _FLANK_FLOOR * g.max(axis=0))
+    centred on the peak; the fit is made above its sloping background, with pixels more than
+    3 noise sigmas and the background's change across the band above it."""
+    bg = band_background(raw)
+    g = np.where(inside, raw - bg, 0)
+    floor = np.maximum(max(3.0, 3.0 * noise), np.abs(bg[-1] - bg[0]))
     vertex = _flank_fit(g, inside, x, sat_mask, floor)
     top = g.max(axis=0) / 2
     half = np.where(inside & (g > top), g - top, 0)
