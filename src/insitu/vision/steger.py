@@ -11,10 +11,10 @@ pixels above half the maximum. Clipping breaks the Gaussian model, and for Stege
 plateau's sharp corners alias into a phase-dependent bias of ≈ 0.05–0.1 px. The flanks are
 taken above the column's own sloping background (:func:`~insitu.vision.detect.band_background`),
 and only where they stand above it by more than the background changes from one side of the
-line to the other (how wrong a straight background can be under the line): beside a wall or
-a part's edge, where one side is lit and the other dark, one background level for both put
-background pixels on the lit flank and moved the vertex by about 1 px (0.24 mm on the step
-block).
+line to the other (how wrong a straight background can be under the line), and only as far
+as they fall without a break: beside a wall or a part's edge, where one side is lit and the
+other dark, one background level for both put background pixels on the lit flank and moved
+the vertex by about 1 px (0.24 mm on the step block).
 """
 
 from __future__ import annotations
@@ -32,10 +32,16 @@ _T_MAX = 0.6    # |t·n| ≤ 0.5 px, plus room for the Taylor step's overshoot n
 
 def _flank_fit(g, inside, x, sat_mask, floor):
     """Vertex of a log-parabola fitted (weights ∝ value) to the unsaturated flank pixels of a
-    saturated plateau. g: (k, n) values minus background, x: (k, 1) offsets. NaN if degenerate."""
+    saturated plateau: those at or above ``floor`` that fall away from it without a break (the
+    first pixel that rises again is the background's, not the line's). g: (k, n) values minus
+    background, x: (k, 1) offsets. NaN if degenerate."""
     use = inside & ~sat_mask & (g >= floor)
     k = len(x) // 2
     above = inside & (g >= floor)                                  # contiguous with the peak
+    falls = np.ones_like(above)
+    falls[:k] = g[:k] <= g[1:k + 1]
+    falls[k + 1:] = g[k + 1:] <= g[k:-1]
+    above &= falls | sat_mask
     near = np.r_[np.cumprod(above[k::-1], axis=0)[::-1][:-1], np.cumprod(above[k:], axis=0)]
     use &= near.astype(bool)
     wgt = np.where(use, g, 0.0).astype(np.float64)
