@@ -187,20 +187,35 @@ def coverage(part, cloud, step=0.25):
     return float(np.mean(d <= step))
 
 
+def lateral_shift(part, p, e, h=0.05):
+    """The cloud's constant shift (dx, dy) mm in x, y, fitted to the height errors ``e`` (N,)
+    of its points ``p`` (N, 3) over the top as e ≈ −∇z_true · (dx, dy), and the RMS of what
+    is left: the error a lateral offset of the whole cloud (the operator's camera
+    calibration, shared with the placed patterns) makes on slopes (0 on flat tops)."""
+    gx = (part.height(p[:, 0] + h, p[:, 1]) - part.height(p[:, 0] - h, p[:, 1])) / (2 * h)
+    gy = (part.height(p[:, 0], p[:, 1] + h) - part.height(p[:, 0], p[:, 1] - h)) / (2 * h)
+    ok = np.isfinite(gx) & np.isfinite(gy)
+    A = np.column_stack([-gx[ok], -gy[ok]])
+    c, *_ = np.linalg.lstsq(A, e[ok], rcond=None)
+    return c, float(np.sqrt(np.mean((e[ok] - A @ c) ** 2)))
+
+
 def error_table(title, parts_clouds):
     t = Table(title=title)
     for col in ("workpiece", "method", "points", "mean", "RMS", "max |e|", "RMS ≥0.3",
-                "max ≥0.3", "top covered"):
+                "max ≥0.3", "top covered", "shift (x, y)", "RMS ≥0.3 unshifted"):
         t.add_column(col)
     for name, (world, clouds) in parts_clouds.items():
         part = world.parts[0]
         for m in METHODS:
             _, e = height_errors(part, clouds[m])
-            _, e3 = height_errors(part, clouds[m], margin=0.3)
+            p3, e3 = height_errors(part, clouds[m], margin=0.3)
+            shift, rest = lateral_shift(part, p3, e3)
             t.add_row(name, m, f"{len(e):,}", f"{np.mean(e):+.4f}",
                       f"{np.sqrt(np.mean(e**2)):.4f}", f"{np.max(np.abs(e)):.4f}",
                       f"{np.sqrt(np.mean(e3**2)):.4f}", f"{np.max(np.abs(e3)):.4f}",
-                      f"{coverage(part, clouds[m]):.1%}")
+                      f"{coverage(part, clouds[m]):.1%}",
+                      f"({shift[0]:+.3f}, {shift[1]:+.3f})", f"{rest:.4f}")
     console.print(t)
 
 

@@ -25,6 +25,7 @@ from insitu.sim.world import SimWorld  # noqa: E402
 from insitu.sim.rig import default_rig  # noqa: E402
 from insitu.sim.workpieces import make_workpiece  # noqa: E402
 from insitu.vision.centres import gray_centroid, line_centres, line_direction  # noqa: E402
+from insitu.vision.extract import extract_centres  # noqa: E402
 from insitu.vision.steger import gaussian_peak, steger  # noqa: E402
 
 cv2.setNumThreads(1)
@@ -77,6 +78,7 @@ METHODS = {
     "line_centres(gray, auto direction)": line_centres,
     "line_centres(steger, auto direction)": lambda f: line_centres(f, "steger"),
     "line_direction": lambda f: [line_direction(f)],
+    "extract_centres (ours: steger + along-line window)": extract_centres,
     "line_centres(steger, BGR colour, auto channel)":
         lambda f: line_centres(cv2.merge([f // 2, f, f // 3]), "steger"),
 }

@@ -30,6 +30,7 @@ from insitu.services.station import simulated
 from insitu.errors import SafetyError
 from insitu.marking import (GalvoDriver, Limits, check_projection, estimate_time, make_job,
                             plan_job, project, run_job, write_job)
+from insitu.marking import Placement
 from insitu.marking.project import densify
 from insitu.services import calibrate_height
 from insitu.services.scan import scan_live
@@ -157,7 +158,21 @@ def focus(worlds, clouds, rig) -> None:
         tab.add_row(name, label, mode, str(len(p)), f"{e.mean():+.4f}",
                     f"{np.sqrt(np.mean(e**2)):.4f}", f"{np.abs(e).max():.4f}",
                     "[green]yes[/]" if ok else "[red]no[/]")
+    qr = Placement('qr:"insitu"', (0.0, -20.0), 10.0, mode="planar")     # issue 11
+    job, _ = plan_job(qr.polylines(qr.placed()), clouds["step-block"], limits, mode="planar")
+    p = np.vstack([path.points for path in job.paths])                   # laser on
+    e = p[:, 2] - worlds["step-block"].parts[0].height(p[:, 0], p[:, 1])
+    wall = np.abs(p[:, 1] + 20.0)                                        # the wall at y = −20
+    for label, sel in (("", wall >= 0), (", > 0.25 mm from the wall", wall > 0.25)):
+        tab.add_row("step-block", f"10 mm QR across the 3/5 mm edge{label}", "planar",
+                    str(sel.sum()), f"{e[sel].mean():+.4f}",
+                    f"{np.sqrt(np.mean(e[sel]**2)):.4f}", f"{np.abs(e[sel]).max():.4f}",
+                    "[green]yes[/]" if np.abs(e[sel]).max() < 0.1 else "[red]no[/]")
     console.print(tab)
+    off = np.abs(e) > 0.1
+    if off.any():
+        console.print(f"QR across the edge: {off.sum()} of {len(e)} marked points more than "
+                      f"0.1 mm off, all within {wall[off].max():.2f} mm of the wall")
 
 
 def true_length(part, xyz: np.ndarray) -> float:

@@ -172,6 +172,25 @@ def test_saturated_with_noise():
         assert np.sqrt(np.mean(e**2)) < 0.15, name
 
 
+
+@pytest.mark.parametrize("name", ["gaussian", "steger"])
+def test_saturated_line_beside_an_edge(name):
+    """A clipped line a few px from a part's edge: the lit top (18 DN) above it, the dark side
+    face (5 DN) from 5 px below it. The plateau's flanks are fitted above the column's sloping
+    background, where they stand above it by more than its change across the line: max |error|
+    0.10 px, mean +0.02 (one level for both sides: 5.0 px and +0.35; 1 px where this happened
+    on the step block, 0.24 mm)."""
+    rng = np.random.default_rng(3)
+    v0 = centre_curve(a=120.3, b=0.002, c=0.0)
+    rows = np.arange(H)[:, None]
+    room = np.where(rows < v0 + 5, 18.0, 5.0)
+    img = sensor(room + profile(v0, 1.1, 500), rng, e_per_dn=1e4, read=1.0)
+    res = METHODS[name](img)
+    e = errors(res, v0)
+    assert res.saturated.all() and len(e) > W - 30
+    assert np.abs(e).max() < 0.25 and abs(e.mean()) < 0.1
+
+
 # ---------------------------------------------------------------- ghosts
 
 def _ghost_frame(rng, ghost_amp):

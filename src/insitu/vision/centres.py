@@ -18,8 +18,8 @@ import cv2
 import numpy as np
 
 from insitu.errors import MeasurementError
-from insitu.vision.detect import (LineCentres, as_image, detect, gather, raw_saturated,
-                                  saturation_level)
+from insitu.vision.detect import (LineCentres, as_image, band_background, detect, gather,
+                                  raw_saturated, saturation_level)
 from insitu.vision.steger import gaussian_peak, steger
 
 
@@ -81,11 +81,8 @@ def _above_background(img, det, k, window, saturation) -> LineCentres:
     c, r, gmax = det.cols, det.row, det.gmax
     rows = np.arange(-window, window + 1)[:, None]
     g, inside = gather(det.pre, r[None, :] + rows, c)
-    (a0, a1, a2), (b0, b1, b2) = g[:3], g[-3:]
-    top = np.maximum(np.minimum(a0, a1), np.minimum(np.maximum(a0, a1), a2))   # medians of 3
-    bot = np.maximum(np.minimum(b0, b1), np.minimum(np.maximum(b0, b1), b2))
-    mid = (top + bot) / 2
-    g -= mid + (bot - top) / (2 * window) * rows + k * (gmax - mid)
+    bg = band_background(g)
+    g -= bg + k * (gmax - bg[window])
     g[(g <= 0) | ~inside] = 0
     total = g.sum(axis=0, dtype=np.float64)
     v = r + (g * rows).sum(axis=0, dtype=np.float64) / np.where(total > 0, total, 1)

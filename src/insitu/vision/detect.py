@@ -205,6 +205,18 @@ def raw_saturated(img, det: Detection, sat: float) -> np.ndarray:
     return g.max(axis=0) >= sat if len(det.cols) else np.zeros(0, bool)
 
 
+def band_background(g: np.ndarray) -> np.ndarray:
+    """(k, n) background under each column of a (k, n) band of rows centred on the peak: a
+    straight line between the medians of the 3 px at each end. Beside a wall or the edge of a
+    part the two sides of the line differ (a lit top on one, a dark face on the other); one
+    level for both would leave a pedestal on one flank and cut the other."""
+    (a0, a1, a2), (b0, b1, b2) = g[:3], g[-3:]
+    top = np.maximum(np.minimum(a0, a1), np.minimum(np.maximum(a0, a1), a2))   # medians of 3
+    bot = np.maximum(np.minimum(b0, b1), np.minimum(np.maximum(b0, b1), b2))
+    half = (len(g) - 1) / 2
+    return (top + bot) / 2 + (bot - top) / (2 * half) * (np.arange(len(g)) - half)[:, None]
+
+
 def fwhm(g, inside, bg, gmax) -> np.ndarray:
     """Pixels of the (k, n) band above half the contrast: a FWHM in px."""
     return ((g > (bg + gmax) / 2) & inside).sum(axis=0).astype(np.float64)

@@ -3,7 +3,8 @@ smoothing along the line.
 
 Speckle makes the centre of each column wander by a fraction of a pixel, correlated over a few
 columns; a local quadratic fit over a window of columns averages that out while keeping slopes
-and curvature. The line is cut where it jumps (steps, occlusion), so edges stay sharp.
+and curvature. The line is cut where it jumps (steps, occlusion), so edges stay sharp, and
+runs on across the few columns a dark speckle blotch or a dropped spike takes out.
 
 How far the wander is correlated depends on the rig (the speckle grain in the image, the
 surface): 2 px on our simulator, 4 px on independent recordings. So the window is sized to the
@@ -16,6 +17,7 @@ from dataclasses import asdict, dataclass, replace
 
 import cv2
 import numpy as np
+from scipy.ndimage import correlate1d
 from scipy.signal import savgol_filter
 
 from insitu.errors import ConfigError
@@ -109,21 +111,28 @@ def wander_correlation_px(c: LineCentres, jump_px: float = 1.0, min_run: int = 8
 
 def smooth_centres(c: LineCentres, half_window: int = 7, jump_px: float = 1.0,
                    end_fraction: float = 0.5, drop_short: int = 3) -> LineCentres:
-    """Savitzky–Golay (quadratic, 2·half_window + 1 columns) within each continuous run.
+    """Local quadratic fit of v against the column over 2·half_window + 1 columns, along each
+    stretch of the line that no discontinuity cuts.
 
-    Runs shorter than the window keep their raw centres; runs shorter than ``drop_short``
-    columns are dropped as isolated (spurious) detections. ``jump_px``: a step in v between
-    neighbouring columns larger than this cuts the line. ``end_fraction``: at each end of a
-    run, columns whose peak is below this fraction of the run's median peak are the blurred
-    tail of the line beyond an edge and are dropped, so a run ends where the light does.
+    Pieces: columns that follow each other with v not jumping by more than ``jump_px``. At each
+    end of a piece, columns whose peak is below ``end_fraction`` of its median peak are the
+    blurred tail of the line beyond an edge and are dropped, so a piece ends where the light
+    does; pieces shorter than ``drop_short`` columns are dropped as isolated (spurious)
+    detections. Stretches: the pieces left, joined across gaps of at most ``half_window``
+    columns where v runs on (within ``jump_px`` plus the line's typical slope times the gap):
+    a dark speckle blotch, or a spike dropped, does not cut the line; a step or an occlusion
+    does. Each point gets the quadratic fitted to its stretch's points in the window centred
+    on it, shifted to stay inside the stretch at its ends (Savitzky–Golay's interp mode, which
+    this is on a stretch without gaps); a stretch shorter than the window is fitted whole (a
+    straight line below 5 points). Without the joins, the pieces between blotches were
+    shorter than the window and kept their raw centres: 7 % of the points of the independent
+    recording, its worst.
     """
     if len(c) == 0 or half_window < 1:
         return c
     order = np.argsort(c.u, kind="stable")
     u, v = c.u[order], c.v[order]
-    out = v.copy()
     keep = np.ones(len(u), bool)
-    w = 2 * half_window + 1
     peak = c.peak[order]
     for r in runs(u, v, jump_px):
         bright = np.nonzero(peak[r] >= end_fraction * np.median(peak[r]))[0]
@@ -131,10 +140,50 @@ def smooth_centres(c: LineCentres, half_window: int = 7, jump_px: float = 1.0,
         keep[r.start:a] = keep[b:r.stop] = False
         if b - a < drop_short:
             keep[a:b] = False
-        elif b - a >= w:
-            out[a:b] = savgol_filter(v[a:b], w, 2, mode="interp")
     idx = order[keep]
     fields = {f: getattr(c, f)[idx] for f in c.__dataclass_fields__
               if isinstance(getattr(c, f), np.ndarray) and len(getattr(c, f)) == len(c)}
-    fields["v"] = out[keep]
+    fields["v"] = _local_quadratic(np.round(u[keep]).astype(np.int64), v[keep], half_window,
+                                   jump_px)
     return replace(c, **fields)
+
+
+def _local_quadratic(col: np.ndarray, v: np.ndarray, h: int, jump_px: float) -> np.ndarray:
+    """v (n,) px smoothed as :func:`smooth_centres` says; col (n,) increasing columns. The
+    stretches are laid on one grid with ≥ 2h + 1 empty cells between them, so that the moment
+    sums Σ j^p and Σ v·j^p over each window (j = −h … h) are 8 correlations of the grid."""
+    n = len(v)
+    if n < 2:
+        return v.copy()
+    dc, dv = np.diff(col), np.abs(np.diff(v))
+    slope = float(np.median(dv[dc == 1])) if (dc == 1).any() else 0.0
+    cut = (dc > h + 1) | (dv > jump_px + slope * (dc - 1))
+    first = np.r_[0, np.flatnonzero(cut) + 1]
+    last = np.r_[first[1:], n] - 1
+    span = col[last] - col[first]
+    base = np.r_[0, np.cumsum(span + 2 * h + 2)[:-1]]
+    which = np.repeat(np.arange(len(first)), last - first + 1)
+    pos = col - col[first][which] + base[which]
+    grid = np.zeros((2, int(pos[-1]) + 1))
+    np.add.at(grid[0], pos, 1.0)
+    np.add.at(grid[1], pos, v)
+    j = np.arange(-h, h + 1, dtype=np.float64)
+    M = [correlate1d(grid[0], j**p, mode="constant") for p in range(5)]
+    T = [correlate1d(grid[1], j**p, mode="constant") for p in range(3)]
+    lo, hi = base[which] + h, base[which] + span[which] - h
+    centre = np.where(hi >= lo, np.clip(pos, lo, np.maximum(lo, hi)),
+                      base[which] + span[which] // 2)
+    m = [a[centre] for a in M]
+    t = [a[centre] for a in T]
+    A = np.stack([np.stack(m[0:3], -1), np.stack(m[1:4], -1), np.stack(m[2:5], -1)], -2)
+    quad = (m[0] >= 5) & (np.abs(np.linalg.det(A)) > 1e-9)
+    A[~quad] = np.eye(3)
+    a = np.linalg.solve(A, np.where(quad[:, None], np.stack(t, -1), 0.0)[..., None])[..., 0]
+    x = (pos - centre).astype(np.float64)
+    out = a[:, 0] + a[:, 1] * x + a[:, 2] * x * x
+    det2 = m[0] * m[2] - m[1] ** 2
+    line = ~quad & (m[0] >= 2) & (np.abs(det2) > 1e-9)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        b1 = (m[0] * t[1] - m[1] * t[0]) / det2
+        b0 = (t[0] - b1 * m[1]) / m[0]
+    return np.where(quad, out, np.where(line, b0 + b1 * x, v))
