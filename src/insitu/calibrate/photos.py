@@ -15,6 +15,7 @@ import numpy as np
 
 from insitu.calibrate.camera import BoardSpec
 from insitu.errors import CalibrationError
+from insitu.formats.images import read_image
 
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff")
 _BOARD = re.compile(r"^\s*(\d+)\s*[xX×]\s*(\d+)\s*[xX×]\s*(\d+(?:\.\d*)?|\.\d+)\s*$")
@@ -60,9 +61,7 @@ def image_files(folder: str | Path) -> list[Path]:
 
 def read_grey(path: Path) -> np.ndarray:
     """One photo as a 2-D uint8/uint16 array; CalibrationError if it cannot be read."""
-    img = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
-    if img is None or img.size == 0:
-        raise CalibrationError(f"{path}: not a readable image")
+    img = read_image(path, error=CalibrationError)      # header checked before decoding
     if img.ndim == 3:
         code = cv2.COLOR_BGRA2GRAY if img.shape[2] == 4 else cv2.COLOR_BGR2GRAY
         img = cv2.cvtColor(img, code)
