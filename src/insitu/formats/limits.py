@@ -3,9 +3,10 @@ such as ``/dev/zero``, a socket or a folder), no larger than the limit for its k
 the files of a folder format such as a recording — inside that folder once symlinks are
 resolved. Image files are also limited in pixels, read from their header before decoding.
 
-Limits (bytes unless said): JSON and CSV files 64 MiB (the largest calibration or job we write is a
-few MB); point clouds 256 MiB (about 10 M points with intensity, line and quality); images
-256 MiB and 64 Mpx (8192 x 8192; a camera frame is 5 Mpx); SVG and DXF drawings 64 MiB.
+Limits (bytes unless said): JSON and CSV files 64 MiB (the largest calibration or job we write
+is a few MB); point clouds 256 MiB (about 10 M points with intensity, line and quality); images
+256 MiB and 64 Mpx (8192 x 8192; a camera frame is 5 Mpx); SVG and DXF drawings 16 MiB
+(a logo is well under 1 MB; their parsers read about 1 MB a second).
 """
 
 from __future__ import annotations
@@ -21,7 +22,7 @@ MAX_JSON_BYTES = 64 * MiB
 MAX_CLOUD_BYTES = 256 * MiB
 MAX_IMAGE_BYTES = 256 * MiB
 MAX_IMAGE_PIXELS = 64_000_000
-MAX_DRAWING_BYTES = 64 * MiB
+MAX_DRAWING_BYTES = 16 * MiB
 
 _KINDS = ((stat.S_ISFIFO, "a FIFO"), (stat.S_ISCHR, "a character device"),
           (stat.S_ISBLK, "a block device"), (stat.S_ISSOCK, "a socket"),
