@@ -202,10 +202,10 @@ def load_dxf(path: str | Path, tol_mm: float = TOL_MM, join_mm: float = 1e-3,
         doc, note = _read(path)
         k, unit_note = _scale(doc, units, path)
         notes = [unit_note] + ([note] if note else [])
+        budget = Budget(path)
         hidden = {layer.dxf.name.lower() for layer in doc.layers
                   if layer.is_off() or layer.is_frozen()}
         fills, edges, closed, pieces, skip = [], [], [], [], set()
-        budget = Budget(path)
         for e in _entities(doc):
             if e.dxf.get("layer", "0").lower() in hidden or e.dxf.get("invisible", 0):
                 continue
