@@ -23,14 +23,12 @@ def image_size(path: str | Path, *, max_pixels: int = MAX_IMAGE_PIXELS,
     from PIL import Image
 
     check_file(path, MAX_IMAGE_BYTES, "image", missing="no such image file", error=error)
+    Image.MAX_IMAGE_PIXELS = None       # Pillow decodes nothing here; max_pixels is checked below
     try:
         with warnings.catch_warnings():
-            warnings.simplefilter("ignore")              # DecompressionBombWarning: checked below
+            warnings.simplefilter("ignore")
             with Image.open(path) as im:
                 w, h = im.size
-    except Image.DecompressionBombError:
-        raise error(f"{path}: image larger than {max_pixels / 1e6:g} Mpx (refused from its "
-                    "header)") from None
     except Exception as e:  # noqa: BLE001 — any header fault is one line naming the file
         raise error(f"{path}: not a readable image ({' '.join(str(e).split())[:80]})") from None
     if w <= 0 or h <= 0:
@@ -48,7 +46,10 @@ def read_image(path: str | Path, flags: int = cv2.IMREAD_UNCHANGED, *,
     The header is checked first (:func:`image_size`), and against ``expect`` = (width,
     height) when given (``expected``: how the message names it), so a frame of the wrong size
     is refused before it is decoded."""
-    w, h = image_size(path, max_pixels=max_pixels, error=error)
+    w, h = image_size(path, max_pixels=max_pixels if expect is None else 1 << 62, error=error)
+    if expect is not None and expect[0] * expect[1] > max_pixels:
+        raise error(f"{path}: {expected} {expect[0]}x{expect[1]}: more than the "
+                    f"{max_pixels / 1e6:g} Mpx limit")
     if expect is not None and (w, h) != tuple(expect):
         raise error(f"{path}: image is {w}x{h} pixels, {expected} {expect[0]}x{expect[1]} "
                     "(width x height)")

@@ -175,6 +175,16 @@ def _check_attributes(e, path: Path, what: str) -> None:
                                           np.float64)).all():
                 raise FormatError(f"{path}: {what}: {key} is not a finite number "
                                   f"({tuple(value) if hasattr(value, 'x') else value})")
+    kind = e.dxftype()
+    lists = {"SPLINE": lambda: {"control points": e.control_points, "fit points": e.fit_points,
+                                "knots": e.knots, "weights": e.weights},
+             "LWPOLYLINE": lambda: {"points": e.get_points("xyseb")},
+             "POLYLINE": lambda: {"vertices": [v.dxf.location for v in e.vertices]},
+             "MESH": lambda: {"vertices": e.vertices}}.get(kind)
+    for key, values in (lists() if lists else {}).items():
+        a = np.asarray([tuple(v) if hasattr(v, "__len__") else (v,) for v in values], np.float64)
+        if not np.isfinite(a).all():
+            raise FormatError(f"{path}: {what}: one of its {key} is not a finite number")
 
 
 def _check_radius(e, path: Path) -> None:
