@@ -239,3 +239,33 @@ def test_drawings_over_the_size_limit_are_refused(tmp_path, monkeypatch):
     monkeypatch.setattr(vector, "MAX_DRAWING_BYTES", 100)
     _refused(load_svg, path, "larger than the 100 bytes limit for a drawing")
     _refused(load_svg, Path("/dev/zero"), "a character device")
+
+
+def test_photos_that_lead_out_of_their_folder_are_refused(tmp_path):
+    import cv2
+    from insitu.calibrate.photos import image_files
+    from insitu.errors import CalibrationError
+    (tmp_path / "photos").mkdir()
+    cv2.imwrite(str(tmp_path / "photos" / "a.png"), np.zeros((8, 8), np.uint8))
+    cv2.imwrite(str(tmp_path / "b.png"), np.zeros((8, 8), np.uint8))
+    assert image_files(tmp_path / "photos") == [tmp_path / "photos" / "a.png"]
+    (tmp_path / "photos" / "b.png").symlink_to(tmp_path / "b.png")
+    with pytest.raises(CalibrationError, match=r"b\.png: the photo leads out of"):
+        image_files(tmp_path / "photos")
+
+
+@pytest.mark.parametrize("args", [["job", "show", "{fifo}"], ["job", "show", "/dev/zero"],
+                                  ["mark", "--cloud", "/dev/zero", "--pattern", 'text:"A"',
+                                   "--at", "0", "0", "-o", "{out}"]])
+def test_commands_refuse_special_files_in_one_line(tmp_path, args):
+    fifo, out = tmp_path / "job.json", tmp_path / "out.json"
+    os.mkfifo(fifo)
+    t = time.perf_counter()
+    res = subprocess.run([sys.executable, "-c", "from insitu.cli.main import main; main()",
+                          *[a.format(fifo=fifo, out=out) for a in args]],
+                         capture_output=True, text=True, timeout=120,
+                         env={**os.environ, "PYTHONPATH": str(SRC)})
+    lines = [ln for ln in (res.stdout + res.stderr).splitlines() if ln.strip()]
+    assert res.returncode == 1 and len(lines) == 1, (res.returncode, lines)
+    assert ("a FIFO" if "{fifo}" in args else "a character device") in lines[0]
+    assert not out.exists() and time.perf_counter() - t < 60

@@ -16,6 +16,7 @@ import numpy as np
 from insitu.calibrate.camera import BoardSpec
 from insitu.errors import CalibrationError
 from insitu.formats.images import read_image
+from insitu.formats.limits import check_inside
 
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff")
 _BOARD = re.compile(r"^\s*(\d+)\s*[xX×]\s*(\d+)\s*[xX×]\s*(\d+(?:\.\d*)?|\.\d+)\s*$")
@@ -46,7 +47,8 @@ def parse_board(text: str, charuco: str | None = None) -> BoardSpec:
 
 
 def image_files(folder: str | Path) -> list[Path]:
-    """The folder's images, sorted by name. CalibrationError if there is none."""
+    """The folder's images, sorted by name. CalibrationError if there is none or one is a
+    symlink that leads out of the folder."""
     folder = Path(folder)
     if not folder.is_dir():
         raise CalibrationError(f"{folder}: " + ("not a folder" if folder.exists()
@@ -56,6 +58,8 @@ def image_files(folder: str | Path) -> list[Path]:
     if not files:
         raise CalibrationError(f"{folder}: no images ({', '.join(IMAGE_SUFFIXES)}) and no "
                                "sequence.json")
+    for p in files:
+        check_inside(p, folder, "photo", CalibrationError)
     return files
 
 
