@@ -352,6 +352,7 @@ class Stats:
     refused: int = 0
     hangs: int = 0
     max_ms: float = 0.0
+    slowest: tuple[int, str] = (-1, "")
     total_ms: float = 0.0
     failures: list[tuple[int, str, str]] = field(default_factory=list)
 
@@ -382,7 +383,9 @@ def run_reader(name: str, seed: int, n: int, timeout_s: float = 10.0, start: int
                 if msg is not None and msg[0] == "done":
                     _, k, res, ms, detail = msg
                     st.examples += 1
-                    st.max_ms, st.total_ms = max(st.max_ms, ms), st.total_ms + ms
+                    if ms > st.max_ms:
+                        st.max_ms, st.slowest = ms, (k, how)
+                    st.total_ms += ms
                     if res == "ok":
                         st.ok += 1
                     elif res == "refused":
@@ -430,6 +433,7 @@ def main() -> None:
               f"{len(st.failures) - st.hangs} | {st.hangs} | {st.max_ms:.0f} | "
               f"{st.total_ms / max(st.examples - st.hangs, 1):.1f} |")
     for st in rows:
+        print(f"{st.name}: slowest #{st.slowest[0]} ({st.slowest[1]}), {st.max_ms:.0f} ms")
         for k, how, what in st.failures[:5]:
             print(f"{st.name} #{k} ({how}): {what}\n  repeat: benchmarks/fuzz.py --readers "
                   f"{st.name} --seed {seed} --start {k} --examples 1")

@@ -1,11 +1,15 @@
 """Image files read safely: the header (Pillow's lazy open: PNG IHDR, JPEG SOF, TIFF IFD, BMP,
 WebP, ...) gives the size before any pixel is decoded, so a 20000 x 20000 PNG of a few kB is
-refused at once; then OpenCV decodes it and the decoded size must be the header's.
+refused at once; a PNG's chunks must lie within the file and match their CRCs (a damaged length
+makes OpenCV allocate and read for seconds, a damaged chunk makes libpng print); then OpenCV
+decodes it and the decoded size must be the header's.
 """
 
 from __future__ import annotations
 
+import struct
 import warnings
+import zlib
 from pathlib import Path
 
 import cv2
@@ -53,7 +57,10 @@ def read_image(path: str | Path, flags: int = cv2.IMREAD_UNCHANGED, *,
     if expect is not None and (w, h) != tuple(expect):
         raise error(f"{path}: image is {w}x{h} pixels, {expected} {expect[0]}x{expect[1]} "
                     "(width x height)")
-    data = np.frombuffer(read_limited(path, MAX_IMAGE_BYTES, "image", error=error), np.uint8)
+    raw = read_limited(path, MAX_IMAGE_BYTES, "image", error=error)
+    if raw.startswith(_PNG):
+        _check_png(path, raw, error)
+    data = np.frombuffer(raw, np.uint8)
     try:
         img = cv2.imdecode(data, flags) if data.size else None
     except cv2.error:
@@ -64,3 +71,23 @@ def read_image(path: str | Path, flags: int = cv2.IMREAD_UNCHANGED, *,
         raise error(f"{path}: decoded {img.shape[1]}x{img.shape[0]} pixels, but its header "
                     f"says {w}x{h}")
     return img
+
+
+_PNG = b"\x89PNG\r\n\x1a\n"
+
+
+def _check_png(path, raw: bytes, error: type[Exception]) -> None:
+    """``error`` unless every chunk of the PNG ``raw`` lies within it, has the CRC it says, and
+    the last is IEND."""
+    i = len(_PNG)
+    while i + 12 <= len(raw):
+        n, kind = struct.unpack(">I4s", raw[i:i + 8])
+        if n > len(raw) - i - 12:
+            raise error(f"{path}: damaged PNG (chunk {kind!r} at byte {i} claims {n} bytes, "
+                        f"{len(raw) - i - 12} are left)")
+        if zlib.crc32(raw[i + 4:i + 8 + n]) != struct.unpack(">I", raw[i + 8 + n:i + 12 + n])[0]:
+            raise error(f"{path}: damaged PNG (chunk {kind!r} at byte {i}: CRC mismatch)")
+        if kind == b"IEND":
+            return
+        i += 12 + n
+    raise error(f"{path}: truncated PNG (no IEND chunk)")
