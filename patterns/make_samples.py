@@ -32,8 +32,8 @@ LOGO = """<?xml version="1.0" encoding="UTF-8"?>
   <!-- a triangle with a white dot painted over it (a knock-out) -->
   <polygon points="30,17 38,17 34,3" fill="black"/>
   <circle cx="34" cy="13" r="1.5" fill="white"/>
-  <!-- a stroked wave under it all: marked along its centre line -->
-  <path d="M 2 19.5 C 12 17, 28 22, 38 19.5" fill="none" stroke="black" stroke-width="0.3"/>
+  <!-- a stroked wave under it all, inside the page: an area, a line under a beam wider than 0.3 mm -->
+  <path d="M 2 19 C 12 17, 28 21, 38 19" fill="none" stroke="black" stroke-width="0.3"/>
 </svg>
 """
 

@@ -187,8 +187,10 @@ def test_save_and_reopen_the_project(qtbot, window, tmp_path):
     qtbot.addWidget(other)
     assert other.recent_files() == [str(path)]
     other.open_project(path)
-    qtbot.waitUntil(lambda: other.session.cloud is not None and other.station is not None,
-                    timeout=WAIT_MS)
+    qtbot.waitUntil(lambda: other.session.cloud is not None, timeout=WAIT_MS)
+    assert other.station is None and "not connected" in other.head_label.text()
+    other.connect_action.trigger()                  # the operator connects the project's rig
+    qtbot.waitUntil(lambda: other.station is not None, timeout=WAIT_MS)
     s0, s1 = window.session, other.session
     assert np.allclose(s1.cloud.points, s0.cloud.points)
     assert s1.placements.items == s0.placements.items and s1.selected == s0.selected == 1
@@ -260,6 +262,29 @@ def test_a_device_fault_mid_scan_keeps_what_was_measured(qtbot, window, monkeypa
     assert window.message_label.text() == text
 
 
+def test_a_mark_in_a_codes_quiet_zone_is_refused_where_it_is_placed(qtbot, window):
+    scan_recording(qtbot, window)
+    place(qtbot, window, spec='qr:"insitu"', at=(0.0, 28.0), width=10.5)   # 0.5 mm modules
+    code_hatch = window.session.current().hatch_mm
+    place(qtbot, window, spec='text:"A"', at=(8.5, 28.0), width=3.0)   # in its 2 mm zone
+    label, s = window.place_panel.ui.statusLabel, window.session
+    assert s.selected == 1 and label.property("warning") is True
+    assert label.text().startswith("refused: text:A: its marks enter the quiet zone of "
+                                   "placement 1 (qr:insitu)")
+    assert "placement 2's marks enter its quiet zone" in s.plans[0].error
+    assert window.view.renderer.lines["warnings"][0].count > 0   # the red cross
+    s.update_selected(at_mm=(9.5, 28.0))                         # moved clear of it
+    qtbot.waitUntil(lambda: len(s.plans) == 2 and not window.runner.running("plan")
+                    and not window._plan_timer.isActive(), timeout=WAIT_MS)
+    assert all(o.plan for o in s.plans), [o.error for o in s.plans]
+    assert label.text().startswith("OK:")
+    s.select(0)
+    s.update_selected(width_mm=6.3)                              # 0.3 mm modules
+    assert s.current().hatch_mm == pytest.approx(0.05) == code_hatch
+    s.update_selected(width_mm=4.62)                             # 0.22 mm: 5 lines each
+    assert s.current().hatch_mm == pytest.approx(0.044)
+
+
 def test_pilot_preview_then_abort_stops_mid_job(qtbot, window, tmp_path):
     scan_recording(qtbot, window)
     place(qtbot, window, spec='qr:"insitu"', at=(0.0, 28.0), width=10.1)  # the symbol
@@ -287,3 +312,35 @@ def test_pilot_preview_then_abort_stops_mid_job(qtbot, window, tmp_path):
     record = json.loads((tmp_path / "a.job.progress.json").read_text())
     assert record["state"] in ("interrupted", "cancelled") and 5 <= record["completed"] < total
     assert not mark.abortButton.isEnabled() and mark.markButton.isEnabled()
+
+
+def test_variable_data_previews_the_next_serial_and_marking_takes_it(qtbot, window, tmp_path):
+    from insitu.formats.counter import locked, read_counter
+    from insitu.marking import read_job
+
+    scan_recording(qtbot, window)
+    place(qtbot, window, 'qr:"SN{serial:04d}";ec=H', width=8.0)
+    mark = window.mark_panel.ui
+    qtbot.waitUntil(lambda: window.mark_panel.job() is not None, timeout=WAIT_MS)
+    assert window.session.plans[0].plan.pattern.code.text == "SN0001"   # no counter yet
+    assert window.save(tmp_path / "m.insitu.json")
+    assert not (tmp_path / "m.job.json").exists()             # written when marked, not saved
+    qtbot.waitUntil(mark.markButton.isEnabled, timeout=WAIT_MS)
+    window.mark_panel.mark()                                          # refused: no counter
+    qtbot.waitUntil(lambda: "no serial counter" in mark.resultLabel.text(), timeout=WAIT_MS)
+    assert window.mark_panel.last_result is None
+    counter = tmp_path / "serial.counter.json"
+    with locked(counter) as c:
+        c.create(5)
+    window.mark_panel.refresh()
+    assert "serial 5 shown as a preview (taken when marked)" in mark.jobLabel.text()
+    for serial in (5, 6):
+        window.mark_panel.last_result = None
+        qtbot.waitUntil(lambda: mark.markButton.isEnabled()
+                        and not window.runner.running("mark"), timeout=WAIT_MS)
+        window.mark_panel.mark()
+        qtbot.waitUntil(lambda: window.mark_panel.last_result is not None, timeout=WAIT_MS)
+        assert window.mark_panel.last_result.state == "done"
+        rec = read_job(tmp_path / "m.job.json").model_extra["variable_data"]
+        assert rec["serial"] == serial and rec["texts"][0]["text"] == f"SN{serial:04d}"
+    assert read_counter(counter).next == 7

@@ -55,7 +55,8 @@ def test_synthetic_corners_recover_the_true_camera_within_its_uncertainty():
     truth = np.array([cam.K[0, 0], cam.K[1, 1], cam.K[0, 2], cam.K[1, 2]])
     got = np.array([res.K[0, 0], res.K[1, 1], res.K[0, 2], res.K[1, 2]])
     err = got - truth
-    assert abs(err[0]) / truth[0] < 1e-3 and abs(err[1]) / truth[1] < 1e-3
+    # 1.5 × today's 0.012 % / 0.015 % (15 synthetic views, 0.05 px noise)
+    assert abs(err[0]) / truth[0] < 1.8e-4 and abs(err[1]) / truth[1] < 2.3e-4, err
     assert np.all(np.abs(err) < 4 * res.std[:4] + 1e-9), (err, res.std[:4])
     assert np.all(np.abs(res.dist - cam.dist) < 4 * res.std[4:9] + 1e-4)
     # the board poses too: the first view's pose reproduces its corners
@@ -126,13 +127,15 @@ def test_cli_calibrates_intrinsics_and_the_world_pose(rec, tmp_path):
     assert res.exit_code == 0, res.output
     cal = load_json_model(out, CameraCalibration)
     K, true = np.array(cal.camera.K), rig.camera
-    assert abs(K[0, 0] / true.K[0, 0] - 1) < 3e-3
+    # 1.5 × today's figures from 4 rendered views at binning 2: fx 0.124 %, fy 0.122 %, the
+    # pose 0.152° and 0.56 mm (benchmarks/camera_calibration.py: 0.004 % at full size, 15 views)
+    assert abs(K[0, 0] / true.K[0, 0] - 1) < 1.9e-3 and abs(K[1, 1] / true.K[1, 1] - 1) < 1.9e-3
     assert len(cal.per_view_rms_px) == 5 and cal.rms_px < 0.1 and len(cal.std_intrinsics) == 9
     assert cal.residuals["views_used"] == 5 and abs(cal.residuals["alignment_angle_deg"] - 90) < 0.5
     R = np.array(cal.camera.R)
     angle = np.degrees(np.arccos(np.clip((np.trace(R @ true.R.T) - 1) / 2, -1, 1)))
     centre = -R.T @ np.array(cal.camera.t)
-    assert angle < 0.3 and np.linalg.norm(centre - true.centre_world) < 2.0
+    assert angle < 0.23 and np.linalg.norm(centre - true.centre_world) < 0.84
     assert "world pose" in cal.notes and cal.inputs == [str(folder)]
     assert cv2.imread(str(out.with_suffix(".png"))).shape[1] >= 500    # the per-view bars
 
@@ -186,7 +189,7 @@ def test_cli_bad_input_one_line_error_and_no_file(rec, tmp_path, case, message):
     assert res.exit_code == 1, res.output
     lines = [ln for ln in res.output.splitlines() if ln.strip()]
     assert len(lines) == 1 and message in lines[0], res.output
-    assert "Traceback" not in res.output
+    assert isinstance(res.exception, SystemExit), res.exception                # not an uncaught error
     assert not out.exists() and not list(tmp_path.glob(".*camera*"))
 
 
@@ -213,8 +216,9 @@ REAL = Path(__file__).resolve().parents[1] / "data/real/opencv-left"
 
 def test_opencv_samples_every_view_used_through_the_cli(tmp_path):
     """OpenCV's 13 left*.jpg: SB misses left11, classic finds it; all 13 calibrate. fx is
-    within 1 % of OpenCV's 536.07 px (0.6 % below it: OpenCV's 11 × 11 half-window reaches the
-    neighbouring corners on these 22–37 px squares, hence its 2× larger reprojection RMS)."""
+    within 1 % of the tutorial's 536.07 px (0.6 % below it: the tutorial's 23 × 23 window reaches
+    the board's edge beyond the outer corners of foreshortened views, hence its 2× larger
+    reprojection RMS; see the next test)."""
     out = tmp_path / "camera.json"
     res = runner.invoke(_app(), ["calibrate", "camera", str(REAL), "--board", "9x6x1",
                                  "-o", str(out)])
@@ -230,6 +234,42 @@ def test_opencv_samples_every_view_used_through_the_cli(tmp_path):
     img = cv2.imread(str(REAL / "left11.jpg"), cv2.IMREAD_GRAYSCALE)
     assert find_chessboard(img, (9, 6), "sb") is None
     assert find_chessboard(img, (9, 6), "classic") is not None
+
+
+def _opencv_sample_flow(images, half: int):
+    """OpenCV's sample flow: classic detector, cornerSubPix(winSize (half, half), 30
+    iterations, 0.1 px), calibrateCamera with default flags. (corners per view, K, rms)."""
+    obj = np.zeros((54, 3), np.float32)
+    obj[:, :2] = np.mgrid[0:9, 0:6].T.reshape(-1, 2)
+    crit = (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_COUNT, 30, 0.1)
+    pts = []
+    for img in images:
+        ok, c = cv2.findChessboardCorners(img, (9, 6), None)
+        assert ok
+        pts.append(cv2.cornerSubPix(img, c, (half, half), (-1, -1), crit))
+    rms, K, *_ = cv2.calibrateCamera([obj] * len(pts), pts, images[0].shape[::-1], None, None)
+    return [p.reshape(-1, 2) for p in pts], K, rms
+
+
+def test_opencv_samples_agree_with_opencvs_own_11x11_window_flow():
+    """OpenCV's samples/python/calibrate.py (an 11 × 11 px window) on the same photos: fx, fy
+    within 0.1 %, the principal point within 1 px, the RMS no worse. The 23 × 23 window of the
+    tutorial and samples/cpp/calibration.cpp (fx 536.07 / 535.89 px) moves corners next to the
+    board's edge on foreshortened views by pixels (left02: 6 px), not a better corner."""
+    from insitu.calibrate.photos import parse_board
+    from insitu.services.camera import calibrate_photos
+
+    cal = calibrate_photos(REAL, parse_board("9x6x1"))
+    K = np.array(cal.camera.K)
+    files = sorted(REAL.glob("left*.jpg"))
+    images = [cv2.imread(str(f), cv2.IMREAD_GRAYSCALE) for f in files]
+    small, K_cv, rms_cv = _opencv_sample_flow(images, 5)
+    assert abs(K[0, 0] / K_cv[0, 0] - 1) < 1e-3 and abs(K[1, 1] / K_cv[1, 1] - 1) < 1e-3
+    assert np.abs(K[:2, 2] - K_cv[:2, 2]).max() < 1.0
+    assert cal.rms_px <= rms_cv
+    big, K_big, rms_big = _opencv_sample_flow(images, 11)
+    shift = {f.name: np.linalg.norm(b - a, axis=1).max() for f, a, b in zip(files, small, big)}
+    assert shift["left02.jpg"] > 3.0 and rms_big > 1.5 * rms_cv and K_big[0, 0] > K_cv[0, 0]
 
 
 def _photos(rec, dst: Path) -> Path:

@@ -145,6 +145,7 @@ def test_a_code_whose_quiet_zone_another_mark_enters_is_refused(station, step_bl
     far = Placement('text:"A"', (6.0, -10.0), 2.0)
     out = plan_all(step_block, [code, near], station.driver)
     assert out[0].plan is None and "placement 2's marks enter its quiet zone" in out[0].error
-    assert out[1].plan is not None
+    assert out[1].plan is None and "its marks enter the quiet zone of placement 1" in out[1].error
+    assert out[0].where == out[1].where and 2.4 < out[1].where[0] < 3.0   # where they meet
     out = plan_all(step_block, [code, far], station.driver)
     assert out[0].plan is not None and out[0].plan.codes[0].ok

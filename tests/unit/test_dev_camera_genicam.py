@@ -8,6 +8,7 @@ from pathlib import Path
 import genicam
 import numpy as np
 import pytest
+from fakes.station import allow
 
 from insitu.devices.camera_genicam import GenICamCamera
 from insitu.devices.protocols import Camera
@@ -15,6 +16,11 @@ from insitu.errors import ConfigError, DeviceError
 
 VIKY = Path(genicam.__file__).with_name("viky.cti")
 pytestmark = pytest.mark.skipif(not VIKY.is_file(), reason="genicam wheel without viky.cti")
+
+
+@pytest.fixture(scope="module", autouse=True)
+def allowed():
+    allow(VIKY)                                     # the station allows the producer
 
 
 @pytest.fixture

@@ -15,6 +15,7 @@ import numpy as np
 import pytest
 from fakes.lmc_usb import FakeLmcBoard
 from fakes.rtc import FakeBoard, build
+from fakes.station import allow
 
 from insitu.devices.lmc import LmcController, LmcSettings
 from insitu.devices.rtc import RtcController, RtcSettings
@@ -99,7 +100,7 @@ def progress_dir(tmp_path):
 
 @pytest.fixture(scope="module")
 def rtc_lib(tmp_path_factory):
-    return build(tmp_path_factory.mktemp("rtc"))
+    return allow(build(tmp_path_factory.mktemp("rtc")))   # the station allows the fake
 
 
 def per_path(segments, first_path):

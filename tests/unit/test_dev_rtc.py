@@ -6,6 +6,7 @@ import time
 import numpy as np
 import pytest
 from fakes.rtc import FakeBoard, build
+from fakes.station import allow
 
 from insitu.devices.galvo import Command, Controller, joint_from_targets
 from insitu.devices.rtc import RtcController, RtcSettings
@@ -19,7 +20,7 @@ K = 2000.0
 
 @pytest.fixture(scope="module")
 def lib_path(tmp_path_factory):
-    return build(tmp_path_factory.mktemp("rtc"))
+    return allow(build(tmp_path_factory.mktemp("rtc")))   # the station allows the fake
 
 
 @pytest.fixture

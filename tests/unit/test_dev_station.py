@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 from fakes.grbl import GrblPeer
 from fakes.rtc import FakeBoard, build
+from fakes.station import allow
 
 from insitu.errors import ConfigError
 from insitu.formats.sequence import Sequence
@@ -25,7 +26,7 @@ REGION = tuple(json.loads((RECORDED / "truth.json").read_text())["region"])
 
 @pytest.fixture(scope="module")
 def rtc_lib(tmp_path_factory):
-    return build(tmp_path_factory.mktemp("rtc"))
+    return allow(build(tmp_path_factory.mktemp("rtc")))   # the station allows the fake
 
 
 @pytest.fixture

@@ -321,7 +321,7 @@ def _run(*args):
 
 def _one_line_error(res, message):
     assert res.exit_code == 1, res.output
-    assert message in res.output and "Traceback" not in res.output
+    assert message in res.output and isinstance(res.exception, SystemExit), res.exception
     assert len(res.output.strip().splitlines()) == 1, res.output
 
 

@@ -175,12 +175,13 @@ def test_the_cli_starts_without_qt_and_offers_gui():
             "assert not [k for k in sys.modules if k.startswith(('PySide6', 'OpenGL'))]; "
             "r = CliRunner().invoke(m.app, ['gui', '--help']); print(r.output); "
             "r = CliRunner().invoke(m.app, ['gui', 'nowhere.insitu.json']); "
-            "print(r.exit_code, r.output)")
+            "print(r.exit_code, type(r.exception).__name__, r.output)")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                          timeout=60)
     assert out.returncode == 0, out.stderr
     assert "Open the operator's application" in out.stdout
-    assert "1 error: nowhere.insitu.json: project file not found" in " ".join(out.stdout.split())
+    assert ("1 SystemExit error: nowhere.insitu.json: project file not found"
+            in " ".join(out.stdout.split()))
 
 
 def test_the_gui_command_without_the_gui_packages_names_the_fix():
@@ -189,11 +190,34 @@ def test_the_gui_command_without_the_gui_packages_names_the_fix():
 
     code = ("import sys; sys.modules['PySide6'] = None; from typer.testing import CliRunner; "
             "import insitu.cli.main as m; r = CliRunner().invoke(m.app, ['gui']); "
-            "print(r.exit_code, r.output)")
+            "print(r.exit_code, type(r.exception).__name__, r.output)")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                          timeout=60)
     assert out.returncode == 0, out.stderr
     lines = out.stdout.split("\n")
-    assert lines[0] == ("1 error: the GUI needs PySide6 and PyOpenGL (PySide6 is not "
+    assert lines[0] == ("1 SystemExit error: the GUI needs PySide6 and PyOpenGL (PySide6 is not "
                         "installed): pip install 'insitu[gui]'"), out.stdout
     assert "Traceback" not in out.stdout and not "".join(lines[1:]).strip()
+
+
+def test_a_code_hatch_follows_its_width_and_rotation_until_the_operator_sets_it():
+    s = Session()
+    qr = Placement('qr:"insitu"', (0.0, 0.0), 10.5)           # 21 modules of 0.5 mm
+    spacing, angle = sd.code_hatch(qr)
+    assert (spacing, angle) == pytest.approx((0.05, 0.0))
+    s.add_placement(Placement(qr.pattern, qr.at_mm, qr.width_mm, hatch_mm=spacing))
+    s.update_selected(width_mm=6.3)                            # 0.3 mm modules: 6 lines each
+    assert s.current().hatch_mm == pytest.approx(0.05)
+    s.update_selected(width_mm=7.35)                           # 0.35 mm: 7 lines of 0.05
+    s.update_selected(width_mm=8.4, rotate_deg=30.0)           # 0.4 mm: 8 lines, along the rows
+    assert (s.current().hatch_mm, s.current().hatch_angle_deg) == pytest.approx((0.05, 30.0))
+    s.update_selected(width_mm=5.25)                           # 0.25 mm: 5 lines
+    assert s.current().hatch_mm == pytest.approx(0.05)
+    s.update_selected(width_mm=4.62)                           # 0.22 mm: 5 lines of 0.044
+    assert s.current().hatch_mm == pytest.approx(0.044)
+    s.update_selected(hatch_mm=0.03)                           # the operator's own hatch stays
+    s.update_selected(width_mm=10.5)
+    assert (s.current().hatch_mm, s.current().hatch_angle_deg) == (0.03, 30.0)
+    s.add_placement(Placement('text:"A"', (0.0, 0.0), 5.0, hatch_mm=0.1))
+    s.update_selected(width_mm=8.0)                            # not a code: untouched
+    assert s.current().hatch_mm == 0.1 and sd.code_hatch(s.current()) is None

@@ -4,6 +4,7 @@ import json
 
 import numpy as np
 import pytest
+from pydantic import ValidationError
 
 from insitu.errors import FormatError
 from insitu.marking import (LaserOverride, LaserParams, MarkJob, Timing, estimate_time, make_job,
@@ -93,10 +94,10 @@ def edit(path, value):
     (edit(["paths", 0, "points"], "abc"), "paths[0].points: expected a list of [x, y, z] points"),
     (edit(["paths", 1, "points"], KeyError), "paths[1].points: missing (required)"),
     (edit(["paths"], {"a": 1}), "paths: expected a list"),
-    (edit(["laser", "power_pct"], 150), "laser.power_pct: expected a number <= 100.0, got 150"),
-    (edit(["laser", "mark_speed_mm_s"], 0), "laser.mark_speed_mm_s: expected a number > 0"),
+    (edit(["laser", "power_pct"], 150), "laser.power_pct: 150 is outside 0 … 100 %"),
+    (edit(["laser", "mark_speed_mm_s"], 0), "laser.mark_speed_mm_s: 0 is outside 0.1 … 20000 mm/s"),
     (edit(["paths", 1, "laser"], {"power_pct": -1}),
-     "paths[1].laser.power_pct: expected a number >= 0"),
+     "paths[1].laser.power_pct: -1 is outside 0 … 100 %"),
     (edit(["format"], "insitu-job/2"), "format: expected 'insitu-job/1', got 'insitu-job/2'"),
     (edit(["units"], "inch"), "units: expected 'mm'"),
     (edit(["frame"], "camera"), "frame: expected 'scan-head'"),
@@ -160,5 +161,5 @@ def test_points_from_arrays_are_rounded_and_read_only():
     job = make_job([np.array([[0.1234567891, 0, 0], [1, 1, 1]])])
     assert job.paths[0].points[0, 0] == 0.123457
     assert not job.paths[0].points.flags.writeable
-    with pytest.raises(Exception):
+    with pytest.raises(ValidationError, match=r"expected \(N, 3\) numbers"):
         MarkJob(paths=[{"points": np.zeros((3, 2))}])

@@ -32,7 +32,7 @@ def _one_line_error(res, message):
     assert res.exit_code == 1, res.output
     lines = [ln for ln in res.output.splitlines() if ln.strip()]
     assert len(lines) == 1 and message in lines[0], res.output
-    assert "Traceback" not in res.output
+    assert isinstance(res.exception, SystemExit), res.exception                # not an uncaught error
 
 
 def _grid(n, half):
@@ -150,10 +150,10 @@ def test_a_moved_camera_is_recovered_through_the_command(flow, tmp_path):
     deg, mm = pose_change(truth, old)
     assert deg > 0.45 and mm > 1.8 and _plate_error_mm(truth, old) > 1.0
     deg, mm = pose_change(truth, new)
-    assert deg < 0.1 and mm < 0.8, (deg, mm)
+    assert deg < 1.5 * 0.0384 and mm < 1.5 * 0.252, (deg, mm)     # 1.5 × today's figures
     # back to the operator's accuracy before the move (their intrinsics are not perfect)
     before_move = _plate_error_mm(default_rig(SEED, binning=4).camera, old)
-    assert _plate_error_mm(truth, new) < 1.3 * before_move + 0.02
+    assert _plate_error_mm(truth, new) < min(1.3 * before_move + 0.02, 1.5 * 0.152)
     cal = json.loads(out.read_text())
     assert cal["kind"] == "camera" and cal["residuals"]["point_to_beam_rms_mm"] < 0.1
     assert cal["pose_change"]["rotation_deg"] == pytest.approx(pose_change(old, new)[0])

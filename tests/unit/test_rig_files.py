@@ -110,7 +110,7 @@ def test_missing_field_is_named(tmp_path, drop, words):
 
 @pytest.mark.parametrize("change, words", [
     (lambda d: d.pop("mirror_distance_mm"), ["mirror_distance_mm: missing"]),
-    (lambda d: d.update(mirror_separation_mm=-1), ["mirror_separation_mm: expected a number >= 0"]),
+    (lambda d: d.update(mirror_separation_mm=-1), ["mirror_separation_mm: -1 is outside 0 … 200 mm"]),
     (lambda d: d.update(lens="fisheye"), ["lens: expected 'non-telecentric' or 'telecentric'"]),
     (lambda d: d.update(z_range_mm=[1, 1]), ["z_range_mm: expected [low, high] with low < high"]),
     (lambda d: d.update(field_size_mm=[200]), ["field_size_mm: expected 2 numbers, got [200]"]),

@@ -23,6 +23,7 @@ from insitu.calibrate.field import (DEFAULT_GOALS, DEFAULT_SMOOTHING, AreaStats,
                                     select_table)
 from insitu.errors import ConfigError
 from insitu.formats.sequence import CameraSpec
+from insitu.formats.bounds import each_within, within
 from insitu.formats.validation import Finite, PositivePair, Vec2, bad, numbers
 from insitu.geometry.field import check_in_field
 from insitu.rig.files import CalibrationEnvelope, load_json_model, save_json_model
@@ -30,17 +31,19 @@ from insitu.rig.files import CalibrationEnvelope, load_json_model, save_json_mod
 CONVENTION = ("landing(C) = C + delta(C) on z = 0 (delta = measured P - commanded Q); the "
               "command for target Q is the K with K + delta(K) = Q")
 _STRICT = ConfigDict(extra="forbid", allow_inf_nan=False)
+Sigma, MseGoal, Smoothing = within("rbf_sigma_mm"), within("mse_goal_mm2"), within("smoothing")
+Position = within("position_mm")
 
 
 class RBFSpec(BaseModel):
     """Mikkelstrup et al. Eqs. 7–8: g(x) = Σ w_j exp(-|x - c_j|² / 2σ²) + b, mm."""
 
     model_config = _STRICT
-    sigma_mm: float = Field(gt=0)
-    mse_goal_mm2: float = Field(ge=0)
-    centres_mm: list[Vec2] = Field(min_length=1)
-    weights_mm: list[Vec2] = Field(min_length=1)
-    bias_mm: Vec2
+    sigma_mm: Sigma
+    mse_goal_mm2: MseGoal
+    centres_mm: Annotated[list[Vec2], Field(min_length=1), each_within("position_mm")]
+    weights_mm: Annotated[list[Vec2], Field(min_length=1), each_within("rbf_weight_mm")]
+    bias_mm: Annotated[Vec2, each_within("correction_mm")]
 
     @model_validator(mode="after")
     def _one_weight_per_centre(self) -> "RBFSpec":
@@ -73,10 +76,10 @@ class TableSpec(BaseModel):
 
     model_config = _STRICT
     interpolation: Literal["bicubic-spline"] = "bicubic-spline"
-    smoothing: float = Field(default=0.0, ge=0)
-    x_nodes_mm: list[Finite] = Field(min_length=2)
-    y_nodes_mm: list[Finite] = Field(min_length=2)
-    values_mm: list[list[Vec2]]
+    smoothing: Smoothing = 0.0
+    x_nodes_mm: Annotated[list[Finite], Field(min_length=2), each_within("position_mm")]
+    y_nodes_mm: Annotated[list[Finite], Field(min_length=2), each_within("position_mm")]
+    values_mm: list[list[Annotated[Vec2, each_within("correction_mm")]]]
 
     @field_validator("x_nodes_mm", "y_nodes_mm")
     @classmethod
@@ -167,9 +170,9 @@ class FieldCorrection(CalibrationEnvelope):
     kind: Literal["field-correction"] = "field-correction"
     convention: str = CONVENTION
     method: Literal[tuple(FIELD_METHODS)]       # a key of the table
-    field_size_mm: PositivePair
-    region_mm: Annotated[list[Finite], numbers(4)]
-    plate_z_mm: Finite = 0.0
+    field_size_mm: Annotated[PositivePair, each_within("field_size_mm")]
+    region_mm: Annotated[list[Finite], numbers(4), each_within("position_mm")]
+    plate_z_mm: Position = 0.0
     camera: CameraSpec | None = None
     rbf: RBFSpec | None = None
     table: TableSpec | None = None

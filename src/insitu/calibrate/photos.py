@@ -15,6 +15,7 @@ import numpy as np
 
 from insitu.calibrate.camera import BoardSpec
 from insitu.errors import CalibrationError
+from insitu.formats.bounds import BOUNDS
 from insitu.formats.images import read_image
 from insitu.formats.limits import check_inside
 
@@ -30,9 +31,11 @@ def parse_board(text: str, charuco: str | None = None) -> BoardSpec:
         raise CalibrationError(f"--board {text!r}: expected COLSxROWSxSQUARE_MM, e.g. 9x6x25 "
                                "(inner corners across, inner corners down, square side in mm)")
     cols, rows, square = int(m[1]), int(m[2]), float(m[3])
-    if cols < 2 or rows < 2 or square <= 0:
-        raise CalibrationError(f"--board {text!r}: need at least 2 × 2 inner corners and a "
-                               "square side > 0 mm")
+    for what, value, bound in (("columns", cols, "board_corners"), ("rows", rows, "board_corners"),
+                               ("square side", square, "length_mm")):
+        why = BOUNDS[bound].problem(value)
+        if why is not None:
+            raise CalibrationError(f"--board {text!r}: {what} {why}")
     spec: dict = {"cols": cols, "rows": rows, "square_mm": square}
     if charuco is not None:
         name, _, marker = charuco.partition(":")
@@ -43,6 +46,9 @@ def parse_board(text: str, charuco: str | None = None) -> BoardSpec:
             except ValueError:
                 raise CalibrationError(f"--charuco {charuco!r}: expected DICT[:MARKER_MM], "
                                        "e.g. DICT_4X4_50:7") from None
+            why = BOUNDS["length_mm"].problem(spec["charuco"]["marker_mm"])
+            if why is not None:
+                raise CalibrationError(f"--charuco {charuco!r}: marker side {why}")
     return BoardSpec.from_spec(spec)
 
 

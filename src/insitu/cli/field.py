@@ -12,8 +12,8 @@ import typer
 from rich.table import Table
 
 from insitu.calibrate.field_file import FIELD_METHODS
-from insitu.cli.common import (check_output, console, err_console, fail, one_line_errors,
-                               progress_bar)
+from insitu.cli.common import (bounded, check_output, console, fail, one_line_errors,
+                               progress_bar, warn)
 from insitu.formats.validation import one_of
 
 
@@ -26,11 +26,14 @@ def field(
     method: Annotated[str, typer.Option(help="; ".join(f"{k}: {m.description}" for k, m in
                                                        FIELD_METHODS.items()) + ".")] = "rbf",
     sigma: Annotated[float | None, typer.Option(
+        callback=bounded("rbf_sigma_mm"),
         help="RBF spread σ, mm (default: chosen by 5-fold CV over 0.15…0.75 × the half "
              "field).")] = None,
     mse_goal: Annotated[float | None, typer.Option(
+        callback=bounded("mse_goal_mm2"),
         help="RBF MSE goal, mm² (default: chosen by 5-fold CV over 1e-5…1e-3).")] = None,
     smoothing: Annotated[float | None, typer.Option(
+        callback=bounded("smoothing"),
         help="Table smoothing (default: chosen by 5-fold CV over 1e-4…1).")] = None,
 ) -> None:
     """Fit a scan-field correction from a recorded field calibration: find each spot, intersect
@@ -42,9 +45,6 @@ def field(
     check_output(out, ".json")
     if method not in FIELD_METHODS:
         fail(f"--method {method!r}: expected {one_of(FIELD_METHODS)}")
-    for name, value in (("--sigma", sigma), ("--mse-goal", mse_goal), ("--smoothing", smoothing)):
-        if value is not None and not (value > 0 or (value == 0 and name != "--sigma")):
-            fail(f"{name} {value:g}: expected a positive number")
     options = {k: [v] for k, v in (("sigmas", sigma), ("goals", mse_goal),
                                    ("smoothing", smoothing)) if v is not None}
     with progress_bar("field calibration") as progress:
@@ -84,9 +84,8 @@ def correct(
     outside = cal.outside_region(Q)
     if outside.any():
         x0, x1, y0, y1 = cal.region_mm
-        err_console.print(f"[yellow]warning:[/] {int(outside.sum())} of {len(Q)} targets lie "
-                          f"outside the calibrated region x {x0:g}…{x1:g}, y {y0:g}…{y1:g} mm: "
-                          "their correction is extrapolated", highlight=False, soft_wrap=True)
+        warn(f"{int(outside.sum())} of {len(Q)} targets lie outside the calibrated region "
+             f"x {x0:g}…{x1:g}, y {y0:g}…{y1:g} mm: their correction is extrapolated")
     shift = (K - Q)
     console.print(f"wrote {out}: {len(K)} commands (correction up to "
                   f"{float(abs(shift).max()) if len(K) else 0.0:.3f} mm)", highlight=False)
@@ -99,6 +98,7 @@ def check(
     rec: Annotated[Path, typer.Argument(metavar="REC", help="Recorded field-calibration folder: "
                                         "a few spots on the plate, raw or corrected commands.")],
     tolerance: Annotated[float | None, typer.Option(
+        callback=bounded("tolerance_mm"),
         help="Largest landing error allowed, mm (default: 3 × the correction's CV RMS, at "
              "least 0.03 mm).")] = None,
 ) -> None:
@@ -108,8 +108,6 @@ def check(
     from insitu.calibrate.field_file import load_field_correction
     from insitu.services.field import check_drift
 
-    if tolerance is not None and not tolerance > 0:
-        fail(f"--tolerance {tolerance:g}: expected a positive number of mm")
     cal = load_field_correction(field_file)
     with progress_bar("drift check") as progress:
         d = check_drift(cal, rec, tolerance_mm=tolerance, progress=progress)

@@ -9,7 +9,7 @@ import numpy as np
 import typer
 from rich.table import Table
 
-from insitu.cli.common import check_output, console, one_line_errors, progress_bar
+from insitu.cli.common import bounded, check_output, console, one_line_errors, progress_bar
 
 app = typer.Typer(help="Mark jobs: show one, or mark it on the rig.", no_args_is_help=True,
                   rich_markup_mode="markdown")
@@ -24,7 +24,7 @@ Rig = Annotated[Path | None, typer.Option(help="Rig file (default: the simulated
 Field = Annotated[Path | None, typer.Option(help="Field correction (FIELD.json) to apply "
                                                  "(default: the rig file's).")]
 Workpiece = Annotated[str, typer.Option(help="Simulated rig: the part on the table.")]
-Seed = Annotated[int, typer.Option(help="Simulated rig: seed.")]
+Seed = Annotated[int, typer.Option(help="Simulated rig: seed.", callback=bounded("seed"))]
 
 
 def run_on_station(station, job, job_path: Path, resume: bool, preview: bool,
@@ -70,7 +70,27 @@ def show(job_path: Annotated[Path, typer.Argument(metavar="JOB.json", help="Mark
     if rec is not None:
         table.add_row("last run", f"{rec['state']}: {rec['completed']} of {rec['paths_total']} "
                                   f"paths ({rec['updated']})")
+    _variable_rows(table, job, job_path)
     console.print(table)
+
+
+def _variable_rows(table: Table, job, job_path: Path) -> None:
+    """The job's serial, rendered texts and the counter's next serial (variable data)."""
+    
+    from insitu.services.serials import counter_next, job_variables
+
+    var = job_variables(job, job_path)
+    if var is None:
+        return
+    if var.serial is not None:
+        path = var.counter_path(job_path)
+        nxt = counter_next(path)
+        table.add_row("serial", f"{var.serial}; counter {path}: next "
+                                + (f"{nxt}" if nxt is not None else "(counter not found)"))
+    for t in var.texts:
+        table.add_row("text", f"{t.text}  ← {t.spec}")
+    table.add_row("planned", var.time + "".join(f", {k}={v}"
+                                                for k, v in var.fields.items()))
 
 
 @app.command("run")

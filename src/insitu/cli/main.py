@@ -7,7 +7,6 @@ from pathlib import Path
 from typing import Annotated
 
 import typer
-from rich.markup import escape
 
 from insitu.cli import calibrate as calibrate_cmd
 from insitu.cli import camera as camera_cmd
@@ -18,8 +17,9 @@ from insitu.cli import mark as mark_cmd
 from insitu.cli import pattern as pattern_cmd
 from insitu.cli import record as record_cmd
 from insitu.cli import scan as scan_cmd
+from insitu.cli import serial as serial_cmd
 from insitu.cli import sim as sim_cmd
-from insitu.cli.common import err_console, fail
+from insitu.cli.common import bounded, err_console, fail, tagged
 
 GUI_MODULES = ("PySide6", "OpenGL")      # the packages of the ``gui`` extra, as imported
 app = typer.Typer(help=__doc__.split("\n")[0] if __doc__ else None, no_args_is_help=True,
@@ -39,6 +39,7 @@ galvo_app.command("check")(field_cmd.check)
 app.add_typer(galvo_app, name="galvo")
 app.add_typer(job_cmd.app, name="job")
 app.add_typer(pattern_cmd.app, name="pattern")
+app.add_typer(serial_cmd.app, name="serial")
 app.add_typer(sim_cmd.app, name="sim")
 
 
@@ -50,7 +51,7 @@ def gui(
     workpiece: Annotated[str, typer.Option(
         help="Simulated rig: the part on the table.")] = "step-block",
     binning: Annotated[int, typer.Option(
-        help="Simulated rig: divide the image size by this.")] = 2,
+        help="Simulated rig: divide the image size by this.", callback=bounded("binning"))] = 2,
 ) -> None:
     """Open the operator's application: connect the rig, scan, place patterns on the cloud,
     preview and mark, calibrate; projects save the whole session."""
@@ -62,7 +63,7 @@ def gui(
         missing = (e.name or "").split(".")[0]
         if isinstance(e, ModuleNotFoundError) and missing in GUI_MODULES:
             fail(f"the GUI needs PySide6 and PyOpenGL ({missing} is not installed): "
-                 + escape("pip install 'insitu[gui]'"))
+                 + "pip install 'insitu[gui]'")
         fail(f"the GUI cannot start: {e} (Qt/OpenGL libraries missing? see scripts/setup.sh)")
     raise typer.Exit(run(project, rig, workpiece, binning))
 
@@ -71,5 +72,5 @@ def main() -> None:
     try:
         app()
     except KeyboardInterrupt:
-        err_console.print("[bold red]error:[/] interrupted")
+        err_console.print(tagged("error:", "bold red", "interrupted"))
         sys.exit(130)

@@ -7,8 +7,9 @@ from typing import Annotated
 
 import typer
 from rich.table import Table
+from rich.text import Text
 
-from insitu.cli.common import check_output, console, fail, one_line_errors, progress_bar
+from insitu.cli.common import bounded, check_output, console, fail, one_line_errors, progress_bar
 from insitu.cli.job import (Field, Inspect, Preview, Resume, Rig, Seed, Workpiece,
                             run_on_station)
 from insitu.marking.modes import PROJECTIONS, projection_mode
@@ -21,43 +22,64 @@ from insitu.patterns.vector import BEAM_MM
 def mark(
     cloud: Annotated[Path, typer.Option(help="Measured point cloud (.ply) of the part.")],
     pattern: Annotated[str, typer.Option(help=f"A file or spec: {sources_help()}.")],
-    at: Annotated[tuple[float, float], typer.Option(help="Centre of the pattern X Y, mm, "
-                                                         "world frame.")],
+    at: Annotated[tuple[float, float], typer.Option(
+        callback=bounded("position_mm"), help="Centre of the pattern X Y, mm, "
+                                              "world frame.")],
     out: Annotated[Path, typer.Option("-o", "--output", help="Mark job to write (.json).")],
     width: Annotated[float | None, typer.Option(
+        callback=bounded("length_mm"),
         help="Width of the pattern, mm (before --rotate; a code's without its quiet zone; "
              "default: the size it loads at, e.g. a code's ;module=).")] = None,
-    rotate: Annotated[float, typer.Option(help="Rotation, degrees CCW about +z.")] = 0.0,
+    rotate: Annotated[float, typer.Option(
+        callback=bounded("angle_deg"), help="Rotation, degrees CCW about +z.")] = 0.0,
     mode: Annotated[str, typer.Option(help="; ".join(f"{k}: {m.description}" for k, m in
                                                      PROJECTIONS.items()) + ".")] = "planar",
-    hatch: Annotated[float | None, typer.Option(help="Fill filled regions with hatch lines this "
-                                                     "far apart, mm (default: outlines "
-                                                     "only).")] = None,
-    hatch_angle: Annotated[float, typer.Option(help="Hatch direction, degrees from +x.")] = 0.0,
+    hatch: Annotated[float | None, typer.Option(
+        callback=bounded("length_mm"), help="Fill filled regions with hatch lines this "
+                                            "far apart, mm (default: outlines "
+                                            "only).")] = None,
+    hatch_angle: Annotated[float, typer.Option(
+        callback=bounded("angle_deg"), help="Hatch direction, degrees from +x.")] = 0.0,
     cross: Annotated[bool, typer.Option(help="Cross-hatch (a second hatch at +90°).")] = False,
     fill: Annotated[str, typer.Option(help="A DXF's closed outlines: auto (fills where the "
                                            "file has hatches, solids, wide polylines, text; "
                                            "other outlines as lines), all (fill every closed "
                                            "outline), none (outlines only).")] = "auto",
-    beam: Annotated[float, typer.Option(help="Beam width, mm: strokes at least this wide are "
-                                             "marked as their area, thinner ones as lines; a "
-                                             "code's default hatch is no coarser.")] = BEAM_MM,
+    beam: Annotated[float, typer.Option(
+        callback=bounded("length_mm"), help="Beam width, mm: strokes at least this wide are "
+                                            "marked as their area, thinner ones as lines; a "
+                                            "code's default hatch is no coarser.")] = BEAM_MM,
     force: Annotated[bool, typer.Option(help="Write the job even when a code would not decode "
                                              "from the planned marks.")] = False,
-    power: Annotated[float, typer.Option(help="Laser power, % of full.")] = 30.0,
-    frequency: Annotated[float, typer.Option(help="Pulse frequency, kHz.")] = 20.0,
-    speed: Annotated[float, typer.Option(help="Mark speed, mm/s.")] = 500.0,
-    jump_speed: Annotated[float, typer.Option(help="Jump speed, mm/s.")] = 3000.0,
+    power: Annotated[float, typer.Option(
+        callback=bounded("power_pct"), help="Laser power, % of full.")] = 30.0,
+    frequency: Annotated[float, typer.Option(
+        callback=bounded("frequency_khz"), help="Pulse frequency, kHz.")] = 20.0,
+    speed: Annotated[float, typer.Option(
+        callback=bounded("mark_speed_mm_s"), help="Mark speed, mm/s.")] = 500.0,
+    jump_speed: Annotated[float, typer.Option(
+        callback=bounded("jump_speed_mm_s"), help="Jump speed, mm/s.")] = 3000.0,
     run: Annotated[bool, typer.Option(help="Also mark the job on the rig (with --preview, "
                                            "--resume, --inspect).")] = False,
     preview: Preview = False, resume: Resume = False, inspect: Inspect = None, rig: Rig = None,
     field: Field = None, workpiece: Workpiece = "step-block", seed: Seed = 0,
+    fields: Annotated[list[str] | None, typer.Option(
+        "--var", metavar="NAME=VALUE", help="A value for {NAME} in the pattern's text "
+        "(again for more fields); {serial}, {date}, {time} are built in.")] = None,
+    counter: Annotated[Path | None, typer.Option(
+        help="Serial counter for {serial} (default: serial.counter.json beside the job).")] = None,
+    serial_start: Annotated[int | None, typer.Option(
+        help="Create the serial counter, its first serial this.")] = None,
 ) -> None:
     """Place a pattern with its centre at X Y, WIDTH mm wide, turned by --rotate; project it
     onto the measured surface (--mode) and write the mark job. The job is refused,
     and nothing is written, when any point lies outside the scan field or the focus range, over
     a hole in the cloud or over a steep wall. --run then marks it: the laser is on only while
-    marking, off at once on any fault, and an interrupted job resumes with --resume."""
+    marking, off at once on any fault, and an interrupted job resumes with --resume.
+    Variable data: a text with {serial:05d}, {date:%Y-%m-%d}, {time:%H%M} or {NAME}
+    (--var NAME=VALUE) is rendered when the job is planned; {serial} takes the counter's next
+    serial, issued once the job passed its checks, never handed out again (a resume marks the
+    job's own)."""
     from insitu.marking import LaserParams, Placement, read_job
     from insitu.services import mark as svc
     from insitu.services.station import connect
@@ -68,16 +90,8 @@ def mark(
         check_output(inspect, ".png")
     if (preview or resume or inspect is not None) and not run:
         fail("--preview, --resume and --inspect go with --run")
-    if not 0 <= power <= 100:
-        fail(f"--power {power:g}: expected 0 … 100 %")
-    for name, value in (("--frequency", frequency), ("--speed", speed),
-                        ("--jump-speed", jump_speed)):
-        if not value > 0:
-            fail(f"{name} {value:g}: expected a positive number")
     if fill not in FILL_MODES:
         fail(f"--fill {fill!r}: expected one of {', '.join(FILL_MODES)}")
-    if not beam > 0:
-        fail(f"--beam {beam:g}: expected a positive number")
     placement = Placement(pattern, at, width, rotate, mode, hatch, hatch_angle, cross, fill,
                           beam)
     laser = LaserParams(power_pct=power, frequency_khz=frequency, mark_speed_mm_s=speed,
@@ -85,17 +99,36 @@ def mark(
     with connect(rig, workpiece, seed, field=field) as station:
         with progress_bar("projecting") as progress:
             progress(0, 1)
-            plan = svc.plan_mark(cloud, placement, station.driver, laser, force)
+            plan, rec = _plan(out, placement, lambda p: svc.plan_mark(
+                cloud, p, station.driver, laser, force), resume, fields, counter, serial_start)
         if resume and (not out.exists() or read_job(out).digest() != plan.job.digest()):
             fail(f"--resume: {out} does not hold this job; run without --resume to start it")
-        if not resume:
-            svc.save_job(out, plan.job)
-        _summary(out, placement, plan, station.field)
+        _summary(out, placement, plan, station.field, rec)
         if run:
             run_on_station(station, plan.job, out, resume, preview, inspect)
 
 
-def _summary(out: Path, placement, plan, field: Path | None) -> None:
+def _plan(out: Path, placement, plan_mark, resume: bool, fields, counter, start):
+    """(plan, variable-data record or None): planned and written with the serial taken from
+    the counter, or, with ``resume``, planned again as the job at ``out`` was (nothing
+    written, no serial taken)."""
+    from insitu.marking import read_job
+    from insitu.patterns.fields import parse_fields
+    from insitu.services import serials
+
+    values = parse_fields(fields or [])
+    if resume:
+        if counter is not None or start is not None:
+            fail("--resume marks the job's own serial: drop --counter and --serial-start")
+        plan = serials.replan(out, [placement], lambda ps: plan_mark(ps[0]), values)
+        return plan, serials.job_variables(read_job(out), out) if out.exists() else None
+    done = serials.plan_and_save(out, [placement], lambda ps: plan_mark(ps[0]),
+                                 lambda plan: plan.job, counter=counter, fields=values,
+                                 start=start)
+    return done.result, done.record
+
+
+def _summary(out: Path, placement, plan, field: Path | None, rec=None) -> None:
     pts = plan.projection.points
     (cx, cy), (w, h) = plan.pattern.centre, plan.pattern.size
     e = plan.estimate
@@ -108,7 +141,13 @@ def _summary(out: Path, placement, plan, field: Path | None) -> None:
         fill = "hatch {:.4g} mm at {:g}° along the modules".format(
             *placement.code_hatch(plan.pattern))
     for note in plan.pattern.notes:
-        table.add_row("loaded", note)
+        table.add_row(Text("warning", "yellow") if note.startswith("warning:") else "loaded",
+                      note)
+    if rec is not None:
+        for t in rec.texts:
+            table.add_row("renders", t.text)
+        if rec.serial is not None:
+            table.add_row("serial", f"{rec.serial} (issued from {rec.counter})")
     table.add_row("marks", f"{len(plan.job.paths):,} paths, {len(pts):,} points ({fill})")
     mode = placement.mode + (f", worst stretch {plan.projection.max_stretch:.2%}"
                              if PROJECTIONS[placement.mode].stretches else "")

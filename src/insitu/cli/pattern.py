@@ -10,8 +10,9 @@ import cv2
 import numpy as np
 import typer
 from rich.table import Table
+from rich.text import Text
 
-from insitu.cli.common import check_output, console, fail, one_line_errors
+from insitu.cli.common import bounded, check_output, console, fail, one_line_errors
 from insitu.patterns.dxf import FILL_MODES
 from insitu.patterns.load import sources_help
 from insitu.patterns.vector import BEAM_MM
@@ -44,6 +45,13 @@ def preview(pattern, size_px: int = 800, margin_px: int = 20) -> np.ndarray:
     return img
 
 
+def _render(spec: str, fields: list[str], serial: int) -> str:
+    """``spec`` with its variable data rendered for a preview (serial ``serial``, now)."""
+    from insitu.patterns.fields import Variables, parse_fields, render_spec
+
+    return render_spec(spec, Variables(serial, parse_fields(fields)))
+
+
 @app.command("show")
 @one_line_errors
 def show(
@@ -52,12 +60,18 @@ def show(
                                              help="Preview picture to write (.png).")] = None,
     fill: Annotated[str, typer.Option(help="A DXF's closed outlines: auto, all or "
                                            "none.")] = "auto",
-    beam: Annotated[float, typer.Option(help="Beam width, mm: strokes at least this wide "
-                                             "are areas.")] = BEAM_MM,
+    beam: Annotated[float, typer.Option(
+        callback=bounded("length_mm"), help="Beam width, mm: strokes at least this wide "
+                                            "are areas.")] = BEAM_MM,
+    fields: Annotated[list[str] | None, typer.Option(
+        "--var", metavar="NAME=VALUE", help="A value for {NAME} in the text.")] = None,
+    serial: Annotated[int, typer.Option(help="The serial {serial} is shown with "
+                                             "(a preview: no counter is read).")] = 1,
 ) -> None:
     """Load a pattern as insitu mark would (at its own size) and say what will be marked:
     filled area, lines, closed outlines, size in mm, units chosen, remarks. -o writes a
-    preview: fills gray, lines blue, outlines red, a code's quiet zone green."""
+    preview: fills gray, lines blue, outlines red, a code's quiet zone green. A text with
+    variable data ({serial}, {date}, --var values) is shown rendered as a preview."""
     import shapely
 
     from insitu.formats.atomic import atomic_write_bytes
@@ -67,12 +81,16 @@ def show(
         fail(f"--fill {fill!r}: expected one of {', '.join(FILL_MODES)}")
     if out is not None:
         check_output(out, ".png")
-    p = load_pattern(spec, fill=fill, beam=beam)
+    rendered = _render(spec, fields or [], serial)
+    p = load_pattern(rendered, fill=fill, beam=beam)
     closed = sum(1 for q in p.paths if len(q) > 2 and np.allclose(q[0], q[-1]))
     lines = len(p.paths) - closed
     length = sum(float(np.linalg.norm(np.diff(q, axis=0), axis=1).sum()) for q in p.paths)
     (w, h), (x0, y0, _, _) = p.size, p.bounds()
     table = Table(title=f"pattern {p.name}", show_header=False)
+    if rendered != spec:
+        table.add_row("preview", f"{rendered} (variable data; serial {serial} as an "
+                                 "example)")
     table.add_row("size", f"{w:.4g} × {h:.4g} mm (from {x0:.4g}, {y0:.4g})")
     table.add_row("fills", f"{len(p.contours):,} contours, {shapely.area(p.to_shapely()):.4g} "
                            "mm² (hatched when marked)")
@@ -85,7 +103,8 @@ def show(
         table.add_row("strokes", ", ".join(f"{x:.3g}" for x in p.stroke_widths[:8])
                       + (" …" if len(p.stroke_widths) > 8 else "") + f" mm wide (beam {beam:g})")
     for note in p.notes:
-        table.add_row("loaded", note)
+        table.add_row(Text("warning", "yellow") if note.startswith("warning:") else "loaded",
+                      note)
     console.print(table)
     if out is not None:
         ok, buf = cv2.imencode(".png", preview(p))

@@ -9,8 +9,8 @@ from typing import Annotated
 
 import typer
 
-from insitu.cli.common import (check_output, console, fail, one_line_errors, parse_heights,
-                               progress_bar)
+from insitu.cli.common import (bounded, check_output, console, fail, one_line_errors,
+                               parse_heights, progress_bar)
 from insitu.services import record as svc
 
 
@@ -21,16 +21,20 @@ def record(
     out: Annotated[Path, typer.Option("-o", "--output",
                                       help="Folder to write (replaced if it exists).")],
     rig: Annotated[Path, typer.Option(help="Rig file of the station.")],
-    spacing: Annotated[float, typer.Option(help="Scan: line spacing, mm.")] = 0.5,
+    spacing: Annotated[float, typer.Option(
+        callback=bounded("spacing_mm"), help="Scan: line spacing, mm.")] = 0.5,
     region: Annotated[tuple[float, float, float, float] | None, typer.Option(
+        callback=bounded("position_mm"),
         help="Scan: region X0 X1 Y0 Y1, mm (required on a real rig).")] = None,
-    grid: Annotated[int, typer.Option(help="Field calibration: spots per side.")] = 21,
+    grid: Annotated[int, typer.Option(
+        callback=bounded("count"), help="Field calibration: spots per side.")] = 21,
     marked: Annotated[bool, typer.Option(help="Field calibration: mark circles on the plate "
                                               "and image them instead of pilot spots.")] = False,
     heights: Annotated[str, typer.Option(metavar="Z1,Z2,...", help="Field calibration: plate "
                                          "heights, mm, comma-separated.")] = "0",
-    views: Annotated[int, typer.Option(help="Camera calibration: checkerboard views (the "
-                                            "operator moves the board between them).")] = 15,
+    views: Annotated[int, typer.Option(
+        callback=bounded("count"), help="Camera calibration: checkerboard views (the "
+                                        "operator moves the board between them).")] = 15,
 ) -> None:
     """Record a sequence (formats.md) on the station a rig file names: a scan, the height
     calibration on the plate (Z stage), the field calibration (pilot spots or marked
@@ -40,8 +44,6 @@ def record(
 
     if kind not in svc.KINDS:
         fail(f"KIND {kind!r}: expected one of {', '.join(svc.KINDS)}")
-    if not spacing > 0:
-        fail(f"--spacing {spacing:g}: expected a positive line spacing in mm")
     plate_z = parse_heights(heights)
     if kind == "camera-calibration" and not sys.stdin.isatty():
         fail("camera-calibration: the operator moves the board between views; run it at a "

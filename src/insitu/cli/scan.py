@@ -8,7 +8,7 @@ from typing import Annotated
 import typer
 from rich.table import Table
 
-from insitu.cli.common import check_output, console, fail, one_line_errors, progress_bar
+from insitu.cli.common import bounded, check_output, console, fail, one_line_errors, progress_bar
 from insitu.formats.validation import one_of
 from insitu.measure.height_models import HEIGHT_MODELS
 
@@ -29,12 +29,17 @@ def scan(
                                                      HEIGHT_MODELS.items()) + ".")] = None,
     rig: Annotated[Path | None, typer.Option(help="Rig file (default: the simulated rig).")] = None,
     workpiece: Annotated[str, typer.Option(help="Simulated rig: the part on the table.")] = "step-block",
-    spacing: Annotated[float, typer.Option(help="Line spacing, mm.")] = 0.5,
+    spacing: Annotated[float, typer.Option(
+        callback=bounded("spacing_mm"), help="Line spacing, mm.")] = 0.5,
     region: Annotated[tuple[float, float, float, float] | None,
-                      typer.Option(help="Region X0 X1 Y0 Y1, mm (default on the simulated rig: the whole part; a real rig needs one).")] = None,
-    seed: Annotated[int, typer.Option(help="Simulated rig: seed.")] = 0,
-    binning: Annotated[int, typer.Option(help="Simulated rig: divide the image size by this.")] = 1,
+                      typer.Option(callback=bounded("position_mm"),
+                                   help="Region X0 X1 Y0 Y1, mm (default on the simulated rig: "
+                                        "the whole part; a real rig needs one).")] = None,
+    seed: Annotated[int, typer.Option(callback=bounded("seed"), help="Simulated rig: seed.")] = 0,
+    binning: Annotated[int, typer.Option(
+        callback=bounded("binning"), help="Simulated rig: divide the image size by this.")] = 1,
     line_speed: Annotated[float | None, typer.Option(
+        callback=bounded("mark_speed_mm_s"),
         help="How fast the head sweeps each line, mm/s (default: the rig file's).")] = None,
     preview: Annotated[Path | None, typer.Option(help="Also write a picture of the cloud (.png).")] = None,
 ) -> None:
@@ -52,8 +57,6 @@ def scan(
         fail("--method height needs --height-cal HCAL")
     if height_model is not None and height_model not in HEIGHT_MODELS:
         fail(f"--height-model {height_model!r}: expected {one_of(HEIGHT_MODELS)}")
-    if spacing <= 0:
-        fail(f"--spacing {spacing:g}: expected a positive line spacing in mm")
     cal = None
     if method == "height":
         with progress_bar("height calibration") as progress:

@@ -7,8 +7,8 @@ from typing import Annotated
 
 import typer
 
-from insitu.cli.common import (check_output, console, fail, one_line_errors, parse_heights,
-                               progress_bar)
+from insitu.cli.common import (bounded, check_output, console, fail, one_line_errors,
+                               parse_heights, progress_bar)
 from insitu.services import record
 from insitu.sim.workpieces import WORKPIECES
 
@@ -24,13 +24,18 @@ def record_cmd(
     out: Annotated[Path, typer.Option("-o", "--output", help="Folder to write (replaced if it exists).")],
     workpiece: Annotated[str, typer.Option(help=f"For a scan: {', '.join(WORKPIECES)} or a "
                                                 "mesh file (STL/PLY/OBJ).")] = "step-block",
-    spacing: Annotated[float, typer.Option(help="Scan line spacing, mm.")] = 0.5,
+    spacing: Annotated[float, typer.Option(
+        callback=bounded("spacing_mm"), help="Scan line spacing, mm.")] = 0.5,
     region: Annotated[tuple[float, float, float, float] | None,
-                      typer.Option(help="Scan region X0 X1 Y0 Y1, mm (default: the part).")] = None,
-    seed: Annotated[int, typer.Option(help="Seed of the simulated rig and its noise.")] = 0,
+                      typer.Option(callback=bounded("position_mm"),
+                                   help="Scan region X0 X1 Y0 Y1, mm (default: the part).")] = None,
+    seed: Annotated[int, typer.Option(
+        callback=bounded("seed"), help="Seed of the simulated rig and its noise.")] = 0,
     binning: Annotated[int, typer.Option(help="Divide the 2448×2048 image by this (1, 2, 4).")] = 1,
-    views: Annotated[int, typer.Option(help="Camera calibration: checkerboard views.")] = 15,
-    grid: Annotated[int, typer.Option(help="Field calibration: spots per side.")] = 21,
+    views: Annotated[int, typer.Option(
+        callback=bounded("count"), help="Camera calibration: checkerboard views.")] = 15,
+    grid: Annotated[int, typer.Option(
+        callback=bounded("count"), help="Field calibration: spots per side.")] = 21,
     marked: Annotated[bool, typer.Option(help="Field calibration: mark circles on the plate "
                                               "and image them instead of pilot spots.")] = False,
     heights: Annotated[str, typer.Option(
@@ -39,10 +44,12 @@ def record_cmd(
              "record the spots `insitu calibrate camera` needs to re-estimate the camera's "
              "pose after it moved.")] = "0",
     camera_moved_deg: Annotated[float, typer.Option(
+        callback=bounded("angle_deg"),
         help="Knock the camera after its calibration: turn it by this angle, degrees, about a "
              "random axis (from --seed). sequence.json keeps the operator's calibration of the "
              "old pose; truth.json holds the moved camera.")] = 0.0,
     camera_moved_mm: Annotated[float, typer.Option(
+        callback=bounded("move_mm"),
         help="Knock the camera after its calibration: move it by this distance, mm, in a "
              "random direction (from --seed).")] = 0.0,
 ) -> None:
@@ -81,7 +88,8 @@ def record_cmd(
 @one_line_errors
 def calib_cmd(
     out: Annotated[Path, typer.Option("-o", "--output", help="Folder for the files (created).")],
-    seed: Annotated[int, typer.Option(help="Seed of the simulated rig.")] = 0,
+    seed: Annotated[int, typer.Option(
+        callback=bounded("seed"), help="Seed of the simulated rig.")] = 0,
 ) -> None:
     """Write the simulated rig's files as its operator knows them: camera.json (calibrated
     camera, with realistic errors), scan-head.json (nominal geometry) and rig.json."""

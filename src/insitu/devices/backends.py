@@ -13,6 +13,9 @@ naming ``options.<block>.<key>``); relative paths in them are relative to the ri
   power_pct, frequency_khz}
 - stage ``grbl``: ``options.stage`` = {port, baudrate, axis, sign, offset_mm, feed_mm_min,
   z_range_mm, timeout_s, home_on_open}
+
+A native library these name (``options.rtc.library``, ``options.camera.producer``) is loaded
+only if the station file allows it (:mod:`.native`), never because the rig file names it.
 """
 
 from __future__ import annotations
@@ -73,6 +76,8 @@ def _build(cfg, block: str, target, **fixed):
         return target(**opts, **fixed)
     except TypeError as e:
         raise ConfigError(f"{cfg.path}: options.{block}: {e}") from None
+    except ConfigError as e:               # a value out of its bounds, named options.<block>.<key>
+        raise ConfigError(f"{cfg.path}: {e}") from None
 
 
 def open_camera(cfg, sim: Devices | None = None) -> Camera:
@@ -84,7 +89,10 @@ def open_camera(cfg, sim: Devices | None = None) -> Camera:
                               "camera (a device index such as 0, or a path)")
         if isinstance(opts["source"], str) and "://" not in opts["source"]:
             opts["source"] = str(cfg.resolve(opts["source"]))      # file, sequence, device
-        return OpenCVCamera(**opts)
+        try:
+            return OpenCVCamera(**opts)
+        except ConfigError as e:           # a value out of its bounds, named options.camera.<key>
+            raise ConfigError(f"{cfg.path}: {e}") from None
     if cfg.camera == "genicam":
         from insitu.devices.camera_genicam import GenICamCamera
         if "producer" not in cfg.options.get("camera", {}):

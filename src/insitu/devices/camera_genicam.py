@@ -1,5 +1,6 @@
 """GenICam industrial cameras (GigE Vision, USB3 Vision, …) through `harvesters` and the
-camera maker's GenTL producer (a ``.cti`` file named in the rig file).
+camera maker's GenTL producer (a ``.cti`` file named in the rig file, loaded only if the
+station file allows it: :mod:`.native`).
 
 Features are set by their SFNC names: PixelFormat (Mono8 → uint8 frames; Mono10/12/16 and
 their packed forms → uint16), ExposureTime (µs; ExposureTimeAbs on older cameras), Gain (dB),
@@ -22,7 +23,9 @@ from pathlib import Path
 import numpy as np
 from harvesters.core import Harvester
 
+from insitu.devices.native import allowed_library
 from insitu.errors import ConfigError, DeviceError
+from insitu.formats.bounds import check
 
 PIXEL_FORMATS = ("Mono8", "Mono10", "Mono12", "Mono16", "Mono10p", "Mono12p", "Mono12Packed")
 TRIGGERS = ("free", "software", "hardware")
@@ -42,13 +45,20 @@ class GenICamCamera:
         if trigger not in TRIGGERS:
             raise ConfigError(f"options.camera.trigger: expected one of {', '.join(TRIGGERS)}, "
                               f"got {trigger!r}")
+        for key, bound, value in (("exposure_ms", "exposure_ms", exposure_ms),
+                                  ("gain_db", "gain_db", gain_db),
+                                  ("num_buffers", "count", num_buffers),
+                                  ("timeout_s", "timeout_s", timeout_s)):
+            if value is not None:
+                check(bound, value, f"options.camera.{key}", ConfigError)
         producer = Path(producer)
         if not producer.is_file():
             raise DeviceError(f"GenICam: GenTL producer {producer} not found (install the "
                               "camera maker's SDK and name its .cti file in the rig file)")
+        real = allowed_library(producer, "options.camera.producer")   # the station's consent
         self.timeout_s, self.trigger = float(timeout_s), trigger
         self.harvester = Harvester()
-        self.harvester.add_file(str(producer), check_validity=True)
+        self.harvester.add_file(str(real), check_validity=True)
         self.harvester.update()
         found = [d.serial_number for d in self.harvester.device_info_list]
         if not found:

@@ -24,7 +24,8 @@ from typing import Any
 import cv2
 import numpy as np
 
-from insitu.errors import DeviceError
+from insitu.errors import ConfigError, DeviceError
+from insitu.formats.bounds import check
 
 
 class _Reader:
@@ -79,6 +80,11 @@ class OpenCVCamera:
     def __init__(self, source: int | str, resolution: tuple[int, int] | None = None,
                  exposure_ms: float | None = None, gain: float | None = None,
                  timeout_s: float = 5.0):
+        for key, bound, value in (("exposure_ms", "exposure_ms", exposure_ms),
+                                  ("timeout_s", "timeout_s", timeout_s),
+                                  *(("resolution", "image_px", v) for v in resolution or ())):
+            if value is not None:
+                check(bound, value, f"options.camera.{key}", ConfigError)
         self.source, self.timeout_s = source, float(timeout_s)
         self.name = f"OpenCV camera {source!r}"
         self._reader = _Reader(self.name)

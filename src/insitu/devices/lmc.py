@@ -30,7 +30,8 @@ import usb.util
 
 from insitu.devices.galvo import Command
 from insitu.devices.watchdog import Heartbeat
-from insitu.errors import DeviceError, SafetyError
+from insitu.errors import ConfigError, DeviceError, SafetyError
+from insitu.formats.bounds import check_fields
 from insitu.geometry.beams import TwoMirrorHead
 
 VENDOR, PRODUCT, EP_OUT, EP_IN = 0x9588, 0x9899, 0x02, 0x88
@@ -62,6 +63,15 @@ class LmcSettings:
     usb_timeout_ms: int = 500
     timeout_s: float = 60.0
     heartbeat_s: float = 0.25
+
+    def __post_init__(self):
+        check_fields(self, _LMC_BOUNDS, "options.lmc", ConfigError)
+
+
+_LMC_BOUNDS = {"bits_per_deg": "bits_per_deg", "index": "board_index", "laser_pin": "board_index",
+               "pilot_pin": "board_index", "focus_tolerance_mm": "focus_tolerance_mm",
+               "usb_timeout_ms": "usb_timeout_ms", "timeout_s": "timeout_s",
+               "heartbeat_s": "heartbeat_s"}
 
 
 def _delay(us: float) -> tuple[int, int]:

@@ -18,7 +18,8 @@ import numpy as np
 
 from insitu.devices.galvo import Command, FieldCorrection, joint_from_targets
 from insitu.devices.protocols import check_in_field
-from insitu.errors import DeviceError, SafetyError
+from insitu.errors import ConfigError, DeviceError, SafetyError
+from insitu.formats.bounds import check
 from insitu.geometry.beams import TwoMirrorHead
 
 
@@ -33,6 +34,11 @@ class GalvoLineProjector:
                  first_draw_timeout_s: float = 5.0):
         if source not in ("pilot", "laser"):
             raise DeviceError(f"line projection: source must be 'pilot' or 'laser', got {source!r}")
+        for key, bound, value in (("speed_mm_s", "mark_speed_mm_s", speed_mm_s),
+                                  ("sweeps", "sweeps", sweeps),
+                                  ("power_pct", "power_pct", power_pct),
+                                  ("frequency_khz", "frequency_khz", frequency_khz)):
+            check(bound, value, f"options.projection.{key}", ConfigError)
         self.controller, self.head, self.correction = controller, head, correction
         self.field_size_mm, self.z_range_mm = tuple(field_size_mm), tuple(z_range_mm)
         self.speed, self.sweeps, self.source = float(speed_mm_s), int(sweeps), source

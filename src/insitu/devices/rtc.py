@@ -30,8 +30,10 @@ from pathlib import Path
 import numpy as np
 
 from insitu.devices.galvo import Command, focus_points
+from insitu.devices.native import allowed_library
 from insitu.devices.watchdog import Heartbeat
 from insitu.errors import ConfigError, DeviceError, SafetyError
+from insitu.formats.bounds import check_fields
 from insitu.geometry.beams import TwoMirrorHead
 
 BITS_MAX = 2**19 - 1                 # 20-bit signed coordinates (RTC5 and RTC6)
@@ -86,9 +88,18 @@ class RtcSettings:
     timeout_s: float = 30.0
     heartbeat_s: float = 0.25
 
+    def __post_init__(self):
+        check_fields(self, _RTC_BOUNDS, "options.rtc", ConfigError)
+
     @property
     def kz(self) -> float:
         return self.kz_bits_per_mm if self.kz_bits_per_mm is not None else self.k_bits_per_mm
+
+
+_RTC_BOUNDS = {"k_bits_per_mm": "k_bits_per_mm", "kz_bits_per_mm": "k_bits_per_mm",
+               "card": "board_index", "correction_table": "board_index",
+               "laser_mode": "board_index", "pulse_length_us": "pulse_length_us",
+               "pilot_bit": "board_index", "timeout_s": "timeout_s", "heartbeat_s": "heartbeat_s"}
 
 
 class RtcListBuilder:
@@ -156,14 +167,16 @@ def _clip(v: float, hi: int) -> int:
 
 
 class RtcLibrary:
-    """The RTC DLL with declared ctypes signatures; every call is checked for existence."""
+    """The RTC DLL with declared ctypes signatures; every call is checked for existence.
+    Loaded only if the station file allows it (:mod:`.native`)."""
 
     def __init__(self, path: Path, generation: int):
         if generation not in (5, 6):
             raise ConfigError(f"options.rtc.generation: expected 5 or 6, got {generation!r}")
+        real = allowed_library(path, "options.rtc.library")   # the station's consent first
         try:
             loader = ctypes.WinDLL if os.name == "nt" else ctypes.CDLL   # __stdcall on Windows
-            self.dll = loader(str(path))
+            self.dll = loader(str(real))
         except OSError as e:
             raise DeviceError(f"RTC: cannot load the library {path} ({e})") from None
         sigs = dict(SIGNATURES)

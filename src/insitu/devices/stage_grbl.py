@@ -16,6 +16,7 @@ from collections.abc import Callable
 import serial
 
 from insitu.errors import ConfigError, DeviceError
+from insitu.formats.bounds import check
 
 ALARMS = {1: "hard limit triggered", 2: "soft limit: target outside the travel",
           3: "reset while in motion (position lost; home again)", 4: "probe fail",
@@ -60,6 +61,12 @@ class GrblStage:
         axis = axis.upper()
         if axis not in "XYZ" or len(axis) != 1:
             raise ConfigError(f"options.stage.axis: expected X, Y or Z, got {axis!r}")
+        for key, bound, value in (("offset_mm", "position_mm", offset_mm),
+                                  ("feed_mm_min", "feed_mm_min", feed_mm_min),
+                                  ("z_range_mm[0]", "position_mm", z_range_mm[0]),
+                                  ("z_range_mm[1]", "position_mm", z_range_mm[1]),
+                                  ("timeout_s", "timeout_s", timeout_s)):
+            check(bound, value, f"options.stage.{key}", ConfigError)
         self.axis, self.index = axis, "XYZ".index(axis)
         self.sign, self.offset_mm, self.feed = float(sign), float(offset_mm), float(feed_mm_min)
         self.z_range_mm, self.timeout_s, self.poll_s = tuple(z_range_mm), timeout_s, poll_s

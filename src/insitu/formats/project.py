@@ -24,12 +24,13 @@ from collections.abc import Callable, Collection
 from dataclasses import asdict, dataclass, field
 from datetime import datetime, timezone
 from pathlib import Path
-from typing import Any, Literal
+from typing import Annotated, Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
 from insitu.errors import FormatError
 from insitu.formats.atomic import atomic_write_text
+from insitu.formats.bounds import each_within, within
 from insitu.formats.validation import dump_json, one_of, read_json, validation_message
 
 PROJECT_FORMAT = "insitu-project/1"
@@ -69,10 +70,16 @@ class _Strict(BaseModel):
     model_config = ConfigDict(extra="forbid", allow_inf_nan=False)
 
 
+Seed, Binning = within("seed", int), within("binning", int)
+Region = Annotated[tuple[float, float, float, float], each_within("position_mm")]
+Spacing, Speed, Length = within("spacing_mm"), within("mark_speed_mm_s"), within("length_mm")
+Angle, Exposure = within("angle_deg"), within("exposure_ms")
+
+
 class _Rig(_Strict):
     workpiece: str = "step-block"
-    seed: int = 0
-    binning: int = Field(2, ge=1, le=16)
+    seed: Seed = 0
+    binning: Binning = 2
     rig_file: str | None = None
 
 
@@ -83,24 +90,24 @@ class _Calibration(_Strict):
 
 
 class _Scan(_Strict):
-    region: tuple[float, float, float, float] | None = None
-    spacing_mm: float = Field(0.5, gt=0)
-    exposure_ms: float = Field(10.0, gt=0)
+    region: Region | None = None
+    spacing_mm: Spacing = 0.5
+    exposure_ms: Exposure = 10.0
     replay: str | None = None
-    speed_mm_s: float = Field(2000.0, gt=0)
+    speed_mm_s: Speed = 2000.0
 
 
 class _Placement(_Strict):
     pattern: str = Field(min_length=1)
-    at_mm: tuple[float, float]
-    width_mm: float = Field(gt=0)
-    rotate_deg: float = 0.0
+    at_mm: Annotated[tuple[float, float], each_within("position_mm")]
+    width_mm: Length
+    rotate_deg: Angle = 0.0
     mode: str = "planar"                 # a projection mode: read_project checks it
-    hatch_mm: float | None = Field(None, gt=0)
-    hatch_angle_deg: float = 0.0
+    hatch_mm: Length | None = None
+    hatch_angle_deg: Angle = 0.0
     cross: bool = False
     fill: Literal["auto", "all", "none"] = "auto"   # a DXF's closed outlines
-    beam_mm: float = Field(0.05, gt=0)             # strokes this wide or more: areas
+    beam_mm: Length = 0.05                         # strokes this wide or more: areas
 
 
 class _Project(_Strict):

@@ -17,7 +17,8 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_valida
 
 from insitu.errors import FormatError
 from insitu.formats.atomic import atomic_folder, atomic_write_text
-from insitu.formats.validation import (Finite, Matrix3, Positive, PositivePair, Range, Vec2, Vec3,
+from insitu.formats.bounds import BOUNDS, each_within, within
+from insitu.formats.validation import (Finite, Matrix3, PositivePair, Range, Vec2, Vec3,
                                        bad, dump_json, numbers, plain, read_json, show,
                                        validation_message)
 from insitu.formats.images import read_image
@@ -28,6 +29,11 @@ Kind = Literal["scan", "height-calibration", "field-calibration", "camera-calibr
 KINDS: tuple[str, ...] = Kind.__args__
 FRAME_NAME = "frames/{:05d}.png"
 _CONFIG = ConfigDict(extra="allow", allow_inf_nan=False)
+ImagePx, Pivot, Position = within("image_px", int), within("pivot_height_mm"), within("position_mm")
+Corners, Square = within("board_corners", int), within("length_mm")
+Exposure, Point = within("exposure_ms"), Annotated[Vec2, each_within("position_mm")]
+_DIST_NAMES = ("k1", "k2", "p1", "p2", "k3", "k4", "k5", "k6", "s1", "s2", "s3", "s4", "tx", "ty")
+_DIST_BOUND = {"k1": "dist_k1", "p1": "dist_tangential", "p2": "dist_tangential"}
 
 
 class CameraSpec(BaseModel):
@@ -35,21 +41,34 @@ class CameraSpec(BaseModel):
     extrinsics mapping a world point X (mm) to camera coordinates ``R @ X + t``."""
 
     model_config = _CONFIG
-    width: int = Field(gt=0)
-    height: int = Field(gt=0)
-    K: Matrix3
+    width: ImagePx
+    height: ImagePx
+    K: Annotated[Matrix3, each_within("pixel_px")]
     dist: Annotated[list[Finite], numbers(4, 5, 8, 12, 14, what=" (OpenCV distortion)")]
     R: Matrix3
-    t: Vec3
+    t: Annotated[Vec3, each_within("camera_t_mm")]
 
     @field_validator("K")
     @classmethod
     def _intrinsics(cls, K: list[list[float]]) -> list[list[float]]:
         if not (K[0][0] > 0 and K[1][1] > 0):
             raise bad("expected fx = K[0][0] > 0 and fy = K[1][1] > 0", K)
+        for i in (0, 1):
+            why = BOUNDS["focal_px"].problem(K[i][i])
+            if why is not None:
+                raise bad(f"{'fx' if i == 0 else 'fy'} = {why}", at=f"[{i}][{i}]")
         if K[2] != [0, 0, 1]:
             raise bad("expected [0, 0, 1]", K[2], at="[2]")
         return K
+
+    @field_validator("dist")
+    @classmethod
+    def _distortion(cls, dist: list[float]) -> list[float]:
+        for i, (name, value) in enumerate(zip(_DIST_NAMES, dist)):
+            why = BOUNDS[_DIST_BOUND.get(name, "dist_other")].problem(value)
+            if why is not None:
+                raise bad(f"{name} = {why}", at=f"[{i}]")
+        return dist
 
     @field_validator("R")
     @classmethod
@@ -77,17 +96,17 @@ class ScanHeadSpec(BaseModel):
 
     model_config = _CONFIG
     lens: Literal["non-telecentric", "telecentric"]
-    pivot_height_mm: Positive
-    field_size_mm: PositivePair
-    z_range_mm: Range
+    pivot_height_mm: Pivot
+    field_size_mm: Annotated[PositivePair, each_within("field_size_mm")]
+    z_range_mm: Annotated[Range, each_within("position_mm")]
 
 
 class LineSpec(BaseModel):
     """A line commanded on the nominal plane z = 0, from ``start`` [x1, y1] to ``end`` (mm)."""
 
     model_config = _CONFIG
-    start: Vec2
-    end: Vec2
+    start: Annotated[Vec2, each_within("position_mm")]
+    end: Annotated[Vec2, each_within("position_mm")]
 
     @model_validator(mode="after")
     def _not_a_point(self) -> "LineSpec":
@@ -102,11 +121,11 @@ class FrameSpec(BaseModel):
     model_config = _CONFIG
     file: str
     line: LineSpec | None = None
-    spot: Vec2 | None = None
-    fiducials: Annotated[list[Vec2], Field(min_length=1)] | None = None
-    fiducial_diameter_mm: Positive | None = None
-    plate_z_mm: Finite | None = None
-    exposure_ms: Positive | None = None
+    spot: Point | None = None
+    fiducials: Annotated[list[Point], Field(min_length=1)] | None = None
+    fiducial_diameter_mm: Square | None = None
+    plate_z_mm: Position | None = None
+    exposure_ms: Exposure | None = None
 
     @field_validator("file")
     @classmethod
@@ -121,9 +140,9 @@ class CheckerboardSpec(BaseModel):
     """Inner-corner counts (as OpenCV's patternSize) and square side, mm."""
 
     model_config = _CONFIG
-    cols: int = Field(ge=2)
-    rows: int = Field(ge=2)
-    square_mm: Positive
+    cols: Corners
+    rows: Corners
+    square_mm: Square
 
 
 def frame_problems(kind: str, frame: FrameSpec) -> list[tuple[str, str]]:

@@ -19,7 +19,8 @@ from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, PlainSeriali
 
 from insitu.errors import FormatError
 from insitu.formats.atomic import atomic_write_text
-from insitu.formats.validation import Positive, bad, read_json, validation_message
+from insitu.formats.bounds import within
+from insitu.formats.validation import bad, read_json, validation_message
 
 JOB_FORMAT = "insitu-job/1"
 
@@ -63,8 +64,12 @@ def _points(v: Any) -> np.ndarray:
 
 Points = Annotated[np.ndarray, BeforeValidator(_points),
                    PlainSerializer(lambda a: a.tolist(), return_type=list)]
-Percent = Annotated[float, Field(ge=0, le=100)]
-NonNegative = Annotated[float, Field(ge=0)]
+Percent = within("power_pct")
+Frequency = within("frequency_khz")
+MarkSpeed = within("mark_speed_mm_s")
+JumpSpeed = within("jump_speed_mm_s")
+Delay = within("delay_us")
+CornerDeg = within("corner_deg")
 
 
 class _Model(BaseModel):
@@ -76,18 +81,18 @@ class LaserParams(_Model):
     """Marking laser: power (% of full), pulse frequency (kHz), mark and jump speeds (mm/s)."""
 
     power_pct: Percent = 30.0
-    frequency_khz: Positive = 20.0
-    mark_speed_mm_s: Positive = 500.0
-    jump_speed_mm_s: Positive = 3000.0
+    frequency_khz: Frequency = 20.0
+    mark_speed_mm_s: MarkSpeed = 500.0
+    jump_speed_mm_s: JumpSpeed = 3000.0
 
 
 class LaserOverride(_Model):
     """A path's own laser parameters; None: the job's."""
 
     power_pct: Percent | None = None
-    frequency_khz: Positive | None = None
-    mark_speed_mm_s: Positive | None = None
-    jump_speed_mm_s: Positive | None = None
+    frequency_khz: Frequency | None = None
+    mark_speed_mm_s: MarkSpeed | None = None
+    jump_speed_mm_s: JumpSpeed | None = None
 
 
 class Timing(_Model):
@@ -95,12 +100,12 @@ class Timing(_Model):
     jump: after every jump; mark: after every path; polygon: at a corner, scaled by the turn
     angle / 180° (corners below ``min_corner_deg`` count as straight)."""
 
-    laser_on_delay_us: NonNegative = 100.0
-    laser_off_delay_us: NonNegative = 150.0
-    jump_delay_us: NonNegative = 250.0
-    mark_delay_us: NonNegative = 150.0
-    polygon_delay_us: NonNegative = 100.0
-    min_corner_deg: NonNegative = 5.0
+    laser_on_delay_us: Delay = 100.0
+    laser_off_delay_us: Delay = 150.0
+    jump_delay_us: Delay = 250.0
+    mark_delay_us: Delay = 150.0
+    polygon_delay_us: Delay = 100.0
+    min_corner_deg: CornerDeg = 5.0
 
 
 class MarkPath(_Model):

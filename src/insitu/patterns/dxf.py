@@ -1,13 +1,19 @@
 """DXF files (ezdxf) → :class:`Pattern` in mm, y up: fills where the file has fills.
 
-HATCH, MPOLYGON, SOLID, TRACE, wide (LW)POLYLINEs and text (TEXT, ATTRIB, MTEXT through
-ezdxf's own text-to-path with the file's style and font) are fills: the contours of the
-region. The boundary of an associative hatch is not marked again, nor a closed outline that
+HATCH, MPOLYGON, SOLID, TRACE, wide (LW)POLYLINEs (banded as ezdxf draws them: each
+segment's start and end width) and text (TEXT, ATTRIB, an ATTDEF's tag, MTEXT through ezdxf's
+own text-to-path with the file's style and font) are fills: the contours of the region. The
+boundary of an associative hatch is not marked again, nor a closed outline that
 runs along a fill's edge. Other closed shapes, and chains of open pieces whose ends meet
 within ``join_mm``, are outlines — closed lines, marked but not filled — unless ``fill="all"``
 (then filled, even-odd: a circle inside a frame is a hole); ``fill="none"`` marks every fill's
-edge as an outline instead. Units from ``$INSUNITS`` (``units=`` overrides; none: mm), said in
-``notes``. A file that ezdxf cannot read is read again through ``ezdxf.recover``.
+edge as an outline instead. A WIPEOUT masks what was drawn before it (as ezdxf's drawing
+add-on paints it in the background colour): fills lose its area, lines their part under it
+(an outline it cuts is marked as its visible pieces, also with ``fill="all"``); what comes
+after it in the file is drawn over it. Units from ``$INSUNITS`` (``units=`` overrides; none:
+mm, with ``$MEASUREMENT`` and a warning when the drawing is only a few units across, as a
+plan in metres is), said in ``notes``. A file that ezdxf cannot read is read again through
+``ezdxf.recover``.
 """
 
 from __future__ import annotations
@@ -19,7 +25,7 @@ import numpy as np
 import shapely
 
 from insitu.errors import FormatError
-from insitu.patterns.model import Pattern, contours_of, region, stroke_region
+from insitu.patterns.model import Pattern, contours_of, region
 from insitu.patterns.vector import (TOL_MM, Budget, _check_file, _fail, _non_empty, bezier_steps,
                                     check_extent, check_finite)
 
@@ -111,7 +117,10 @@ def _scale(doc, units: str | None, path: Path) -> tuple[float, str]:
         return float(u.conversion_factor(_UNITS[units], u.MM)), f"units: {units} (given)"
     code = int(doc.header.get("$INSUNITS", 0) or 0)
     if code == 0:
-        return 1.0, "units: none in the file ($INSUNITS unset) → taken as mm (;units= to change)"
+        system = {0: ", $MEASUREMENT imperial", 1: ", $MEASUREMENT metric"}.get(
+            doc.header.get("$MEASUREMENT"), "")
+        return 1.0, (f"units: none in the file ($INSUNITS unset{system}) → taken as mm "
+                     "(;units= to change)")
     try:
         k = float(u.conversion_factor(code, u.MM))
     except Exception:  # noqa: BLE001 — an unknown code
@@ -119,14 +128,27 @@ def _scale(doc, units: str | None, path: Path) -> tuple[float, str]:
     return k, f"units: $INSUNITS {code} ({u.unit_name(code)}) → ×{k:g} mm"
 
 
+def _attdef_text(e, doc):
+    """A TEXT of an ATTDEF's tag with its style, place and alignment."""
+    from ezdxf.entities import Text
+
+    attrs = {k: v for k, v in e.dxfattribs().items()
+             if Text.DXFATTRIBS.get(k) is not None and k not in ("handle", "owner")}
+    attrs["text"] = e.dxf.get("tag", "")
+    return Text.new(dxfattribs=attrs, doc=doc)
+
+
 def _entities(doc):
-    """Model-space entities, blocks exploded; MTEXT exploded into TEXT (its background
-    mask dropped)."""
+    """Model-space entities, blocks exploded; an ATTDEF as the TEXT of its tag; MTEXT
+    exploded into TEXT (its background mask dropped)."""
     from ezdxf import disassemble
     from ezdxf.addons.mtxpl import MTextExplode
     from ezdxf.layouts import VirtualLayout
 
     for e in disassemble.recursive_decompose(doc.modelspace()):
+        if e.dxftype() == "ATTDEF":  # shown as its tag, as ezdxf's drawing add-on does
+            yield _attdef_text(e, doc)
+            continue
         if e.dxftype() != "MTEXT":
             yield e
             continue
@@ -187,10 +209,56 @@ def _check_attributes(e, path: Path, what: str) -> None:
             raise FormatError(f"{path}: {what}: one of its {key} is not a finite number")
 
 
+def _banded(e, k: float):
+    """The area of a wide (LW)POLYLINE as ezdxf's drawing add-on fills it (its TraceBuilder:
+    each segment's own start and end width, bulges in 256 chords a turn), shapely, mm."""
+    from ezdxf.math import Vec3
+    from ezdxf.render import TraceBuilder
+
+    ocs = e.ocs()
+    z = float(e.dxf.elevation) if e.dxftype() == "LWPOLYLINE" else Vec3(e.dxf.elevation).z
+    polys = []
+    for poly in TraceBuilder.from_polyline(e, segments=256).polygons():
+        if len(poly) < 3:
+            continue
+        pts = ocs.points_to_wcs(Vec3(v.x, v.y, z) for v in poly) if ocs.transform else poly
+        ring = np.array([(v.x, v.y) for v in pts], np.float64) * k
+        polys.append(shapely.make_valid(shapely.Polygon(ring)))
+    return shapely.unary_union(polys) if polys else shapely.Polygon()
+
+
 def _check_radius(e, path: Path) -> None:
     if e.dxftype() in ("CIRCLE", "ARC") and not float(e.dxf.radius) > 0:
         raise FormatError(f"{path}: {e.dxftype()} #{e.dxf.get('handle', '?')} has radius "
                           f"{float(e.dxf.radius):g} (must be > 0)")
+
+
+def _masked(mask, fills: list, closed: list[np.ndarray], pieces: list[np.ndarray]):
+    """What a WIPEOUT polygon ``mask`` (shapely, mm) leaves of the fills, closed outlines and
+    open pieces drawn before it: (fills, closed outlines it does not touch, open pieces)."""
+    fills = [g.difference(mask) for g in fills]
+    keep, cut = [], []
+    for r in closed:
+        (keep if not mask.intersects(shapely.LinearRing(r)) else cut).append(r)
+    lines = [shapely.LineString(np.vstack([r, r[:1]])) for r in cut]
+    lines += [shapely.LineString(q) for q in pieces]
+    out = [np.asarray(g.coords)[:, :2] for line in lines
+           for g in shapely.get_parts(line.difference(mask))
+           if g.geom_type == "LineString" and g.length > 0]
+    return fills, keep, out
+
+
+def _small_drawing(contours, paths, note: str) -> str | None:
+    """A warning when a drawing without units (so read as mm) is under 10 units across (a
+    plan drawn in metres, a part in inches), None otherwise."""
+    if not note.startswith("units: none") or not (contours or paths):
+        return None
+    w, h = np.ptp(np.concatenate([*contours, *paths]), axis=0)
+    if max(w, h) >= 10:
+        return None
+    return (f"warning: no units in the file and the drawing is only {w:.4g} × {h:.4g} units: "
+            f"marked {w:.4g} × {h:.4g} mm; a plan drawn in metres needs ;units=m "
+            "(inches: ;units=in)")
 
 
 def load_dxf(path: str | Path, tol_mm: float = TOL_MM, join_mm: float = 1e-3,
@@ -216,6 +284,7 @@ def load_dxf(path: str | Path, tol_mm: float = TOL_MM, join_mm: float = 1e-3,
         hidden = {layer.dxf.name.lower() for layer in doc.layers
                   if layer.is_off() or layer.is_frozen()}
         fills, edges, closed, pieces, skip = [], [], [], [], set()
+        wipeouts = 0
         for e in _entities(doc):
             if e.dxf.get("layer", "0").lower() in hidden or e.dxf.get("invisible", 0):
                 continue
@@ -223,6 +292,14 @@ def load_dxf(path: str | Path, tol_mm: float = TOL_MM, join_mm: float = 1e-3,
             what = f"{kind} #{e.dxf.get('handle', '?')}"
             _check_attributes(e, path, what)
             _check_radius(e, path)
+            if kind == "WIPEOUT":
+                ring = np.array([(v.x, v.y) for v in e.boundary_path_wcs()]).reshape(-1, 2) * k
+                check_extent(ring, path, what)
+                if len(ring) >= 3:
+                    mask = shapely.make_valid(shapely.Polygon(ring))
+                    fills, closed, pieces = _masked(mask, fills, closed, pieces)
+                    wipeouts += 1
+                continue
             if kind in ("TEXT", "ATTRIB"):
                 paths = text2path.make_paths_from_entity(e)
             elif kind in ("HATCH", "MPOLYGON"):
@@ -259,9 +336,7 @@ def load_dxf(path: str | Path, tol_mm: float = TOL_MM, join_mm: float = 1e-3,
                     fills.append(region(rings, "evenodd"))
                     edges.extend(rings)
             elif width > 0:
-                fills.append(shapely.unary_union(
-                    [stroke_region(r, width, "butt", "miter", 4.0, True) for r in rings]
-                    + [stroke_region(q, width, "butt", "miter", 4.0) for q in lines]))
+                fills.append(_banded(e, k))
             elif e.dxf.get("handle") not in skip:
                 closed.extend(rings)
                 pieces.extend(lines)
@@ -280,7 +355,12 @@ def load_dxf(path: str | Path, tol_mm: float = TOL_MM, join_mm: float = 1e-3,
         notes.append(f"{len(loops)} closed outline(s) " + (
             "filled (fill=all)" if fill == "all" else
             f"marked as lines, {dropped} of them along a fill's edge (not marked again)"))
+    if wipeouts:
+        notes.append(f"{wipeouts} WIPEOUT(s) mask what was drawn before them")
     paths_out = [np.vstack([r, r[:1]]) for r in outlines] + opens
+    small = _small_drawing(contours, paths_out, unit_note)
+    if small:
+        notes.append(small)
     return _non_empty(Pattern(tuple(contours), tuple(paths_out), path.name,
                               notes=tuple(notes)), path, "drawable entities")
 

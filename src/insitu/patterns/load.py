@@ -36,7 +36,7 @@ from pathlib import Path
 from typing import Any
 
 from insitu.errors import FormatError
-from insitu.patterns import codes, dxf, raster, svg, text
+from insitu.patterns import codes, dxf, gs1, raster, svg, text
 from insitu.patterns.model import Pattern
 from insitu.patterns.vector import BEAM_MM
 
@@ -83,6 +83,8 @@ def _zxing(symbology: str):
         opts = {k: o[k] for k in ("ec", "square", "aspect") if k in o}
         if symbology == "datamatrix":
             opts["gs1"] = o.get("gs1", body.startswith("("))
+            if opts["gs1"]:
+                gs1.check_gtin(body, f"datamatrix:{body[:40]!r}")
         return codes.code_pattern(symbology, body, module_mm=o.get("module", 1.0),
                                   quiet_zone=o.get("quiet"), **opts)
     return load
@@ -182,6 +184,17 @@ def _split_spec(rest: str) -> tuple[str, str]:
                 return m["body"], m["opts"]
     m = re.match(rf"^(?P<body>.*?){_OPTS}$", rest, re.S)
     return m["body"], m["opts"]
+
+
+def spec_parts(spec: str) -> tuple[str, str, str] | None:
+    """(prefix, payload without quotes, options string) of a spec source's spec, e.g.
+    ``('qr:', 'SN 1', ';ec=H')``; None for a file."""
+    kind = next((k for k, src in SOURCES.items() if src.prefix and spec.startswith(src.prefix)),
+                None)
+    if kind is None or Path(spec).is_file():
+        return None
+    prefix = SOURCES[kind].prefix
+    return (prefix, *_split_spec(spec[len(prefix):]))
 
 
 def _spec(kind: str, rest: str, defaults: dict) -> Pattern:

@@ -10,18 +10,22 @@ from __future__ import annotations
 
 from datetime import datetime, timezone
 from pathlib import Path
-from typing import Any, ClassVar, Literal, TypeVar
+from typing import Annotated, Any, ClassVar, Literal, TypeVar
 
 from pydantic import BaseModel, ConfigDict, Field, PrivateAttr, ValidationError, field_validator
 
 from insitu.errors import ConfigError, InsituError
 from insitu.formats.atomic import atomic_write_text
+from insitu.formats.bounds import each_within, within
 from insitu.formats.sequence import CameraSpec, ScanHeadSpec
 from insitu.formats.validation import (Positive, Range, bad, dump_json, read_json,
                                        show, validation_message)
 from insitu.geometry.beams import TwoMirrorHead
 
 M = TypeVar("M", bound=BaseModel)
+Pivot = within("pivot_height_mm")
+MirrorDistance, MirrorSeparation = within("mirror_distance_mm"), within("mirror_separation_mm")
+Seed = within("seed", int)
 
 
 def utc_now() -> str:
@@ -86,8 +90,8 @@ class ScanHeadGeometry(ScanHeadSpec):
     range) plus the two-mirror distance d and separation e (Mikkelstrup et al.), mm."""
 
     model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
-    mirror_distance_mm: Positive
-    mirror_separation_mm: float = Field(ge=0)
+    mirror_distance_mm: MirrorDistance
+    mirror_separation_mm: MirrorSeparation
 
     def spec(self, mirrors: bool = False) -> dict:
         """The ``scan_head`` object of a recorded sequence (formats.md §1); with ``mirrors``
@@ -119,12 +123,13 @@ class SheetModelSpec(BaseModel):
     """Our height model (insitu.measure.heightcal.SheetHeightModel)."""
 
     model_config = ConfigDict(allow_inf_nan=False)
-    pivot_height_mm: Positive
-    exponents: list[tuple[int, int, int]] = Field(min_length=1)
-    coefficients_mm: list[float] = Field(min_length=1)
-    scale_mm: tuple[Positive, Positive, Positive]
-    x_range_mm: Range
-    z_range_mm: Range
+    pivot_height_mm: Pivot
+    exponents: Annotated[list[tuple[int, int, int]], Field(min_length=1),
+                         each_within("exponent")]
+    coefficients_mm: Annotated[list[float], Field(min_length=1), each_within("coefficient_mm")]
+    scale_mm: Annotated[tuple[float, float, float], each_within("scale_mm")]
+    x_range_mm: Annotated[Range, each_within("position_mm")]
+    z_range_mm: Annotated[Range, each_within("position_mm")]
 
     @field_validator("coefficients_mm")
     @classmethod
@@ -139,11 +144,11 @@ class PaperModelSpec(BaseModel):
     """Li et al.'s model (insitu.measure.heightcal.PaperHeightModel)."""
 
     model_config = ConfigDict(allow_inf_nan=False)
-    ref_u: list[float] = Field(min_length=5)
-    ref_v: list[float] = Field(min_length=5)
-    offsets_mm: list[float] = Field(min_length=2)
-    heights_mm: list[float] = Field(min_length=2)
-    P_px: list[list[float]]
+    ref_u: Annotated[list[float], Field(min_length=5), each_within("pixel_px")]
+    ref_v: Annotated[list[float], Field(min_length=5), each_within("pixel_px")]
+    offsets_mm: Annotated[list[float], Field(min_length=2), each_within("position_mm")]
+    heights_mm: Annotated[list[float], Field(min_length=2), each_within("position_mm")]
+    P_px: Annotated[list[list[float]], each_within("pixel_px")]
 
     @field_validator("P_px")
     @classmethod
@@ -216,7 +221,7 @@ class RigConfig(JsonFile):
     scan_head_config: str | None = None
     height_calibration: str | None = None
     field_correction: str | None = None
-    sim_seed: int = 0
+    sim_seed: Seed = 0
     options: dict[str, Any] = {}
 
     @property

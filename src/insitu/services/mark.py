@@ -90,7 +90,8 @@ class PlanOutcome:
 def plan_all(cloud: PointCloud, placements, driver: GalvoDriver,
              laser: LaserParams | None = None) -> list[PlanOutcome]:
     """:func:`plan_mark` of each placement; a refusal is kept as its message (and place).
-    A code whose quiet zone another placement's marks enter is refused too."""
+    A code whose quiet zone another placement's marks enter is refused, and so is the
+    placement whose marks enter it (each naming the other, the place where they meet)."""
     out = []
     for p in placements:
         try:
@@ -99,29 +100,36 @@ def plan_all(cloud: PointCloud, placements, driver: GalvoDriver,
             out.append(PlanOutcome(error=str(e), where=e.where_mm))
         except InsituError as e:
             out.append(PlanOutcome(error=str(e)))
-    return [_quiet_zone_clear(i, o, out) for i, o in enumerate(out)]
+    return _quiet_zones_clear(out)
 
 
-def _quiet_zone_clear(i: int, outcome: PlanOutcome, outcomes) -> PlanOutcome:
-    """``outcome``, or its refusal when another planned pattern (world x, y, as placed)
-    reaches into the frame — symbol and quiet zone — of its code."""
+def _quiet_zones_clear(outcomes: list[PlanOutcome]) -> list[PlanOutcome]:
+    """``outcomes`` with a refusal for each code whose frame — symbol and quiet zone —
+    another planned pattern's marks (world x, y, as placed) reach into, and for that
+    pattern."""
     import shapely
 
-    plan = outcome.plan
-    if plan is None or plan.pattern.code is None or plan.pattern.frame is None:
-        return outcome
-    zone = shapely.Polygon(plan.pattern.frame)
-    for j, other in enumerate(outcomes):
-        if j == i or other.plan is None:
+    out = list(outcomes)
+    marks = [None if o.plan is None else shapely.union_all(
+        [o.plan.pattern.to_shapely(), *map(shapely.LineString, o.plan.pattern.paths)])
+        for o in outcomes]
+    for i, o in enumerate(outcomes):
+        code = None if o.plan is None else o.plan.pattern
+        if code is None or code.code is None or code.frame is None:
             continue
-        q = other.plan.pattern
-        marks = shapely.union_all([q.to_shapely(), *map(shapely.LineString, q.paths)])
-        if marks.intersects(zone):
-            c = zone.centroid
-            return PlanOutcome(error=f"{plan.pattern.name}: placement {j + 1}'s marks enter "
-                                     "its quiet zone (a reader needs it clear)",
-                               where=(c.x, c.y))
-    return outcome
+        zone = shapely.Polygon(code.frame)
+        for j, m in enumerate(marks):
+            if j == i or m is None or not m.intersects(zone):
+                continue
+            c = m.intersection(zone).representative_point()
+            out[i] = PlanOutcome(error=f"{code.name}: placement {j + 1}'s marks enter its "
+                                       "quiet zone (a reader needs it clear)", where=(c.x, c.y))
+            if out[j].plan is not None:
+                out[j] = PlanOutcome(error=f"{outcomes[j].plan.pattern.name}: its marks enter "
+                                           f"the quiet zone of placement {i + 1} "
+                                           f"({code.name})", where=(c.x, c.y))
+            break
+    return out
 
 
 def save_job(path: str | Path, job: MarkJob) -> Path:

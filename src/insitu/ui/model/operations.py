@@ -67,6 +67,69 @@ def mark(job: MarkJob, station: Station, job_path: Path | None, progress: Progre
                                     progress=progress)
 
 
+def joined(outcomes) -> MarkJob | None:
+    """One job marking every planned placement in order (None: none, or one refused)."""
+    if not outcomes or any(o.plan is None for o in outcomes):
+        return None
+    first = outcomes[0].plan.job
+    return first.model_copy(update={"paths": [path for o in outcomes
+                                              for path in o.plan.job.paths]})
+
+
+def preview_serial(job_path: Path | None) -> int:
+    """The serial a preview of variable data shows: the counter's next (1 without one)."""
+    from insitu.services.serials import counter_next, default_counter
+
+    nxt = counter_next(default_counter(job_path)) if job_path is not None else None
+    return 1 if nxt is None else nxt
+
+
+def plan_preview(cloud, items, driver, job_path: Path | None) -> list:
+    """:func:`insitu.services.mark.plan_all` of ``items`` with their texts rendered for the
+    screen: the next serial (a preview — marking takes it), the date and time now; a text that
+    cannot be rendered is refused with its one-line message."""
+    from insitu.patterns.fields import Variables
+    from insitu.services.serials import is_templated, render_placement
+
+    if not is_templated(items):
+        return mark_svc.plan_all(cloud, items, driver)
+    values, rendered, errors = Variables(preview_serial(job_path)), [], {}
+    for i, p in enumerate(items):
+        try:
+            rendered.append(render_placement(p, values))
+        except InsituError as e:
+            errors[i] = mark_svc.PlanOutcome(error=str(e))
+    planned = iter(mark_svc.plan_all(cloud, rendered, driver))
+    return [errors[i] if i in errors else next(planned) for i in range(len(items))]
+
+
+def mark_serial(items, cloud, laser, station: Station, job_path: Path | None,
+                progress: Progress, cancel: threading.Event) -> mark_svc.StationRun:
+    """Plan ``items`` (with variable data) again with the serial taken from the counter
+    beside the job — issued once every placement passed its checks, before the job is
+    written — then mark it as :func:`mark` does."""
+    from insitu.services.serials import default_counter, plan_and_save
+
+    if job_path is None:
+        raise InsituError("save the project first: the serial counter is kept beside it")
+    counter = default_counter(job_path)
+    if not counter.exists():
+        raise InsituError(f"no serial counter beside the project: in its folder, insitu serial "
+                          f"set {counter.name} FIRST_SERIAL creates it")
+
+    def job_of(outcomes) -> MarkJob:
+        job = joined(outcomes)
+        if job is None:
+            raise InsituError(next(o.error for o in outcomes if o.plan is None))
+        return job.model_copy(update={"laser": laser})
+
+    done = plan_and_save(job_path, items,
+                         lambda ps: mark_svc.plan_all(cloud, ps, station.driver, laser),
+                         job_of, counter=counter)
+    return mark_svc.mark_on_station(station, done.job, job_path, image=True, cancel=cancel,
+                                    progress=progress)
+
+
 @dataclass(frozen=True)
 class CalibrationOutcome:
     """What a calibration page shows: ``residuals`` (name → value), ``notes`` and a

@@ -5,12 +5,14 @@ Everything in world mm."""
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from functools import lru_cache
 
 import numpy as np
 
+from insitu.errors import InsituError
 from insitu.patterns import Pattern, load_pattern
+from insitu.patterns.fields import Variables, render_spec
 from insitu.marking import Placement
 
 # height colour map stops (t in 0…1 → RGB): blue, cyan, green, yellow, red
@@ -67,12 +69,41 @@ def cross(x: float, y: float, z: float, size_mm: float) -> np.ndarray:
 
 @lru_cache(maxsize=32)
 def base_pattern(spec: str) -> Pattern:
-    """The pattern of a file or spec, loaded once (FormatError if it cannot be)."""
-    return load_pattern(spec)
+    """The pattern of a file or spec, loaded once (FormatError if it cannot be); variable
+    data is drawn with serial 1, the date and time now (a placeholder of its size)."""
+    return load_pattern(render_spec(spec, Variables(1)))
 
 
 def placed_pattern(p: Placement) -> Pattern:
     return base_pattern(p.pattern).placed(p.at_mm, p.width_mm, p.rotate_deg)
+
+
+def code_hatch(p: Placement) -> tuple[float, float] | None:
+    """(spacing mm, angle °) of the hatch along a code placement's modules at its width and
+    rotation (``Placement.code_hatch``), None when ``p`` is not a code (or does not load)."""
+    try:
+        base = base_pattern(p.pattern)
+        if base.code is None or base.frame is None:
+            return None
+        width = base.mark_width if p.width_mm is None else p.width_mm
+        return p.code_hatch(base.placed(p.at_mm, width, p.rotate_deg))
+    except InsituError:
+        return None
+
+
+def follow_code_hatch(old: Placement, new: Placement) -> Placement:
+    """``new`` (``old`` changed), its hatch moved with its modules when ``old``'s hatch ran
+    along them (a code's default) and the change did not set the hatch itself: a code made
+    wider or turned keeps a whole number of hatch lines per module, along its rows."""
+    if (new.hatch_mm, new.hatch_angle_deg) != (old.hatch_mm, old.hatch_angle_deg) \
+            or old.hatch_mm is None:
+        return new
+    before = code_hatch(old)
+    if before is None or not (math.isclose(old.hatch_mm, before[0], rel_tol=0, abs_tol=5e-4)
+                              and math.isclose(old.hatch_angle_deg, before[1], abs_tol=1e-9)):
+        return new
+    after = code_hatch(new)
+    return new if after is None else replace(new, hatch_mm=after[0], hatch_angle_deg=after[1])
 
 
 def pattern_lines(pattern: Pattern, z: float) -> np.ndarray:

@@ -14,6 +14,7 @@ from insitu.formats.project import RigChoice
 from insitu.marking import MarkJob
 from insitu.marking import Placement
 from insitu.services.mark import PlanOutcome
+from insitu.ui.model.scene_data import follow_code_hatch
 
 
 class PlacementHistory:
@@ -121,11 +122,13 @@ class Session:
             self.placements.push(tuple(items))
 
     def update_selected(self, merge_key: object = None, **changes) -> None:
-        """Change fields of the selected placement (``at_mm``, ``width_mm``, ...)."""
+        """Change fields of the selected placement (``at_mm``, ``width_mm``, ...); a code
+        hatched along its modules stays so (``scene_data.follow_code_hatch``)."""
         items = list(self.placements.items)
         if not 0 <= self.selected < len(items):
             return
-        items[self.selected] = replace(items[self.selected], **changes)
+        old = items[self.selected]
+        items[self.selected] = follow_code_hatch(old, replace(old, **changes))
         self.placements.push(tuple(items), merge_key)
 
     def _clamp_selection(self) -> None:
@@ -145,10 +148,8 @@ class Session:
     def job(self) -> MarkJob | None:
         """One job marking every placement in order (each was checked by ``plan_mark``), or
         None while any is refused or not yet planned."""
-        if not self.plans or len(self.plans) != len(self.placements.items):
+        from insitu.ui.model.operations import joined
+
+        if len(self.plans) != len(self.placements.items):
             return None
-        if any(p.plan is None for p in self.plans):
-            return None
-        first = self.plans[0].plan.job
-        return first.model_copy(update={"paths": [path for p in self.plans
-                                                  for path in p.plan.job.paths]})
+        return joined(self.plans)

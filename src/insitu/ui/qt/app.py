@@ -26,7 +26,8 @@ def surface_format() -> QSurfaceFormat:
 def run(project: Path | None = None, rig: Path | None = None, workpiece: str = "step-block",
         binning: int = 2) -> int:
     """Open the main window and connect the rig (the simulated one unless ``rig`` names a rig
-    file), or open ``project``; returns the exit code."""
+    file), or open ``project`` without connecting its rig (the operator connects it: Rig ▸
+    Connect); returns the exit code."""
     QSurfaceFormat.setDefaultFormat(surface_format())
     app = QApplication.instance() or QApplication(sys.argv[:1])
     app.setApplicationName("insitu")

@@ -15,8 +15,9 @@ from insitu.errors import InsituError
 from insitu.formats.project import SUFFIX, Project, RigChoice, beside
 from insitu.patterns import FILE_SUFFIXES
 from insitu.services import load_height_calibration
-from insitu.services.mark import PlanOutcome, plan_all
+from insitu.services.mark import PlanOutcome
 from insitu.services.project import OpenedProject, open_project, save_project
+from insitu.services.serials import is_templated
 from insitu.services.station import Station
 from insitu.ui.model import operations as ops
 from insitu.ui.model.session import Session
@@ -59,6 +60,7 @@ class MainWindow(QMainWindow):
         self.session = Session()
         self.runner = TaskRunner(self)
         self.station: Station | None = None
+        self._rig_epoch = 0             # a connection started before a disconnect is dropped
         self.view = View3D(self)
         self.setCentralWidget(self.view)
         self.binding = SceneBinding(self.session, self.view)
@@ -148,8 +150,10 @@ class MainWindow(QMainWindow):
             self._action(v, f"{name.capitalize()} view", lambda _=False, n=name:
                          self.view.set_view(n), key)
         r = mb.addMenu("&Rig")
-        tb.addAction(self._action(r, "&Connect simulated rig", lambda: self.connect_rig(),
-                                  None, "connect"))
+        self.connect_action = self._action(r, "&Connect", lambda: self.connect_rig(), None,
+                                           "connect")
+        tb.addAction(self.connect_action)
+        self._rig_named()
         self._action(r, "Connect with a rig &file…", self._rig_file_dialog)
         self._update_recent()
 
@@ -168,18 +172,41 @@ class MainWindow(QMainWindow):
         self.message_label.setText(text.splitlines()[0] if text else "error")
 
     # -- rig -----------------------------------------------------------------------------
+    def _rig_named(self) -> None:
+        """Rig ▸ Connect names the rig it connects: the session's (a project's) choice."""
+        rig_file = self.session.rig_choice.rig_file
+        self.connect_action.setText("&Connect simulated rig" if rig_file is None
+                                    else f"&Connect rig {Path(rig_file).name}")
+
+    def disconnect_rig(self) -> None:
+        """Close the station (laser off, devices released); the status says so."""
+        self._rig_epoch += 1
+        if self.station is not None:
+            self.station.close()
+            self.station = None
+        self.camera_label.setText("camera: not connected")
+        self.head_label.setText("scan head: not connected")
+        self._plan_timer.start()
+
     def connect_rig(self, choice: RigChoice | None = None) -> None:
+        """Connect the station of ``choice`` (default: the session's), off the GUI thread.
+        Only the operator's action (or ``insitu gui`` without a project) calls this: opening a
+        project never connects its rig, so a rig file that came with it runs nothing."""
         choice = choice or self.session.rig_choice
-        field = self.session.field_path
-        self.runner.start("connect", lambda p, c, f: (choice, ops.connect(choice, field)),
+        field, epoch = self.session.field_path, self._rig_epoch
+        self.runner.start("connect", lambda p, c, f: (epoch, choice, ops.connect(choice, field)),
                           self._connected, lambda m, _c: self.show_error(m))
 
     def _connected(self, result) -> None:
-        choice, station = result
+        epoch, choice, station = result
+        if epoch != self._rig_epoch:    # a project was opened meanwhile: not its rig
+            station.close()
+            return
         if self.station is not None:
             self.station.close()
         self.station = station
         self.session.rig_choice = choice
+        self._rig_named()
         cam, head = station.describe()
         self.camera_label.setText(cam)
         self.head_label.setText(head)
@@ -263,8 +290,9 @@ class MainWindow(QMainWindow):
         if self.runner.running("plan"):
             self._plan_again = True
             return
-        driver = self.station.driver
-        self.runner.start("plan", lambda p, c, f: (items, plan_all(cloud, items, driver)),
+        driver, path = self.station.driver, self.job_path()
+        self.runner.start("plan", lambda p, c, f: (items, ops.plan_preview(cloud, items, driver,
+                                                                            path)),
                           self._planned, lambda m, _c: self.show_error(m))
 
     def _planned(self, result) -> None:
@@ -306,7 +334,9 @@ class MainWindow(QMainWindow):
         s.project_path = path
         s.height_cal_path, s.height_cal = pr.height_cal, opened.height_cal
         s.field_path, s.camera_cal_path = pr.field_correction, pr.camera_cal
+        self.disconnect_rig()           # its rig and field correction: when the operator connects
         s.rig_choice = pr.rig
+        self._rig_named()
         self.scan_panel.show_settings(pr.scan)
         self.scan_panel.ui.heightCalEdit.setText(str(pr.height_cal or ""))
         if opened.height_cal is not None:
@@ -317,8 +347,8 @@ class MainWindow(QMainWindow):
         s.select(pr.selected)
         self._remember(path)
         self.setWindowTitle(f"insitu — {path.name}")
-        self.connect_rig(pr.rig)
-        self.show_message(f"opened {path}")
+        self.show_message(f"opened {path}; rig not connected: "
+                          f"{self.connect_action.text().replace('&', '')} (Rig menu)")
 
     def save(self, path: Path | None = None) -> bool:
         """Save the session to ``path`` (default: where it came from); True when written."""
@@ -330,8 +360,10 @@ class MainWindow(QMainWindow):
         project = Project(s.rig_choice, s.height_cal_path, s.field_path, s.camera_cal_path,
                           self.scan_panel.settings(), s.cloud_path, s.placements.items,
                           s.selected, None)
+        # a job with variable data is written when it is marked, with the serial it takes
+        job = None if is_templated(s.placements.items) else self.mark_panel.job()
         try:
-            written = save_project(path, project, s.cloud, self.mark_panel.job())
+            written = save_project(path, project, s.cloud, job)
         except InsituError as e:
             self.show_error(str(e))
             return False

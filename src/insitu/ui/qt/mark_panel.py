@@ -10,6 +10,7 @@ from PySide6.QtWidgets import QVBoxLayout, QWidget
 
 from insitu.marking import LaserParams, MarkJob, estimate_time
 from insitu.services.mark import StationRun
+from insitu.services.serials import is_templated
 from insitu.ui.model import operations as ops
 from insitu.ui.model import scene_data as sd
 from insitu.ui.qt.forms import icon, load_form
@@ -57,10 +58,17 @@ class MarkPanel(QWidget):
         else:
             e = estimate_time(job, station.driver.timing if station else None)
             self.ui.jobLabel.setText(f"{len(job.paths)} paths, mark {e.mark_mm:.0f} mm, "
-                                     f"about {e.total_s:.1f} s")
+                                     f"about {e.total_s:.1f} s" + self._serial_note())
         ok = job is not None and station is not None and not busy
         self.ui.previewButton.setEnabled(ok)
         self.ui.markButton.setEnabled(ok)
+
+    def _serial_note(self) -> str:
+        """What the job's variable data shows: the next serial, as a preview."""
+        if not is_templated(self.session.placements.items):
+            return ""
+        return (f"; serial {ops.preview_serial(self.window_.job_path())} shown as a preview "
+                "(taken when marked)")
 
     def preview(self) -> None:
         job, station = self.job(), self.window_.station
@@ -77,10 +85,16 @@ class MarkPanel(QWidget):
         job, station = self.job(), self.window_.station
         if job is None or station is None:
             return
-        path = self.window_.job_path()
-        task = self.window_.runner.start(
-            "mark", lambda progress, cancel, _f: ops.mark(job, station, path, progress, cancel),
-            self._marked, self._failed)
+        path, items = self.window_.job_path(), self.session.placements.items
+        if is_templated(items):           # planned again with the serial it takes
+            cloud, laser = self.session.cloud, self.laser()
+
+            def work(progress, cancel, _f):
+                return ops.mark_serial(items, cloud, laser, station, path, progress, cancel)
+        else:
+            def work(progress, cancel, _f):
+                return ops.mark(job, station, path, progress, cancel)
+        task = self.window_.runner.start("mark", work, self._marked, self._failed)
         if task is not None:
             self._t0 = time.perf_counter()
             self.ui.progressBar.setValue(0)

@@ -14,7 +14,7 @@ from insitu.errors import InsituError
 from insitu.marking import PROJECTIONS
 from insitu.patterns import FILE_SUFFIXES, is_spec
 from insitu.marking import Placement
-from insitu.ui.model.scene_data import base_pattern
+from insitu.ui.model.scene_data import base_pattern, code_hatch
 from insitu.ui.qt.forms import load_form
 
 PATTERN_FILES = f"Patterns ({' '.join('*' + s for s in FILE_SUFFIXES)})"
@@ -60,7 +60,7 @@ class PlacePanel(QWidget):
         """Place pattern ``spec`` (file, ``text:"…"``, ``qr:"…"``) on the cloud's middle,
         a third of its width wide; False (and a message) if it cannot be loaded."""
         try:
-            code = base_pattern(spec).code
+            base_pattern(spec)
         except InsituError as e:
             self.window_.show_error(str(e))
             return False
@@ -71,9 +71,9 @@ class PlacePanel(QWidget):
             at = tuple(round(float(v), 1) for v in (lo + hi) / 2)
             width = round(max(float(min(hi - lo)) / 3, 1.0), 1)
         placement = Placement(spec, at, width)
-        if code is not None:  # a code is hatched along its modules: an outline does not read
-            placement = replace(placement,
-                                hatch_mm=round(placement.code_hatch(placement.placed())[0], 3))
+        hatch = code_hatch(placement)
+        if hatch is not None:  # a code is hatched along its modules: an outline does not read
+            placement = replace(placement, hatch_mm=hatch[0], hatch_angle_deg=hatch[1])
         self.session.add_placement(placement)
         return True
 
@@ -134,7 +134,8 @@ class PlacePanel(QWidget):
         self.show_outcome()
 
     def show_outcome(self) -> None:
-        """The selected placement's plan: its size and time, or why it is refused."""
+        """The selected placement's plan: its size and time and the loader's warnings, or
+        why it is refused (a code's quiet zone entered: on both placements)."""
         s, label = self.session, self.ui.statusLabel
         i = s.selected
         if not 0 <= i < len(s.plans):
@@ -146,6 +147,7 @@ class PlacePanel(QWidget):
             z = plan.projection.points[:, 2]
             text, warn = (f"OK: {len(plan.job.paths)} paths on z {z.min():.2f} … {z.max():.2f} "
                           f"mm, about {plan.estimate.total_s:.1f} s"), False
+            text += "".join(f"\n{n}" for n in plan.pattern.notes if n.startswith("warning:"))
         label.setText(text)
         label.setProperty("warning", warn)
         label.style().unpolish(label)
