@@ -18,11 +18,11 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_valida
 from insitu.errors import FormatError
 from insitu.formats.atomic import atomic_folder, atomic_write_text
 from insitu.formats.bounds import BOUNDS, each_within, within
+from insitu.formats.images import read_image
+from insitu.formats.limits import MAX_IMAGE_BYTES, check_file, check_inside
 from insitu.formats.validation import (Finite, Matrix3, PositivePair, Range, Vec2, Vec3,
                                        bad, dump_json, numbers, plain, read_json, show,
                                        validation_message)
-from insitu.formats.images import read_image
-from insitu.formats.limits import MAX_IMAGE_BYTES, check_file, check_inside
 
 FORMAT = "insitu-sequence/1"
 Kind = Literal["scan", "height-calibration", "field-calibration", "camera-calibration"]
