@@ -1,16 +1,21 @@
-"""Every file the program reads, fuzzed for a bounded time: arbitrary bytes, arbitrary JSON,
-and valid files with one field replaced by anything. A reader (and the first use of what it
-read) may only fail with an InsituError. Sequences and patterns are fuzzed in
-test_sequence_io.py and test_patterns.py. INSITU_FUZZ_EXAMPLES=2000 explores longer."""
+"""Every file the program reads, fuzzed for a bounded time: the mutation engine of
+benchmarks/fuzz.py (a few hundred examples over its eleven readers, in worker processes that
+catch hangs and crashes), arbitrary bytes, arbitrary JSON, and valid files with one field
+replaced by anything. A reader (and the first use of what it read) may only fail with an
+InsituError. Every run draws a new seed, printed; INSITU_FUZZ_SEED=N repeats a run,
+INSITU_FUZZ_EXAMPLES=2000 explores longer (benchmarks/fuzz.py: 10,000 per reader)."""
 
+import importlib.util
 import json
 import math
 import os
+import random
+import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
-from hypothesis import HealthCheck, given, settings
+from hypothesis import HealthCheck, given, seed, settings
 from hypothesis import strategies as st
 
 from insitu.calibrate.field_file import FieldCorrection, load_field_correction
@@ -26,9 +31,10 @@ from insitu.services.common import camera_model
 from insitu.services.field import read_targets_csv
 from insitu.services.height import height_model
 
-# CI explores the same examples on every run (derandomize); elsewhere each run explores anew
-FUZZ = settings(max_examples=int(os.environ.get("INSITU_FUZZ_EXAMPLES", 60)), deadline=None,
-                derandomize=bool(os.environ.get("CI")),
+# each run explores anew from a printed seed; INSITU_FUZZ_SEED repeats one
+SEED = int(os.environ.get("INSITU_FUZZ_SEED") or random.SystemRandom().randrange(10**9))
+EXAMPLES = int(os.environ.get("INSITU_FUZZ_EXAMPLES", 60))
+FUZZ = settings(max_examples=EXAMPLES, deadline=None, database=None,
                 suppress_health_check=[HealthCheck.function_scoped_fixture,
                                        HealthCheck.too_slow])
 HEAD = TwoMirrorHead(350.0, 12.0)
@@ -40,6 +46,28 @@ json_values = st.recursive(
     lambda inner: st.lists(inner, max_size=4) | st.dictionaries(st.text(max_size=6), inner,
                                                                  max_size=4),
     max_leaves=12)
+
+_spec = importlib.util.spec_from_file_location(
+    "insitu_fuzz", Path(__file__).parents[2] / "benchmarks" / "fuzz.py")
+engine = sys.modules.setdefault("insitu_fuzz", importlib.util.module_from_spec(_spec))
+_spec.loader.exec_module(engine)
+
+
+@pytest.fixture(scope="module", autouse=True)
+def _print_seed(request):
+    with request.config.pluginmanager.get_plugin("capturemanager").global_and_fixture_disabled():
+        print(f"\nfuzz seed {SEED} (INSITU_FUZZ_SEED={SEED} repeats this run)")
+
+
+@pytest.mark.parametrize("name", sorted(engine.READERS))
+def test_fuzz_engine(name):
+    """Mutated valid files of each reader, as benchmarks/fuzz.py makes them (30 each)."""
+    n = max(EXAMPLES // 2, 10)
+    stats = engine.run_reader(name, SEED, n, timeout_s=60.0)
+    assert stats.examples == n and not stats.failures, (
+        f"INSITU_FUZZ_SEED={SEED}: {stats.failures[:3]} (benchmarks/fuzz.py --readers {name} "
+        f"--seed {SEED} --start K --examples 1 repeats example K)")
+    assert stats.refused > 0                        # the mutations reach the readers' checks
 
 
 def _job():
@@ -149,6 +177,7 @@ def samples(tmp_path_factory):
 
 @pytest.mark.parametrize("name", sorted(READERS))
 @FUZZ
+@seed(SEED)
 @given(data=st.data())
 def test_fuzz_mutated_valid_file(name, samples, tmp_path, data):
     valid = samples[name]
@@ -162,6 +191,7 @@ def test_fuzz_mutated_valid_file(name, samples, tmp_path, data):
 
 @pytest.mark.parametrize("name", sorted(READERS))
 @FUZZ
+@seed(SEED)
 @given(raw=st.binary(max_size=120) | json_values.map(lambda v: json.dumps(v).encode()))
 def test_fuzz_arbitrary_content(name, tmp_path, raw):
     path = tmp_path / f"{name}.json"
@@ -170,6 +200,7 @@ def test_fuzz_arbitrary_content(name, tmp_path, raw):
 
 
 @FUZZ
+@seed(SEED)
 @given(raw=st.binary(max_size=200) | json_values.map(lambda v: json.dumps(v).encode()))
 def test_fuzz_progress_file(tmp_path, raw):
     path = tmp_path / "job.progress.json"
@@ -178,6 +209,7 @@ def test_fuzz_progress_file(tmp_path, raw):
 
 
 @FUZZ
+@seed(SEED)
 @given(data=st.data())
 def test_fuzz_mutated_progress_file(tmp_path, data):
     path = tmp_path / "job.progress.json"
@@ -191,6 +223,7 @@ def test_fuzz_mutated_progress_file(tmp_path, data):
 
 
 @FUZZ
+@seed(SEED)
 @given(text=st.text(alphabet="xy,.-+eE0123456789 \n\tinfa", max_size=80))
 def test_fuzz_targets_csv(tmp_path, text):
     path = tmp_path / "targets.csv"
@@ -199,6 +232,7 @@ def test_fuzz_targets_csv(tmp_path, text):
 
 
 @FUZZ
+@seed(SEED)
 @given(cut=st.integers(0, 400), flip=st.lists(st.tuples(st.integers(0, 400),
                                                         st.integers(0, 255)), max_size=4))
 def test_fuzz_point_cloud(tmp_path, cut, flip):
@@ -236,6 +270,7 @@ _svg_value = st.one_of(st.text(alphabet="0123456789.-+eE ,MmLlHhVvCcSsQqTtAaZz()
 
 
 @settings(FUZZ, max_examples=max(FUZZ.max_examples // 3, 10))
+@seed(SEED)
 @given(d=_svg_value, transform=_svg_value, width=_svg_value, view=_svg_value,
        fill=st.sampled_from(["black", "white", "none", "#000", "red"]),
        stroke=st.sampled_from(["black", "none", "#111"]), sw=_svg_value)
@@ -265,6 +300,7 @@ def dxf_lines(tmp_path_factory):
 
 
 @settings(FUZZ, max_examples=max(FUZZ.max_examples // 3, 10))
+@seed(SEED)
 @given(data=st.data())
 def test_fuzz_dxf_values(tmp_path, dxf_lines, data):
     lines = list(dxf_lines)

@@ -164,8 +164,8 @@ def test_centres_command_writes_csv_and_previews(tmp_path):
 
 
 @pytest.mark.parametrize("bad, message", [
-    ("missing", "missing.png: image file not found"),
-    ("text", "notes.png: not an image OpenCV can read"),
+    ("missing", "missing.png: no such image file"),
+    ("text", "notes.png: not a readable image"),
     ("blank", "no laser line found in 1 image"),
 ])
 def test_centres_command_refuses_bad_input_in_one_line_and_keeps_the_old_file(

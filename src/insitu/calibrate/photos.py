@@ -16,6 +16,8 @@ import numpy as np
 from insitu.calibrate.camera import BoardSpec
 from insitu.errors import CalibrationError
 from insitu.formats.bounds import BOUNDS
+from insitu.formats.images import read_image
+from insitu.formats.limits import check_inside
 
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff")
 _BOARD = re.compile(r"^\s*(\d+)\s*[xX×]\s*(\d+)\s*[xX×]\s*(\d+(?:\.\d*)?|\.\d+)\s*$")
@@ -51,7 +53,8 @@ def parse_board(text: str, charuco: str | None = None) -> BoardSpec:
 
 
 def image_files(folder: str | Path) -> list[Path]:
-    """The folder's images, sorted by name. CalibrationError if there is none."""
+    """The folder's images, sorted by name. CalibrationError if there is none or one is a
+    symlink that leads out of the folder."""
     folder = Path(folder)
     if not folder.is_dir():
         raise CalibrationError(f"{folder}: " + ("not a folder" if folder.exists()
@@ -61,14 +64,14 @@ def image_files(folder: str | Path) -> list[Path]:
     if not files:
         raise CalibrationError(f"{folder}: no images ({', '.join(IMAGE_SUFFIXES)}) and no "
                                "sequence.json")
+    for p in files:
+        check_inside(p, folder, "photo", CalibrationError)
     return files
 
 
 def read_grey(path: Path) -> np.ndarray:
     """One photo as a 2-D uint8/uint16 array; CalibrationError if it cannot be read."""
-    img = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
-    if img is None or img.size == 0:
-        raise CalibrationError(f"{path}: not a readable image")
+    img = read_image(path, error=CalibrationError)      # header checked before decoding
     if img.ndim == 3:
         code = cv2.COLOR_BGRA2GRAY if img.shape[2] == 4 else cv2.COLOR_BGR2GRAY
         img = cv2.cvtColor(img, code)

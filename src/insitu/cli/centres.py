@@ -14,6 +14,7 @@ import typer
 
 from insitu.cli.common import check_output, console, one_line_errors
 from insitu.errors import InsituError
+from insitu.formats import images
 from insitu.formats.atomic import atomic_write_bytes, atomic_write_text
 from insitu.formats.validation import one_of
 from insitu.vision.centres import CENTRE_METHODS, LineCentres, line_centres
@@ -24,12 +25,7 @@ COLUMNS = "file,u,v,peak,width,quality"
 def read_image(path: Path) -> np.ndarray:
     """(H, W) gray or (H, W, 3) BGR image of ``path`` (8 or 16 bit, any format OpenCV reads);
     InsituError naming the file if it is missing or not an image."""
-    if not path.is_file():
-        raise InsituError(f"{path}: image file not found")
-    img = cv2.imdecode(np.fromfile(path, np.uint8), cv2.IMREAD_ANYDEPTH | cv2.IMREAD_ANYCOLOR)
-    if img is None:
-        raise InsituError(f"{path}: not an image OpenCV can read")
-    return img
+    return images.read_image(path, cv2.IMREAD_ANYDEPTH | cv2.IMREAD_ANYCOLOR)
 
 
 def preview(img: np.ndarray, c: LineCentres) -> bytes:

@@ -159,9 +159,13 @@ def _abs(text: str | None, folder: Path, where: str, source: Path, must_exist=Tr
          ) -> Path | None:
     if text is None:
         return None
-    p = Path(text).expanduser()
-    p = p if p.is_absolute() else Path(os.path.normpath(folder / p))
-    if must_exist and not p.exists():
+    try:
+        p = Path(text).expanduser()
+        p = p if p.is_absolute() else Path(os.path.normpath(folder / p))
+        found = not must_exist or p.exists()
+    except (OSError, RuntimeError, ValueError) as e:    # too long, a NUL, no home for ~user
+        raise FormatError(f"{source}: {where}: not a usable path ({str(e)[:80]})") from None
+    if not found:
         raise FormatError(f"{source}: {where}: {text} not found (looked for {p})")
     return p
 

@@ -18,6 +18,8 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_valida
 from insitu.errors import FormatError
 from insitu.formats.atomic import atomic_folder, atomic_write_text
 from insitu.formats.bounds import BOUNDS, each_within, within
+from insitu.formats.images import read_image
+from insitu.formats.limits import MAX_IMAGE_BYTES, check_file, check_inside
 from insitu.formats.validation import (Finite, Matrix3, PositivePair, Range, Vec2, Vec3,
                                        bad, dump_json, numbers, plain, read_json, show,
                                        validation_message)
@@ -201,7 +203,7 @@ def _check_size(where: str, img: np.ndarray, cam: CameraSpec | None, shape=None)
 
 def _exists(path: Path) -> bool:
     try:
-        return path.is_file()
+        return path.exists()
     except (OSError, ValueError):
         return False
 
@@ -220,12 +222,17 @@ class Sequence:
             raise FormatError(f"{folder}: " + ("not a folder" if folder.exists()
                                                else "no such sequence folder"))
         path = folder / "sequence.json"
+        if path.exists():
+            check_inside(path, folder, "sequence file")
         data = read_json(path, missing="missing (a recorded sequence folder holds sequence.json)")
         spec = _validate(SequenceSpec, data, str(path))
         missing = [f.file for f in spec.frames if not _exists(folder / f.file)]
         if missing:
             raise FormatError(f"{folder}: frame file {missing[0]} is missing ({len(missing)} of "
                               f"{len(spec.frames)} frame files missing)")
+        for f in spec.frames:
+            check_inside(folder / f.file, folder, "frame file")
+            check_file(folder / f.file, MAX_IMAGE_BYTES, "frame image")
         return cls(folder, spec)
 
     kind = property(lambda self: self.spec.kind)
@@ -243,14 +250,10 @@ class Sequence:
     def read_frame(self, i: int) -> np.ndarray:
         """Frame ``i`` as (H, W) uint8 or uint16; FormatError naming the file if it is not one."""
         path = self.folder / self.spec.frames[i].file
-        try:
-            img = cv2.imdecode(np.fromfile(path, np.uint8), cv2.IMREAD_UNCHANGED)
-        except OSError as e:
-            raise FormatError(f"{path}: cannot read ({e.strerror or e})") from e
-        except cv2.error:
-            img = None
-        if img is None:
-            raise FormatError(f"{path}: not a readable image (expected a PNG)")
+        cam = self.spec.camera
+        check_inside(path, self.folder, "frame file")
+        img = read_image(path, expect=None if cam is None else (cam.width, cam.height),
+                         expected="camera is")
         if img.ndim == 3 and img.shape[2] == 1:
             img = img[:, :, 0]
         elif img.ndim == 3 and img.shape[2] == 3:

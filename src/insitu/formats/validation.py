@@ -14,6 +14,7 @@ from pydantic import AfterValidator, BeforeValidator, Field, ValidationError
 from pydantic_core import PydanticCustomError
 
 from insitu.errors import FormatError
+from insitu.formats.limits import MAX_JSON_BYTES, read_limited
 
 _MAX_SHOWN = 60
 
@@ -116,13 +117,9 @@ def validation_message(source: str | Path, error: ValidationError, prefix: str =
 
 
 def read_json(path: Path, missing: str = "file not found", error: type = FormatError) -> Any:
-    """Parse the JSON file ``path``; any failure is ``error`` naming the file (and line)."""
-    try:
-        raw = path.read_bytes()
-    except FileNotFoundError:
-        raise error(f"{path}: {missing}") from None
-    except OSError as e:
-        raise error(f"{path}: cannot read ({e.strerror or e})") from e
+    """Parse the JSON file ``path``; any failure is ``error`` naming the file (and line). Only
+    a regular file of at most ``MAX_JSON_BYTES`` is read (:mod:`insitu.formats.limits`)."""
+    raw = read_limited(path, MAX_JSON_BYTES, "JSON file", missing=missing, error=error)
     try:
         text = raw.decode("utf-8-sig")
     except UnicodeDecodeError as e:

@@ -26,7 +26,8 @@ import shapely
 
 from insitu.errors import FormatError
 from insitu.patterns.model import Pattern, contours_of, region
-from insitu.patterns.vector import TOL_MM, _check_file, _fail, _non_empty, check_extent
+from insitu.patterns.vector import (TOL_MM, Budget, _check_file, _fail, _non_empty, bezier_steps,
+                                    check_extent, check_finite)
 
 FILL_MODES = ("auto", "all", "none")
 _FILLS = ("HATCH", "MPOLYGON", "SOLID", "TRACE")
@@ -174,6 +175,40 @@ def _width(e) -> float:
     return 0.0
 
 
+def _flatten(sub, distance: float, budget: Budget, what: str) -> np.ndarray:
+    """(n, 2) drawing units: the sub-path ``sub`` flattened within ``distance``; its segments
+    (bounded from its control points before flattening) are taken from ``budget``."""
+    n, start = 0, sub.start
+    for cmd in sub.commands():
+        ctrl = getattr(cmd, "ctrl1", None), getattr(cmd, "ctrl2", None), getattr(cmd, "ctrl", None)
+        ctrl = [start, *(c for c in ctrl if c is not None), cmd.end]
+        n += 1 if len(ctrl) == 2 else 2 * bezier_steps([(c.x, c.y) for c in ctrl], distance) + 4
+        start = cmd.end
+    budget.take(n, what)
+    return np.array([(v.x, v.y) for v in sub.flattening(distance)], np.float64).reshape(-1, 2)
+
+
+def _check_attributes(e, path: Path, what: str) -> None:
+    """FormatError naming the entity and the attribute when a number or point among its DXF
+    attributes (centre, radius, angles, ratio, extrusion, ...) is not finite."""
+    for key, value in e.dxf.all_existing_dxf_attribs().items():
+        if isinstance(value, float) or hasattr(value, "isclose"):        # a float, Vec2 or Vec3
+            if not np.isfinite(np.asarray(tuple(value) if hasattr(value, "x") else value,
+                                          np.float64)).all():
+                raise FormatError(f"{path}: {what}: {key} is not a finite number "
+                                  f"({tuple(value) if hasattr(value, 'x') else value})")
+    kind = e.dxftype()
+    lists = {"SPLINE": lambda: {"control points": e.control_points, "fit points": e.fit_points,
+                                "knots": e.knots, "weights": e.weights},
+             "LWPOLYLINE": lambda: {"points": e.get_points("xyseb")},
+             "POLYLINE": lambda: {"vertices": [v.dxf.location for v in e.vertices]},
+             "MESH": lambda: {"vertices": e.vertices}}.get(kind)
+    for key, values in (lists() if lists else {}).items():
+        a = np.asarray([tuple(v) if hasattr(v, "__len__") else (v,) for v in values], np.float64)
+        if not np.isfinite(a).all():
+            raise FormatError(f"{path}: {what}: one of its {key} is not a finite number")
+
+
 def _banded(e, k: float):
     """The area of a wide (LW)POLYLINE as ezdxf's drawing add-on fills it (its TraceBuilder:
     each segment's own start and end width, bulges in 256 chords a turn), shapely, mm."""
@@ -245,6 +280,7 @@ def load_dxf(path: str | Path, tol_mm: float = TOL_MM, join_mm: float = 1e-3,
         doc, note = _read(path)
         k, unit_note = _scale(doc, units, path)
         notes = [unit_note] + ([note] if note else [])
+        budget = Budget(path)
         hidden = {layer.dxf.name.lower() for layer in doc.layers
                   if layer.is_off() or layer.is_frozen()}
         fills, edges, closed, pieces, skip = [], [], [], [], set()
@@ -254,6 +290,7 @@ def load_dxf(path: str | Path, tol_mm: float = TOL_MM, join_mm: float = 1e-3,
                 continue
             kind = e.dxftype()
             what = f"{kind} #{e.dxf.get('handle', '?')}"
+            _check_attributes(e, path, what)
             _check_radius(e, path)
             if kind == "WIPEOUT":
                 ring = np.array([(v.x, v.y) for v in e.boundary_path_wcs()]).reshape(-1, 2) * k
@@ -274,17 +311,18 @@ def load_dxf(path: str | Path, tol_mm: float = TOL_MM, join_mm: float = 1e-3,
                     paths = [dxfpath.make_path(e)]
                 except (TypeError, ValueError):
                     continue  # an entity with no outline (POINT, DIMENSION, IMAGE, ...)
-            cv = [np.array([(v.x, v.y) for v in p.control_vertices()], np.float64)
-                  .reshape(-1, 2) for p in paths]
-            cv = np.concatenate(cv or [np.zeros((0, 2))]) * k
-            check_extent(cv, path, what)
+            cv = [np.array([(v.x, v.y, v.z) for v in p.control_vertices()], np.float64)
+                  .reshape(-1, 3) for p in paths]
+            cv = np.concatenate(cv or [np.zeros((0, 3))])
+            check_extent(cv[:, :2] * k, path, what)
+            check_finite(cv, path, what)                 # z too, before flattening (nan: no end)
+            cv = cv[:, :2] * k
             # within tol_mm, or 2e-5 of the entity's size (a 100 m drawing marked at 50 mm)
             tol = max(tol_mm, 2e-5 * float(np.ptp(cv, axis=0).max())) if len(cv) else tol_mm
             rings, lines = [], []
             for p in paths:
                 for sub in p.sub_paths():
-                    pts = np.array([(v.x, v.y) for v in sub.flattening(tol / k)],
-                                   np.float64).reshape(-1, 2) * k
+                    pts = _flatten(sub, tol / k, budget, what) * k
                     if len(pts) < 2:
                         continue
                     if sub.is_closed or np.linalg.norm(pts[0] - pts[-1]) <= join_mm:

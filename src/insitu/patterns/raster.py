@@ -14,6 +14,7 @@ import numpy as np
 import shapely
 
 from insitu.errors import FormatError
+from insitu.formats.images import read_image
 from insitu.patterns.model import Pattern, contours_of
 
 DEFAULT_DPI = 96.0
@@ -73,7 +74,8 @@ def scan_lines(mask: np.ndarray, pixel_mm: float) -> list[np.ndarray]:
 def file_dpi(path: Path) -> float | None:
     """Resolution recorded in a PNG (pHYs), JPEG (JFIF) or BMP header, dots per inch."""
     try:
-        head = path.read_bytes()[:1 << 16]
+        with open(path, "rb") as f:
+            head = f.read(1 << 16)
     except OSError:
         return None
     try:
@@ -100,14 +102,7 @@ def file_dpi(path: Path) -> float | None:
 
 def image_gray(path: Path) -> np.ndarray:
     """(H, W) float64 in [0, 1] (0 black), alpha composited over white."""
-    import cv2
-
-    if not path.is_file():
-        raise FormatError(f"{path}: no such image file")
-    data = np.fromfile(str(path), np.uint8)
-    img = cv2.imdecode(data, cv2.IMREAD_UNCHANGED) if data.size else None
-    if img is None or img.size == 0:
-        raise FormatError(f"{path}: not a readable image (PNG, JPEG, BMP, TIFF)")
+    img = read_image(path)             # header first: size and pixel limits before decoding
     scale = 65535.0 if img.dtype == np.uint16 else 255.0 if img.dtype == np.uint8 else 1.0
     img = img.astype(np.float64) / scale
     if img.ndim == 2:

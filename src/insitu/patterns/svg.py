@@ -22,18 +22,21 @@ import shapely.affinity
 
 from insitu.errors import FormatError
 from insitu.patterns.model import Pattern, contours_of, region, stroke_region
-from insitu.patterns.vector import (BEAM_MM, MM_PER_PX, TOL_MM, _arc_steps, _check_file, _fail,
-                                    _non_empty, bezier_points, check_extent)
+from insitu.patterns.vector import (BEAM_MM, MM_PER_PX, TOL_MM, Budget, _arc_steps, _check_file,
+                                    _fail, _non_empty, bezier_points, bezier_steps, check_extent,
+                                    check_finite)
 
 # svgelements turns mm and cm into px with 0.0393701 in/mm; this ppi makes those exact
 # (px, pt and pc do not depend on it; inches are then off by 5e-7)
 _SVG_PPI = 96.0 / (25.4 * 0.0393701)
 
 
-def _svg_subpaths(shape, se, tol: float) -> list[tuple[np.ndarray, bool]]:
+def _svg_subpaths(shape, se, tol: float, budget: Budget,
+                  what: str) -> list[tuple[np.ndarray, bool]]:
     """Flatten one svgelements shape, in its own user space (its transform not applied), into
     (points, closed) subpaths within ``tol`` of the curves; a lone move-to is a one-point
-    subpath (a dot under a round cap)."""
+    subpath (a dot under a round cap). Every segment's points must be finite, and its chords
+    are taken from ``budget``, before it is flattened."""
     out: list[tuple[np.ndarray, bool]] = []
     pts: list = []
     closed = False
@@ -51,6 +54,18 @@ def _svg_subpaths(shape, se, tol: float) -> list[tuple[np.ndarray, bool]]:
             continue
         if not pts:
             pts = [(seg.start.x, seg.start.y)]
+        ctrl = [(p.x, p.y) for p in (seg.start, getattr(seg, "control", None),
+                                     getattr(seg, "control1", None),
+                                     getattr(seg, "control2", None), seg.end) if p is not None]
+        check_finite(ctrl, budget.path, what)
+        if isinstance(seg, se.Arc):
+            check_finite([(seg.rx, seg.ry), (seg.sweep, 0.0)], budget.path, what)
+        if isinstance(seg, (se.QuadraticBezier, se.CubicBezier)):
+            budget.take(bezier_steps(ctrl, tol), what)
+        elif isinstance(seg, se.Arc):
+            budget.take(_arc_steps(max(abs(seg.rx), abs(seg.ry)), seg.sweep, tol), what)
+        else:
+            budget.take(1, what)
         if isinstance(seg, se.Close):
             pts.append((seg.end.x, seg.end.y))
             closed = True
@@ -180,6 +195,7 @@ def load_svg(path: str | Path, tol_mm: float = TOL_MM, beam_mm: float = BEAM_MM)
         thin: list[np.ndarray] = []
         widths: set[float] = set()
         n_stroke_areas = 0
+        budget = Budget(path)
 
         def paint(g, is_dark: bool):
             nonlocal filled, dark
@@ -197,15 +213,16 @@ def load_svg(path: str | Path, tol_mm: float = TOL_MM, beam_mm: float = BEAM_MM)
             if not isinstance(el, se.Shape) or el.values.get("visibility") in ("hidden",
                                                                                "collapse"):
                 continue
+            tag = el.values.get("tag", "shape")
             m = _matrix(el.transform)
+            check_finite(m, path, f"a <{tag}>'s transform")
             scale = float(np.linalg.norm(m[:, :2], 2))
             if not scale > 0:
                 continue  # scaled to nothing: nothing is drawn
-            local = _svg_subpaths(el, se, tol_px / scale)
+            local = _svg_subpaths(el, se, tol_px / scale, budget, f"a <{tag}>")
             subs = [(_apply(m, q), c) for q, c in local]
             if not subs:
                 continue
-            tag = el.values.get("tag", "shape")
             check_extent(np.concatenate([q for q, _ in subs]) * MM_PER_PX, path, f"a <{tag}>")
             if _painted(el.fill):
                 rule = "evenodd" if el.values.get("fill-rule") == "evenodd" else "nonzero"

@@ -2,7 +2,10 @@
 guard and one-line failures.
 
 Curves are flattened to polylines that stay within ``tol_mm`` of the true curve (default
-0.002 mm, far below a 40 µm laser line). Any failure to read a file is one FormatError.
+0.002 mm, far below a 40 µm laser line). Any failure to read a file is one FormatError. A
+drawing file is at most ``MAX_DRAWING_BYTES``; coordinates that are not finite are refused
+before anything is flattened, and a file flattens to at most ``MAX_SEGMENTS`` segments
+(:class:`Budget`), so no file can hang the loader or fill the memory.
 """
 
 from __future__ import annotations
@@ -13,6 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from insitu.errors import FormatError
+from insitu.formats.limits import MAX_DRAWING_BYTES, check_file
 from insitu.patterns.model import Pattern
 
 TOL_MM = 0.002
@@ -20,18 +24,49 @@ MM_PER_PX = 25.4 / 96.0  # CSS pixel, the SVG user unit
 MAX_MM = 1e5      # 100 m: an entity larger than this is a broken file, not a pattern
 FAR_MM = 1e9      # coordinates beyond this (1000 km) have lost their precision
 BEAM_MM = 0.05    # default beam width: strokes at least this wide are marked as areas
+MAX_SEGMENTS = 2_000_000  # flattened segments in one file (a detailed logo has ~1e4)
 
 
-def bezier_points(ctrl, tol: float) -> np.ndarray:
-    """Points (n+1, 2) along a quadratic (3 control points) or cubic (4) Bézier, from start to
-    end inclusive, spaced uniformly in t so the chords stay within ``tol`` of the curve."""
+class Budget:
+    """The segments a file may still flatten into; :meth:`take` refuses, naming the entity,
+    the first one that would exceed ``limit``."""
+
+    def __init__(self, path: Path, limit: int = MAX_SEGMENTS):
+        self.path, self.limit, self.left = path, limit, limit
+
+    def take(self, n: int, what: str) -> None:
+        self.left -= n
+        if self.left < 0:
+            raise FormatError(f"{self.path}: {what}: the drawing flattens to more than "
+                              f"{self.limit:,} segments (refused: too detailed to mark)")
+
+
+def check_finite(pts, path: Path, what: str) -> None:
+    """FormatError naming ``what`` when any coordinate of ``pts`` (N, 2 or 3) is not finite
+    (checked before flattening: a nan makes curve subdivision run forever)."""
+    a = np.asarray(pts, np.float64)
+    if not np.isfinite(a).all():
+        raise FormatError(f"{path}: {what} has a coordinate that is not a finite number "
+                          f"({a[~np.isfinite(a).all(axis=-1)][0].tolist()})")
+
+
+def bezier_steps(ctrl, tol: float) -> int:
+    """Chords of a quadratic (3 control points) or cubic (4) Bézier, uniform in t, so that
+    they stay within ``tol`` of the curve (at most 10,000)."""
     c = np.asarray(ctrl, np.float64)
     if len(c) == 3:
         m = float(np.linalg.norm(c[0] - 2 * c[1] + c[2])) / 4.0
     else:
         m = 0.75 * max(float(np.linalg.norm(c[0] - 2 * c[1] + c[2])),
                        float(np.linalg.norm(c[1] - 2 * c[2] + c[3])))
-    n = max(1, min(10_000, math.ceil(math.sqrt(m / max(tol, 1e-12)))))
+    return max(1, min(10_000, math.ceil(math.sqrt(m / max(tol, 1e-12)))))
+
+
+def bezier_points(ctrl, tol: float) -> np.ndarray:
+    """Points (n+1, 2) along a quadratic (3 control points) or cubic (4) Bézier, from start to
+    end inclusive, spaced uniformly in t so the chords stay within ``tol`` of the curve."""
+    c = np.asarray(ctrl, np.float64)
+    n = bezier_steps(c, tol)
     t = np.linspace(0.0, 1.0, n + 1)[:, None]
     s = 1.0 - t
     if len(c) == 3:
@@ -54,8 +89,7 @@ def _fail(path: Path, kind: str, e: BaseException) -> FormatError:
 
 
 def _check_file(path: Path) -> None:
-    if not path.is_file():
-        raise FormatError(f"{path}: no such pattern file")
+    check_file(path, MAX_DRAWING_BYTES, "drawing", missing="no such pattern file")
 
 
 def _non_empty(p: Pattern, path: Path, what: str) -> Pattern:

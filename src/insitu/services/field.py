@@ -25,6 +25,7 @@ from insitu.calibrate.field_file import FIELD_METHODS, AreaRow, CVRow, FieldCorr
 from insitu.calibrate.report import report_image, write_report_png
 from insitu.errors import CalibrationError, FormatError
 from insitu.formats.atomic import atomic_write_text
+from insitu.formats.limits import MAX_JSON_BYTES, read_limited
 from insitu.formats.sequence import Sequence
 from insitu.formats.validation import one_of
 from insitu.services.common import Progress, camera_model, save_with_picture
@@ -237,12 +238,11 @@ def report_png(correction: FieldCorrection, path: str | Path) -> None:
 def read_targets_csv(path: str | Path) -> np.ndarray:
     """(N, 2) targets, mm, from a CSV with header ``x,y``. FormatError naming file and line."""
     path = Path(path)
+    raw = read_limited(path, MAX_JSON_BYTES, "targets CSV", missing="file not found")
     try:
-        text = path.read_text(encoding="utf-8-sig")
-    except FileNotFoundError:
-        raise FormatError(f"{path}: file not found") from None
-    except (OSError, UnicodeDecodeError) as e:
-        raise FormatError(f"{path}: cannot read ({getattr(e, 'strerror', None) or e})") from e
+        text = raw.decode("utf-8-sig")
+    except UnicodeDecodeError as e:
+        raise FormatError(f"{path}: cannot read (not UTF-8 text at byte {e.start})") from None
     rows = [r for r in csv.reader(io.StringIO(text))]
     if not rows or [c.strip().lower() for c in rows[0]] != ["x", "y"]:
         raise FormatError(f"{path}: line 1: expected the header 'x,y', got "
