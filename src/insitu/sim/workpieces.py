@@ -11,13 +11,15 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable
+from typing import TYPE_CHECKING, Callable
 
 import numpy as np
-import open3d as o3d
 
 from insitu.errors import ConfigError, FormatError
 from insitu.sim import meshes
+
+if TYPE_CHECKING:                       # open3d takes 0.4 s to import: only where it is used
+    import open3d as o3d
 
 HeightFn = Callable[[np.ndarray, np.ndarray], np.ndarray]
 
@@ -56,6 +58,8 @@ class Workpiece:
 
     def o3d_tensor_mesh(self) -> o3d.t.geometry.TriangleMesh:
         """The mesh for ``RaycastingScene.add_triangles``: float32 positions, int32 indices."""
+        import open3d as o3d
+
         mesh = o3d.t.geometry.TriangleMesh()
         mesh.vertex.positions = o3d.core.Tensor(self.vertices.astype(np.float32))
         mesh.triangle.indices = o3d.core.Tensor(np.ascontiguousarray(self.triangles))
@@ -298,6 +302,8 @@ def make_workpiece(name: str, **overrides) -> Workpiece:
 
 def _raycast_height(vertices: np.ndarray, triangles: np.ndarray) -> HeightFn:
     """z of the first surface hit by a vertical ray from above (float32 ray casting)."""
+    import open3d as o3d
+
     scene = o3d.t.geometry.RaycastingScene()
     scene.add_triangles(o3d.core.Tensor(vertices.astype(np.float32)),
                         o3d.core.Tensor(triangles.astype(np.uint32)))
@@ -325,6 +331,8 @@ def load_mesh_workpiece(path: str | Path, x: float = 0.0, y: float = 0.0,
     if path.suffix.lower() not in MESH_SUFFIXES:
         raise FormatError(f"{path}: unsupported mesh format {path.suffix!r}; "
                           "expected .stl, .ply or .obj")
+    import open3d as o3d
+
     try:
         with o3d.utility.VerbosityContextManager(o3d.utility.VerbosityLevel.Error):
             mesh = o3d.io.read_triangle_mesh(str(path))
