@@ -172,7 +172,7 @@ def test_pattern_show_prints_the_warnings(tmp_path):
     res = CliRunner().invoke(app, ["pattern", "show", str(svg)], env={"COLUMNS": "200"})
     assert res.exit_code == 0 and res.exception is None, res.output
     text = " ".join(re.sub(r"[│┃┌┐└┘├┤┬┴┼─━]", " ", res.output).split())
-    assert "warning warning: content outside the page (26.46 × 26.46 mm) clipped" in text
+    assert "warning content outside the page (26.46 × 26.46 mm) clipped" in text
 
 
 def test_a_tapered_wide_polyline_and_an_attdef_tag(tmp_path):

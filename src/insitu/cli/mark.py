@@ -144,7 +144,7 @@ def _summary(out: Path, placement, plan, field: Path | None, rec=None) -> None:
             *placement.code_hatch(plan.pattern))
     for note in plan.pattern.notes:
         table.add_row(Text("warning", "yellow") if note.startswith("warning:") else "loaded",
-                      note)
+                      note.removeprefix("warning: "))
     if rec is not None:
         for t in rec.texts:
             table.add_row("renders", t.text)

@@ -104,7 +104,7 @@ def show(
                       + (" …" if len(p.stroke_widths) > 8 else "") + f" mm wide (beam {beam:g})")
     for note in p.notes:
         table.add_row(Text("warning", "yellow") if note.startswith("warning:") else "loaded",
-                      note)
+                      note.removeprefix("warning: "))
     console.print(table)
     if out is not None:
         ok, buf = cv2.imencode(".png", preview(p))
