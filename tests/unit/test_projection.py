@@ -294,3 +294,9 @@ def test_a_wrapped_path_leaves_the_strip_out_too():
     p = proj.points
     assert len(proj.paths) == 2 and proj.unmarked_mm > 0.2
     assert np.abs(p[:, 2] - true_step(p)).max() < 0.10
+
+
+def test_a_pattern_wholly_in_the_unmeasured_strip_is_refused():
+    with pytest.raises(SafetyError, match=r"\(x, y\) = \(-2\.000, -0\.100\) mm lies beside a "
+                                          "step, where the cloud does not show the surface"):
+        project([np.array([[-2.0, -0.1], [2.0, -0.1]])], gapped_step())

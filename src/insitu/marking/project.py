@@ -150,7 +150,7 @@ def _measured(xyz: np.ndarray, cuts: np.ndarray, unmeasured: np.ndarray, *per_po
     """Split the packed paths (points (N, 3), offsets ``cuts``) where they enter the strip
     that neither level measured and leave those points out; a piece of a longer path left
     with one point is left out too. Returns the paths, their length (x-y, mm) and each of
-    ``per_point`` (N,) arrays for the points kept."""
+    ``per_point`` (N,) arrays for the points kept; SafetyError when nothing is left."""
     n = len(xyz)
     lens = np.diff(cuts)
     keep = ~unmeasured
@@ -165,6 +165,11 @@ def _measured(xyz: np.ndarray, cuts: np.ndarray, unmeasured: np.ndarray, *per_po
         if len(single) == 0:
             break
         keep[single] = False
+    if n and not len(kept):
+        x, y = xyz[0, :2]
+        raise SafetyError(f"pattern point at (x, y) = ({x:.3f}, {y:.3f}) mm lies beside a step, "
+                          "where the cloud does not show the surface (nothing of the pattern "
+                          "is left to mark)", where_mm=(x, y))
     out = xyz[kept]
     return _split(out, off), _xy_length(out, off), [a[kept] for a in per_point]
 
