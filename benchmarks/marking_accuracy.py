@@ -33,6 +33,7 @@ from insitu.marking import (GalvoDriver, Limits, check_projection, estimate_time
 from insitu.marking import Placement
 from insitu.marking.project import densify
 from insitu.services import calibrate_height
+from insitu.services.mark import check_codes
 from insitu.services.scan import scan_live
 from insitu.sim.world import sim_world
 from insitu.sim.marks import find_marks, render_inspection
@@ -159,7 +160,9 @@ def focus(worlds, clouds, rig) -> None:
                     f"{np.sqrt(np.mean(e**2)):.4f}", f"{np.abs(e).max():.4f}",
                     "[green]yes[/]" if ok else "[red]no[/]")
     qr = Placement('qr:"insitu"', (0.0, -20.0), 10.0, mode="planar")     # issue 11
-    job, _ = plan_job(qr.polylines(qr.placed()), clouds["step-block"], limits, mode="planar")
+    pattern = qr.placed()
+    job, qr_proj = plan_job(qr.polylines(pattern), clouds["step-block"], limits, mode="planar")
+    code = check_codes(job, pattern, qr_proj, qr.beam_mm)[0]
     p = np.vstack([path.points for path in job.paths])                   # laser on
     e = p[:, 2] - worlds["step-block"].parts[0].height(p[:, 0], p[:, 1])
     wall = np.abs(p[:, 1] + 20.0)                                        # the wall at y = −20
@@ -173,6 +176,10 @@ def focus(worlds, clouds, rig) -> None:
     if off.any():
         console.print(f"QR across the edge: {off.sum()} of {len(e)} marked points more than "
                       f"0.1 mm off, all within {wall[off].max():.2f} mm of the wall")
+    console.print(f"QR across the edge: unmarked at the wall {qr_proj.unmarked_mm:.2f} of "
+                  f"{qr_proj.path_mm:.0f} mm of path ({qr_proj.unmarked_fraction:.1%}), marked "
+                  f"{wall[p[:, 1] < -20.0].min():.3f} mm below and {wall[p[:, 1] > -20.0].min():.3f}"
+                  f" mm above the wall; decodes {'yes' if code.ok else 'NO'}")
 
 
 def true_length(part, xyz: np.ndarray) -> float:

@@ -177,7 +177,7 @@ def test_field_correction_out_of_bounds(tmp_path):
             "weights_mm": [[0.1, 0.0]], "bias_mm": [0, 0]}
     assert RBFSpec.model_validate(good).sigma_mm == 20.0
     for key, value, word in (("sigma_mm", 1e-300, "1e-300 is outside 0.001 … 10000 mm"),
-                             ("weights_mm", [[1e300, 0]], "1e+300 is outside -10000 … 10000 mm"),
+                             ("weights_mm", [[1e300, 0]], "1e+300 is outside -1000000 … 1000000 mm"),
                              ("centres_mm", [[0, -1e9]], "-1e+09 is outside -1000 … 1000 mm")):
         with pytest.raises(ValidationError, match=rf"{key}\n  {re.escape(word)}"):
             RBFSpec.model_validate({**good, key: value})

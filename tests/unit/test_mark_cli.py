@@ -188,3 +188,42 @@ def test_fill_option_fills_a_dxf_frame_only_when_asked(tmp_path, files):
     res = _run("mark", "--cloud", files / "step3.ply", "--pattern", tmp_path / "frame.dxf",
                "--at", 0, -30, "--width", 8, "--fill", "some", "-o", tmp_path / "x.json")
     assert res.exit_code != 0 and "--fill 'some': expected one of auto, all, none" in res.output
+
+
+def _gapped_step(path):
+    """A 3 → 5 mm step at y = −20 whose wall the cloud does not show: lines along y every
+    0.5 mm, the lower level lost 0.3 mm behind the top edge."""
+    xs, ys = np.meshgrid(np.arange(-10.0, 10.01, 0.5), np.arange(-30.0, -10.0, 0.15) + 0.01)
+    x, y = xs.ravel(), ys.ravel()
+    keep = (y < -20.3) | (y > -20.0)
+    z = np.where(y > -20.0, 5.0, 3.0)
+    write_ply(path, PointCloud(np.column_stack([x, y, z])[keep]))
+
+
+def test_the_summary_says_what_a_step_left_unmarked(files, tmp_path):
+    """The job marks neither the wall nor the strip beside it that the cloud does not show,
+    and says so."""
+    _gapped_step(tmp_path / "step.ply")
+    out = tmp_path / "job.json"
+    res = _run("mark", "--cloud", tmp_path / "step.ply", "--pattern", files / "rect.svg",
+               "--at", 0, -20, "--width", 8, "--hatch", 0.1, "-o", out)
+    assert res.exit_code == 0, res.output
+    p = _points(out)
+    assert np.abs(p[:, 2] - np.where(p[:, 1] > -20.0, 5.0, 3.0)).max() < 0.10
+    assert not ((p[:, 1] > -20.3) & (p[:, 1] < -20.0)).any()
+    m = re.search(r"unmarked at walls (\d+\.\d\d) mm of (\d+) mm of path \((\d+\.\d)%\)",
+                  _flat(res.output))
+    assert m, res.output
+    assert float(m[1]) > 2 * 8.0 and 1.0 < float(m[3]) < 20.0     # hatch rows in the strip
+
+
+def test_a_code_the_unmarked_strip_breaks_is_refused(tmp_path):
+    """A QR code whose middle module row the unmarked strip runs through does not decode: it
+    is refused, naming the wall, and nothing is written."""
+    _gapped_step(tmp_path / "step.ply")
+    out = tmp_path / "qr.json"
+    res = _run("mark", "--cloud", tmp_path / "step.ply", "--pattern", "qr:HELLO;module=0.5",
+               "--at", 0, -20, "-o", out)
+    assert res.exit_code == 1 and not out.exists()
+    assert len(res.output.strip().splitlines()) == 1
+    assert "does not decode" in res.output and "left unmarked at a step's wall" in res.output

@@ -235,3 +235,68 @@ def test_a_step_seen_with_a_gap_where_the_lines_break_is_two_levels():
     s = Surface(cloud).sample(np.array([[0.25, -0.35], [0.75, -0.3], [0.25, 0.2]]))
     np.testing.assert_allclose(s.z, [3.0, 3.0, 5.0], atol=1e-6)
     assert (s.slope_deg < 1.0).all()
+
+
+def gapped_step(shift=0.0):
+    """Lines along y every 0.5 mm (points 0.15 mm apart) over a 3 → 5 mm step at y = 0, as the
+    camera sees it: the lower level lost 0.2–0.4 mm behind the top edge, the upper level's
+    lines stopping 0–0.2 mm short of it; ``shift``: the upper level's last points measured
+    that far past the true edge (lateral error)."""
+    xs, ys = np.meshgrid(np.arange(-6.0, 6.01, 0.5), np.arange(-6.0, 6.0, 0.15) + 0.01)
+    x, y = xs.ravel(), ys.ravel()
+    line = np.round((x + 6.0) / 0.5).astype(int)
+    lost_low = 0.2 + 0.2 * ((line * 7) % 5) / 4                # 0.2 … 0.4 mm
+    short_high = 0.2 * ((line * 3) % 5) / 4 - shift           # 0 … 0.2 mm
+    keep = (y < -lost_low) | (y > short_high)
+    z = np.where(y > 0.0, 5.0, 3.0)
+    return np.column_stack([x[keep], y[keep], z[keep]])
+
+
+def true_step(p):
+    return np.where(p[:, 1] > 0.0, 5.0, 3.0)
+
+
+@pytest.mark.parametrize("shift", [0.0, 0.03])
+def test_nothing_is_marked_in_the_strip_a_step_leaves_unmeasured(shift):
+    """Issue 11: hatch lines across and along a step whose wall the cloud does not show: every
+    target within 0.10 mm of the true surface, the strip between the levels left unmarked,
+    and the projection says how much."""
+    cloud = gapped_step(shift)
+    across = [np.array([[x, -3.0], [x, 3.0]]) for x in np.arange(-4.0, 4.01, 0.05)]
+    along = [np.array([[-4.0, y], [4.0, y]]) for y in np.arange(-1.0, 1.0, 0.05)]
+    for lines in (across, along):
+        proj = project(lines, cloud)
+        check_projection(proj, LIMITS)
+        p = proj.points
+        assert np.abs(p[:, 2] - true_step(p)).max() < 0.10
+        assert not ((p[:, 1] > -0.2) & (p[:, 1] < 0.0)).any()   # lower level not seen there
+        assert 0.0 < proj.unmarked_mm < proj.path_mm
+        kept = sum(float(np.linalg.norm(np.diff(q[:, :2], axis=0), axis=1).sum())
+                   for q in proj.paths)
+        assert proj.unmarked_mm == pytest.approx(proj.path_mm - kept)
+    assert 0.1 < proj.unmarked_fraction < 0.5                  # along: rows in the strip
+    assert not (np.abs(proj.points[:, 1] + 0.1) < 0.01).any()  # the row at y = −0.1: none
+
+
+def test_a_fully_measured_step_keeps_its_paths_whole():
+    cloud = grid_cloud(lambda x, y: np.where(y > 0.0, 5.0, 3.0), -6, 6, -6, 6, 0.15)
+    proj = project([np.array([[1.0, -3.0], [1.0, 3.0]])], cloud)
+    low, high = proj.paths
+    assert high[0, 1] - low[-1, 1] <= proj.step_mm + 1e-9
+    assert proj.unmarked_mm == pytest.approx(high[0, 1] - low[-1, 1])
+    flat = project([np.array([[1.0, -3.0], [1.0, 3.0]])], grid_cloud(tilted))
+    assert flat.unmarked_mm == 0.0 and flat.path_mm == pytest.approx(6.0)
+
+
+def test_a_wrapped_path_leaves_the_strip_out_too():
+    proj = project([np.array([[1.0, -3.0], [1.0, 3.0]])], gapped_step(), "wrap",
+                   anchor=(1.0, -2.0), direction_deg=90.0)
+    p = proj.points
+    assert len(proj.paths) == 2 and proj.unmarked_mm > 0.2
+    assert np.abs(p[:, 2] - true_step(p)).max() < 0.10
+
+
+def test_a_pattern_wholly_in_the_unmeasured_strip_is_refused():
+    with pytest.raises(SafetyError, match=r"\(x, y\) = \(-2\.000, -0\.100\) mm lies beside a "
+                                          "step, where the cloud does not show the surface"):
+        project([np.array([[-2.0, -0.1], [2.0, -0.1]])], gapped_step())

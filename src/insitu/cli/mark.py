@@ -154,6 +154,11 @@ def _summary(out: Path, placement, plan, field: Path | None, rec=None) -> None:
     mode = placement.mode + (f", worst stretch {plan.projection.max_stretch:.2%}"
                              if PROJECTIONS[placement.mode].stretches else "")
     table.add_row("projection", mode)
+    proj = plan.projection
+    if proj.unmarked_mm > 0:
+        table.add_row("unmarked at walls", f"{proj.unmarked_mm:.2f} mm of {proj.path_mm:.0f} mm "
+                      f"of path ({proj.unmarked_fraction:.1%}): across a wall and where the "
+                      "cloud does not show where it is")
     for c in plan.codes:
         table.add_row("decodes", f"{'yes' if c.ok else 'NO'}: {c.name} (module "
                                  f"{c.module_mm:.3g} mm" + (f", read {c.decoded!r})" if not c.ok

@@ -105,7 +105,8 @@ BOUNDS: dict[str, Bound] = {
     # -- field correction --
     "rbf_sigma_mm": Bound(1e-3, 1e4, "mm", "the RBF spread is a fraction of the field"),
     "mse_goal_mm2": Bound(0, 100, "mm²", "the RBF fit's goal: errors are well below 10 mm"),
-    "rbf_weight_mm": Bound(-1e4, 1e4, "mm", "RBF weights of close neurons oppose one another"),
+    "rbf_weight_mm": Bound(-1e6, 1e6, "mm", "RBF weights of close neurons oppose one another "
+                           "(an OLS fit on 21 × 21 marked circles: up to 12,000)"),
     "correction_mm": Bound(-100, 100, "mm", "a landing error of a scan head is below 100 mm"),
     "smoothing": Bound(0, 1e6, "", "a spline's smoothing factor"),
     "tolerance_mm": Bound(1e-6, 100, "mm", "a landing-error tolerance"),

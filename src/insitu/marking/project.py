@@ -14,6 +14,11 @@ one (N', 3) array per polyline, world frame, mm — the 3-D targets of a mark jo
   ``max_stretch`` = max |σ − 1| over the pattern of the mapping's singular values σ. The
   direction is the one with the least stretch among x, y, the anchor's principal curvature
   and slope directions, unless given.
+
+Both modes leave out what lies in the strip between two levels of a step that neither level
+measured (:class:`~.surface.SurfaceSample` ``unmeasured``): the path is split there and the
+laser is off across it, so every target lies on a measured level within its measured extent.
+``Projection.unmarked_mm`` says how much of the pattern's path that left out.
 """
 
 from __future__ import annotations
@@ -37,7 +42,9 @@ class Projection:
     """``paths``: (N_i, 3) mm per input polyline. Per point, concatenated in path order:
     ``gap_mm`` to the nearest cloud point and the local ``slope_deg`` (for the checks).
     ``step_mm``: densification step; ``max_stretch``: worst metric distortion (wrap; 0 for
-    planar); ``direction_deg``: wrap unroll direction (angle of a from +x)."""
+    planar); ``direction_deg``: wrap unroll direction (angle of a from +x). ``path_mm``: the
+    pattern's path length (x, y), ``unmarked_mm`` of it left out at walls (across a wall and
+    over the strip beside it that neither level measured)."""
 
     paths: list[np.ndarray]
     mode: str
@@ -49,11 +56,18 @@ class Projection:
     direction_deg: float | None = None
     anchor: tuple[float, float] | None = None
     extra: dict = field(default_factory=dict)
+    path_mm: float = 0.0
+    unmarked_mm: float = 0.0
 
     @property
     def points(self) -> np.ndarray:
         """(N, 3) all points, path order."""
         return np.vstack(self.paths) if self.paths else np.zeros((0, 3))
+
+    @property
+    def unmarked_fraction(self) -> float:
+        """Share of the pattern's path left unmarked at walls, 0 … 1."""
+        return self.unmarked_mm / self.path_mm if self.path_mm > 0 else 0.0
 
 
 def _pack(polylines) -> tuple[np.ndarray, np.ndarray]:
@@ -121,6 +135,45 @@ def _split(arr: np.ndarray, off: np.ndarray) -> list[np.ndarray]:
     return [arr[off[i]:off[i + 1]] for i in range(len(off) - 1)]
 
 
+def _xy_length(xyz: np.ndarray, off: np.ndarray) -> float:
+    """Summed x-y length of the paths of packed points (N, ≥ 2), offsets (P + 1,), mm."""
+    if len(xyz) < 2:
+        return 0.0
+    seg = np.linalg.norm(np.diff(xyz[:, :2], axis=0), axis=1)
+    inside = np.ones(len(seg), bool)
+    inside[off[1:-1] - 1] = False
+    return float(seg[inside].sum())
+
+
+def _measured(xyz: np.ndarray, cuts: np.ndarray, unmeasured: np.ndarray, *per_point
+              ) -> tuple[list[np.ndarray], float, list[np.ndarray]]:
+    """Split the packed paths (points (N, 3), offsets ``cuts``) where they enter the strip
+    that neither level measured and leave those points out; a piece of a longer path left
+    with one point is left out too. Returns the paths, their length (x-y, mm) and each of
+    ``per_point`` (N,) arrays for the points kept; SafetyError when nothing is left."""
+    n = len(xyz)
+    lens = np.diff(cuts)
+    keep = ~unmeasured
+    for _ in range(2):                   # the second pass: the single points the first left
+        start = np.zeros(n, bool)
+        start[cuts[:-1]] = True
+        start[1:] |= keep[1:] & ~keep[:-1]
+        kept = np.flatnonzero(keep)
+        off = np.append(np.flatnonzero(start[kept]), len(kept))
+        single = kept[off[:-1][np.diff(off) == 1]]
+        single = single[np.repeat(lens, lens)[single] > 1]
+        if len(single) == 0:
+            break
+        keep[single] = False
+    if n and not len(kept):
+        x, y = xyz[0, :2]
+        raise SafetyError(f"pattern point at (x, y) = ({x:.3f}, {y:.3f}) mm lies beside a step, "
+                          "where the cloud does not show the surface (nothing of the pattern "
+                          "is left to mark)", where_mm=(x, y))
+    out = xyz[kept]
+    return _split(out, off), _xy_length(out, off), [a[kept] for a in per_point]
+
+
 def project_planar(polylines, cloud: PointCloud | np.ndarray | Surface,
                    step_mm: float | None = None, *, anchor=None,
                    direction_deg: float | None = None) -> Projection:
@@ -137,8 +190,10 @@ def project_planar(polylines, cloud: PointCloud | np.ndarray | Surface,
     jump = level_jumps(xyz)
     jump[doff[1:-1] - 1] = False                     # between two polylines: not a jump
     cuts = np.union1d(doff, np.flatnonzero(jump) + 1)
-    return Projection(_split(xyz, cuts), "planar", step, surf.hole_radius_mm, s.gap_mm,
-                      s.slope_deg)
+    paths, marked, (gap, slope) = _measured(xyz, cuts, s.unmeasured, s.gap_mm, s.slope_deg)
+    total = _xy_length(xyz, doff)
+    return Projection(paths, "planar", step, surf.hole_radius_mm, gap, slope,
+                      path_mm=total, unmarked_mm=total - marked)
 
 
 # ----------------------------------------------------------------------------- wrap
@@ -264,7 +319,10 @@ def project_wrap(polylines, cloud: PointCloud | np.ndarray | Surface, anchor=Non
     xy = amap(dense_rel @ np.array([[c, -s], [s, c]]))
     smp = surf.sample(xy)
     xyz = np.column_stack([xy, smp.z])
-    return Projection(_split(xyz, doff), "wrap", step, surf.hole_radius_mm, smp.gap_mm,
-                      smp.slope_deg, stretch, float(np.degrees(theta)),
-                      (float(anchor[0]), float(anchor[1])))
+    paths, marked, (gap, slope) = _measured(xyz, doff, smp.unmeasured, smp.gap_mm,
+                                            smp.slope_deg)
+    total = _xy_length(xyz, doff)
+    return Projection(paths, "wrap", step, surf.hole_radius_mm, gap, slope, stretch,
+                      float(np.degrees(theta)), (float(anchor[0]), float(anchor[1])),
+                      path_mm=total, unmarked_mm=total - marked)
 

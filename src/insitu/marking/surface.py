@@ -14,6 +14,15 @@ the point takes its nearest neighbours' level and that level's slope: a vertical
 surface to mark on, the projection splits paths where they drop from one level to the other
 (:func:`level_jumps`), while a steep surface (a chamfer, the flank of a curved part) keeps
 its steep slope.
+
+Beside a step the camera loses the foot of the wall behind the top edge and the upper level's
+lines stop short of the edge: between the two levels lies a strip neither measured. A point
+there is ``unmeasured``: across the wall (from its level towards the other), its level's
+nearest measured point — among those beside it along the wall, within the coverage spacing —
+lies more than half the point spacing behind it (a measured point stands for ± half the
+spacing around it). Where points were lost there (the levels' facing points more than 1.5
+spacings apart), the wall may be anywhere in the strip and a level's last point itself may lie
+over the edge: a point within half a spacing of it is unmeasured too. Nothing is marked there.
 """
 
 from __future__ import annotations
@@ -30,6 +39,7 @@ _Z_FLOOR_MM = 0.02          # never reject points closer than this to the robust
 _RIDGE = 0.02               # ridge on the slope terms: as if spread ± this × radius
 _LEVEL_SLOPE = np.tan(np.radians(60.0))   # steeper jumps within a neighbourhood: two levels
 _NEAR = 6                   # nearest neighbours that tell a query point's level
+_LOST = 1.5                 # levels farther apart across a wall (× point spacing): points lost
 
 
 @dataclass(frozen=True)
@@ -37,13 +47,15 @@ class SurfaceSample:
     """Per query point (M,): height z (mm, NaN where no cloud point within the hole radius),
     gradient (M, 2) dz/dx, dz/dy of the robust plane, slope_deg of the local surface (walls
     included), gap_mm to the nearest cloud point (inf when none within the hole radius) and
-    the number of neighbours used."""
+    the number of neighbours used; ``unmeasured`` (M,) bool: in the strip between two levels
+    that neither measured (see the module docstring)."""
 
     z: np.ndarray
     grad: np.ndarray
     slope_deg: np.ndarray
     gap_mm: np.ndarray
     n_used: np.ndarray
+    unmeasured: np.ndarray
 
 
 def level_jumps(xyz: np.ndarray) -> np.ndarray:
@@ -86,7 +98,7 @@ class Surface:
         parts = [self._sample(xy[i:i + chunk], k) for i in range(0, len(xy), chunk)]
         if not parts:
             e = np.zeros(0)
-            return SurfaceSample(e, np.zeros((0, 2)), e, e, e.astype(int))
+            return SurfaceSample(e, np.zeros((0, 2)), e, e, e.astype(int), e.astype(bool))
         return SurfaceSample(*(np.concatenate([getattr(p, f) for p in parts])
                                for f in SurfaceSample.__dataclass_fields__))
 
@@ -126,7 +138,41 @@ class Surface:
         zq = np.where(n_valid > 0, coef[:, 0], np.nan)
         grad[n_valid == 0] = np.nan
         slope[n_valid == 0] = np.nan
-        return SurfaceSample(zq, grad, slope, d[:, 0], n_keep)
+        unmeasured = np.zeros(len(xy), bool)
+        step = np.isfinite(cut)
+        if step.any():
+            unmeasured[step] = self._unmeasured(xy[step], cut[step], upper[step])
+        return SurfaceSample(zq, grad, slope, d[:, 0], n_keep, unmeasured)
+
+    def _unmeasured(self, xy: np.ndarray, cut: np.ndarray, upper: np.ndarray) -> np.ndarray:
+        """(M,) bool: query points (M, 2) beside a step (levels split at height ``cut``, the
+        point's on the ``upper`` one or not) that lie in the strip between the levels that
+        neither measured. The direction across the wall is from the centroid of the point's
+        level to that of the other among its 4 k nearest cloud points."""
+        k = min(4 * self.k, len(self.points))
+        d, idx = self.tree.query(xy, k=k, distance_upper_bound=self.hole_radius_mm, workers=1)
+        d, idx = d.reshape(len(xy), k), idx.reshape(len(xy), k)
+        valid = np.isfinite(d)
+        px, py, pz = self._padded
+        dx = np.where(valid, px[idx] - xy[:, :1], 0.0)
+        dy = np.where(valid, py[idx] - xy[:, 1:], 0.0)
+        own = valid & ((pz[idx] > cut[:, None]) == upper[:, None])
+        other = valid & ~own
+
+        def centroid(m):
+            n = np.maximum(m.sum(1), 1)
+            return np.column_stack([(dx * m).sum(1) / n, (dy * m).sum(1) / n])
+        n = centroid(other) - centroid(own)
+        norm = np.hypot(n[:, 0], n[:, 1])
+        n /= np.maximum(norm, 1e-12)[:, None]
+        across = dx * n[:, :1] + dy * n[:, 1:]                # towards the other level
+        along = np.abs(dy * n[:, :1] - dx * n[:, 1:])
+        beside = along <= self.coverage_mm
+        edge = np.where(own & beside, across, -np.inf).max(1)     # the level's last point
+        foot = np.where(other & beside, across, np.inf).min(1)    # the other's first, mm
+        lost = foot - edge > _LOST * self.spacing_mm
+        need = np.where(lost, 0.5, -0.5) * self.spacing_mm
+        return other.any(1) & (norm > 0) & (edge < need)
 
     def quadric(self, centre: np.ndarray, radius_mm: float, max_points: int = 20000
                 ) -> np.ndarray | None:

@@ -72,8 +72,10 @@ def plan_mark(cloud: PointCloud | str | Path, placement: Placement, driver: Galv
     bad = [c for c in codes if not c.ok]
     if bad and not force:
         c = bad[0]
+        wall = (f", {proj.unmarked_fraction:.1%} of its path left unmarked at a step's wall: "
+                "place it off the step" if proj.unmarked_mm > 0 else "")
         raise FormatError(f"{c.name}: does not decode from the planned marks (read "
-                          f"{c.decoded!r}, module {c.module_mm:.3g} mm); nothing written "
+                          f"{c.decoded!r}, module {c.module_mm:.3g} mm{wall}); nothing written "
                           "(--force to mark it anyway)")
     return MarkPlan(job, pattern, proj, estimate_time(job, driver.timing), codes)
 
