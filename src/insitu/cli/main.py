@@ -20,6 +20,7 @@ from insitu.cli import scan as scan_cmd
 from insitu.cli import serial as serial_cmd
 from insitu.cli import sim as sim_cmd
 from insitu.cli.common import bounded, err_console, fail, tagged
+from insitu.formats.project import SIM_BINNING
 
 GUI_MODULES = ("PySide6", "OpenGL")      # the packages of the ``gui`` extra, as imported
 app = typer.Typer(help=__doc__.split("\n")[0] if __doc__ else None, no_args_is_help=True,
@@ -51,7 +52,7 @@ def gui(
     workpiece: Annotated[str, typer.Option(
         help="Simulated rig: the part on the table.")] = "step-block",
     binning: Annotated[int, typer.Option(
-        help="Simulated rig: divide the image size by this.", callback=bounded("binning"))] = 2,
+        help="Simulated rig: divide the image size by this.", callback=bounded("binning"))] = SIM_BINNING,
 ) -> None:
     """Open the operator's application: connect the rig, scan, place patterns on the cloud,
     preview and mark, calibrate; projects save the whole session."""

@@ -9,6 +9,7 @@ import typer
 from rich.table import Table
 
 from insitu.cli.common import bounded, check_output, console, fail, one_line_errors, progress_bar
+from insitu.formats.project import SIM_BINNING
 from insitu.formats.validation import one_of
 from insitu.measure.height_models import HEIGHT_MODELS
 
@@ -37,7 +38,7 @@ def scan(
                                         "the whole part; a real rig needs one).")] = None,
     seed: Annotated[int, typer.Option(callback=bounded("seed"), help="Simulated rig: seed.")] = 0,
     binning: Annotated[int, typer.Option(
-        callback=bounded("binning"), help="Simulated rig: divide the image size by this.")] = 1,
+        callback=bounded("binning"), help="Simulated rig: divide the image size by this.")] = SIM_BINNING,
     line_speed: Annotated[float | None, typer.Option(
         callback=bounded("mark_speed_mm_s"),
         help="How fast the head sweeps each line, mm/s (default: the rig file's).")] = None,

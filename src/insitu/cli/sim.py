@@ -9,6 +9,7 @@ import typer
 
 from insitu.cli.common import (bounded, check_output, console, fail, one_line_errors,
                                parse_heights, progress_bar)
+from insitu.formats.project import SIM_BINNING
 from insitu.services import record
 from insitu.sim.workpieces import WORKPIECES
 
@@ -31,7 +32,7 @@ def record_cmd(
                                    help="Scan region X0 X1 Y0 Y1, mm (default: the part).")] = None,
     seed: Annotated[int, typer.Option(
         callback=bounded("seed"), help="Seed of the simulated rig and its noise.")] = 0,
-    binning: Annotated[int, typer.Option(help="Divide the 2448×2048 image by this (1, 2, 4).")] = 1,
+    binning: Annotated[int, typer.Option(help="Divide the 2448×2048 image by this (1, 2, 4).")] = SIM_BINNING,
     views: Annotated[int, typer.Option(
         callback=bounded("count"), help="Camera calibration: checkerboard views.")] = 15,
     grid: Annotated[int, typer.Option(

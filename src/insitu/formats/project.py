@@ -2,7 +2,7 @@
 calibration references, cloud, placed patterns, job — with paths relative to the file.
 
     {"format": "insitu-project/1", "schema_version": 1, "saved": "...Z",
-     "rig": {"workpiece": "step-block", "seed": 0, "binning": 2, "rig_file": null},
+     "rig": {"workpiece": "step-block", "seed": 0, "binning": 1, "rig_file": null},
      "calibration": {"height": "calib/height.json", "field": null, "camera": null},
      "scan": {"region": [-15, 15, -45, 45], "spacing_mm": 0.5, "exposure_ms": 10, "replay": null},
      "cloud": "part.cloud.ply",
@@ -41,6 +41,11 @@ _SPEC = re.compile(r"^[a-z][a-z0-9-]+:")
 letter ``C:`` is one character)."""
 
 
+SIM_BINNING = 1
+"""The simulated rig's binning wherever none is given: the commands, the GUI, a new project
+(README's recordings and calibrations are made at it)."""
+
+
 @dataclass(frozen=True)
 class RigChoice:
     """Which rig: the simulated one (``workpiece``, ``seed``, ``binning``: image size divided
@@ -49,7 +54,7 @@ class RigChoice:
 
     workpiece: str = "step-block"
     seed: int = 0
-    binning: int = 2
+    binning: int = SIM_BINNING
     rig_file: Path | None = None
 
 
@@ -79,7 +84,7 @@ Angle, Exposure = within("angle_deg"), within("exposure_ms")
 class _Rig(_Strict):
     workpiece: str = "step-block"
     seed: Seed = 0
-    binning: Binning = 2
+    binning: Binning = SIM_BINNING
     rig_file: str | None = None
 
 

@@ -11,6 +11,7 @@ from typing import TYPE_CHECKING
 
 from insitu.devices.backends import Devices, open_devices
 from insitu.errors import ConfigError
+from insitu.formats.project import SIM_BINNING
 from insitu.marking import GalvoDriver
 from insitu.rig.files import RigConfig, load_json_model
 from insitu.rig.model import RigModel, rig_model, simulated_devices
@@ -85,7 +86,7 @@ def simulated(world: SimWorld, field: Path | None = None) -> Station:
 
 
 def connect(rig_file: Path | None = None, workpiece: str = "step-block", seed: int = 0,
-            binning: int = 1, field: Path | None = None) -> Station:
+            binning: int = SIM_BINNING, field: Path | None = None) -> Station:
     """The station a rig file names (devices chosen by it, never probed), or the simulated
     rig with ``workpiece`` on the table. A rig file with simulated devices simulates
     ``workpiece`` with its ``sim_seed``, the operator knowing what its calibration files say.

@@ -8,7 +8,7 @@ from pathlib import Path
 from PySide6.QtGui import QSurfaceFormat
 from PySide6.QtWidgets import QApplication
 
-from insitu.formats.project import RigChoice
+from insitu.formats.project import SIM_BINNING, RigChoice
 from insitu.ui.qt.forms import stylesheet
 from insitu.ui.qt.main_window import MainWindow
 
@@ -24,7 +24,7 @@ def surface_format() -> QSurfaceFormat:
 
 
 def run(project: Path | None = None, rig: Path | None = None, workpiece: str = "step-block",
-        binning: int = 2) -> int:
+        binning: int = SIM_BINNING) -> int:
     """Open the main window and connect the rig (the simulated one unless ``rig`` names a rig
     file), or open ``project`` without connecting its rig (the operator connects it: Rig ▸
     Connect); returns the exit code."""
