@@ -11,7 +11,8 @@ import numpy as np
 import typer
 from rich.table import Table
 
-from insitu.cli.common import bounded, check_output, console, one_line_errors, progress_bar
+from insitu.cli.common import (bounded, check_output, console, one_line_errors, progress_bar,
+                               warn)
 from insitu.errors import InsituError
 
 app = typer.Typer(help="Mark jobs: show one, or mark it on the rig.", no_args_is_help=True,
@@ -171,4 +172,6 @@ def run(
         check_output(inspect, ".png")
     job = read_job(job_path)
     with connect(rig, workpiece, seed, field=field) as station:
+        if warning := station.check_source(job_path, job.rig, "job"):
+            warn(warning)
         run_on_station(station, job, job_path, resume, preview, inspect, restart, cut_path)

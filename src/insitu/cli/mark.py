@@ -9,7 +9,8 @@ import typer
 from rich.table import Table
 from rich.text import Text
 
-from insitu.cli.common import bounded, check_output, console, fail, one_line_errors, progress_bar
+from insitu.cli.common import (bounded, check_output, console, fail, one_line_errors,
+                               progress_bar, warn)
 from insitu.cli.job import (CutPath, Field, Inspect, Preview, Restart, Resume, Rig, Seed,
                             Workpiece, check_run_options, run_on_station)
 from insitu.marking.modes import PROJECTIONS, projection_mode
@@ -81,6 +82,7 @@ def mark(
     (--var NAME=VALUE) is rendered when the job is planned; {serial} takes the counter's next
     serial, issued once the job passed its checks, never handed out again (a resume marks the
     job's own)."""
+    from insitu.formats.pointcloud import read_ply
     from insitu.marking import LaserParams, Placement, read_job
     from insitu.services import mark as svc
     from insitu.services.station import connect
@@ -98,11 +100,15 @@ def mark(
                           beam)
     laser = LaserParams(power_pct=power, frequency_khz=frequency, mark_speed_mm_s=speed,
                         jump_speed_mm_s=jump_speed)
+    measured = read_ply(cloud)
     with connect(rig, workpiece, seed, field=field) as station:
+        if run and (warning := station.check_source(cloud, measured.rig, "cloud")):
+            warn(warning)
         with progress_bar("projecting") as progress:
             progress(0, 1)
             plan, rec = _plan(out, placement, lambda p: svc.plan_mark(
-                cloud, p, station.driver, laser, force), resume, fields, counter, serial_start)
+                measured, p, station.driver, laser, force), resume, fields, counter,
+                serial_start)
         if resume and (not out.exists() or read_job(out).digest() != plan.job.digest()):
             fail(f"--resume: {out} does not hold this job; run without --resume to start it")
         _summary(out, placement, plan, station.field, rec)

@@ -1,5 +1,6 @@
 """Point clouds (formats.md §2): binary little-endian PLY written with Open3D, world frame, mm,
-with optional per-point intensity, line index and quality.
+with optional per-point intensity, line index and quality, and the rig it was measured on in a
+header comment (:mod:`insitu.formats.rig_record`).
 
 Reading does not go through Open3D: its reader fills a short file with zeros or whatever memory
 held, prints its complaints from C++ and crashes on some headers. :func:`read_ply` parses the
@@ -18,6 +19,7 @@ import numpy as np
 from insitu.errors import FormatError
 from insitu.formats.atomic import atomic_file
 from insitu.formats.limits import MAX_CLOUD_BYTES, read_limited
+from insitu.formats.rig_record import RigRecord, from_ply_header, ply_line
 
 _ATTRIBUTES = ("intensity", "line", "quality")
 _TYPES = {"char": "i1", "int8": "i1", "uchar": "u1", "uint8": "u1", "short": "i2", "int16": "i2",
@@ -30,10 +32,11 @@ _MAX_HEADER = 65536
 @dataclass(frozen=True)
 class PointCloud:
     """points: (N, 3) float64 mm, world frame. attributes: name → (N,) arrays (intensity,
-    line index, quality)."""
+    line index, quality). rig: the rig it was measured on, None when unknown."""
 
     points: np.ndarray
     attributes: dict[str, np.ndarray] = field(default_factory=dict)
+    rig: RigRecord | None = None
 
     def __len__(self) -> int:
         return len(self.points)
@@ -56,6 +59,10 @@ def write_ply(path: str | Path, cloud: PointCloud) -> None:
     with atomic_file(path, suffix=".ply") as tmp:
         if not o3d.t.io.write_point_cloud(str(tmp), pcd, write_ascii=False, compressed=False):
             raise FormatError(f"{path}: Open3D could not write the point cloud")
+        if cloud.rig is not None:           # Open3D writes no comments: one after "format"
+            data = tmp.read_bytes()
+            at = data.index(b"\n", data.index(b"\nformat ") + 1) + 1
+            tmp.write_bytes(data[:at] + ply_line(cloud.rig) + data[at:])
 
 
 def read_ply(path: str | Path) -> PointCloud:
@@ -85,7 +92,7 @@ def read_ply(path: str | Path) -> PointCloud:
                           f"not finite (first: vertex {int(np.argmax(bad))}, {pts[bad][0].tolist()})")
     attrs = {n: np.ascontiguousarray(v[n]).astype(v[n].dtype.newbyteorder("="))
              for n in _ATTRIBUTES if n in v.dtype.names}
-    return PointCloud(pts, attrs)
+    return PointCloud(pts, attrs, from_ply_header(path, data[:start].decode("latin-1")))
 
 
 def _header(path: Path, data: bytes) -> tuple[str, dict[str, tuple[int, list[tuple]]], int]:

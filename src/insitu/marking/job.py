@@ -114,13 +114,16 @@ class MarkPath(_Model):
 
 
 class MarkJob(_Model):
-    """formats.md §3. ``paths`` is the only field a file must have."""
+    """formats.md §3. ``paths`` is the only field a file must have. ``rig``: the rig the
+    cloud it was planned on was measured on (:mod:`insitu.formats.rig_record`), None when
+    unknown; not part of what is marked (:meth:`digest`)."""
 
     format: Literal["insitu-job/1"] = JOB_FORMAT
     frame: Literal["scan-head"] = "scan-head"
     units: Literal["mm"] = "mm"
     laser: LaserParams = LaserParams()
     timing: Timing | None = None
+    rig: dict[Literal["workpiece", "seed", "binning", "rig_file"], str | int] | None = None
     paths: Annotated[list[MarkPath], Field(min_length=1)]
 
     def path_laser(self, i: int) -> LaserParams:

@@ -67,6 +67,7 @@ def plan_mark(cloud: PointCloud | str | Path, placement: Placement, driver: Galv
         cloud = read_ply(cloud)
     job, proj = plan_job(polylines, cloud, driver.limits, placement.mode, laser,
                          anchor=placement.at_mm)
+    job = job.model_copy(update={"rig": cloud.rig})     # the job records the cloud's rig
     driver.check(job)
     codes = check_codes(job, pattern, proj, placement.beam_mm)
     bad = [c for c in codes if not c.ok]

@@ -6,7 +6,7 @@ from __future__ import annotations
 import threading
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -15,6 +15,7 @@ from insitu.devices.protocols import Camera, ScanHead
 from insitu.devices.replay import ReplayCamera
 from insitu.errors import DeviceError, InsituError, MeasurementError
 from insitu.formats.pointcloud import PointCloud, write_ply
+from insitu.formats.rig_record import RigRecord
 from insitu.formats.sequence import Sequence
 from insitu.geometry.camera import CameraModel
 from insitu.measure.plan import check_region, scan_lines
@@ -83,15 +84,16 @@ class ScanInterrupted(DeviceError):
         self.partial = partial
 
 
-def _partial(rec: ScanReconstructor, t0: float) -> ScanResult | None:
+def _partial(rec: ScanReconstructor, t0: float, rig: RigRecord | None) -> ScanResult | None:
     try:
-        return _finish(rec, t0)
+        return _finish(rec, t0, rig)
     except MeasurementError:
         return None
 
 
-def _finish(rec: ScanReconstructor, t0: float) -> ScanResult:
-    cloud = rec.cloud()
+def _finish(rec: ScanReconstructor, t0: float, rig: RigRecord | None = None) -> ScanResult:
+    """The result so far, its cloud recording ``rig`` (the station's; None for a replay)."""
+    cloud = replace(rec.cloud(), rig=rig)
     lo, hi = cloud.points.min(axis=0), cloud.points.max(axis=0)
     return ScanResult(cloud, ScanSummary(len(cloud), rec.frames, rec.frames_with_line, rec.method,
                                          time.perf_counter() - t0, tuple(lo), tuple(hi),
@@ -155,12 +157,13 @@ def scan_live(station: Station, spacing: float = 0.5, region=None,
         camera.set_exposure(exposure_ms)
     if speed_mm_s is not None:
         head.set_line_speed(speed_mm_s)
-    return _scan(camera, head, lines, rec, t0, "lines", progress, cancel, on_frame)
+    return _scan(camera, head, lines, rec, t0, "lines", progress, cancel, on_frame,
+                 station.record)
 
 
 def _scan(camera: Camera, head: ScanHead, lines, rec: ScanReconstructor, t0: float, what: str,
           progress: Progress | None, cancel: threading.Event | None,
-          on_frame: FrameCallback | None) -> ScanResult:
+          on_frame: FrameCallback | None, rig: RigRecord | None = None) -> ScanResult:
     """The scan loop: each line drawn, grabbed and reconstructed in turn; the laser off at
     the end, on a cancel (:class:`Cancelled`) or a device fault (:class:`ScanInterrupted`),
     each keeping what was measured."""
@@ -168,14 +171,14 @@ def _scan(camera: Camera, head: ScanHead, lines, rec: ScanReconstructor, t0: flo
         for i, (a, b) in enumerate(lines):
             if cancel is not None and cancel.is_set():
                 raise Cancelled(f"scan cancelled after {i} of {len(lines)} {what}",
-                                _partial(rec, t0))
+                                _partial(rec, t0, rig))
             try:
                 head.show_line(a, b)
                 image = camera.grab()
             except DeviceError as e:
                 head.off()
                 raise ScanInterrupted(f"scan stopped at line {i + 1} of {len(lines)}, laser "
-                                      f"off: {e}", _partial(rec, t0)) from e
+                                      f"off: {e}", _partial(rec, t0, rig)) from e
             rec.add(i, image, a, b)
             if on_frame:
                 on_frame(ScanFrame(i, len(lines), image, rec.last_centres, rec.last_points))
@@ -183,7 +186,7 @@ def _scan(camera: Camera, head: ScanHead, lines, rec: ScanReconstructor, t0: flo
                 progress(i + 1, len(lines))
     finally:
         head.off()
-    return _finish(rec, t0)
+    return _finish(rec, t0, rig)
 
 
 class RecordedHead:

@@ -10,8 +10,9 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from insitu.devices.backends import Devices, open_devices
-from insitu.errors import ConfigError
+from insitu.errors import ConfigError, SafetyError
 from insitu.formats.project import SIM_BINNING
+from insitu.formats.rig_record import RigRecord, describe, same_rig
 from insitu.marking import GalvoDriver
 from insitu.rig.files import RigConfig, load_json_model
 from insitu.rig.model import RigModel, rig_model, simulated_devices
@@ -25,11 +26,14 @@ class Station:
     (partly) simulated, else None; ``driver``: nominal kinematics with the field correction
     of the file ``field``; ``devices``: camera, line projector, job controller, stage —
     opened on first use, so planning never touches the hardware. Close it when done (laser
-    off, devices released); it is a context manager."""
+    off, devices released); it is a context manager. ``record``: which rig and workpiece
+    this is, as clouds and jobs record it (None: unknown)."""
 
     def __init__(self, rig: RigModel, cfg: RigConfig, world: SimWorld | None = None,
-                 field: Path | None = None, rig_file: Path | None = None):
+                 field: Path | None = None, rig_file: Path | None = None,
+                 record: RigRecord | None = None):
         self.rig, self.cfg, self.world, self.rig_file = rig, cfg, world, rig_file
+        self.record = record
         self._devices: Devices | None = None
         self.use_field(field)
 
@@ -71,6 +75,18 @@ class Station:
         ``extra``; None on a real one."""
         return None if self.world is None else self.world.truth(**extra)
 
+    def check_source(self, source: Path, record: RigRecord | None, what: str) -> str | None:
+        """Refuse (SafetyError) the ``what`` ("cloud", "job") at ``source`` when its ``record``
+        names another rig or workpiece than this station's; a warning line when it has none."""
+        if record is None:
+            return (f"{source} does not record the rig it was {_MADE[what]} (an older file or "
+                    f"another source): not checked against this station ({describe(self.record)})"
+                    if self.record else None)
+        if self.record is not None and not same_rig(record, self.record):
+            raise SafetyError(f"{source}: the {what} was {_MADE[what]} {describe(record)}, "
+                              f"the station is {describe(self.record)}; nothing marked")
+        return None
+
     def default_region(self) -> tuple[float, float, float, float]:
         """Where to scan when no region is given: the simulated parts' footprint; a real rig
         does not know where its part is (ConfigError)."""
@@ -80,9 +96,13 @@ class Station:
         return self.world.footprint()
 
 
-def simulated(world: SimWorld, field: Path | None = None) -> Station:
+_MADE = {"cloud": "measured on", "job": "planned for"}
+
+
+def simulated(world: SimWorld, field: Path | None = None,
+              record: RigRecord | None = None) -> Station:
     """The station of the simulated ``world``, its operator knowing what its rig model says."""
-    return Station(world.rig.operator, RigConfig(), world, field)
+    return Station(world.rig.operator, RigConfig(), world, field, record=record)
 
 
 def connect(rig_file: Path | None = None, workpiece: str = "step-block", seed: int = 0,
@@ -94,7 +114,8 @@ def connect(rig_file: Path | None = None, workpiece: str = "step-block", seed: i
     from insitu.sim.world import sim_world      # the simulator (Open3D) only when simulated
 
     if rig_file is None:
-        return simulated(sim_world(workpiece, seed=seed, binning=binning), field)
+        return simulated(sim_world(workpiece, seed=seed, binning=binning), field,
+                         {"workpiece": workpiece, "seed": seed, "binning": binning})
     cfg = load_json_model(rig_file, RigConfig)
     world = None
     if simulated_devices(cfg):
@@ -107,5 +128,8 @@ def connect(rig_file: Path | None = None, workpiece: str = "step-block", seed: i
                               f"the rig's is {sim.width}×{sim.height} px")
     if world is not None:            # the simulated head reads angles as the driver wrote them
         world.rig = replace(world.rig, operator=rig)
+    record: RigRecord = {"rig_file": Path(rig_file).name}
+    if world is not None:
+        record |= {"workpiece": workpiece, "seed": cfg.sim_seed}
     return Station(rig, cfg, world, field if field is not None else rig.field_correction,
-                   Path(rig_file))
+                   Path(rig_file), record)

@@ -1,0 +1,58 @@
+"""Which rig a cloud was measured on and a job planned for (formats.md §2, §3 ``rig``): a flat
+JSON object — the simulated rig's ``workpiece``, ``seed`` and ``binning``, or a real rig's
+``rig_file`` (its name; with simulated devices also ``workpiece`` and ``seed``). The binning
+changes only the camera's pixels, so two records name the same rig when all else agrees."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+from insitu.errors import FormatError
+
+RigRecord = dict[str, str | int]
+_KEYS = {"workpiece": str, "seed": int, "binning": int, "rig_file": str}
+PLY_COMMENT = "insitu-rig"
+
+
+def describe(record: RigRecord) -> str:
+    """"rig file rig.json, workpiece arc, seed 0" or "simulated rig, workpiece arc, seed 0,
+    binning 1"."""
+    head = f"rig file {record['rig_file']}" if "rig_file" in record else "simulated rig"
+    return ", ".join([head] + [f"{k} {record[k]}" for k in ("workpiece", "seed", "binning")
+                               if k in record])
+
+
+def same_rig(a: RigRecord, b: RigRecord) -> bool:
+    """Whether ``a`` and ``b`` name the same rig and workpiece (binning aside)."""
+    strip = lambda r: {k: v for k, v in r.items() if k != "binning"}    # noqa: E731
+    return strip(a) == strip(b)
+
+
+def parse(path: Path, where: str, value) -> RigRecord:
+    """``value`` checked as a record (keys and types above); FormatError naming ``path`` and
+    ``where`` (the field or header line) otherwise."""
+    if not isinstance(value, dict) or not value or any(
+            k not in _KEYS or type(v) is not _KEYS[k] for k, v in value.items()):
+        raise FormatError(f"{path}: {where}: expected an object of {', '.join(_KEYS)} "
+                          f"(text, whole numbers), got {json.dumps(value)[:80]}")
+    return value
+
+
+def ply_line(record: RigRecord) -> bytes:
+    """The PLY header line carrying ``record``."""
+    return f"comment {PLY_COMMENT} {json.dumps(record, sort_keys=True)}\n".encode("ascii")
+
+
+def from_ply_header(path: Path, header: str) -> RigRecord | None:
+    """The record of the header text ``header``, None when it has none."""
+    for n, line in enumerate(header.splitlines(), start=1):
+        words = line.split(None, 2)
+        if words[:2] == ["comment", PLY_COMMENT]:
+            where = f"header line {n} ({PLY_COMMENT})"
+            try:
+                value = json.loads(words[2] if len(words) == 3 else "")
+            except ValueError:
+                raise FormatError(f"{path}: {where}: not a JSON object") from None
+            return parse(path, where, value)
+    return None
