@@ -2,6 +2,7 @@
 refused naming both, nothing fired; files without the record are marked with a warning."""
 
 import inspect
+import threading
 import json
 
 import numpy as np
@@ -15,6 +16,7 @@ from insitu.formats.pointcloud import PointCloud, read_ply, write_ply
 from insitu.formats.project import SIM_BINNING, RigChoice
 from insitu.marking import make_job, read_job, write_job
 from insitu.services.station import connect
+from insitu.ui.model import operations
 
 runner = CliRunner()
 SQUARE = ('<svg xmlns="http://www.w3.org/2000/svg" width="20mm" height="10mm" '
@@ -121,3 +123,11 @@ def test_job_run_checks_the_jobs_rig(files, tmp_path):
     bad.write_text(job.read_text().replace('"workpiece": "arc"', '"part": "arc"'))
     res = _run("job", "run", bad)
     assert res.exit_code == 1 and "bad.json" in res.output, res.output
+
+
+def test_the_application_refuses_a_job_of_another_workpiece(tmp_path):
+    job = make_job([np.array([[-2.0, -30.0, 3.0], [2.0, -30.0, 3.0]])])
+    with connect() as st, pytest.raises(SafetyError, match="workpiece arc.*workpiece step"):
+        operations.mark(job.model_copy(update={"rig": ARC}), st, tmp_path / "j.json", None,
+                        threading.Event())
+    assert not (tmp_path / "j.json").exists()

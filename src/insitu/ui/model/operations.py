@@ -63,7 +63,9 @@ def mark(job: MarkJob, station: Station, job_path: Path | None, progress: Progre
     """Write ``job`` to ``job_path`` (when given, unless resuming; its journal is kept beside
     it), mark it (``resume`` / ``restart`` / ``cut_path`` as
     :func:`~insitu.marking.run_job`) and image the part. Setting ``cancel`` stops the laser
-    before the next command."""
+    before the next command. A job planned for another rig or workpiece is refused
+    (SafetyError), nothing written or fired."""
+    station.check_source(job_path or Path("the job"), job.rig, "job")
     if job_path is not None and not resume:
         mark_svc.save_job(job_path, job)
     return mark_svc.mark_on_station(station, job, job_path, resume=resume, restart=restart,
