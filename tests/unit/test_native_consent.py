@@ -119,7 +119,8 @@ def test_opening_a_project_loads_nothing_and_job_run_says_why(canary, tmp_path):
     assert opened.project.rig.rig_file == rig
     assert not marker.exists()
     job = tmp_path / "job.json"
-    save_job(job, make_job([np.array([[0.0, 0.0, 0.0], [5.0, 0.0, 0.0]])]))
+    save_job(job, make_job([np.array([[0.0, 0.0, 0.0], [5.0, 0.0, 0.0]])]).model_copy(
+        update={"rig": {"rig_file": rig.name}}))          # planned for this rig: no warning
     res = run_cli("job", "run", job, "--rig", rig)
     assert res.returncode == 1, res.stdout + res.stderr
     lines = res.stderr.strip().splitlines()
