@@ -32,7 +32,7 @@ def scan(
     spacing: Annotated[float, typer.Option(
         callback=bounded("spacing_mm"), help="Line spacing, mm.")] = 0.5,
     region: Annotated[tuple[float, float, float, float] | None,
-                      typer.Option(callback=bounded("position_mm"),
+                      typer.Option(metavar="X0 X1 Y0 Y1", callback=bounded("position_mm"),
                                    help="Region X0 X1 Y0 Y1, mm (default on the simulated rig: "
                                         "the whole part; a real rig needs one).")] = None,
     seed: Annotated[int, typer.Option(callback=bounded("seed"), help="Simulated rig: seed.")] = 0,
