@@ -94,6 +94,7 @@ def progress_bar(description: str, unit: str = "") -> Iterator:
 
 @contextlib.contextmanager
 def _plain_progress(description: str, unit: str) -> Iterator:
+    """The ``progress(done, total)`` callback of ``progress_bar`` without a terminal."""
     last = {"t": time.monotonic(), "done": 0, "shown": -1, "total": 0}
 
     def line(done: int, total: int) -> None:
@@ -109,7 +110,7 @@ def _plain_progress(description: str, unit: str) -> Iterator:
             line(done, total)
 
     yield update
-    if last["total"] and last["done"] != last["shown"]:
+    if last["done"] and last["done"] != last["shown"]:
         line(last["done"], last["total"])
 
 

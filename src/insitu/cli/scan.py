@@ -61,7 +61,7 @@ def scan(
     if method == "height":
         with progress_bar("height calibration") as progress:
             cal = services.load_height_calibration(height_cal, progress)
-    with progress_bar("scanning") as progress:
+    with progress_bar("scanning", "lines") as progress:
         if replay is not None:
             result = services.scan_replay(replay, cal, height_model, progress=progress)
         else:
