@@ -109,7 +109,7 @@ def check(
     from insitu.services.field import check_drift
 
     cal = load_field_correction(field_file)
-    with progress_bar("drift check") as progress:
+    with progress_bar("drift check", "points") as progress:
         d = check_drift(cal, rec, tolerance_mm=tolerance, progress=progress)
     err = np.linalg.norm(d.residuals, axis=1)
     table = Table(title=f"{rec} against {field_file}: landing points, mm")

@@ -80,7 +80,7 @@ def run_on_station(station, job, job_path: Path, resume: bool, preview: bool,
     from insitu.marking import journal_path_for
     from insitu.services.mark import mark_on_station
 
-    with stop_on_signals(), progress_bar("marking") as progress:
+    with stop_on_signals(), progress_bar("marking", "paths") as progress:
         run = mark_on_station(station, job, job_path, resume=resume, restart=restart,
                               cut_path=cut_path, preview=preview, inspect=inspect,
                               progress=progress)

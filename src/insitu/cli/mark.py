@@ -23,7 +23,7 @@ from insitu.patterns.vector import BEAM_MM
 def mark(
     cloud: Annotated[Path, typer.Option(help="Measured point cloud (.ply) of the part.")],
     pattern: Annotated[str, typer.Option(help=f"A file or spec: {sources_help()}.")],
-    at: Annotated[tuple[float, float], typer.Option(
+    at: Annotated[tuple[float, float], typer.Option(metavar="X Y",
         callback=bounded("position_mm"), help="Centre of the pattern X Y, mm, "
                                               "world frame.")],
     out: Annotated[Path, typer.Option("-o", "--output", help="Mark job to write (.json).")],

@@ -24,7 +24,7 @@ def record(
     rig: Annotated[Path, typer.Option(help="Rig file of the station.")],
     spacing: Annotated[float, typer.Option(
         callback=bounded("spacing_mm"), help="Scan: line spacing, mm.")] = 0.5,
-    region: Annotated[tuple[float, float, float, float] | None, typer.Option(
+    region: Annotated[tuple[float, float, float, float] | None, typer.Option(metavar="X0 X1 Y0 Y1", 
         callback=bounded("position_mm"),
         help="Scan: region X0 X1 Y0 Y1, mm (required on a real rig).")] = None,
     grid: Annotated[int, typer.Option(

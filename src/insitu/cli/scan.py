@@ -33,7 +33,7 @@ def scan(
     spacing: Annotated[float, typer.Option(
         callback=bounded("spacing_mm"), help="Line spacing, mm.")] = 0.5,
     region: Annotated[tuple[float, float, float, float] | None,
-                      typer.Option(callback=bounded("position_mm"),
+                      typer.Option(metavar="X0 X1 Y0 Y1", callback=bounded("position_mm"),
                                    help="Region X0 X1 Y0 Y1, mm (default on the simulated rig: "
                                         "the whole part; a real rig needs one).")] = None,
     seed: Annotated[int, typer.Option(callback=bounded("seed"), help="Simulated rig: seed.")] = 0,
@@ -62,7 +62,7 @@ def scan(
     if method == "height":
         with progress_bar("height calibration") as progress:
             cal = services.load_height_calibration(height_cal, progress)
-    with progress_bar("scanning") as progress:
+    with progress_bar("scanning", "lines") as progress:
         if replay is not None:
             result = services.scan_replay(replay, cal, height_model, progress=progress)
         else:

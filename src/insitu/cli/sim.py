@@ -28,7 +28,7 @@ def record_cmd(
     spacing: Annotated[float, typer.Option(
         callback=bounded("spacing_mm"), help="Scan line spacing, mm.")] = 0.5,
     region: Annotated[tuple[float, float, float, float] | None,
-                      typer.Option(callback=bounded("position_mm"),
+                      typer.Option(metavar="X0 X1 Y0 Y1", callback=bounded("position_mm"),
                                    help="Scan region X0 X1 Y0 Y1, mm (default: the part).")] = None,
     seed: Annotated[int, typer.Option(
         callback=bounded("seed"), help="Seed of the simulated rig and its noise.")] = 0,
