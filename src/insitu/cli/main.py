@@ -80,7 +80,8 @@ def gui(
     workpiece: Annotated[str, typer.Option(
         help="Simulated rig: the part on the table.")] = "step-block",
     binning: Annotated[int, typer.Option(
-        help="Simulated rig: divide the image size by this.", callback=bounded("binning"))] = SIM_BINNING,
+        help="Simulated rig: divide the image size by this.",
+        callback=bounded("binning"))] = SIM_BINNING,
 ) -> None:
     """Open the operator's application: connect the rig, scan, place patterns on the cloud,
     preview and mark, calibrate; projects save the whole session."""
