@@ -24,7 +24,7 @@ from insitu.formats.pointcloud import PointCloud, read_ply, write_ply
 from insitu.formats.sequence import Sequence
 from insitu.geometry.beams import TwoMirrorHead
 from insitu.marking import GalvoDriver, make_job, read_job, run_job, write_job
-from insitu.marking.run import resume_point
+from insitu.marking.run import history
 from insitu.rig.files import (CameraCalibration, HeightCalibration, RigConfig, ScanHeadConfig,
                               load_json_model, save_json_model)
 from insitu.services.common import camera_model
@@ -96,7 +96,7 @@ def _use_job(path):
 
 
 def _use_progress(path):
-    resume_point(_job(), path)
+    history(_job(), path, strict=True)
 
 
 def _use_model(model, use=None):

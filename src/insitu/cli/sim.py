@@ -32,7 +32,8 @@ def record_cmd(
                                    help="Scan region X0 X1 Y0 Y1, mm (default: the part).")] = None,
     seed: Annotated[int, typer.Option(
         callback=bounded("seed"), help="Seed of the simulated rig and its noise.")] = 0,
-    binning: Annotated[int, typer.Option(help="Divide the 2448×2048 image by this (1, 2, 4).")] = SIM_BINNING,
+    binning: Annotated[int, typer.Option(
+        help="Divide the 2448×2048 image by this (1, 2, 4, 8).")] = SIM_BINNING,
     views: Annotated[int, typer.Option(
         callback=bounded("count"), help="Camera calibration: checkerboard views.")] = 15,
     grid: Annotated[int, typer.Option(

@@ -16,7 +16,7 @@ from insitu.marking.placement import Placement
 from insitu.marking.project import Projection, densify, project_planar, project_wrap
 from insitu.marking.journal import JournalSummary, journal_path_for, read_journal
 from insitu.marking.run import (CUT_CHOICES, RunResult, history, progress_path_for,
-                                read_progress, resume_point, run_job, run_preview)
+                                read_progress, run_job, run_preview)
 from insitu.marking.surface import Surface, SurfaceSample
 
 __all__ = [
@@ -25,6 +25,6 @@ __all__ = [
     "Placement", "Projection", "ProjectionMode", "RunResult", "Surface", "SurfaceSample", "TimeEstimate",
     "Timing", "check_projection", "check_targets", "densify", "estimate_time", "make_job",
     "plan_job", "preview_outlines", "progress_path_for", "project", "project_planar",
-    "project_wrap", "projection_mode", "read_job", "read_progress", "resume_point", "run_job",
+    "project_wrap", "projection_mode", "read_job", "read_progress", "run_job",
     "run_preview", "write_job",
 ]

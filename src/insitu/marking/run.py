@@ -32,7 +32,7 @@ CUT_CHOICES = ("remark", "skip", "continue")
 PROGRESS_EVERY_S = 0.5          # the progress record is rewritten at most this often mid-run
 
 __all__ = ["CUT_CHOICES", "RunResult", "history", "progress_path_for", "read_progress",
-           "resume_list", "resume_point", "run_job", "run_preview"]
+           "resume_list", "run_job", "run_preview"]
 
 
 @dataclass(frozen=True)
@@ -98,14 +98,6 @@ def history(job: MarkJob, progress_path: str | Path | None,
         raise FormatError(f"{journal_beside(ppath)}: paths_total: {s.paths_total}, but the "
                           f"job has {total} paths")
     return s
-
-
-def resume_point(job: MarkJob, progress_path: str | Path) -> int:
-    """The first path a resume would mark (0 without a record; FormatError for a malformed
-    record or one of another job)."""
-    s = history(job, progress_path, strict=True)
-    todo = [] if s is None else sorted(([s.cut] if s.cut is not None else []) + s.next_paths())
-    return 0 if s is None else (todo[0] if todo else len(job.paths))
 
 
 def _board_marks(job, driver, controller, s: JournalSummary) -> int | None:
