@@ -42,7 +42,8 @@ def scan(
     line_speed: Annotated[float | None, typer.Option(
         callback=bounded("mark_speed_mm_s"),
         help="How fast the head sweeps each line, mm/s (default: the rig file's).")] = None,
-    preview: Annotated[Path | None, typer.Option(help="Also write a picture of the cloud (.png).")] = None,
+    preview: Annotated[Path | None, typer.Option(help="Also write a picture of the cloud (.png): the top view by height, and "
+                                      "in the camera's room-light grey when the scan has it.")] = None,
 ) -> None:
     """Scan a part (or replay a recorded scan) and write its point cloud."""
     from insitu import services
@@ -72,7 +73,7 @@ def scan(
     services.save_cloud(result, out)
     if preview is not None:
         from insitu.measure.preview import save_cloud_picture
-        save_cloud_picture(result.cloud.points, check_output(preview, ".png"))
+        save_cloud_picture(result.cloud, check_output(preview, ".png"), title=out.name)
     s = result.summary
     table = Table(title=f"scan → {out}", show_header=False)
     table.add_row("method", s.method)

@@ -90,6 +90,8 @@ BOUNDS: dict[str, Bound] = {
     "heartbeat_s": Bound(0.001, 60, "s", "the watchdog's ping interval"),
     "feed_mm_min": Bound(1, 100000, "mm/min", "a Z stage moves at 1 mm/min … 1.7 m/s"),
     "exposure_ms": Bound(0.001, 10000, "ms", "a camera exposure: 1 µs … 10 s"),
+    "ambient_grey": Bound(0, 1, "of full scale", "a cloud's ambient: the room-light grey value "
+                          "of a pixel, black 0 … full scale 1"),
     "gain_db": Bound(-20, 60, "dB", "industrial camera gains span about 0 … 48 dB"),
     "usb_timeout_ms": Bound(1, 60000, "ms", "a USB transfer"),
     "pulse_length_us": Bound(0, 10000, "µs", "a laser pulse or its trigger"),

@@ -1,5 +1,6 @@
 """Point clouds (formats.md §2): binary little-endian PLY written with Open3D, world frame, mm,
-with optional per-point intensity, line index and quality, and the rig it was measured on in a
+with optional per-point intensity, line index, quality and ambient (the room-light grey
+value of the camera's pixel where the point was measured, 0..1 of full scale), and the rig it was measured on in a
 header comment (:mod:`insitu.formats.rig_record`).
 
 Reading does not go through Open3D: its reader fills a short file with zeros or whatever memory
@@ -18,10 +19,11 @@ import numpy as np
 
 from insitu.errors import FormatError
 from insitu.formats.atomic import atomic_file
+from insitu.formats.bounds import BOUNDS
 from insitu.formats.limits import MAX_CLOUD_BYTES, read_limited
 from insitu.formats.rig_record import RigRecord, from_ply_header, ply_line
 
-_ATTRIBUTES = ("intensity", "line", "quality")
+_ATTRIBUTES = ("intensity", "line", "quality", "ambient")
 _TYPES = {"char": "i1", "int8": "i1", "uchar": "u1", "uint8": "u1", "short": "i2", "int16": "i2",
           "ushort": "u2", "uint16": "u2", "int": "i4", "int32": "i4", "uint": "u4",
           "uint32": "u4", "float": "f4", "float32": "f4", "double": "f8", "float64": "f8"}
@@ -32,7 +34,9 @@ _MAX_HEADER = 65536
 @dataclass(frozen=True)
 class PointCloud:
     """points: (N, 3) float64 mm, world frame. attributes: name → (N,) arrays (intensity,
-    line index, quality). rig: the rig it was measured on, None when unknown."""
+    line index, quality; ``ambient``: float32 0..1, the room-light grey value at the pixel
+    each point was measured at, when the scan had a laser-off frame). rig: the rig it was
+    measured on, None when unknown."""
 
     points: np.ndarray
     attributes: dict[str, np.ndarray] = field(default_factory=dict)
@@ -67,7 +71,7 @@ def write_ply(path: str | Path, cloud: PointCloud) -> None:
 
 def read_ply(path: str | Path) -> PointCloud:
     """Read a PLY point cloud (ascii or binary, any scalar types) with whatever of intensity,
-    line and quality it holds; FormatError unless the data is exactly what the header says
+    line, quality and ambient it holds; FormatError unless the data is exactly what the header says
     and every x, y, z is finite. Files over ``MAX_CLOUD_BYTES`` are refused unread."""
     path = Path(path)
     data = read_limited(path, MAX_CLOUD_BYTES, "point cloud", missing="no such point cloud file")
@@ -92,7 +96,20 @@ def read_ply(path: str | Path) -> PointCloud:
                           f"not finite (first: vertex {int(np.argmax(bad))}, {pts[bad][0].tolist()})")
     attrs = {n: np.ascontiguousarray(v[n]).astype(v[n].dtype.newbyteorder("="))
              for n in _ATTRIBUTES if n in v.dtype.names}
+    if "ambient" in attrs:
+        _check_ambient(path, attrs["ambient"])
     return PointCloud(pts, attrs, from_ply_header(path, data[:start].decode("latin-1")))
+
+
+def _check_ambient(path: Path, ambient: np.ndarray) -> None:
+    """FormatError naming the first vertex whose ``ambient`` is outside its range."""
+    bound = BOUNDS["ambient_grey"]
+    with np.errstate(invalid="ignore"):
+        out = ~((ambient >= bound.lo) & (ambient <= bound.hi))
+    if out.any():
+        i = int(np.argmax(out))
+        raise FormatError(f"{path}: vertex {i}: ambient {bound.problem(ambient[i])} "
+                          f"({int(out.sum())} of {len(ambient)} vertices)")
 
 
 def _header(path: Path, data: bytes) -> tuple[str, dict[str, tuple[int, list[tuple]]], int]:

@@ -2,6 +2,8 @@
 
 :class:`Sequence` reads one (validated, frames streamed one at a time); :class:`SequenceWriter`
 records one atomically. Models keep fields they don't know (other tools may add some).
+Our optional extension (docs/conventions.md): a scan may hold one laser-off frame under the
+room light, ``ambient.png``, named by the top-level ``"ambient": {"file", "exposure_ms"}``.
 """
 
 from __future__ import annotations
@@ -13,84 +15,27 @@ from typing import Annotated, Any, Literal
 
 import cv2
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
+from pydantic import (AfterValidator, BaseModel, ConfigDict, Field, ValidationError,
+                      field_validator, model_validator)
 
 from insitu.errors import FormatError
 from insitu.formats.atomic import atomic_folder, atomic_write_text
-from insitu.formats.bounds import BOUNDS, each_within, within
+from insitu.formats.bounds import each_within, within
+from insitu.formats.camera_spec import CameraSpec
 from insitu.formats.images import read_image
 from insitu.formats.limits import MAX_IMAGE_BYTES, check_file, check_inside
-from insitu.formats.validation import (Finite, Matrix3, PositivePair, Range, Vec2, Vec3,
-                                       bad, dump_json, numbers, plain, read_json, show,
-                                       validation_message)
+from insitu.formats.validation import (PositivePair, Range, Vec2, bad, dump_json, plain,
+                                       read_json, show, validation_message)
 
 FORMAT = "insitu-sequence/1"
 Kind = Literal["scan", "height-calibration", "field-calibration", "camera-calibration"]
 KINDS: tuple[str, ...] = Kind.__args__
 FRAME_NAME = "frames/{:05d}.png"
+AMBIENT_NAME = "ambient.png"
 _CONFIG = ConfigDict(extra="allow", allow_inf_nan=False)
-ImagePx, Pivot, Position = within("image_px", int), within("pivot_height_mm"), within("position_mm")
+Pivot, Position = within("pivot_height_mm"), within("position_mm")
 Corners, Square = within("board_corners", int), within("length_mm")
 Exposure, Point = within("exposure_ms"), Annotated[Vec2, each_within("position_mm")]
-_DIST_NAMES = ("k1", "k2", "p1", "p2", "k3", "k4", "k5", "k6", "s1", "s2", "s3", "s4", "tx", "ty")
-_DIST_BOUND = {"k1": "dist_k1", "p1": "dist_tangential", "p2": "dist_tangential"}
-
-
-class CameraSpec(BaseModel):
-    """The rig's camera as known to the operator: intrinsics K (px), OpenCV distortion, and
-    extrinsics mapping a world point X (mm) to camera coordinates ``R @ X + t``."""
-
-    model_config = _CONFIG
-    width: ImagePx
-    height: ImagePx
-    K: Annotated[Matrix3, each_within("pixel_px")]
-    dist: Annotated[list[Finite], numbers(4, 5, 8, 12, 14, what=" (OpenCV distortion)")]
-    R: Matrix3
-    t: Annotated[Vec3, each_within("camera_t_mm")]
-
-    @field_validator("K")
-    @classmethod
-    def _intrinsics(cls, K: list[list[float]]) -> list[list[float]]:
-        if not (K[0][0] > 0 and K[1][1] > 0):
-            raise bad("expected fx = K[0][0] > 0 and fy = K[1][1] > 0", K)
-        for i in (0, 1):
-            why = BOUNDS["focal_px"].problem(K[i][i])
-            if why is not None:
-                raise bad(f"{'fx' if i == 0 else 'fy'} = {why}", at=f"[{i}][{i}]")
-        if K[2] != [0, 0, 1]:
-            raise bad("expected [0, 0, 1]", K[2], at="[2]")
-        return K
-
-    @field_validator("dist")
-    @classmethod
-    def _distortion(cls, dist: list[float]) -> list[float]:
-        for i, (name, value) in enumerate(zip(_DIST_NAMES, dist)):
-            why = BOUNDS[_DIST_BOUND.get(name, "dist_other")].problem(value)
-            if why is not None:
-                raise bad(f"{name} = {why}", at=f"[{i}]")
-        return dist
-
-    @field_validator("R")
-    @classmethod
-    def _rotation(cls, R: list[list[float]]) -> list[list[float]]:
-        a = np.asarray(R, np.float64)
-        if np.abs(a).max() > 1.0 + 1e-6:                # a rotation's entries are within ±1
-            raise bad("expected a rotation matrix (entries within ±1)", R)
-        err, det = float(np.abs(a @ a.T - np.eye(3)).max()), float(np.linalg.det(a))
-        if err > 1e-6 or det <= 0:
-            raise bad("expected a rotation matrix (R @ R.T = I within 1e-6, det +1), got "
-                      f"max |R @ R.T - I| = {err:.3g}, det = {det:.6g}")
-        return R
-
-    K_array = property(lambda self: np.array(self.K, np.float64), doc="(3, 3) float64, px.")
-    dist_array = property(lambda self: np.array(self.dist, np.float64),
-                          doc="(N,) float64, OpenCV order [k1, k2, p1, p2, k3, ...].")
-    R_array = property(lambda self: np.array(self.R, np.float64),
-                       doc="(3, 3) float64 rotation, world → camera.")
-    t_array = property(lambda self: np.array(self.t, np.float64),
-                       doc="(3,) float64 translation, mm, world → camera.")
-
-
 class ScanHeadSpec(BaseModel):
     """Nominal scan-head geometry: beam pivot height H above z = 0, usable field, focus range (mm)."""
 
@@ -115,11 +60,30 @@ class LineSpec(BaseModel):
         return self
 
 
+def _relative_file(f: str) -> str:
+    p = PurePosixPath(f.replace("\\", "/"))
+    if not f or "\x00" in f or p.is_absolute() or ".." in p.parts or ":" in f[:2]:
+        raise bad("expected a path relative to the sequence folder", f)
+    return f
+
+
+RelativeFile = Annotated[str, AfterValidator(_relative_file)]
+
+
+class AmbientSpec(BaseModel):
+    """Our optional extension: one frame with the laser off under the room light, taken
+    before the lines (``file`` relative to the folder, ``exposure_ms`` it was taken with)."""
+
+    model_config = _CONFIG
+    file: RelativeFile
+    exposure_ms: Exposure | None = None
+
+
 class FrameSpec(BaseModel):
     """One frame: image ``file`` (relative to the folder) and what the head showed (mm)."""
 
     model_config = _CONFIG
-    file: str
+    file: RelativeFile
     line: LineSpec | None = None
     spot: Point | None = None
     fiducials: Annotated[list[Point], Field(min_length=1)] | None = None
@@ -127,13 +91,6 @@ class FrameSpec(BaseModel):
     plate_z_mm: Position | None = None
     exposure_ms: Exposure | None = None
 
-    @field_validator("file")
-    @classmethod
-    def _relative(cls, f: str) -> str:
-        p = PurePosixPath(f.replace("\\", "/"))
-        if not f or "\x00" in f or p.is_absolute() or ".." in p.parts or ":" in f[:2]:
-            raise bad("expected a path relative to the sequence folder", f)
-        return f
 
 
 class CheckerboardSpec(BaseModel):
@@ -165,6 +122,7 @@ class SequenceSpec(BaseModel):
     scan_head: ScanHeadSpec
     frames: list[FrameSpec]
     checkerboard: CheckerboardSpec | None = None
+    ambient: AmbientSpec | None = None
 
     @field_validator("frames", mode="before")
     @classmethod
@@ -233,6 +191,11 @@ class Sequence:
         for f in spec.frames:
             check_inside(folder / f.file, folder, "frame file")
             check_file(folder / f.file, MAX_IMAGE_BYTES, "frame image")
+        if spec.ambient is not None:
+            ambient = folder / spec.ambient.file
+            check_inside(ambient, folder, "ambient frame file")
+            check_file(ambient, MAX_IMAGE_BYTES, "ambient frame image",
+                       missing="missing (sequence.json names it as the ambient frame)")
         return cls(folder, spec)
 
     kind = property(lambda self: self.spec.kind)
@@ -247,11 +210,23 @@ class Sequence:
     def __repr__(self) -> str:
         return f"Sequence({str(self.folder)!r}, kind={self.kind!r}, frames={len(self)})"
 
+    ambient = property(lambda self: self.spec.ambient,
+                       doc="The laser-off frame's spec (our extension), None without one.")
+
     def read_frame(self, i: int) -> np.ndarray:
         """Frame ``i`` as (H, W) uint8 or uint16; FormatError naming the file if it is not one."""
-        path = self.folder / self.spec.frames[i].file
+        return self._read_grey(self.folder / self.spec.frames[i].file, "frame file")
+
+    def read_ambient(self) -> np.ndarray | None:
+        """The laser-off frame under the room light (H, W) uint8 or uint16, None when the
+        recording has none (other recorders' never do)."""
+        if self.spec.ambient is None:
+            return None
+        return self._read_grey(self.folder / self.spec.ambient.file, "ambient frame file")
+
+    def _read_grey(self, path: Path, what: str) -> np.ndarray:
         cam = self.spec.camera
-        check_inside(path, self.folder, "frame file")
+        check_inside(path, self.folder, what)
         img = read_image(path, expect=None if cam is None else (cam.width, cam.height),
                          expected="camera is")
         if img.ndim == 3 and img.shape[2] == 1:
@@ -315,6 +290,7 @@ class SequenceWriter:
             _validate(CheckerboardSpec, self._board, self._source, "checkerboard")
         self._truth = None if truth is None else plain(truth)
         self._frames: list[dict] = []
+        self._ambient: dict | None = None
         self._size: tuple[int, ...] | None = None
         self._cm, self._tmp = None, None
 
@@ -337,6 +313,29 @@ class SequenceWriter:
         if self._tmp is None:
             raise RuntimeError("SequenceWriter.add() outside its 'with' block")
         i, where = len(self._frames), f"{self._source}: frames[{len(self._frames)}]"
+        self._check_image(image, where)
+        frame = {"file": FRAME_NAME.format(i), **plain(frame_fields)}
+        spec = _validate(FrameSpec, frame, self._source, f"frames[{i}]")
+        problems = frame_problems(self.kind, spec)
+        if problems:
+            raise FormatError(f"{where}.{problems[0][0]}: {problems[0][1]}")
+        self._write_png(frame["file"], image, where)
+        self._frames.append(frame)
+        return i
+
+    def add_ambient(self, image: np.ndarray, exposure_ms: float | None = None) -> None:
+        """Write the laser-off frame under the room light ((H, W) uint8/uint16, the frames'
+        size) as ``ambient.png``, taken with ``exposure_ms``."""
+        if self._tmp is None:
+            raise RuntimeError("SequenceWriter.add_ambient() outside its 'with' block")
+        where = f"{self._source}: ambient"
+        self._check_image(image, where)
+        spec = _validate(AmbientSpec, plain({"file": AMBIENT_NAME, "exposure_ms": exposure_ms}),
+                         self._source, "ambient")
+        self._write_png(AMBIENT_NAME, image, where)
+        self._ambient = spec.model_dump(mode="json", exclude_none=True)
+
+    def _check_image(self, image: np.ndarray, where: str) -> None:
         if (not isinstance(image, np.ndarray) or image.ndim != 2
                 or image.dtype not in (np.uint8, np.uint16)):
             got = (f"{image.dtype} {image.shape}" if isinstance(image, np.ndarray)
@@ -344,24 +343,20 @@ class SequenceWriter:
             raise FormatError(f"{where}: expected a (H, W) uint8 or uint16 image, got {got}")
         _check_size(where, image, self._cam, self._size)
         self._size = image.shape
-        frame = {"file": FRAME_NAME.format(i), **plain(frame_fields)}
-        spec = _validate(FrameSpec, frame, self._source, f"frames[{i}]")
-        problems = frame_problems(self.kind, spec)
-        if problems:
-            raise FormatError(f"{where}.{problems[0][0]}: {problems[0][1]}")
+
+    def _write_png(self, name: str, image: np.ndarray, where: str) -> None:
         ok, buf = cv2.imencode(".png", image, [cv2.IMWRITE_PNG_COMPRESSION, 1])
         if not ok:
             raise FormatError(f"{where}: OpenCV could not encode the image as PNG")
-        with open(self._tmp / frame["file"], "wb") as f:
+        with open(self._tmp / name, "wb") as f:
             f.write(buf.tobytes())
             f.flush()
             os.fsync(f.fileno())
-        self._frames.append(frame)
-        return i
 
     def _finish(self) -> None:
         data = {"format": FORMAT, "kind": self.kind, "camera": self._camera,
-                "scan_head": self._head, "frames": self._frames, "checkerboard": self._board}
+                "scan_head": self._head, "frames": self._frames, "checkerboard": self._board,
+                "ambient": self._ambient}
         spec = _validate(SequenceSpec, data, self._source)
         atomic_write_text(self._tmp / "sequence.json",
                           dump_json(spec.model_dump(mode="json", exclude_none=True)))

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+from scipy.ndimage import map_coordinates
 from scipy.spatial import cKDTree
 
 from insitu.errors import MeasurementError
@@ -25,6 +26,8 @@ class ScanReconstructor:
     height model: the one it was calibrated with). z_range_mm: heights the surface can have
     (the focus range); the line is only searched where its light plane can put it (ghosts
     and reflections elsewhere are ignored). None: the whole column.
+    :meth:`set_ambient` before the frames gives every point the room-light grey value of the
+    pixel it was measured at (attribute ``ambient``).
     """
 
     def __init__(self, camera: CameraModel, pivot_height_mm: float, telecentric: bool = False,
@@ -41,6 +44,16 @@ class ScanReconstructor:
         self.unconfirmed_removed = 0
         self.last_centres = np.zeros((0, 2))
         self.last_points = np.zeros((0, 3))
+        self._ambient: np.ndarray | None = None
+
+    def set_ambient(self, image: np.ndarray | None) -> None:
+        """The laser-off frame under the room light, (H, W) uint8 or uint16 as the line
+        frames (None: none); each point then gets its grey value, 0..1 of full scale."""
+        if image is not None and image.shape != (self.camera.height, self.camera.width):
+            raise MeasurementError(
+                f"ambient frame: {image.shape[1]}×{image.shape[0]} px, but the camera "
+                f"calibration is for {self.camera.width}×{self.camera.height} px")
+        self._ambient = image
 
     @property
     def method(self) -> str:
@@ -75,8 +88,11 @@ class ScanReconstructor:
             return 0
         self.frames_with_line += 1
         self.last_points = pts[ok]
-        self._chunks.append((pts[ok], np.full(ok.sum(), index, np.int32), centres.peak[ok],
-                             np.clip(centres.contrast[ok] / 255.0, 0, 1)))
+        chunk = (pts[ok], centres.peak[ok], np.full(ok.sum(), index, np.int32),
+                 np.clip(centres.contrast[ok] / 255.0, 0, 1))
+        if self._ambient is not None:
+            chunk += (grey_at(self._ambient, centres.uv[ok]),)
+        self._chunks.append(chunk)
         return int(ok.sum())
 
     def cloud(self, outlier_radius_mm: float = 1.5, outlier_neighbours: int = 8,
@@ -89,18 +105,19 @@ class ScanReconstructor:
         if not self._chunks:
             raise MeasurementError(f"no laser line found in any of {self.frames} frames "
                                    "(laser off, exposure too low, or the part outside the view)")
-        pts, line, inten, qual = (np.concatenate(c) for c in zip(*self._chunks))
+        pts, *values = (np.concatenate(c) for c in zip(*self._chunks))
+        attrs = dict(zip(("intensity", "line", "quality", "ambient"), values))
         keep = (density_inliers(pts, outlier_radius_mm, outlier_neighbours)
                 if outlier_neighbours else slice(None))
-        pts, line, inten, qual = pts[keep], line[keep], inten[keep], qual[keep]
+        pts, attrs = pts[keep], {k: a[keep] for k, a in attrs.items()}
         self.outliers_removed = int(len(keep) - keep.sum()) if isinstance(keep, np.ndarray) else 0
         if cross_check:
-            confirmed = cross_line_inliers(pts, line)
-            pts, line, inten, qual = (a[confirmed] for a in (pts, line, inten, qual))
+            confirmed = cross_line_inliers(pts, attrs["line"])
+            pts, attrs = pts[confirmed], {k: a[confirmed] for k, a in attrs.items()}
             self.unconfirmed_removed = int(len(confirmed) - confirmed.sum())
         if self.model is not None:
             check_bracket(self.model, pts[:, 2], "scan")
-        return PointCloud(pts, {"intensity": inten, "line": line, "quality": qual})
+        return PointCloud(pts, attrs)
 
 
 def density_inliers(points: np.ndarray, radius_mm: float, neighbours: int) -> np.ndarray:
@@ -110,3 +127,12 @@ def density_inliers(points: np.ndarray, radius_mm: float, neighbours: int) -> np
     density is lower but real."""
     d, _ = cKDTree(points).query(points, k=neighbours + 1, distance_upper_bound=radius_mm)
     return np.isfinite(d[:, -1])
+
+
+def grey_at(image: np.ndarray, uv: np.ndarray) -> np.ndarray:
+    """(M,) float32 grey values of ``image`` (H, W) uint8 or uint16 at the sub-pixel
+    positions ``uv`` (M, 2) px (bilinear; edges clamped), 0..1 of the dtype's full scale."""
+    full = 255.0 if image.dtype == np.uint8 else 65535.0
+    grey = map_coordinates(image, (uv[:, 1], uv[:, 0]), order=1, mode="nearest",
+                           output=np.float32)
+    return np.clip(grey / np.float32(full), 0, 1)

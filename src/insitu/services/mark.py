@@ -23,6 +23,7 @@ from insitu.marking.verify import CodeCheck, check_code, unrolled
 from insitu.patterns import Pattern
 from insitu.services.common import Progress
 from insitu.services.scan import Cancelled
+from insitu.services.room_light import grab_room_light
 
 if TYPE_CHECKING:
     from insitu.services.station import Station
@@ -229,11 +230,13 @@ def mark_on_station(station: Station, job: MarkJob, job_path: str | Path | None 
                     progress: Progress | None = None) -> StationRun:
     """:func:`mark` ``job`` with the station's driver and controller, its journal and progress
     recorded beside ``job_path`` (the job file; None: not recorded); then image the marked part
-    when ``image`` is set or ``inspect`` names the .png to write."""
+    under the room light, auto-exposed, when ``image`` is set or ``inspect`` names the .png
+    to write."""
     ppath = progress_path_for(job_path) if job_path is not None else None
     result = mark(job, station.driver, station.devices.controller, ppath, resume, preview,
                   cancel, progress, restart, cut_path)
-    picture = station.devices.camera.grab() if image or inspect is not None else None
+    picture = (grab_room_light(station.devices.camera, station.devices.head).image
+               if image or inspect is not None else None)
     if inspect is not None:
         save_image(inspect, picture)
     return StationRun(result, ppath, picture)

@@ -14,6 +14,7 @@ from insitu.errors import ConfigError
 from insitu.formats.sequence import SequenceWriter
 from insitu.measure.plan import check_region, scan_lines
 from insitu.services.common import Progress
+from insitu.services.room_light import grab_room_light
 from insitu.services.station import Station
 
 KINDS = ("scan", "height-calibration", "field-calibration", "camera-calibration")
@@ -52,7 +53,8 @@ def _on_plate(station: Station):
 def record_scan(station: Station, out: Path, spacing: float = 0.5, region=None,
                 exposure_ms: float | None = None, progress: Progress | None = None) -> Path:
     """A scan over ``region`` (x0, x1, y0, y1) mm (default: the station's), a line every
-    ``spacing`` mm."""
+    ``spacing`` mm, after a frame with the laser off under the room light (auto-exposed,
+    ``ambient.png``)."""
     region = tuple(region) if region is not None else station.default_region()
     check_region(region, station.rig.head.field_size_mm)
     lines = scan_lines(region, spacing)
@@ -60,6 +62,8 @@ def record_scan(station: Station, out: Path, spacing: float = 0.5, region=None,
     exposure = _exposure(cam, exposure_ms)
     with _writer(station, out, "scan", truth=station.truth(region=list(region))) as w:
         try:
+            room = grab_room_light(cam, head)
+            w.add_ambient(room.image, exposure_ms=room.exposure_ms)
             for i, (a, b) in enumerate(lines):
                 head.show_line(a, b)
                 w.add(cam.grab(), line={"start": a.tolist(), "end": b.tolist()},

@@ -23,6 +23,7 @@ from insitu.measure.scan import ScanReconstructor
 from insitu.rig.files import HeightCalibration
 from insitu.services.common import Progress, camera_model
 from insitu.services.height import centre_settings, check_same_camera, height_model
+from insitu.services.room_light import grab_room_light
 from insitu.services.station import Station
 
 
@@ -120,7 +121,8 @@ def scan_replay(folder: str | Path, height_cal: HeightCalibration | None = None,
                 on_frame: FrameCallback | None = None) -> ScanResult:
     """Reconstruct a recorded scan sequence (formats.md §1): Method 1, or Method 2 when a
     height calibration is given. The recording is a camera like any other
-    (:class:`~insitu.devices.replay.ReplayCamera`): the same loop as a live scan."""
+    (:class:`~insitu.devices.replay.ReplayCamera`): the same loop as a live scan. Its
+    ambient frame, when it has one, gives each point its ``ambient`` grey value."""
     t0 = time.perf_counter()
     seq = Sequence.open(folder)
     if seq.kind != "scan":
@@ -132,7 +134,7 @@ def scan_replay(folder: str | Path, height_cal: HeightCalibration | None = None,
     lines = [(np.asarray(f.line.start, float), np.asarray(f.line.end, float))
              for f in seq.frames]
     return _scan(ReplayCamera(seq), RecordedHead(), lines, rec, t0, "frames", progress, cancel,
-                 on_frame)
+                 on_frame, room_light=seq.read_ambient)
 
 
 def scan_live(station: Station, spacing: float = 0.5, region=None,
@@ -143,7 +145,9 @@ def scan_live(station: Station, spacing: float = 0.5, region=None,
     """Drive the station: step the line over ``region`` (x0, x1, y0, y1) mm (default: the
     station's, which a real rig does not have) and reconstruct each frame as it arrives
     (``on_frame`` sees each; ``exposure_ms``: the camera's, default its own; ``speed_mm_s``:
-    the head's line sweep speed, default its own). The laser is off when this returns or
+    the head's line sweep speed, default its own). First a frame with the laser off under
+    the room light, auto-exposed (:func:`~insitu.services.room_light.grab_room_light`),
+    gives each point its ``ambient`` grey value. The laser is off when this returns or
     raises; a device fault raises :class:`ScanInterrupted` with what was measured before it."""
     t0 = time.perf_counter()
     region = tuple(region) if region is not None else station.default_region()
@@ -158,16 +162,25 @@ def scan_live(station: Station, spacing: float = 0.5, region=None,
     if speed_mm_s is not None:
         head.set_line_speed(speed_mm_s)
     return _scan(camera, head, lines, rec, t0, "lines", progress, cancel, on_frame,
-                 station.record)
+                 station.record, lambda: grab_room_light(camera, head).image)
 
 
 def _scan(camera: Camera, head: ScanHead, lines, rec: ScanReconstructor, t0: float, what: str,
           progress: Progress | None, cancel: threading.Event | None,
-          on_frame: FrameCallback | None, rig: RigRecord | None = None) -> ScanResult:
-    """The scan loop: each line drawn, grabbed and reconstructed in turn; the laser off at
-    the end, on a cancel (:class:`Cancelled`) or a device fault (:class:`ScanInterrupted`),
-    each keeping what was measured."""
+          on_frame: FrameCallback | None, rig: RigRecord | None = None,
+          room_light: Callable[[], np.ndarray | None] | None = None) -> ScanResult:
+    """The scan loop: ``room_light()`` (the laser-off frame, or None) first, then each line
+    drawn, grabbed and reconstructed in turn; the laser off at the end, on a cancel
+    (:class:`Cancelled`) or a device fault (:class:`ScanInterrupted`), each keeping what was
+    measured."""
     try:
+        if room_light is not None:
+            try:
+                rec.set_ambient(room_light())
+            except DeviceError as e:
+                head.off()
+                raise ScanInterrupted(f"scan stopped at the room-light frame before the "
+                                      f"lines, laser off: {e}", None) from e
         for i, (a, b) in enumerate(lines):
             if cancel is not None and cancel.is_set():
                 raise Cancelled(f"scan cancelled after {i} of {len(lines)} {what}",

@@ -34,7 +34,7 @@ from insitu.devices.galvo import (Command, ListPosition, focus_points, list_dige
                                   nominal_commands)
 from insitu.devices.protocols import check_in_field
 from insitu.errors import DeviceError, SafetyError
-from insitu.sim.marks import Burn, render_inspection
+from insitu.sim.marks import Burn, RoomLightView, render_inspection
 from insitu.sim.render import NOMINAL_EXPOSURE_MS
 from insitu.sim.scene import Scene
 from insitu.sim.world import LaserState, SimWorld
@@ -279,22 +279,40 @@ def last_position(log: str | os.PathLike) -> ListPosition | None:
 
 
 class SimInspectionCamera(SimCamera):
-    """The sim camera that also sees the marks: with the laser off, a frame of the marked
-    part under room light (:func:`~insitu.sim.marks.render_inspection`; the default exposure
-    is longer than for laser lines, room light being dim). Laser frames are SimCamera's."""
+    """The sim camera that also sees the marks: with the laser off, a frame of the (marked)
+    part under room light (:func:`~insitu.sim.marks.render_inspection`). Its exposure, as a
+    machine-vision camera's: automatic until :meth:`set_exposure` is called (room light then
+    at ``inspection_exposure_ms``, laser frames at the nominal exposure), then that one
+    exposure for every frame (as ``GenICamCamera.set_exposure`` turns ExposureAuto off).
+    The ray cast of the camera's pixels is kept per scene: only the first room-light frame
+    of a scene casts them."""
 
     def __init__(self, world: SimWorld, exposure_ms: float = 12 * NOMINAL_EXPOSURE_MS):
         super().__init__(world)
         self.inspection_exposure_ms = float(exposure_ms)
+        self._manual = False
         self._frames = 0
+        self._view: tuple[Scene, RoomLightView] | None = None
+
+    def set_exposure(self, exposure_ms: float) -> None:
+        super().set_exposure(exposure_ms)
+        self._manual = True
+
+    @property
+    def room_light_exposure_ms(self) -> float:
+        """The exposure of a frame with the laser off."""
+        return self.exposure_ms if self._manual else self.inspection_exposure_ms
 
     def grab(self, timeout_s: float = 5.0) -> np.ndarray:
         if self.world.laser.kind != "off" or self.world.board is not None:
             return super().grab(timeout_s)
         self._frames += 1
-        return render_inspection(self.world.rig, self.world.renderer().scene,
-                                 list(self.world.burns), self.inspection_exposure_ms,
-                                 seed=self.world.seed + self._frames)
+        scene = self.world.renderer().scene
+        if self._view is None or self._view[0] is not scene:
+            self._view = scene, RoomLightView(self.world.rig, scene)
+        return render_inspection(self.world.rig, scene, list(self.world.burns),
+                                 self.room_light_exposure_ms,
+                                 seed=self.world.seed + self._frames, view=self._view[1])
 
 
 def sim_devices(world: SimWorld) -> Devices:

@@ -76,24 +76,48 @@ def mark_darkness(points: np.ndarray, burns: list[Burn],
     return contrast * dark
 
 
+class RoomLightView:
+    """What the true camera of ``rig`` sees of ``scene`` under room light, one ray per pixel
+    centre, cast once: ``hit`` (H·W,) bool, ``points`` (M, 3) float32 mm of the hit pixels,
+    ``shade`` (M,) float32 DN at the nominal exposure (albedo, textured unless ``ideal``,
+    shaded by the normal)."""
+
+    def __init__(self, rig: SimRig, scene: Scene, ideal: bool = False):
+        cam, o = rig.camera, rig.optics
+        self.shape = (cam.height, cam.width)
+        u, v = np.meshgrid(np.arange(cam.width, dtype=np.float64),
+                           np.arange(cam.height, dtype=np.float64))
+        origin, dirs = cam.rays(np.column_stack([u.ravel(), v.ravel()]))
+        hits = scene.cast(np.broadcast_to(origin, dirs.shape), dirs)
+        self.hit = hits.hit
+        p, part, nrm = hits.points[hits.hit], hits.part[hits.hit], hits.normals[hits.hit]
+        albedo = (np.array([scene.materials[i].albedo for i in part]) if ideal
+                  else scene.albedo(p, part))
+        self.points = p.astype(np.float32)
+        self.shade = (o.ambient_dn * albedo * (0.6 + 0.4 * np.abs(nrm[:, 2]))).astype(np.float32)
+
+
 def render_inspection(rig: SimRig, scene: Scene, burns: list[Burn],
                       exposure_ms: float = 12 * NOMINAL_EXPOSURE_MS, seed: int = 0,
-                      ideal: bool = False, contrast: float = MARK_CONTRAST) -> np.ndarray:
+                      ideal: bool = False, contrast: float = MARK_CONTRAST,
+                      view: RoomLightView | None = None) -> np.ndarray:
     """(H, W) frame of the true camera under room light, marks darker. One ray per pixel
-    centre. ``ideal``: untextured, noise-free float32; else 8-bit with shot and read noise."""
-    cam, o = rig.camera, rig.optics
-    H, W = cam.height, cam.width
-    u, v = np.meshgrid(np.arange(W, dtype=np.float64), np.arange(H, dtype=np.float64))
-    origin, dirs = cam.rays(np.column_stack([u.ravel(), v.ravel()]))
-    hits = scene.cast(np.broadcast_to(origin, dirs.shape), dirs)
-    shade = np.zeros(H * W)
-    p, part, nrm = hits.points[hits.hit], hits.part[hits.hit], hits.normals[hits.hit]
-    albedo = (np.array([scene.materials[i].albedo for i in part]) if ideal
-              else scene.albedo(p, part))
-    albedo = albedo * (1.0 - mark_darkness(p, burns, contrast))
-    shade[hits.hit] = (o.ambient_dn * albedo * (0.6 + 0.4 * np.abs(nrm[:, 2]))
-                       * exposure_ms / NOMINAL_EXPOSURE_MS)
-    img = shade.reshape(H, W).astype(np.float32)
+    centre (``view``: that cast, made for the same rig, scene and ``ideal``, kept by the
+    caller). ``ideal``: untextured, noise-free float32; else 8-bit with shot and read noise."""
+    o = rig.optics
+    view = view or RoomLightView(rig, scene, ideal)
+    H, W = view.shape
+    shade = view.shade.copy()
+    samples, radius = _burn_samples(burns)
+    if len(samples):              # only the pixels near a burn can be darker
+        reach = 2.0 * float(radius.max()) + 1e-3
+        near = ((view.points >= samples.min(0) - reach)
+                & (view.points <= samples.max(0) + reach)).all(1)
+        shade[near] *= (1.0 - mark_darkness(view.points[near].astype(np.float64), burns,
+                                            contrast)).astype(np.float32)
+    img = np.zeros(H * W, np.float32)
+    img[view.hit] = shade * np.float32(exposure_ms / NOMINAL_EXPOSURE_MS)
+    img = img.reshape(H, W)
     if ideal:
         return img
     rng = np.random.default_rng(seed)
