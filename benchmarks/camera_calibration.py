@@ -46,7 +46,8 @@ from insitu.services.common import camera_model
 from insitu.services.field import calibrate_field
 from insitu.services.record import record_camera_calibration, record_field_calibration
 from insitu.services.station import simulated
-from insitu.sim.board import BoardViews, axis_lines
+from insitu.geometry.beams import axis_lines
+from insitu.sim.board import BoardViews
 from insitu.sim.rig import default_rig, move_camera
 
 console = Console(width=150)

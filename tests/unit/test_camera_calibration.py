@@ -22,7 +22,8 @@ from insitu.geometry.camera import CameraModel
 from insitu.rig.files import CameraCalibration, load_json_model
 from insitu.services.record import record_camera_calibration
 from insitu.services.station import simulated
-from insitu.sim.board import BoardViews, axis_lines
+from insitu.geometry.beams import axis_lines
+from insitu.sim.board import BoardViews
 from insitu.sim.checkerboard import board_corners, random_board_poses
 from insitu.sim.rig import default_rig
 
@@ -342,3 +343,23 @@ def test_plain_folder_bad_input_one_line_error_and_no_file(rec, tmp_path, case, 
     lines = [ln for ln in res.output.splitlines() if ln.strip() and not PROGRESS.fullmatch(ln)]
     assert len(lines) == 1 and message in lines[0], res.output
     assert not (tmp_path / "camera.json").exists()
+
+
+def test_sim_record_then_calibrate_gives_the_pose_in_the_scan_head_frame(tmp_path):
+    """The README's two commands: `insitu sim record camera-calibration` records the head's
+    axis lines on the board by default, so `insitu calibrate camera` gives the camera's pose
+    in the scan-head frame (not R = I, t = 0)."""
+    from insitu.cli.main import app
+
+    rec, out = tmp_path / "ccal", tmp_path / "camera.json"
+    res = runner.invoke(app, ["sim", "record", "camera-calibration", "-o", str(rec),
+                              "--views", "4", "--binning", "2", "--seed", "2"])
+    assert res.exit_code == 0, res.output
+    assert sum(f.line is not None for f in Sequence.open(rec).frames) == 3
+    res = runner.invoke(app, ["calibrate", "camera", str(rec), "-o", str(out)])
+    assert res.exit_code == 0, res.output
+    cal, true = load_json_model(out, CameraCalibration), default_rig(seed=2, binning=2).camera
+    R = np.array(cal.camera.R)
+    angle = np.degrees(np.arccos(np.clip((np.trace(R @ true.R.T) - 1) / 2, -1, 1)))
+    assert angle < 0.23 and np.linalg.norm(-R.T @ np.array(cal.camera.t) - true.centre_world) < 0.84
+    assert "world pose from the head's axis lines" in cal.notes

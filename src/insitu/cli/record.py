@@ -53,13 +53,20 @@ def record(
     with (connect(rig) as station, stop_on_signals(f"recording {kind}", ""),
           progress_bar(f"recording {kind}") as progress):
         svc.record(station, kind, out, spacing=spacing, region=region, grid=grid,
-                   heights=plate_z, marked=marked, next_view=_ask_for_view, views=views,
+                   heights=plate_z, marked=marked, next_view=_view_asker(views), views=views,
                    progress=progress)
     console.print(f"wrote {out}", highlight=False)
 
 
-def _ask_for_view(i: int | None) -> None:
-    """The operator brings the board into view ``i`` (None: done)."""
-    if i is not None:
-        typer.prompt(f"move the checkerboard to view {i + 1}, then press Enter",
-                     default="", show_default=False, prompt_suffix=" ")
+def _view_asker(views: int):
+    """Asks the operator to bring the board into view ``i`` (None: done); view ``views`` is
+    the board flat on the plate, where the head draws its axis lines."""
+    def ask(i: int | None) -> None:
+        if i is None:
+            return
+        what = (f"move the checkerboard to view {i + 1} of {views}" if i < views else
+                "lay the checkerboard flat on the plate at the field centre (the head will "
+                "draw its axis lines on it)")
+        typer.prompt(f"{what}, then press Enter", default="", show_default=False,
+                     prompt_suffix=" ")
+    return ask

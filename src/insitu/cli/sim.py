@@ -45,6 +45,11 @@ def record_cmd(
         help="Field calibration: plate heights, mm, comma-separated. Two or more (e.g. 0,20) "
              "record the spots `insitu calibrate camera` needs to re-estimate the camera's "
              "pose after it moved.")] = "0",
+    alignment: Annotated[bool, typer.Option(
+        "--axis-lines/--no-axis-lines",
+        help="Camera calibration: after the views, the board flat on the plate with the "
+             "head's x and y axis lines drawn on it, which give the camera's pose in the "
+             "scan-head frame.")] = True,
     camera_moved_deg: Annotated[float, typer.Option(
         callback=bounded("angle_deg"),
         help="Knock the camera after its calibration: turn it by this angle, degrees, about a "
@@ -61,6 +66,7 @@ def record_cmd(
     (`insitu calibrate field`), then record spots at two heights with the camera moved
     (`--heights 0,20 --grid 7 --camera-moved-deg 0.5 --camera-moved-mm 2`) and run
     `insitu calibrate camera SPOTS --field FIELD.json -o CAMERA.json`."""
+    from insitu.geometry.beams import axis_lines
     from insitu.services.station import simulated
     from insitu.sim.board import BoardViews
     from insitu.sim.rig import default_rig, move_camera
@@ -78,11 +84,13 @@ def record_cmd(
     if camera_moved_deg or camera_moved_mm:
         rig = move_camera(rig, camera_moved_deg, camera_moved_mm, seed)
     world = sim_world(workpiece if kind == "scan" else "step-block", rig=rig, seed=seed)
-    board = BoardViews(world, views) if kind == "camera-calibration" else None
+    board = (BoardViews(world, views, lines=axis_lines() if alignment else None)
+             if kind == "camera-calibration" else None)
     with progress_bar(f"recording {kind}") as progress, simulated(world) as station:
         record.record(station, kind, out, spacing=spacing, region=region, grid=grid,
                       heights=plate_z, marked=marked, next_view=board, views=views,
-                      truth=board.truth if board else None, progress=progress)
+                      truth=board.truth if board else None, alignment=alignment,
+                      progress=progress)
     console.print(f"wrote {out}")
 
 

@@ -143,3 +143,15 @@ def light_plane(pivot_height_mm: float, start: np.ndarray, end: np.ndarray,
         raise ValueError("light plane undefined: the line and the pivot are collinear")
     n /= norm
     return np.append(n, -n @ b)
+
+
+AXIS_HALF_MM = 30.0
+
+
+def axis_lines(half_mm: float = AXIS_HALF_MM) -> list[tuple[np.ndarray, np.ndarray]]:
+    """The lines the head draws on the board for the camera ↔ scan-head alignment (Li et al.
+    Case 1 step 1): x axis, y axis, +x half-axis (it tells +x from −x), (start, end) mm."""
+    L = float(half_mm)
+    return [(np.array([-L, 0.0]), np.array([L, 0.0])),
+            (np.array([0.0, -L]), np.array([0.0, L])),
+            (np.array([0.0, 0.0]), np.array([L, 0.0]))]

@@ -12,6 +12,7 @@ import numpy as np
 
 from insitu.errors import ConfigError
 from insitu.formats.sequence import SequenceWriter
+from insitu.geometry.beams import axis_lines
 from insitu.measure.plan import check_region, scan_lines
 from insitu.services.common import Progress
 from insitu.services.room_light import grab_room_light
@@ -192,11 +193,13 @@ def record_camera_calibration(station: Station, out: Path, next_view: NextView, 
 def record(station: Station, kind: str, out: Path, *, spacing: float = 0.5, region=None,
            grid: int = 21, heights: Seq[float] = (0.0,), marked: bool = False,
            next_view: NextView | None = None, views: int = 15, truth: dict | None = None,
-           progress: Progress | None = None) -> Path:
+           alignment: bool = True, progress: Progress | None = None) -> Path:
     """A sequence of ``kind`` (one of :data:`KINDS`) with the options that kind takes:
     a scan (``spacing``, ``region``), the height calibration, the field calibration
     (``grid`` spots per side at ``heights``, or ``marked`` circles), the camera calibration
-    (``views`` brought by ``next_view``; ``truth``: added to the station's)."""
+    (``views`` brought by ``next_view``, then with ``alignment`` the board flat on the plate
+    and the head's axis lines on it, which give the camera's pose in the scan-head frame;
+    ``truth``: added to the station's)."""
     if kind == "scan":
         return record_scan(station, out, spacing, region, progress=progress)
     if kind == "height-calibration":
@@ -208,6 +211,7 @@ def record(station: Station, kind: str, out: Path, *, spacing: float = 0.5, regi
                                         progress=progress)
     if kind == "camera-calibration" and next_view is not None:
         return record_camera_calibration(station, out, next_view, views, truth=truth,
+                                         axis_lines=axis_lines() if alignment else (),
                                          progress=progress)
     raise ConfigError(f"KIND {kind!r}: expected one of {', '.join(KINDS)}"
                       + (" (a camera calibration needs someone to move the board)"

@@ -32,17 +32,6 @@ from insitu.sim.checkerboard import random_board_poses, render_checkerboard
 from insitu.sim.rig import SimRig
 from insitu.sim.world import LaserState, SimWorld
 
-AXIS_HALF_MM = 30.0
-
-
-def axis_lines(half_mm: float = AXIS_HALF_MM) -> list[tuple[np.ndarray, np.ndarray]]:
-    """The lines drawn for the alignment: x axis, y axis, +x half-axis (start, end), mm."""
-    L = float(half_mm)
-    return [(np.array([-L, 0.0]), np.array([L, 0.0])),
-            (np.array([0.0, -L]), np.array([0.0, L])),
-            (np.array([0.0, 0.0]), np.array([L, 0.0]))]
-
-
 def board_on_plate(cols: int, rows: int, square_mm: float, rng: np.random.Generator,
                    plate_z: float = 0.0, max_offset_mm: float = 5.0
                    ) -> tuple[np.ndarray, np.ndarray]:
