@@ -152,11 +152,12 @@ def test_replay_and_live_scans_give_each_point_its_grey_value(recorded, tmp_path
     amb, z = cloud.attributes["ambient"], cloud.points[:, 2]
     assert amb.dtype == np.float32 and len(amb) == len(cloud)
     assert amb[z > 2].mean() > amb[z < 0.5].mean() + 0.15           # the part is brighter
-    # the values are the ambient frame's at the points' pixels
+    # the values are the ambient frame's at the pixels the points were measured at (Method 1
+    # puts each point on its pixel's ray: projected back, it lands there)
     cam = default_rig(seed=3, binning=4).operator.camera
-    uv, _ = cv2.projectPoints(cloud.points[z > 2], cv2.Rodrigues(cam.R)[0], cam.t, cam.K, cam.dist)
+    uv, _ = cv2.projectPoints(cloud.points, cv2.Rodrigues(cam.R)[0], cam.t, cam.K, cam.dist)
     expect = grey_at(recorded.read_ambient(), uv.reshape(-1, 2))
-    assert np.median(np.abs(expect - amb[z > 2])) < 0.03
+    assert np.percentile(np.abs(expect - amb), 90) < 0.002
     # a recording without the ambient frame (another recorder's) still reconstructs
     data = json.loads((recorded.folder / "sequence.json").read_text())
     del data["ambient"]
