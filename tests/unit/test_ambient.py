@@ -183,3 +183,35 @@ def test_cloud_picture_has_the_camera_panel_when_the_cloud_has_ambient(recorded,
     grey = np.abs(both.astype(int) - both.mean(2, keepdims=True)).max(2) < 3
     assert grey[:, both.shape[1] // 2:].mean() > 0.8    # the camera panel is grey
     assert not grey[:, :height.shape[1] // 2].mean() > 0.8
+
+
+# -- a damaged recording, as the operator sees it --------------------------------------------
+@pytest.mark.parametrize("damage, words", [
+    (lambda f: f.write_bytes(f.read_bytes()[:len(f.read_bytes()) // 2]),
+     ["00001.png: truncated or damaged PNG", "only"]),
+    (lambda f: f.write_bytes(bytes(b ^ 0xFF if i == 60 else b
+                                   for i, b in enumerate(f.read_bytes()))),
+     ["00001.png: damaged PNG", "CRC mismatch"]),
+    (lambda f: (f.parent.parent / "ambient.png").write_bytes(
+        (f.parent.parent / "ambient.png").read_bytes()[:-12]),
+     ["ambient.png: truncated PNG (no IEND chunk)"]),
+    (lambda f: (f.parent.parent / "sequence.json").write_text('{"format": "insitu-seq'),
+     ["sequence.json: not valid JSON"]),
+])
+def test_a_damaged_frame_or_file_is_one_line_without_library_chatter(recorded, tmp_path, damage,
+                                                                      words):
+    """The whole process's output (C libraries' stderr included): one line naming the file."""
+    import subprocess
+    import sys
+
+    rec = tmp_path / "rec"
+    shutil.copytree(recorded.folder, rec)
+    damage(rec / "frames" / "00001.png")
+    code = "from insitu.cli.main import main; main()"
+    res = subprocess.run([sys.executable, "-c", code, "scan", "--replay", str(rec), "-o",
+                          str(tmp_path / "c.ply")], capture_output=True, text=True, timeout=120)
+    lines = [ln for ln in (res.stdout + res.stderr).splitlines()
+             if not ln.startswith("scanning: ")]                  # plain progress lines
+    assert res.returncode == 1 and len(lines) == 1, res.stdout + res.stderr
+    assert lines[0].startswith("error: ") and all(w in lines[0] for w in words), lines[0]
+    assert not (tmp_path / "c.ply").exists()

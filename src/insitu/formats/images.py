@@ -83,8 +83,8 @@ def _check_png(path, raw: bytes, error: type[Exception]) -> None:
     while i + 12 <= len(raw):
         n, kind = struct.unpack(">I4s", raw[i:i + 8])
         if n > len(raw) - i - 12:
-            raise error(f"{path}: damaged PNG (chunk {kind!r} at byte {i} claims {n} bytes, "
-                        f"{len(raw) - i - 12} are left)")
+            raise error(f"{path}: truncated or damaged PNG (chunk {kind!r} at byte {i} "
+                        f"claims {n} bytes, only {len(raw) - i - 12} are left)")
         if zlib.crc32(raw[i + 4:i + 8 + n]) != struct.unpack(">I", raw[i + 8 + n:i + 12 + n])[0]:
             raise error(f"{path}: damaged PNG (chunk {kind!r} at byte {i}: CRC mismatch)")
         if kind == b"IEND":
