@@ -18,7 +18,8 @@ for pkg in libusb-1.0-0 gcc libc6-dev xvfb xauth libgl1 libegl1 libgl1-mesa-dri 
     dpkg-query -W -f='${Status}' "$pkg" 2>/dev/null | grep -q "install ok installed" || need_pkgs+=("$pkg")
 done
 if ((${#need_pkgs[@]})); then
-    echo "insitu setup: installing system packages: ${need_pkgs[*]}"
+    echo "insitu setup: installing ${#need_pkgs[@]} system packages with apt-get (sudo; about a" \
+         "minute): ${need_pkgs[*]}"
     SUDO=""; [ "$(id -u)" -eq 0 ] || SUDO="sudo"
     $SUDO apt-get update -qq
     DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq --no-install-recommends "${need_pkgs[@]}" >/dev/null
@@ -32,7 +33,16 @@ if [ ! -x "$VENV/bin/python" ]; then
 fi
 STAMP="$VENV/.insitu-installed"
 if [ ! -f "$STAMP" ] || [ "$ROOT/pyproject.toml" -nt "$STAMP" ] || [ "$(cat "$STAMP")" != "$EXTRAS" ]; then
-    echo "insitu setup: installing insitu and its packages into $VENV"
+    PKGS="$("$VENV/bin/python" - "$ROOT/pyproject.toml" "$EXTRAS" <<'PY'
+import re, sys, tomllib
+project = tomllib.load(open(sys.argv[1], "rb"))["project"]
+extras = [e for e in sys.argv[2].split(",") if e]
+deps = project["dependencies"] + [d for e in extras for d in project["optional-dependencies"][e]]
+print(", ".join(re.split(r"[<>=!~;\[ ]", d, maxsplit=1)[0] for d in deps))
+PY
+)"
+    echo "insitu setup: installing insitu[$EXTRAS] into $VENV with pip (the first time a" \
+         "minute or two): $PKGS"
     LOG="$VENV/pip-install.log"
     if ! "$VENV/bin/python" -m pip install -e "$ROOT[$EXTRAS]" >"$LOG" 2>&1; then
         tail -n 30 "$LOG" >&2
@@ -40,5 +50,6 @@ if [ ! -f "$STAMP" ] || [ "$ROOT/pyproject.toml" -nt "$STAMP" ] || [ "$(cat "$ST
         exit 1
     fi
     echo "$EXTRAS" >"$STAMP"
+    echo "insitu setup: installed (pip's log: $LOG)"
 fi
 export PATH="$VENV/bin:$PATH"

@@ -17,7 +17,7 @@ from insitu.formats.sequence import Sequence, SequenceWriter
 from insitu.measure.preview import save_cloud_picture
 from insitu.measure.scan import ScanReconstructor, grey_at
 from insitu.services.record import record_scan
-from insitu.services.room_light import ACCEPT, grab_room_light
+from insitu.services.room_light import ACCEPT, grab_room_light, station_room_light
 from insitu.services.scan import scan_live, scan_replay
 from insitu.services.station import simulated
 from insitu.sim.rig import default_rig
@@ -123,6 +123,19 @@ def test_room_light_is_exposed_well_and_the_line_exposure_comes_back(dn_per_ms):
     assert ACCEPT[0] <= top <= ACCEPT[1] and (room.image == 255).mean() < 0.005
     assert np.isclose(room.exposure_ms * dn_per_ms / 255, top, atol=0.01)   # as taken
     assert head.offs == 1 and cam.exposure_ms == 10.0 and cam.grabs <= 4
+
+
+def test_the_station_starts_from_the_exposure_the_room_light_needed_last():
+    from types import SimpleNamespace
+
+    cam = LinearCamera(np.full((64, 64), 0.3))
+    station = SimpleNamespace(devices=SimpleNamespace(camera=cam, head=Head()),
+                              room_light_ms=None)
+    first = station_room_light(station)
+    assert first.grabs >= 2 and station.room_light_ms == first.exposure_ms
+    again = station_room_light(station)
+    assert again.grabs == 1 and again.exposure_ms == first.exposure_ms
+    assert cam.exposure_ms == 10.0
 
 
 # -- on the simulated rig -----------------------------------------------------------------------

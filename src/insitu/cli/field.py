@@ -67,12 +67,21 @@ def field(
 def correct(
     field_file: Annotated[Path, typer.Argument(metavar="FIELD.json",
                                                help="Field correction file.")],
-    targets: Annotated[Path, typer.Argument(metavar="TARGETS.csv",
-                                            help="Targets: header x,y, mm on z = 0.")],
+    targets: Annotated[Path, typer.Argument(
+        metavar="TARGETS.csv",
+        help="Where the spot must land: UTF-8 text, the header line x,y, then one target per "
+             "line: x,y in mm on the focal plane z = 0, scan-head frame (origin at the field "
+             "centre), e.g. 0,0 and -40.5,12.25.")],
     out: Annotated[Path, typer.Option("-o", "--output", help="Corrected commands (.csv).")],
 ) -> None:
     """Corrected commands for targets: COMMANDS.csv (header x,y, same order) holds, for each
-    target, the command K with K + δ(K) = target, so that the spot lands on the target."""
+    target, the command K with K + δ(K) = target, so that the spot lands on the target.
+
+    TARGETS.csv is plain text: the header `x,y`, then one target per line, x and y in mm on
+    the nominal focal plane z = 0 in the scan-head frame (origin at the field centre, x the
+    direction the scan lines are offset along), comma-separated, `.` as the decimal point;
+    blank lines are skipped, every target must lie inside the scan field. For example
+    `x,y` / `0,0` / `-40.5,12.25` / `60,-60`, one per line."""
     from insitu.calibrate.field_file import load_field_correction
     from insitu.services.field import correct_targets, read_targets_csv, write_commands_csv
 

@@ -23,7 +23,7 @@ from insitu.marking.verify import CodeCheck, check_code, unrolled
 from insitu.patterns import Pattern
 from insitu.services.common import Progress
 from insitu.services.scan import Cancelled
-from insitu.services.room_light import grab_room_light
+from insitu.services.room_light import station_room_light
 
 if TYPE_CHECKING:
     from insitu.services.station import Station
@@ -235,8 +235,7 @@ def mark_on_station(station: Station, job: MarkJob, job_path: str | Path | None 
     ppath = progress_path_for(job_path) if job_path is not None else None
     result = mark(job, station.driver, station.devices.controller, ppath, resume, preview,
                   cancel, progress, restart, cut_path)
-    picture = (grab_room_light(station.devices.camera, station.devices.head).image
-               if image or inspect is not None else None)
+    picture = station_room_light(station).image if image or inspect is not None else None
     if inspect is not None:
         save_image(inspect, picture)
     return StationRun(result, ppath, picture)

@@ -15,7 +15,7 @@ from insitu.formats.sequence import SequenceWriter
 from insitu.geometry.beams import axis_lines
 from insitu.measure.plan import check_region, scan_lines
 from insitu.services.common import Progress
-from insitu.services.room_light import grab_room_light
+from insitu.services.room_light import station_room_light
 from insitu.services.station import Station
 
 KINDS = ("scan", "height-calibration", "field-calibration", "camera-calibration")
@@ -63,7 +63,7 @@ def record_scan(station: Station, out: Path, spacing: float = 0.5, region=None,
     exposure = _exposure(cam, exposure_ms)
     with _writer(station, out, "scan", truth=station.truth(region=list(region))) as w:
         try:
-            room = grab_room_light(cam, head)
+            room = station_room_light(station)
             w.add_ambient(room.image, exposure_ms=room.exposure_ms)
             for i, (a, b) in enumerate(lines):
                 head.show_line(a, b)

@@ -15,6 +15,7 @@ import numpy as np
 
 from insitu.devices.protocols import Camera, ScanHead
 from insitu.formats.bounds import BOUNDS
+from insitu.services.station import Station
 
 TARGET = 0.70             # the bright end of the part: 70 % of full scale
 ACCEPT = (0.45, 0.90)     # ... anywhere in here is kept
@@ -54,16 +55,17 @@ def next_exposure(exposure_ms: float, level: float, saturated: float) -> float |
     return None if np.isclose(new, exposure_ms) else new
 
 
-def grab_room_light(camera: Camera, head: ScanHead,
+def grab_room_light(camera: Camera, head: ScanHead, start_ms: float | None = None,
                     restore_ms: float | None = None) -> RoomLightFrame:
-    """The laser off (``head.off()``), a frame under the room light, auto-exposed when the
-    camera's exposure is known (its ``exposure_ms``; else one frame at whatever it has).
-    The exposure is set back to ``restore_ms`` (default: the camera's before)."""
+    """The laser off (``head.off()``), a frame under the room light, auto-exposed from
+    ``start_ms`` (default: the camera's ``exposure_ms``; a camera that does not say gives
+    one frame at whatever it has). The exposure is set back to ``restore_ms`` (default: the
+    camera's before)."""
     head.off()
     before = getattr(camera, "exposure_ms", None)
     if before is None:
         return RoomLightFrame(camera.grab(), None)
-    exposure, grabs = float(before), 0
+    exposure, grabs = float(start_ms if start_ms is not None else before), 0
     camera.set_exposure(exposure)            # manual: a camera on its own auto is set to it
     try:
         while True:
@@ -78,3 +80,13 @@ def grab_room_light(camera: Camera, head: ScanHead,
         back = float(restore_ms if restore_ms is not None else before)
         if exposure != back:
             camera.set_exposure(back)
+
+
+def station_room_light(station: Station) -> RoomLightFrame:
+    """:func:`grab_room_light` on the station's camera, starting from the exposure its last
+    room-light frame needed (kept as ``station.room_light_ms``: one frame when the light has
+    not changed)."""
+    devices = station.devices
+    room = grab_room_light(devices.camera, devices.head, start_ms=station.room_light_ms)
+    station.room_light_ms = room.exposure_ms
+    return room

@@ -23,7 +23,7 @@ from insitu.measure.scan import ScanReconstructor
 from insitu.rig.files import HeightCalibration
 from insitu.services.common import Progress, camera_model
 from insitu.services.height import centre_settings, check_same_camera, height_model
-from insitu.services.room_light import grab_room_light
+from insitu.services.room_light import station_room_light
 from insitu.services.station import Station
 
 
@@ -146,7 +146,7 @@ def scan_live(station: Station, spacing: float = 0.5, region=None,
     station's, which a real rig does not have) and reconstruct each frame as it arrives
     (``on_frame`` sees each; ``exposure_ms``: the camera's, default its own; ``speed_mm_s``:
     the head's line sweep speed, default its own). First a frame with the laser off under
-    the room light, auto-exposed (:func:`~insitu.services.room_light.grab_room_light`),
+    the room light, auto-exposed (:func:`~insitu.services.room_light.station_room_light`),
     gives each point its ``ambient`` grey value. The laser is off when this returns or
     raises; a device fault raises :class:`ScanInterrupted` with what was measured before it."""
     t0 = time.perf_counter()
@@ -162,7 +162,7 @@ def scan_live(station: Station, spacing: float = 0.5, region=None,
     if speed_mm_s is not None:
         head.set_line_speed(speed_mm_s)
     return _scan(camera, head, lines, rec, t0, "lines", progress, cancel, on_frame,
-                 station.record, lambda: grab_room_light(camera, head).image)
+                 station.record, lambda: station_room_light(station).image)
 
 
 def _scan(camera: Camera, head: ScanHead, lines, rec: ScanReconstructor, t0: float, what: str,

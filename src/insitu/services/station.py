@@ -27,13 +27,15 @@ class Station:
     of the file ``field``; ``devices``: camera, line projector, job controller, stage —
     opened on first use, so planning never touches the hardware. Close it when done (laser
     off, devices released); it is a context manager. ``record``: which rig and workpiece
-    this is, as clouds and jobs record it (None: unknown)."""
+    this is, as clouds and jobs record it (None: unknown). ``room_light_ms``: the exposure
+    the last frame under the room light needed (:mod:`insitu.services.room_light`)."""
 
     def __init__(self, rig: RigModel, cfg: RigConfig, world: SimWorld | None = None,
                  field: Path | None = None, rig_file: Path | None = None,
                  record: RigRecord | None = None):
         self.rig, self.cfg, self.world, self.rig_file = rig, cfg, world, rig_file
         self.record = record
+        self.room_light_ms: float | None = None
         self._devices: Devices | None = None
         self.use_field(field)
 
