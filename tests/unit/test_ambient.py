@@ -228,3 +228,22 @@ def test_a_damaged_frame_or_file_is_one_line_without_library_chatter(recorded, t
     assert res.returncode == 1 and len(lines) == 1, res.stdout + res.stderr
     assert lines[0].startswith("error: ") and all(w in lines[0] for w in words), lines[0]
     assert not (tmp_path / "c.ply").exists()
+
+
+def test_a_camera_that_gives_no_room_light_frame_still_scans(monkeypatch):
+    """A camera the head triggers gives no frame with the laser off: the scan goes on, its
+    points without grey values, and says why."""
+    from insitu.errors import DeviceError
+
+    station = simulated(sim_world("step-block", seed=3, binning=4))
+    cam, grab = station.devices.camera, station.devices.camera.grab
+
+    def triggered_by_the_head(timeout_s=5.0):
+        if station.world.laser.kind == "off":
+            raise DeviceError("camera: no frame within 5 s (no trigger from the scan head?)")
+        return grab(timeout_s)
+    monkeypatch.setattr(cam, "grab", triggered_by_the_head)
+    result = scan_live(station, spacing=2.0, region=(-12, 12, -44, 44))
+    assert len(result.cloud) > 500 and "ambient" not in result.cloud.attributes
+    assert result.summary.ambient.startswith("none (the room-light frame failed: camera: no")
+    assert station.world.laser.kind == "off"

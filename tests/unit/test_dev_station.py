@@ -8,6 +8,7 @@ import re
 import shutil
 from pathlib import Path
 
+import cv2
 import numpy as np
 import pytest
 from fakes.grbl import GrblPeer
@@ -46,8 +47,11 @@ def write_rig(folder: Path, lib: Path, port: str, frames: int, **options) -> Pat
         pivot_height_mm=350.0, mirror_distance_mm=350.0, mirror_separation_mm=12.0,
         field_size_mm=(200.0, 200.0), z_range_mm=(-25.0, 25.0)))
     (folder / "frames").mkdir()
-    for f in sorted((RECORDED / "frames").glob("*.png"))[:frames]:
-        shutil.copy(f, folder / "frames" / f.name)
+    # the camera's first frame: the room light, laser off (two frames' minimum: no line in it)
+    cv2.imwrite(str(folder / "frames" / "00000.png"),
+                np.minimum(seq.read_frame(0), seq.read_frame(len(seq) - 1)))
+    for i, f in enumerate(sorted((RECORDED / "frames").glob("*.png"))[:frames], start=1):
+        shutil.copy(f, folder / "frames" / f"{i:05d}.png")
     (folder / "head3d.ct5").write_bytes(b"\0" * 16)
     opts = {"camera": {"source": "frames/%05d.png", "timeout_s": 2.0},
             "rtc": {"library": str(lib), "correction_file": "head3d.ct5",

@@ -84,6 +84,7 @@ def scan(
     table.add_row("x range, mm", f"{s.bounds_min[0]:.2f} … {s.bounds_max[0]:.2f}")
     table.add_row("y range, mm", f"{s.bounds_min[1]:.2f} … {s.bounds_max[1]:.2f}")
     table.add_row("z range, mm", f"{s.bounds_min[2]:.2f} … {s.bounds_max[2]:.2f}")
+    table.add_row("camera colours", s.ambient)
     table.add_row("time", f"{s.seconds:.1f} s")
     console.print(table)
 

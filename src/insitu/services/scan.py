@@ -38,6 +38,7 @@ class ScanSummary:
     bounds_max: tuple[float, float, float]
     outliers_removed: int = 0
     unconfirmed_removed: int = 0
+    ambient: str = "none"      # "yes": each point has its grey value; else why not
 
     @property
     def coverage(self) -> float:
@@ -85,20 +86,23 @@ class ScanInterrupted(DeviceError):
         self.partial = partial
 
 
-def _partial(rec: ScanReconstructor, t0: float, rig: RigRecord | None) -> ScanResult | None:
+def _partial(rec: ScanReconstructor, t0: float, rig: RigRecord | None,
+             ambient: str = "none") -> ScanResult | None:
     try:
-        return _finish(rec, t0, rig)
+        return _finish(rec, t0, rig, ambient)
     except MeasurementError:
         return None
 
 
-def _finish(rec: ScanReconstructor, t0: float, rig: RigRecord | None = None) -> ScanResult:
+def _finish(rec: ScanReconstructor, t0: float, rig: RigRecord | None = None,
+            ambient: str = "none") -> ScanResult:
     """The result so far, its cloud recording ``rig`` (the station's; None for a replay)."""
     cloud = replace(rec.cloud(), rig=rig)
     lo, hi = cloud.points.min(axis=0), cloud.points.max(axis=0)
     return ScanResult(cloud, ScanSummary(len(cloud), rec.frames, rec.frames_with_line, rec.method,
                                          time.perf_counter() - t0, tuple(lo), tuple(hi),
-                                         rec.outliers_removed, rec.unconfirmed_removed))
+                                         rec.outliers_removed, rec.unconfirmed_removed,
+                                         ambient))
 
 
 def reconstructor(camera: CameraModel, pivot_height_mm: float, telecentric: bool,
@@ -169,29 +173,31 @@ def _scan(camera: Camera, head: ScanHead, lines, rec: ScanReconstructor, t0: flo
           progress: Progress | None, cancel: threading.Event | None,
           on_frame: FrameCallback | None, rig: RigRecord | None = None,
           room_light: Callable[[], np.ndarray | None] | None = None) -> ScanResult:
-    """The scan loop: ``room_light()`` (the laser-off frame, or None) first, then each line
-    drawn, grabbed and reconstructed in turn; the laser off at the end, on a cancel
-    (:class:`Cancelled`) or a device fault (:class:`ScanInterrupted`), each keeping what was
-    measured."""
+    """The scan loop: ``room_light()`` (the laser-off frame, or None) first — a camera that
+    gives none (a trigger only the head sends) leaves the points without grey values, said in
+    the summary's ``ambient`` — then each line drawn, grabbed and reconstructed in turn; the
+    laser off at the end, on a cancel (:class:`Cancelled`) or a device fault
+    (:class:`ScanInterrupted`), each keeping what was measured."""
+    ambient = "none"
     try:
         if room_light is not None:
             try:
-                rec.set_ambient(room_light())
+                image = room_light()
+                ambient = "yes" if image is not None else "none (no room-light frame)"
             except DeviceError as e:
-                head.off()
-                raise ScanInterrupted(f"scan stopped at the room-light frame before the "
-                                      f"lines, laser off: {e}", None) from e
+                image, ambient = None, f"none (the room-light frame failed: {e})"
+            rec.set_ambient(image)
         for i, (a, b) in enumerate(lines):
             if cancel is not None and cancel.is_set():
                 raise Cancelled(f"scan cancelled after {i} of {len(lines)} {what}",
-                                _partial(rec, t0, rig))
+                                _partial(rec, t0, rig, ambient))
             try:
                 head.show_line(a, b)
                 image = camera.grab()
             except DeviceError as e:
                 head.off()
                 raise ScanInterrupted(f"scan stopped at line {i + 1} of {len(lines)}, laser "
-                                      f"off: {e}", _partial(rec, t0, rig)) from e
+                                      f"off: {e}", _partial(rec, t0, rig, ambient)) from e
             rec.add(i, image, a, b)
             if on_frame:
                 on_frame(ScanFrame(i, len(lines), image, rec.last_centres, rec.last_points))
@@ -199,7 +205,7 @@ def _scan(camera: Camera, head: ScanHead, lines, rec: ScanReconstructor, t0: flo
                 progress(i + 1, len(lines))
     finally:
         head.off()
-    return _finish(rec, t0, rig)
+    return _finish(rec, t0, rig, ambient)
 
 
 class RecordedHead:
