@@ -82,19 +82,23 @@ class RoomLightView:
     ``shade`` (M,) float32 DN at the nominal exposure (albedo, textured unless ``ideal``,
     shaded by the normal)."""
 
-    def __init__(self, rig: SimRig, scene: Scene, ideal: bool = False):
+    def __init__(self, rig: SimRig, scene: Scene, ideal: bool = False, rows: int = 256):
         cam, o = rig.camera, rig.optics
         self.shape = (cam.height, cam.width)
-        u, v = np.meshgrid(np.arange(cam.width, dtype=np.float64),
-                           np.arange(cam.height, dtype=np.float64))
-        origin, dirs = cam.rays(np.column_stack([u.ravel(), v.ravel()]))
-        hits = scene.cast(np.broadcast_to(origin, dirs.shape), dirs)
-        self.hit = hits.hit
-        p, part, nrm = hits.points[hits.hit], hits.part[hits.hit], hits.normals[hits.hit]
-        albedo = (np.array([scene.materials[i].albedo for i in part]) if ideal
-                  else scene.albedo(p, part))
-        self.points = p.astype(np.float32)
-        self.shade = (o.ambient_dn * albedo * (0.6 + 0.4 * np.abs(nrm[:, 2]))).astype(np.float32)
+        hit, points, shade = [], [], []
+        for v0 in range(0, cam.height, rows):          # a block of rows at a time: flat memory
+            u, v = np.meshgrid(np.arange(cam.width, dtype=np.float64),
+                               np.arange(v0, min(v0 + rows, cam.height), dtype=np.float64))
+            origin, dirs = cam.rays(np.column_stack([u.ravel(), v.ravel()]))
+            hits = scene.cast(np.broadcast_to(origin, dirs.shape), dirs)
+            p, part, nrm = hits.points[hits.hit], hits.part[hits.hit], hits.normals[hits.hit]
+            albedo = (np.array([scene.materials[i].albedo for i in part]) if ideal
+                      else scene.albedo(p, part))
+            hit.append(hits.hit)
+            points.append(p.astype(np.float32))
+            shade.append((o.ambient_dn * albedo * (0.6 + 0.4 * np.abs(nrm[:, 2])))
+                         .astype(np.float32))
+        self.hit, self.points, self.shade = (np.concatenate(a) for a in (hit, points, shade))
 
 
 def render_inspection(rig: SimRig, scene: Scene, burns: list[Burn],
