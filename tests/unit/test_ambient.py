@@ -230,7 +230,7 @@ def test_a_damaged_frame_or_file_is_one_line_without_library_chatter(recorded, t
     assert not (tmp_path / "c.ply").exists()
 
 
-def test_a_camera_that_gives_no_room_light_frame_still_scans(monkeypatch):
+def test_a_camera_that_gives_no_room_light_frame_still_scans(monkeypatch, tmp_path):
     """A camera the head triggers gives no frame with the laser off: the scan goes on, its
     points without grey values, and says why."""
     from insitu.errors import DeviceError
@@ -247,3 +247,6 @@ def test_a_camera_that_gives_no_room_light_frame_still_scans(monkeypatch):
     assert len(result.cloud) > 500 and "ambient" not in result.cloud.attributes
     assert result.summary.ambient.startswith("none (the room-light frame failed: camera: no")
     assert station.world.laser.kind == "off"
+    seq = Sequence.open(record_scan(station, tmp_path / "rec", spacing=4.0,
+                                    region=(-12, 12, -44, 44)))
+    assert seq.ambient is None and not (seq.folder / "ambient.png").exists() and len(seq) == 7

@@ -10,7 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
-from insitu.errors import ConfigError
+from insitu.errors import ConfigError, DeviceError
 from insitu.formats.sequence import SequenceWriter
 from insitu.geometry.beams import axis_lines
 from insitu.measure.plan import check_region, scan_lines
@@ -55,7 +55,7 @@ def record_scan(station: Station, out: Path, spacing: float = 0.5, region=None,
                 exposure_ms: float | None = None, progress: Progress | None = None) -> Path:
     """A scan over ``region`` (x0, x1, y0, y1) mm (default: the station's), a line every
     ``spacing`` mm, after a frame with the laser off under the room light (auto-exposed,
-    ``ambient.png``)."""
+    ``ambient.png``; left out when the camera gives none)."""
     region = tuple(region) if region is not None else station.default_region()
     check_region(region, station.rig.head.field_size_mm)
     lines = scan_lines(region, spacing)
@@ -63,8 +63,11 @@ def record_scan(station: Station, out: Path, spacing: float = 0.5, region=None,
     exposure = _exposure(cam, exposure_ms)
     with _writer(station, out, "scan", truth=station.truth(region=list(region))) as w:
         try:
-            room = station_room_light(station)
-            w.add_ambient(room.image, exposure_ms=room.exposure_ms)
+            try:
+                room = station_room_light(station)
+                w.add_ambient(room.image, exposure_ms=room.exposure_ms)
+            except DeviceError:
+                pass            # a camera only the head triggers: a recording without one
             for i, (a, b) in enumerate(lines):
                 head.show_line(a, b)
                 w.add(cam.grab(), line={"start": a.tolist(), "end": b.tolist()},
