@@ -83,19 +83,25 @@ class CameraImage(QWidget):
 
     def zoom_at(self, factor: float, xy) -> None:
         """Zoom by ``factor`` keeping the image point under widget px ``xy`` where it is."""
+        self._fit_now()
+        self.zoom_to(self.scale * factor, xy)
+
+    def zoom_to(self, scale: float, xy) -> None:
+        """Show ``scale`` screen px per image px, the image point under ``xy`` kept there."""
         uv = self.to_image(xy)
-        self.scale = float(np.clip(self.scale * factor, *ZOOM_RANGE))
+        self.scale = float(np.clip(scale, *ZOOM_RANGE))
         self.offset = np.asarray(xy, float) - self.scale * (uv + 0.5)
         self.fitted = False
         self.update()
 
     def one_to_one(self) -> None:
         """One image pixel per screen pixel, about the widget's centre."""
-        self._fit_now()
-        self.zoom_at(1.0 / self.scale, np.array([self.width(), self.height()]) / 2)
+        self.zoom_to(1.0, np.array([self.width(), self.height()]) / 2)
 
     def fit(self) -> None:
+        """The whole image in the widget, following its size."""
         self.fitted = True
+        self._fit_now()
         self.update()
 
     # -- events ----------------------------------------------------------------------------
