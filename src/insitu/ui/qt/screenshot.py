@@ -49,14 +49,13 @@ def wait_until(app: QApplication, condition, timeout_s: float = 30.0, what: str 
 def ambient_from_rig(window: MainWindow) -> np.ndarray:
     """(N,) float32 0…1: the connected camera's laser-off frame, bilinearly sampled where the
     session cloud's points project (the rig's camera model)."""
-    import cv2
+    from scipy.ndimage import map_coordinates
 
     frame = np.asarray(window.station.devices.camera.grab(), np.float32)
     frame /= 65535.0 if frame.max() > 255 else 255.0
-    uv = window.station.rig.camera.project(window.session.cloud.points).astype(np.float32)
-    gray = cv2.remap(frame, uv[:, :1], uv[:, 1:], cv2.INTER_LINEAR,
-                     borderMode=cv2.BORDER_REPLICATE)
-    return np.clip(gray.reshape(-1), 0, 1).astype(np.float32)
+    uv = window.station.rig.camera.project(window.session.cloud.points)
+    gray = map_coordinates(frame, [uv[:, 1], uv[:, 0]], order=1, mode="nearest")
+    return np.clip(gray, 0, 1).astype(np.float32)
 
 
 def build(app: QApplication, replay: Path, height_cal: Path | None, pattern: str | None,

@@ -135,6 +135,9 @@ def _colour_bar(view, p: QPainter, w: int) -> None:
         return
     kind, lo, hi = shown
     rect = QRectF(w - BAR_W - 12, 30, BAR_W, BAR_H)
+    p.setPen(Qt.NoPen)
+    p.setBrush(BAND)
+    p.drawRoundedRect(rect.adjusted(-78, -26, 6, 14), 4, 4)
     g = QLinearGradient(rect.bottomLeft(), rect.topLeft())
     if kind == "height":
         for t, r, gg, b in COLORMAP_STOPS:
@@ -150,5 +153,5 @@ def _colour_bar(view, p: QPainter, w: int) -> None:
         (f"{hi:.2f}", f"{lo:.2f}")
     p.drawText(QRectF(rect.left() - 80, rect.top() - 8, 76, 16), right, top)
     p.drawText(QRectF(rect.left() - 80, rect.bottom() - 8, 76, 16), right, bottom)
-    p.drawText(QRectF(rect.left() - 60, rect.top() - 26, 60 + BAR_W, 16), right,
+    p.drawText(QRectF(rect.left() - 80, rect.top() - 26, 80 + BAR_W, 16), right,
                "height z" if kind == "height" else "camera gray")
