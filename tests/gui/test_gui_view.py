@@ -167,3 +167,12 @@ def test_the_camera_window_zooms_about_the_cursor_pans_and_shows_the_centres(qtb
     assert img.caption == "inspection" and img.image.width() == 306
     bare.camera_dock.enlarge_button.click()
     assert bare.camera_dock.window_ is win
+
+
+def test_a_frame_draws_at_most_its_budget_of_points():
+    from insitu.ui.qt.gl_renderer import INTERACTIVE_POINTS, REST_POINTS, Renderer
+
+    r = Renderer()
+    assert r.budget(True, 10**7) == INTERACTIVE_POINTS and r.budget(False, 10**7) == REST_POINTS
+    small = 500 * 720                                   # a small view needs fewer points
+    assert r.budget(True, small) < r.budget(False, small) < REST_POINTS

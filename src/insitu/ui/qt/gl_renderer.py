@@ -123,7 +123,8 @@ class VertexBuffer:
         GL.glBindBuffer(GL.GL_ARRAY_BUFFER, self.vbo)
         size = 4 * self.components
         if self.count > self.capacity or self.uploaded == 0:
-            self.capacity = max(self.count, min(2 * self.capacity, 1 << 26), 1024)
+            grown = 2 * self.capacity if self.uploaded else 0     # a new set: its own size
+            self.capacity = max(self.count, min(grown, 1 << 26), 1024)
             GL.glBufferData(GL.GL_ARRAY_BUFFER, self.capacity * size, None, GL.GL_DYNAMIC_DRAW)
             self.uploaded = 0
         tail = self.data[self.uploaded:]
@@ -174,8 +175,10 @@ class LineBuffer:
             self.vao = None
 
 
-INTERACTIVE_POINTS = 150_000    # drawn while the view moves
-REST_POINTS = 400_000           # drawn at rest; fewer in the view: every one of them
+INTERACTIVE_POINTS = 150_000    # drawn while the view moves, at most
+REST_POINTS = 400_000           # drawn at rest, at most; fewer in the view: every one of them
+POINTS_PER_PX = (0.3, 0.6)      # and at most this many per pixel of the view (moving, at rest):
+                                # 2-px points cover a cloud that fills the view twice over
 
 
 class PointLayer:
@@ -245,10 +248,9 @@ class PointLayer:
 
 
 class Renderer:
-    """The point cloud and named line layers, drawn with one matrix. While the operator
-    moves the view (``fast``) at most :data:`INTERACTIVE_POINTS` of the cloud's points in
-    the view are drawn, at rest at most :data:`REST_POINTS` (evenly thinned, in scan order),
-    so a software renderer keeps up; a view showing fewer gets every point.
+    """The point cloud and named line layers, drawn with one matrix. Of the cloud's points in
+    the view, a frame draws at most :meth:`budget` (evenly thinned, in scan order), so a
+    software renderer keeps up; a view showing fewer gets every point.
     ``camera_colours``: the points take the ambient frame's gray (when the cloud has it)."""
 
     def __init__(self) -> None:
@@ -278,8 +280,16 @@ class Renderer:
         buf.set(vertices)
         self.lines[name] = (buf, tuple(colour), on_top)
 
-    def draw(self, mvp: np.ndarray, fast: bool = False, background=(0.11, 0.12, 0.14)) -> None:
-        """Clear and draw everything; ``fast``: the thinned cloud (the view is moving)."""
+    def budget(self, fast: bool, view_px: int) -> int:
+        """Points a frame draws at most: moving (``fast``) or at rest, in a view of
+        ``view_px`` pixels."""
+        cap = INTERACTIVE_POINTS if fast else REST_POINTS
+        return int(min(cap, POINTS_PER_PX[0 if fast else 1] * view_px))
+
+    def draw(self, mvp: np.ndarray, fast: bool = False, view_px: int = 1 << 30,
+             background=(0.11, 0.12, 0.14)) -> None:
+        """Clear and draw everything; ``fast``: the view is moving; ``view_px``: its size,
+        pixels (the budget of points follows both)."""
         GL.glClearColor(*background, 1.0)
         GL.glClear(GL.GL_COLOR_BUFFER_BIT | GL.GL_DEPTH_BUFFER_BIT)
         m = np.ascontiguousarray(mvp.T, np.float32)
@@ -291,7 +301,7 @@ class Renderer:
         GL.glUniform1i(GL.glGetUniformLocation(prog, "camera_colours"),
                        int(self.camera_colours and self.points.has_ambient))
         GL.glUniform1f(GL.glGetUniformLocation(prog, "point_size"), self.point_size)
-        self.points.draw(mvp, INTERACTIVE_POINTS if fast else REST_POINTS)
+        self.points.draw(mvp, self.budget(fast, view_px))
         GL.glUseProgram(self._line_prog)
         GL.glUniformMatrix4fv(GL.glGetUniformLocation(self._line_prog, "mvp"), 1, GL.GL_FALSE, m)
         loc = GL.glGetUniformLocation(self._line_prog, "colour")

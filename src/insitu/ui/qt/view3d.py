@@ -115,7 +115,9 @@ class View3D(QOpenGLWidget):
 
     def paintGL(self) -> None:
         self._update_guides()
-        self.renderer.draw(self.camera.mvp(self.width() / max(self.height(), 1)), self.moving)
+        dpr = self.devicePixelRatioF()
+        self.renderer.draw(self.camera.mvp(self.width() / max(self.height(), 1)), self.moving,
+                           int(self.width() * self.height() * dpr * dpr))
         p = QPainter(self)
         view_overlay.paint(self, p)
         p.end()
