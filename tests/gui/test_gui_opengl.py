@@ -138,5 +138,8 @@ def test_top_view_is_orthographic_with_outline_on_paths_grid_rulers_and_camera_c
     band = img[h - int(10 * scale), :, :].astype(float)
     assert (np.linalg.norm(band - (59, 51, 47), axis=1) < 14).mean() > 0.5     # BGR
     assert info["colour_bar"][0] == "camera"
-    # the window picture holds the view with its overlay
+    # the window picture holds the view with its overlay (the colour bar, the rulers)
     assert window.shape[0] >= 700 and window.shape[1] >= 1200
+    x0, y0 = (np.array(info["in_window"]) * scale).astype(int)
+    inset = window[y0:y0 + h, x0:x0 + w].astype(float)
+    assert np.abs(inset - img).mean() < 2

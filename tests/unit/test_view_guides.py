@@ -113,6 +113,15 @@ def test_scale_bar_is_a_nice_length_at_the_view_scale():
     assert vg.scale_bar(cam, H)[0] < mm
 
 
+def test_axes_start_at_the_origin_a_nice_length_long():
+    cam = _top()
+    length, lines = vg.axes(cam, H)
+    assert length == vg.nice_step(length)
+    assert np.allclose(lines[0::2], 0) and np.allclose(lines[1::2], np.eye(3) * length)
+    px = cam.project(lines[:4], W, H)
+    assert vg.AXIS_PX <= np.linalg.norm(px[1] - px[0]) < 2.5 * vg.AXIS_PX
+
+
 # -- level of detail ---------------------------------------------------------------------
 def _scan_cloud(n=200_000, lines=200):
     per = n // lines

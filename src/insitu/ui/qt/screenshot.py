@@ -118,7 +118,8 @@ def view_info(window: MainWindow) -> dict:
     cam = view.camera
     plan = s.plans[0].plan if s.plans else None
     bar = colour_bar_range(view)
-    return {"width": view.width(), "height": view.height(),
+    at = view.mapTo(window, view.rect().topLeft())
+    return {"width": view.width(), "height": view.height(), "in_window": [at.x(), at.y()],
             "device_pixel_ratio": view.devicePixelRatioF(),
             "centre": list(map(float, cam.centre)), "distance_mm": cam.distance_mm,
             "azimuth_deg": cam.azimuth_deg, "elevation_deg": cam.elevation_deg,
