@@ -145,7 +145,7 @@ class CameraImage(QWidget):
                 (xy[:, 1] < self.height())
             xy = xy[inside]
             xy = xy[::max(len(xy) // MAX_CENTRES_DRAWN, 1)]
-            p.setPen(QPen(QColor(255, 60, 60), max(2.0, min(self.scale / 3, 4.0))))
+            p.setPen(QPen(QColor(255, 40, 40), max(2.0, min(self.scale * 0.8, 6.0))))
             p.drawPoints([QPointF(x, y) for x, y in xy])
         p.setPen(QColor(230, 230, 230))
         zoom = "fit" if self.fitted else f"{self.scale * 100:.0f} %"
