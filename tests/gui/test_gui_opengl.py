@@ -1,8 +1,9 @@
 """The 3-D view in a real OpenGL window (Xvfb + Mesa, the xcb platform, in a child process
 because the test session's Qt runs offscreen): the step block's cloud coloured by height
-and the projected pattern must be where the camera puts them. (The README's docs/gui.png is
-made by the same module: see its docstring.) Fails, never skips, without a display: CI must
-render. And the renderer's budget: a moving view draws a thinned cloud."""
+and the projected pattern must be where the camera puts them; the orthographic top view with
+camera colours puts the pattern's outline on its projected paths and shows the grid, the
+rulers and the colour bar. (The README's docs/gui*.png are made by the same module:
+scripts/gui-pictures.sh.) Fails, never skips, without a display: CI must render."""
 
 import json
 import os
@@ -21,32 +22,45 @@ DATA = Path(__file__).parents[1] / "data"
 BACKGROUND = np.array([0.14, 0.12, 0.11]) * 255        # BGR of the view's clear colour
 
 
-def _render(tmp_path) -> tuple[dict, np.ndarray, np.ndarray]:
+@pytest.fixture(scope="module")
+def rendered(tmp_path_factory):
+    """One run of the screenshot module: the iso view by height (``view.png``) and the
+    orthographic top view with camera colours (``view-1.png``), a text across a step edge."""
     if not os.environ.get("DISPLAY"):
         pytest.fail("no X display: the OpenGL test needs Xvfb + Mesa (run scripts/test.sh)")
-    view_png = tmp_path / "view.png"
-    cmd = [sys.executable, "-m", "insitu.ui.qt.screenshot", str(tmp_path / "gui.png"),
+    tmp = tmp_path_factory.mktemp("gl")
+    cmd = [sys.executable, "-m", "insitu.ui.qt.screenshot", str(tmp / "gui.png"),
            "--replay", str(DATA / "scan-step-block-b4"), "--height-cal",
-           str(DATA / "height-cal-b4"), "--pattern", 'text:"insitu"', "--at", "0", "28",
-           "--width", "16", "--view", "iso", "--view-png", str(view_png)]
+           str(DATA / "height-cal-b4"), "--pattern", 'text:"insitu"', "--at", "0", "20",
+           "--width", "16", "--view", "iso", "--ambient-from-rig",
+           "--extra", f"top:camera:{tmp / 'gui-top.png'}", "--view-png", str(tmp / "view.png")]
     env = dict(os.environ, QT_QPA_PLATFORM="xcb")
-    r = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=180)
+    r = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=300)
     assert r.returncode == 0, r.stderr[-2000:]
-    info = json.loads(view_png.with_suffix(".json").read_text())
-    view = cv2.imread(str(view_png), cv2.IMREAD_COLOR)
-    window = cv2.imread(str(tmp_path / "gui.png"), cv2.IMREAD_COLOR)
+    return tmp
+
+
+def _shot(tmp, name) -> tuple[dict, np.ndarray, np.ndarray]:
+    info = json.loads((tmp / f"view{name}.json").read_text())
+    view = cv2.imread(str(tmp / f"view{name}.png"), cv2.IMREAD_COLOR)
+    window = cv2.imread(str(tmp / ("gui.png" if not name else "gui-top.png")), cv2.IMREAD_COLOR)
     return info, view, window
 
 
-def test_the_view_draws_the_cloud_by_height_and_the_projected_pattern(tmp_path):
-    info, img, window = _render(tmp_path)
+def _camera(info) -> OrbitCamera:
+    return OrbitCamera(np.array(info["centre"]), info["distance_mm"], info["azimuth_deg"],
+                       info["elevation_deg"], info["fov_deg"], info["ortho"])
+
+
+def test_the_view_draws_the_cloud_by_height_and_the_projected_pattern(rendered):
+    info, img, window = _shot(rendered, "")
     assert info["renderer"]                                   # a real GL context
     assert window.shape[0] >= 700 and window.shape[1] >= 1200
     h, w = img.shape[:2]
     assert (w, h) == (round(info["width"] * info["device_pixel_ratio"]),
                       round(info["height"] * info["device_pixel_ratio"]))
-    cam = OrbitCamera(np.array(info["centre"]), info["distance_mm"], info["azimuth_deg"],
-                      info["elevation_deg"], info["fov_deg"])
+    cam = _camera(info)
+    assert not cam.ortho                                      # iso: perspective
     cloud = np.array(info["cloud_points"])
 
     def pixels(points):
@@ -79,16 +93,53 @@ def test_the_view_draws_the_cloud_by_height_and_the_projected_pattern(tmp_path):
     assert np.mean(near) > 0.7
 
 
-def test_a_moving_view_draws_a_thinned_cloud():
-    from insitu.ui.qt.gl_renderer import INTERACTIVE_POINTS, Renderer
-
-    r = Renderer()
-    r.points.set(np.random.default_rng(1).normal(size=(1_000_000, 3)))
-    assert r._cloud(fast=False) is r.points
-    thin = r._cloud(fast=True)
-    assert INTERACTIVE_POINTS / 2 < thin.count <= INTERACTIVE_POINTS
-    k = -(-1_000_000 // INTERACTIVE_POINTS)                # every k-th point, in order
-    assert np.array_equal(thin.data[1], r.points.data[k])
-    count = thin.count
-    r.points.set(np.ones((1_000_000 + k, 3)))              # a new cloud is thinned anew
-    assert r._cloud(fast=True) is thin and thin.count == count + 1 and (thin.data == 1).all()
+def test_top_view_is_orthographic_with_outline_on_paths_grid_rulers_and_camera_colours(
+        rendered):
+    info, img, window = _shot(rendered, "-1")
+    cam = _camera(info)
+    assert cam.ortho and info["camera_colours"]
+    h, w = img.shape[:2]
+    scale = info["device_pixel_ratio"]
+    # the text crosses the 10 → 15 mm step edge: its paths lie on two levels, and the
+    # outline (drawn at one height) still lines up with them: the bounding boxes agree
+    pattern = np.array(info["pattern_points"])
+    assert np.ptp(pattern[:, 2]) > 3.0
+    px = cam.project(pattern, info["width"], info["height"])
+    outline = cam.project(np.c_[np.array(info["outline_corners"]),
+                                np.full(4, info["handle_z"])], info["width"], info["height"])
+    assert np.allclose(px.min(0), outline.min(0), atol=2.0)
+    assert np.allclose(px.max(0), outline.max(0), atol=2.0)
+    # the magenta paths are drawn there
+    colour = np.array(sd.PROJECTED_COLOUR[2::-1]) * 255
+    magenta = np.linalg.norm(img.astype(float) - colour, axis=2) < 60
+    ys, xs = np.nonzero(magenta)
+    assert len(xs) > 100
+    assert np.allclose([xs.min(), ys.min()], px.min(0) * scale, atol=4)
+    assert np.allclose([xs.max(), ys.max()], px.max(0) * scale, atol=4)
+    # camera colours: the cloud's pixels are gray (r = g = b), not the height map
+    cloud = np.array(info["cloud_points"])
+    cpx = np.round(cam.project(cloud, info["width"], info["height"]) * scale).astype(int)
+    ok = (cpx[:, 0] >= 0) & (cpx[:, 0] < w) & (cpx[:, 1] >= 0) & (cpx[:, 1] < h)
+    on = img[cpx[ok, 1], cpx[ok, 0]].astype(float)
+    drawn = on[np.linalg.norm(on - BACKGROUND, axis=1) > 30]
+    assert len(drawn) > 100 and np.median(np.ptp(drawn, axis=1)) < 12
+    # the grid: a major line (a multiple of 10 × the step) crosses the view as a faint line
+    step = info["grid_step_mm"]
+    major = 10 ** np.ceil(np.log10(step * 2))
+    x_line = np.ceil((info["centre"][0] - 20) / major) * major
+    col = int(round(cam.project(np.array([[x_line, info["centre"][1], 0.0]]), info["width"],
+                                info["height"])[0, 0] * scale))
+    strip = img[h // 4:3 * h // 4, col - 1:col + 2].astype(float)
+    lifted = np.linalg.norm(strip - BACKGROUND, axis=2).max(1) > 12
+    assert lifted.mean() > 0.5
+    # the rulers (a dark band with labels) and the colour bar (camera gray: black → white)
+    bar = img[40:200, w - int(20 * scale), :].astype(float).mean(1)
+    assert bar[0] > bar[-1] + 100                               # white at the top
+    band = img[h - int(10 * scale), :, :].astype(float)
+    assert (np.linalg.norm(band - (59, 51, 47), axis=1) < 14).mean() > 0.5     # BGR
+    assert info["colour_bar"][0] == "camera"
+    # the window picture holds the view with its overlay (the colour bar, the rulers)
+    assert window.shape[0] >= 700 and window.shape[1] >= 1200
+    x0, y0 = (np.array(info["in_window"]) * scale).astype(int)
+    inset = window[y0:y0 + h, x0:x0 + w].astype(float)
+    assert np.abs(inset - img).mean() < 2

@@ -1,12 +1,18 @@
-"""The camera dock: the latest camera image with the extracted line centres drawn over it
-(a live scan), or the inspection image of a marked part."""
+"""The camera's picture: the latest camera image with the extracted line centres drawn over it
+(a live scan), or the inspection image of a marked part. Fitted to the widget until the
+operator zooms (wheel, about the cursor) or pans (drag); :meth:`CameraImage.one_to_one`
+and :meth:`CameraImage.fit` reset it. Double-click asks for the enlarged window."""
 
 from __future__ import annotations
 
 import numpy as np
-from PySide6.QtCore import QPointF, QRectF, Qt
+from PySide6.QtCore import QPointF, QRectF, Qt, Signal
 from PySide6.QtGui import QColor, QImage, QPainter, QPen
 from PySide6.QtWidgets import QWidget
+
+MAX_CENTRES_DRAWN = 4000
+ZOOM_STEP = 1.25                 # per wheel notch
+ZOOM_RANGE = (0.02, 64.0)        # screen px per image px
 
 
 def to_qimage(image: np.ndarray) -> QImage:
@@ -24,7 +30,12 @@ def to_qimage(image: np.ndarray) -> QImage:
 
 
 class CameraImage(QWidget):
-    """Shows ``image`` scaled to fit, and ``centres`` (M, 2) px (u, v) as red dots."""
+    """Shows ``image`` and ``centres`` (M, 2) px (u, v) as red dots. The view maps image
+    pixel centre (u, v) to widget ``offset + scale · (u + ½, v + ½)``; ``fitted``: the scale
+    follows the widget's size."""
+
+    image_changed = Signal()
+    enlarge_requested = Signal()
 
     def __init__(self, parent=None):
         super().__init__(parent)
@@ -33,13 +44,89 @@ class CameraImage(QWidget):
         self.image: QImage | None = None
         self.centres = np.zeros((0, 2))
         self.caption = "no image"
+        self.fitted = True
+        self.scale = 1.0
+        self.offset = np.zeros(2)
+        self._pan_from: tuple[np.ndarray, np.ndarray] | None = None
 
     def show_image(self, image: np.ndarray, centres: np.ndarray | None = None,
                    caption: str = "") -> None:
-        self.image = to_qimage(image)
+        self.show_qimage(to_qimage(image), centres, caption)
+
+    def show_qimage(self, image: QImage, centres: np.ndarray | None, caption: str) -> None:
+        size_changed = self.image is None or self.image.size() != image.size()
+        self.image = image
         self.centres = np.zeros((0, 2)) if centres is None else np.asarray(centres)
         self.caption = caption
+        if size_changed:
+            self.fitted = True
         self.update()
+        self.image_changed.emit()
+
+    # -- the view's mapping ----------------------------------------------------------------
+    def _fit_now(self) -> None:
+        if self.fitted and self.image is not None:
+            w, h = self.image.width(), self.image.height()
+            self.scale = min(self.width() / w, self.height() / h)
+            self.offset = np.array([(self.width() - self.scale * w) / 2,
+                                    (self.height() - self.scale * h) / 2])
+
+    def to_widget(self, uv: np.ndarray) -> np.ndarray:
+        """(N, 2) image px (u, v) → (N, 2) widget px."""
+        self._fit_now()
+        return self.offset + self.scale * (np.asarray(uv, float) + 0.5)
+
+    def to_image(self, xy) -> np.ndarray:
+        """Widget px → image px (u, v)."""
+        self._fit_now()
+        return (np.asarray(xy, float) - self.offset) / self.scale - 0.5
+
+    def zoom_at(self, factor: float, xy) -> None:
+        """Zoom by ``factor`` keeping the image point under widget px ``xy`` where it is."""
+        self._fit_now()
+        self.zoom_to(self.scale * factor, xy)
+
+    def zoom_to(self, scale: float, xy) -> None:
+        """Show ``scale`` screen px per image px, the image point under ``xy`` kept there."""
+        uv = self.to_image(xy)
+        self.scale = float(np.clip(scale, *ZOOM_RANGE))
+        self.offset = np.asarray(xy, float) - self.scale * (uv + 0.5)
+        self.fitted = False
+        self.update()
+
+    def one_to_one(self) -> None:
+        """One image pixel per screen pixel, about the widget's centre."""
+        self.zoom_to(1.0, np.array([self.width(), self.height()]) / 2)
+
+    def fit(self) -> None:
+        """The whole image in the widget, following its size."""
+        self.fitted = True
+        self._fit_now()
+        self.update()
+
+    # -- events ----------------------------------------------------------------------------
+    def wheelEvent(self, e) -> None:
+        if self.image is not None:
+            self.zoom_at(ZOOM_STEP ** (e.angleDelta().y() / 120.0),
+                         (e.position().x(), e.position().y()))
+        e.accept()
+
+    def mousePressEvent(self, e) -> None:
+        self._fit_now()
+        self._pan_from = (np.array([e.position().x(), e.position().y()]), self.offset.copy())
+
+    def mouseMoveEvent(self, e) -> None:
+        if self._pan_from is not None and self.image is not None:
+            start, offset = self._pan_from
+            self.offset = offset + np.array([e.position().x(), e.position().y()]) - start
+            self.fitted = False
+            self.update()
+
+    def mouseReleaseEvent(self, _e) -> None:
+        self._pan_from = None
+
+    def mouseDoubleClickEvent(self, _e) -> None:
+        self.enlarge_requested.emit()
 
     def paintEvent(self, _event) -> None:
         p = QPainter(self)
@@ -48,15 +135,19 @@ class CameraImage(QWidget):
             p.setPen(QColor(150, 150, 150))
             p.drawText(self.rect(), Qt.AlignCenter, self.caption)
             return
+        self._fit_now()
         w, h = self.image.width(), self.image.height()
-        s = min(self.width() / w, self.height() / h)
-        ox, oy = (self.width() - s * w) / 2, (self.height() - s * h) / 2
-        p.drawImage(QRectF(ox, oy, s * w, s * h), self.image)
+        p.setRenderHint(QPainter.SmoothPixmapTransform, self.scale < 1)
+        p.drawImage(QRectF(*self.offset, self.scale * w, self.scale * h), self.image)
         if len(self.centres):
-            p.setPen(QPen(QColor(255, 60, 60), 2))
-            step = max(len(self.centres) // 400, 1)
-            for u, v in self.centres[::step]:
-                p.drawPoint(QPointF(ox + s * (u + 0.5), oy + s * (v + 0.5)))
+            xy = self.to_widget(self.centres)
+            inside = (xy[:, 0] >= 0) & (xy[:, 0] < self.width()) & (xy[:, 1] >= 0) & \
+                (xy[:, 1] < self.height())
+            xy = xy[inside]
+            xy = xy[::max(len(xy) // MAX_CENTRES_DRAWN, 1)]
+            p.setPen(QPen(QColor(255, 40, 40), max(2.0, min(self.scale * 0.8, 6.0))))
+            p.drawPoints([QPointF(x, y) for x, y in xy])
         p.setPen(QColor(230, 230, 230))
-        p.drawText(8, 16, self.caption)
+        zoom = "fit" if self.fitted else f"{self.scale * 100:.0f} %"
+        p.drawText(8, 16, f"{self.caption}   {w}×{h} px, {zoom}")
         p.end()

@@ -7,6 +7,7 @@ from __future__ import annotations
 from datetime import datetime, timezone
 from pathlib import Path
 
+import numpy as np
 from PySide6.QtCore import QSettings, Qt, QTimer
 from PySide6.QtGui import QAction, QKeySequence
 from PySide6.QtWidgets import QDockWidget, QFileDialog, QLabel, QMainWindow
@@ -22,13 +23,14 @@ from insitu.services.station import Station
 from insitu.ui.model import operations as ops
 from insitu.ui.model.session import Session
 from insitu.ui.qt.calibrate_panel import CalibratePanel
-from insitu.ui.qt.camera_image import CameraImage
+from insitu.ui.qt.camera_window import CameraDock
 from insitu.ui.qt.forms import icon
 from insitu.ui.qt.mark_panel import MarkPanel
 from insitu.ui.qt.place_panel import PlacePanel
 from insitu.ui.qt.scan_panel import ScanPanel
 from insitu.ui.qt.scene_binding import SceneBinding
 from insitu.ui.qt.view3d import View3D
+from insitu.ui.qt.view_menu import ViewMenu
 from insitu.ui.qt.workers import TaskRunner
 
 PROJECT_FILES = f"insitu projects (*{SUFFIX})"
@@ -64,7 +66,8 @@ class MainWindow(QMainWindow):
         self.view = View3D(self)
         self.setCentralWidget(self.view)
         self.binding = SceneBinding(self.session, self.view)
-        self.camera_image = CameraImage(self)
+        self.camera_dock = CameraDock(self)
+        self.camera_image = self.camera_dock.image
         self.scan_panel = ScanPanel(self)
         self.place_panel = PlacePanel(self)
         self.mark_panel = MarkPanel(self)
@@ -98,7 +101,7 @@ class MainWindow(QMainWindow):
                       "place": dock("Place", self.place_panel, right),
                       "mark": dock("Mark", self.mark_panel, right),
                       "calibrate": dock("Calibrate", self.calibrate_panel, right),
-                      "camera": dock("Camera", self.camera_image, Qt.LeftDockWidgetArea)}
+                      "camera": dock("Camera", self.camera_dock, Qt.LeftDockWidgetArea)}
         for name in ("place", "mark", "calibrate"):
             self.tabifyDockWidget(self.docks["scan"], self.docks[name])
         self.docks["scan"].raise_()
@@ -145,10 +148,7 @@ class MainWindow(QMainWindow):
         tb.addActions([self.undo_action, self.redo_action])
         self.session.placements.changed.connect(self._undo_state)
         self._undo_state()
-        v = mb.addMenu("&View")
-        for name, key in (("top", "1"), ("front", "2"), ("side", "3"), ("iso", "4")):
-            self._action(v, f"{name.capitalize()} view", lambda _=False, n=name:
-                         self.view.set_view(n), key)
+        self.view_menu = ViewMenu(mb.addMenu("&View"), self.view, self.binding, self.session)
         r = mb.addMenu("&Rig")
         self.connect_action = self._action(r, "&Connect", lambda: self.connect_rig(), None,
                                            "connect")
@@ -212,9 +212,10 @@ class MainWindow(QMainWindow):
         self.head_label.setText(head)
         nominal = station.rig.head
         self.binding.show_field(nominal.field_size_mm, nominal.z_range_mm)
-        if self.session.cloud is None:
-            h = max(nominal.field_size_mm) / 2
-            self.view.frame_all((-h / 2, -h / 2, 0), (h / 2, h / 2, 20))
+        if self.session.cloud is None:            # the whole scan field
+            hx, hy = np.asarray(nominal.field_size_mm, float) / 2
+            self.view.frame_all((-hx, -hy, min(nominal.z_range_mm)),
+                                (hx, hy, max(nominal.z_range_mm)))
         self.session.rig_changed.emit()
         self._plan_timer.start()
         self.show_message("rig connected")

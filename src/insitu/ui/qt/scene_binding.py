@@ -1,6 +1,7 @@
-"""Keeps the 3-D view showing the session: the cloud (and its live growth during a scan),
-the scan field and region, each pattern as placed (above the part) and as projected (on the
-surface), and a red cross where a check refused it."""
+"""Keeps the 3-D view showing the session: the cloud (and its live growth during a scan;
+with the camera's ambient gray when it has one), the scan field and region, each pattern
+once — its projected paths on the surface when it has a plan, else as placed, above the
+part — and a red cross where a check refused it; frames the cloud and the patterns."""
 
 from __future__ import annotations
 
@@ -43,11 +44,38 @@ class SceneBinding:
             self.view.set_cloud(None)
             return
         pts = cloud.points
-        self.view.set_cloud(pts)
+        ambient = cloud.attributes.get(sd.AMBIENT)
+        if ambient is not None and len(ambient) != len(pts):
+            ambient = None
+        self.view.set_cloud(pts, ambient=ambient)
         self.top_z = float(np.percentile(pts[:, 2], 99.5)) + 1.0
         self.view.handle_z = self.top_z
-        self.view.frame_all(pts.min(0), pts.max(0))
         self.show_patterns()
+        self.frame_all()
+
+    def bounds(self) -> tuple[np.ndarray, np.ndarray] | None:
+        """(lo, hi) (3,) mm of the cloud and the placed patterns' outlines, or None."""
+        boxes = []
+        cloud = self.session.cloud
+        if cloud is not None and len(cloud):
+            boxes += [cloud.points.min(0), cloud.points.max(0)]
+        for p in self.session.placements.items:
+            try:
+                c = sd.handles(p).corners
+            except InsituError:
+                continue
+            boxes += [np.c_[c, np.full(4, self.top_z)].min(0), np.c_[c, np.zeros(4)].max(0)]
+        if not boxes:
+            return None
+        b = np.vstack(boxes)
+        return b.min(0), b.max(0)
+
+    def frame_all(self) -> bool:
+        """Fit the cloud and the patterns into the view; False when there is nothing."""
+        box = self.bounds()
+        if box is not None:
+            self.view.frame_all(*box)
+        return box is not None
 
     def add_live_points(self, points: np.ndarray) -> None:
         z = points[:, 2]
@@ -58,29 +86,40 @@ class SceneBinding:
         self.view.append_points(points)
 
     def show_patterns(self) -> None:
+        """Each pattern once: its projected paths where it will be marked when it has a
+        plan (the selected one's handles and outline at their height), else as placed."""
         s = self.session
         placed, selected, projected, warn = [], [], [], []
-        handles = None
+        handles, handle_z = None, self.top_z
         for i, p in enumerate(s.placements.items):
+            outcome = s.plans[i] if i < len(s.plans) else None
+            paths = None if outcome is None or outcome.plan is None else \
+                outcome.plan.projection.paths
+            if i == s.selected:
+                try:
+                    handles = sd.handles(p)
+                except InsituError:
+                    continue
+            if paths is not None:
+                projected.append(sd.segments(paths))
+                if i == s.selected and len(outcome.plan.projection.points):
+                    handle_z = float(np.median(outcome.plan.projection.points[:, 2]))
+                continue
             try:
                 lines = sd.pattern_lines(sd.placed_pattern(p), self.top_z)
             except InsituError:
                 continue
             (selected if i == s.selected else placed).append(lines)
-            if i == s.selected:
-                handles = sd.handles(p)
-            if i < len(s.plans):
-                outcome = s.plans[i]
-                if outcome.plan is not None:
-                    projected.append(sd.segments(outcome.plan.projection.paths))
-                elif outcome.where is not None:
-                    warn.append(self._warning_cross(outcome.where, p.width_mm))
+            if outcome is not None and outcome.where is not None:
+                warn.append(self._warning_cross(outcome.where, p.width_mm))
         cat = (lambda a: np.concatenate(a) if a else np.zeros((0, 3), np.float32))
         self.view.set_lines("placed", cat(placed), sd.PLACED_COLOUR)
         self.view.set_lines("selected", cat(selected), sd.SELECTED_COLOUR)
         self.view.set_lines("projected", cat(projected), sd.PROJECTED_COLOUR)
         self.view.set_lines("warnings", cat(warn), sd.WARNING_COLOUR)
         self.view.handles = handles
+        self.view.handle_z = handle_z
+        self.view.update()
 
     def _warning_cross(self, xy, width_mm: float) -> np.ndarray:
         """A cross at (x, y) on the cloud (its nearest point's height)."""

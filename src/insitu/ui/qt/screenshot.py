@@ -1,18 +1,17 @@
 """Render the application on a recorded scan with a placed pattern and save pictures (the
-README's docs/gui.png, the OpenGL test, the benchmark). Needs a display with OpenGL 3.3 (on a
-headless machine: ``QT_QPA_PLATFORM=xcb xvfb-run -a python -m insitu.ui.qt.screenshot``).
-docs/gui.png is the step block recorded at binning 2 with the logo across a step edge::
-
-    insitu sim record scan --binning 2 -o rec2
-    insitu sim record height-calibration --binning 2 -o hcal2
-    insitu calibrate height hcal2 -o h2.json
-    python -m insitu.ui.qt.screenshot docs/gui.png --replay rec2 --height-cal h2.json \\
-        --pattern patterns/logo.svg --at 0 0 --width 18
+README's docs/gui*.png, the OpenGL tests, the benchmark). Needs a display with OpenGL 3.3 (on
+a headless machine: ``QT_QPA_PLATFORM=xcb xvfb-run -a python -m insitu.ui.qt.screenshot``).
+``scripts/gui-pictures.sh`` makes the README's pictures (the step block recorded at binning 2,
+a QR code placed on its 10 mm step; the top view with camera colours, and the iso view).
 
 ``--view-png V.png`` also saves the 3-D view's own framebuffer and ``V.json`` beside it: the
-camera (centre, distance, angles, field of view), the image size, the colour scale's z range,
-the GL renderer, the cloud's points and the projected pattern's points (N, 3) mm — what a
-test needs to check the picture.
+camera (centre, distance, angles, field of view, orthographic), the image size, the colour
+scale's z range, the colour bar's range, the grid step, the GL renderer, the cloud's points
+and the projected pattern's points (N, 3) mm — what a test needs to check the picture.
+``--extra VIEW:COLOURS:PATH`` saves more pictures of the same window (COLOURS: height or
+camera), the k-th one's view as ``V-k.png`` and ``V-k.json`` too. ``--ambient-from-rig``: a cloud without its ambient gray (attribute ``ambient``)
+takes it from one laser-off frame of the connected (simulated) camera, sampled where each
+point projects — what a scan that records the ambient frame stores.
 """
 
 from __future__ import annotations
@@ -21,16 +20,20 @@ import argparse
 import json
 import sys
 import time
+from dataclasses import replace
 from pathlib import Path
 
+import numpy as np
 from PySide6.QtCore import QEventLoop, QSettings
-from PySide6.QtGui import QSurfaceFormat
+from PySide6.QtGui import QImage, QPainter, QSurfaceFormat
 from PySide6.QtWidgets import QApplication
 
 from insitu.formats.project import RigChoice
+from insitu.ui.model.scene_data import AMBIENT
 from insitu.ui.qt.app import surface_format
 from insitu.ui.qt.forms import stylesheet
 from insitu.ui.qt.main_window import MainWindow
+from insitu.ui.qt.view_overlay import colour_bar_range
 
 
 def wait_until(app: QApplication, condition, timeout_s: float = 30.0, what: str = "") -> None:
@@ -43,14 +46,27 @@ def wait_until(app: QApplication, condition, timeout_s: float = 30.0, what: str 
         time.sleep(0.005)
 
 
+def ambient_from_rig(window: MainWindow) -> np.ndarray:
+    """(N,) float32 0…1: the connected camera's laser-off frame, bilinearly sampled where the
+    session cloud's points project (the rig's camera model)."""
+    from scipy.ndimage import map_coordinates
+
+    frame = np.asarray(window.station.devices.camera.grab(), np.float32)
+    frame /= 65535.0 if frame.max() > 255 else 255.0
+    uv = window.station.rig.camera.project(window.session.cloud.points)
+    gray = map_coordinates(frame, [uv[:, 1], uv[:, 0]], order=1, mode="nearest")
+    return np.clip(gray, 0, 1).astype(np.float32)
+
+
 def build(app: QApplication, replay: Path, height_cal: Path | None, pattern: str | None,
-          at: tuple[float, float], width: float, settings_file: Path) -> MainWindow:
+          at: tuple[float, float], width: float, settings_file: Path, binning: int = 4,
+          add_ambient: bool = False) -> MainWindow:
     """The window connected to the simulated rig (image size of the recording), the scan
     replayed and the pattern placed and checked."""
     window = MainWindow(QSettings(str(settings_file), QSettings.IniFormat))
     window.resize(1280, 800)
     window.show()
-    window.connect_rig(RigChoice(binning=4))
+    window.connect_rig(RigChoice(binning=binning))
     wait_until(app, lambda: window.station is not None, what="the rig")
     if height_cal is not None:
         window.load_height_cal(height_cal)
@@ -59,15 +75,63 @@ def build(app: QApplication, replay: Path, height_cal: Path | None, pattern: str
     ui.sourceCombo.setCurrentIndex(1)
     ui.replayEdit.setText(str(replay))
     window.scan_panel.start()
-    wait_until(app, lambda: window.session.cloud is not None, 60, "the scan")
+    wait_until(app, lambda: window.session.cloud is not None, 120, "the scan")
+    s = window.session
+    if add_ambient and AMBIENT not in s.cloud.attributes:
+        s.set_cloud(replace(s.cloud, attributes={**s.cloud.attributes,
+                                                 AMBIENT: ambient_from_rig(window)}),
+                    s.cloud_path)
     if pattern:
         window.place_panel.add_pattern(pattern)
-        window.session.update_selected(at_mm=at, width_mm=width)
-        wait_until(app, lambda: len(window.session.plans) == 1, 30, "the plan")
-        if window.session.plans[0].error:
-            raise RuntimeError(window.session.plans[0].error)
+        s.update_selected(at_mm=at, width_mm=width)
+        wait_until(app, lambda: len(s.plans) == 1 and not window._plan_timer.isActive()
+                   and not window.runner.running("plan"), 60, "the plan")
+        if s.plans[0].error:
+            raise RuntimeError(s.plans[0].error)
         window.docks["place"].raise_()
     return window
+
+
+def show(app: QApplication, window: MainWindow, view_name: str, camera_colours: bool) -> None:
+    """Set the view, framed on the cloud and the patterns, and the colouring; draw it."""
+    window.view.set_view(view_name)
+    window.binding.frame_all()
+    window.view_menu.camera_colours.setChecked(camera_colours)
+    wait_until(app, lambda: bool(window.view.renderer_name), 10, "OpenGL")
+    app.processEvents()
+
+
+def grab(window: MainWindow) -> QImage:
+    """The window as the screen shows it: the 3-D view's framebuffer (with its overlay)
+    painted where the view is."""
+    img = window.grab().toImage()
+    view = window.view
+    p = QPainter(img)
+    p.drawImage(view.mapTo(window, view.rect().topLeft()),
+                view.grabFramebuffer().scaled(view.size()))
+    p.end()
+    return img
+
+
+def view_info(window: MainWindow) -> dict:
+    view, s = window.view, window.session
+    cam = view.camera
+    plan = s.plans[0].plan if s.plans else None
+    bar = colour_bar_range(view)
+    at = view.mapTo(window, view.rect().topLeft())
+    return {"width": view.width(), "height": view.height(), "in_window": [at.x(), at.y()],
+            "device_pixel_ratio": view.devicePixelRatioF(),
+            "centre": list(map(float, cam.centre)), "distance_mm": cam.distance_mm,
+            "azimuth_deg": cam.azimuth_deg, "elevation_deg": cam.elevation_deg,
+            "fov_deg": cam.fov_deg, "ortho": cam.ortho, "z_range": list(view.renderer.z_range),
+            "colour_bar": None if bar is None else [bar[0], bar[1], bar[2]],
+            "grid_step_mm": None if view.grid is None else view.grid.step_mm,
+            "renderer": view.renderer_name,
+            "camera_colours": bool(view.renderer.camera_colours and view.has_camera_colours),
+            "cloud_points": s.cloud.points.tolist(),
+            "pattern_points": plan.projection.points.tolist() if plan else [],
+            "outline_corners": [] if view.handles is None else view.handles.corners.tolist(),
+            "handle_z": view.handle_z}
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -75,36 +139,34 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("out", type=Path, help="PNG of the whole window")
     ap.add_argument("--replay", type=Path, required=True)
     ap.add_argument("--height-cal", type=Path)
+    ap.add_argument("--binning", type=int, default=4, help="of the recording")
     ap.add_argument("--pattern")
     ap.add_argument("--at", type=float, nargs=2, default=(0.0, 0.0))
     ap.add_argument("--width", type=float, default=10.0)
-    ap.add_argument("--view", default="iso", choices=["top", "front", "side", "iso"])
+    ap.add_argument("--view", default="top", choices=["top", "front", "side", "iso"])
+    ap.add_argument("--camera-colours", action="store_true")
+    ap.add_argument("--ambient-from-rig", action="store_true")
+    ap.add_argument("--extra", action="append", default=[], metavar="VIEW:COLOURS:PATH")
     ap.add_argument("--view-png", type=Path)
     args = ap.parse_args(argv)
     QSurfaceFormat.setDefaultFormat(surface_format())
     app = QApplication.instance() or QApplication(sys.argv[:1])
     app.setStyleSheet(stylesheet())
+    settings = args.out.with_suffix(".settings.ini")
     window = build(app, args.replay, args.height_cal, args.pattern, tuple(args.at), args.width,
-                   args.out.with_suffix(".settings.ini"))
-    args.out.with_suffix(".settings.ini").unlink(missing_ok=True)
-    view = window.view
-    view.set_view(args.view)
-    wait_until(app, lambda: bool(view.renderer_name), 10, "OpenGL")
-    app.processEvents()
-    window.grab().save(str(args.out))
-    if args.view_png is not None:
-        view.grabFramebuffer().save(str(args.view_png))
-        cam, s = view.camera, window.session
-        plan = s.plans[0].plan if s.plans else None
-        info = {"width": view.width(), "height": view.height(),
-                "device_pixel_ratio": view.devicePixelRatioF(),
-                "centre": list(map(float, cam.centre)), "distance_mm": cam.distance_mm,
-                "azimuth_deg": cam.azimuth_deg, "elevation_deg": cam.elevation_deg,
-                "fov_deg": cam.fov_deg, "z_range": list(view.renderer.z_range),
-                "renderer": view.renderer_name,
-                "cloud_points": s.cloud.points.tolist(),
-                "pattern_points": plan.projection.points.tolist() if plan else []}
-        args.view_png.with_suffix(".json").write_text(json.dumps(info))
+                   settings, args.binning, args.ambient_from_rig)
+    settings.unlink(missing_ok=True)
+    show(app, window, args.view, args.camera_colours)
+    shots = [(args.view, args.camera_colours, args.out)] + \
+        [(v, c == "camera", Path(p)) for v, c, p in (e.split(":", 2) for e in args.extra)]
+    for k, (view_name, camera_colours, path) in enumerate(shots):
+        show(app, window, view_name, camera_colours)
+        grab(window).save(str(path))
+        if args.view_png is not None:
+            v = args.view_png if k == 0 else \
+                args.view_png.with_name(f"{args.view_png.stem}-{k}{args.view_png.suffix}")
+            window.view.grabFramebuffer().save(str(v))
+            v.with_suffix(".json").write_text(json.dumps(view_info(window)))
     window.close()
     return 0
 

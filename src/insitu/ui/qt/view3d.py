@@ -1,22 +1,29 @@
-"""The 3-D view: a QOpenGLWidget showing the cloud (coloured by height), the scan field, the
-scan region and the patterns; orbit (left drag), pan (right or middle drag), zoom (wheel),
-and, on the selected pattern, move (drag inside it), turn (drag the round handle) and scale
-(drag the corner handle); shift + drag draws the scan region on z = 0. It emits what the
-operator asked for; the window applies it to the session."""
+"""The 3-D view: a QOpenGLWidget showing the cloud (coloured by height or by the camera's
+ambient gray), the scan field, the scan region and the patterns, over a mm grid on z = 0
+with the x/y/z axes, and with rulers, a scale bar and a colour bar painted over it
+(:mod:`.view_overlay`). Orthographic top view for placing, perspective for looking; orbit
+(left drag), pan (right or middle drag), zoom (wheel), and, on the selected pattern, move
+(drag inside it), turn (drag the round handle) and scale (drag the corner handle); shift +
+drag draws the scan region on z = 0. It emits what the operator asked for; the window
+applies it to the session."""
 
 from __future__ import annotations
 
 import numpy as np
 from PySide6.QtCore import QPointF, Qt, QTimer, Signal
-from PySide6.QtGui import QColor, QMouseEvent, QPainter, QPolygonF, QWheelEvent
+from PySide6.QtGui import QMouseEvent, QPainter, QPolygonF, QWheelEvent
 from PySide6.QtOpenGLWidgets import QOpenGLWidget
 
 from insitu.ui.model import scene_data as sd
+from insitu.ui.model import view_guides as vg
 from insitu.ui.model.orbit_camera import OrbitCamera
+from insitu.ui.qt import view_overlay
 from insitu.ui.qt.gl_renderer import Renderer
+from insitu.ui.qt.view_overlay import AXIS_COLOURS, HANDLE_PX
 
-HANDLE_PX = 9
 SETTLE_MS = 250                 # full detail this long after the view stopped moving
+GRID_COLOUR = (0.5, 0.53, 0.58, 0.22)
+GRID_MAJOR_COLOUR = (0.6, 0.63, 0.68, 0.45)
 
 
 class View3D(QOpenGLWidget):
@@ -28,6 +35,7 @@ class View3D(QOpenGLWidget):
     scale_dragged = Signal(float, float, float, float, object)  # drag start x, y; mouse x, y
     region_drawn = Signal(object)           # (x0, x1, y0, y1) mm
     gl_ready = Signal(str)                  # the renderer's name
+    projection_changed = Signal(bool)       # orthographic?
 
     def __init__(self, parent=None):
         super().__init__(parent)
@@ -35,7 +43,10 @@ class View3D(QOpenGLWidget):
         self.setMinimumSize(320, 240)
         self.setMouseTracking(False)
         self.camera = OrbitCamera()
+        self.camera.set_view("top")
         self.renderer = Renderer()
+        self.grid: vg.Grid | None = None
+        self._axes_mm = 0.0
         self.renderer_name = ""
         self.handles: sd.Handles | None = None
         self.handle_z = 0.0                 # height the selected pattern is drawn and picked at
@@ -45,15 +56,35 @@ class View3D(QOpenGLWidget):
         self._drag: dict | None = None
 
     # -- content -------------------------------------------------------------------------
-    def set_cloud(self, points: np.ndarray | None, z_range=None) -> None:
-        """(N, 3) mm, or None to clear; ``z_range``: colour scale (default: the points')."""
+    def set_cloud(self, points: np.ndarray | None, z_range=None,
+                  ambient: np.ndarray | None = None) -> None:
+        """(N, 3) mm, or None to clear; ``z_range``: colour scale (default: the points');
+        ``ambient``: (N,) 0…1 gray of the ambient camera frame at each point, or None."""
         pts = np.zeros((0, 3)) if points is None else np.asarray(points).reshape(-1, 3)
-        self.renderer.points.set(pts)
+        self.renderer.points.set(pts, ambient)
         if z_range is None and len(pts):
-            z = pts[:, 2]
-            z_range = (float(np.percentile(z, 0.5)), float(np.percentile(z, 99.5)))
+            z_range = (float(pts[:, 2].min()), float(pts[:, 2].max()))
         if z_range is not None:
             self.renderer.z_range = z_range
+        if ambient is not None and len(pts):
+            lo, hi = np.percentile(np.asarray(ambient, np.float32), (1.0, 99.0))
+            self.renderer.ambient_range = (float(lo), float(max(hi, lo + 1e-3)))
+        self.update()
+
+    @property
+    def has_camera_colours(self) -> bool:
+        """Does the cloud carry the ambient gray the camera colours need?"""
+        return self.renderer.points.has_ambient
+
+    def set_camera_colours(self, on: bool) -> None:
+        """Colour by the camera's ambient gray (True) or by height (a uniform: no upload)."""
+        self.renderer.camera_colours = bool(on)
+        self.update()
+
+    def set_ortho(self, on: bool) -> None:
+        if self.camera.ortho != bool(on):
+            self.camera.ortho = bool(on)
+            self.projection_changed.emit(self.camera.ortho)
         self.update()
 
     def append_points(self, points: np.ndarray) -> None:
@@ -65,11 +96,16 @@ class View3D(QOpenGLWidget):
         self.update()
 
     def set_view(self, name: str) -> None:
+        """A preset view: top (orthographic), front, side, iso (perspective)."""
+        was = self.camera.ortho
         self.camera.set_view(name)
+        if self.camera.ortho != was:
+            self.projection_changed.emit(self.camera.ortho)
         self.update()
 
     def frame_all(self, lo, hi) -> None:
-        self.camera.frame(lo, hi)
+        """Fit the box (lo, hi) mm into the view (its eight corners inside, with a margin)."""
+        self.camera.frame(lo, hi, self.width() / max(self.height(), 1))
         self.update()
 
     # -- GL ------------------------------------------------------------------------------
@@ -78,27 +114,28 @@ class View3D(QOpenGLWidget):
         self.gl_ready.emit(self.renderer_name)
 
     def paintGL(self) -> None:
-        self.renderer.draw(self.camera.mvp(self.width() / max(self.height(), 1)), self.moving)
-        if self.handles is not None or self._drag and self._drag["kind"] == "region":
-            self._paint_overlay()
-
-    def _paint_overlay(self) -> None:
+        self._update_guides()
+        dpr = self.devicePixelRatioF()
+        self.renderer.draw(self.camera.mvp(self.width() / max(self.height(), 1)), self.moving,
+                           int(self.width() * self.height() * dpr * dpr))
         p = QPainter(self)
-        p.setRenderHint(QPainter.Antialiasing)
-        if self.handles is not None:
-            rot, scl = self._handle_px()
-            p.setPen(QColor(80, 220, 255))
-            p.setBrush(QColor(80, 220, 255, 160))
-            p.drawEllipse(QPointF(*rot), HANDLE_PX / 2 + 1, HANDLE_PX / 2 + 1)
-            p.drawRect(int(scl[0] - HANDLE_PX / 2), int(scl[1] - HANDLE_PX / 2), HANDLE_PX,
-                       HANDLE_PX)
-        if self._drag and self._drag["kind"] == "region":
-            a, b = self._drag["start_px"], self._drag["now_px"]
-            p.setPen(QColor(240, 200, 50))
-            p.setBrush(QColor(240, 200, 50, 40))
-            p.drawRect(int(min(a[0], b[0])), int(min(a[1], b[1])), int(abs(b[0] - a[0])),
-                       int(abs(b[1] - a[1])))
+        view_overlay.paint(self, p)
         p.end()
+
+    def _update_guides(self) -> None:
+        """The grid and the axes for the current zoom (uploaded when they changed)."""
+        g = vg.grid(self.camera, self.width(), self.height())
+        old = self.grid
+        if old is None or old.step_mm != g.step_mm or not np.array_equal(old.minor, g.minor) \
+                or not np.array_equal(old.major, g.major):
+            self.grid = g
+            self.renderer.set_lines("grid", g.minor, GRID_COLOUR)
+            self.renderer.set_lines("grid_major", g.major, GRID_MAJOR_COLOUR)
+        length, axes = vg.axes(self.camera, self.height())
+        if length != self._axes_mm:
+            self._axes_mm = length
+            for i, name in enumerate(("axis_x", "axis_y", "axis_z")):
+                self.renderer.set_lines(name, axes[2 * i:2 * i + 2], AXIS_COLOURS[i], True)
 
     # -- picking -------------------------------------------------------------------------
     def _screen(self, xy, z) -> np.ndarray:
