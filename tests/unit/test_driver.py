@@ -270,3 +270,23 @@ def test_burns_stay_on_the_world_and_the_inspection_camera_sees_them(rig):
     after = cam.grab().astype(float)
     u, v = np.rint(rig.camera.project(np.array([[0.0, 5.0, 4.0]]))[0]).astype(int)
     assert after[v - 1:v + 2, u - 1:u + 2].min() < 0.6 * before[v - 1:v + 2, u - 1:u + 2].mean()
+
+
+def test_sim_burns_each_pass_and_a_wobble_widens_the_burn(rig):
+    from insitu.formats.pens import Pen, Wobble
+    from insitu.marking import with_pen
+
+    targets = np.array([[-10.0, 0.0, 0.0], [10.0, 0.0, 0.0]])
+    plain = SimController(plate_world(rig))
+    run_job(make_job([targets]), GalvoDriver.from_config(rig.operator.head), plain)
+    pen = Pen(name="p", passes=2, wobble=Wobble(amplitude_mm=0.2, frequency_hz=1000.0))
+    job = with_pen(make_job([targets]), pen)
+    sc = SimController(plate_world(rig))
+    run_job(job, GalvoDriver.from_config(rig.operator.head), sc)
+    assert len(plain.burns) == 1 and len(sc.burns) == 2
+    np.testing.assert_allclose(sc.burns[1].points, sc.burns[0].points, atol=1e-9)
+    np.testing.assert_allclose(np.nanmean(sc.burns[0].widths),
+                               np.nanmean(plain.burns[0].widths) + 0.4, rtol=1e-6)
+    assert sc.elapsed_s == pytest.approx(estimate_time(job).total_s, rel=1e-9)
+    sc.execute(GalvoDriver.from_config(rig.operator.head).compile(make_job([targets]))[0])
+    np.testing.assert_allclose(sc.burns[-1].widths, plain.burns[0].widths)  # wobble: its list

@@ -124,7 +124,8 @@ def show(job_path: Annotated[Path, typer.Argument(metavar="JOB.json", help="Mark
             table.add_row("error", s.error)
         if s.cut is not None:
             pos = ("the board reported no position" if s.cut_position is None else
-                   f"{s.cut_position} of {max(len(job.paths[s.cut].points) - 1, 1)} marks done")
+                   f"{s.cut_position} of {job.path_passes(s.cut) * max(len(job.paths[s.cut].points) - 1, 1)}"
+                   " marks done")
             table.add_row("cut path", f"{s.cut + 1} ({pos}): --resume --cut-path "
                                       "remark|skip|continue")
     _variable_rows(table, job, job_path)
