@@ -69,7 +69,7 @@ def test_pen_settings_travel_in_each_paths_laser(tmp_path):
                                          "mark": 150.0, "polygon": 100.0}
     back = read_job(f)
     assert back.digest() == job.digest() and back.path_passes(1) == 2
-    assert back.path_laser(0).power_pct == 80.0 and back.pens() == {"deep": 2}
+    assert back.path_laser(0).power_pct == 80.0 and back.pens() == {"deep": [0, 1]}
 
 
 def test_an_older_jobs_digest_is_unchanged():
@@ -90,6 +90,7 @@ def test_time_estimate_counts_passes_jump_speed_and_delays():
               delays_us=Delays(laser_on=1000, laser_off=1000, jump=1000, mark=1000, polygon=0))
     three = estimate_time(with_pen(make_job([PATH]), pen))
     assert three.mark_s == pytest.approx(3 * one.mark_s)
+    assert three.mark_mm == pytest.approx(3 * one.mark_mm)
     assert three.jump_mm == pytest.approx(2 * 5.0)             # back to the start twice
     assert three.jump_s == pytest.approx(10.0 / 1000.0)
     assert three.delay_s == pytest.approx(3 * 4000e-6)
@@ -192,3 +193,15 @@ def test_pen_table_replaced_keeps_the_default():
     t = DEFAULT_PENS.replaced(DEEP.model_copy(update={"name": "deeper"}), "deep")
     assert t.names == ("mark", "fine", "deeper", "bold") and t.default == "mark"
     assert PenTable(default="a", pens=(Pen(name="a"),)).replaced(Pen(name="b")).names == ("a", "b")
+
+
+def test_time_left_weighs_the_paths_still_to_mark_by_their_passes():
+    from insitu.marking import LaserOverride, path_seconds, time_left
+    job = make_job([PATH, PATH, PATH], overrides={2: LaserOverride.of_pen(
+        Pen(name="p", passes=3))})
+    sec = path_seconds(job)
+    assert sec.sum() == pytest.approx(estimate_time(job).total_s)
+    assert sec[2] > 2.5 * sec[1]
+    # the first path took twice its estimate: the rest will too
+    assert time_left(sec, 1, 2 * sec[0]) == pytest.approx(2 * (sec[1] + sec[2]))
+    assert time_left(sec, 0, 0.0) == pytest.approx(sec.sum())

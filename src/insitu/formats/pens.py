@@ -160,7 +160,7 @@ class PenTable(_Strict):
 
 
 DEFAULT_PENS = PenTable(default="mark", pens=(
-    Pen(name="mark", colour="#ff00ff"),
+    Pen(name="mark", colour="#ff4dff"),
     Pen(name="fine", colour="#00c8ff", power_pct=20.0, frequency_khz=60.0,
         mark_speed_mm_s=300.0, delays_us=Delays(laser_on=80.0, laser_off=120.0)),
     Pen(name="deep", colour="#ff8000", power_pct=80.0, frequency_khz=20.0,

@@ -36,7 +36,8 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError
 from insitu.errors import FormatError
 from insitu.formats.atomic import atomic_write_text
 from insitu.formats.bounds import each_within, within
-from insitu.formats.pens import DEFAULT_PENS, PenName, PenTable, pen_table, pens_dict
+from insitu.formats.pens import (DEFAULT_PENS, PenName, PenTable, pen_table, pens_dict,
+                                 read_pens)
 from insitu.formats.validation import dump_json, one_of, read_json, validation_message
 
 PROJECT_FORMAT = "insitu-project/1"
@@ -220,11 +221,24 @@ def write_project(path: str | Path, project: Project) -> None:
     atomic_write_text(path, project_json(project, path))
 
 
+def load_pens(path: str | Path) -> PenTable:
+    """The pens of a pens file, or of a project (:data:`DEFAULT_PENS` when it saved none)."""
+    path = Path(path)
+    if not path.name.endswith(SUFFIX):
+        return read_pens(path)
+    raw = read_json(path)
+    if not isinstance(raw, dict) or raw.get("format") != PROJECT_FORMAT:
+        raise FormatError(f"{path}: format: expected {PROJECT_FORMAT!r} (a project's pens)")
+    if raw.get("pens") is None:
+        return DEFAULT_PENS
+    return pen_table(raw["pens"], raw.get("default_pen"), path, "default_pen")
+
+
 def read_project(path: str | Path, placement: Callable[..., Any],
                  modes: Collection[str]) -> Project:
     """Read and validate a project file; FormatError naming the file and the field. Each
     placed pattern is made by ``placement(pattern, at_mm, width_mm, rotate_deg, mode,
-    hatch_mm, hatch_angle_deg, cross, fill, beam_mm, pen=…)``; ``modes``: the projection
+    hatch_mm, hatch_angle_deg, cross, fill, beam_mm, pen)``; ``modes``: the projection
     modes it may name."""
     path = Path(path)
     raw = read_json(path)
@@ -256,7 +270,7 @@ def read_project(path: str | Path, placement: Callable[..., Any],
             _abs(p.pattern, folder, f"placements[{i}].pattern", path))
         placements.append(placement(pattern, tuple(p.at_mm), p.width_mm, p.rotate_deg, p.mode,
                                     p.hatch_mm, p.hatch_angle_deg, p.cross, p.fill,
-                                    p.beam_mm, pen=p.pen))
+                                    p.beam_mm, p.pen))
     return Project(
         rig=RigChoice(d.rig.workpiece, d.rig.seed, d.rig.binning,
                       _abs(d.rig.rig_file, folder, "rig.rig_file", path)),

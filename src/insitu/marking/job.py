@@ -171,12 +171,12 @@ class MarkJob(_Model):
         over = self.paths[i].laser
         return None if over is None else over.wobble
 
-    def pens(self) -> dict[str, int]:
-        """Pen name → paths marked with it, in order of first use ("" for paths without)."""
-        out: dict[str, int] = {}
-        for p in self.paths:
-            name = p.laser.pen if p.laser is not None and p.laser.pen else ""
-            out[name] = out.get(name, 0) + 1
+    def pens(self) -> dict[str, list[int]]:
+        """Pen name → the paths marked with it, in order of first use ("" for paths
+        without)."""
+        out: dict[str, list[int]] = {}
+        for i, p in enumerate(self.paths):
+            out.setdefault(p.laser.pen if p.laser is not None and p.laser.pen else "", []).append(i)
         return out
 
     def digest(self) -> str:
@@ -282,27 +282,41 @@ class TimeEstimate:
     paths: int
 
 
-def estimate_time(job: MarkJob, timing: Timing | None = None, start=(0.0, 0.0, 0.0),
-                  first_path: int = 0) -> TimeEstimate:
-    """Marking time of the job from path ``first_path`` on, starting at ``start`` (3,) mm:
-    jumps at the path's jump speed, marks at its mark speed, each pass of a path its jump
-    (the first from the last point, the others back to the path's start) + laser on + laser
-    off + mark delays and polygon delays at corners, with the path's delays. ``timing``: the
-    job's, else this, else defaults."""
+def _path_costs(job: MarkJob, timing: Timing | None, start, first_path: int):
+    """Per path from ``first_path`` on: (jump mm, mark mm, jump s, mark s, delays s) — each
+    pass its jump (the first from where the last path ended, the others back to the path's
+    start), its marks and its delays (jump, laser on and off, mark, polygon at corners)."""
     pos = np.asarray(start, float)
-    jump_s = mark_s = delay_us = jump_mm = mark_mm = 0.0
     for i in range(first_path, len(job.paths)):
         pts, las, t = job.paths[i].points, job.path_laser(i), job.path_timing(i, timing)
         n = job.path_passes(i)
-        m = float(np.linalg.norm(np.diff(pts, axis=0), axis=1).sum())
+        m = n * float(np.linalg.norm(np.diff(pts, axis=0), axis=1).sum())
         j = float(np.linalg.norm(pts[0] - pos)) + (n - 1) * float(np.linalg.norm(pts[-1] - pts[0]))
-        jump_mm, mark_mm = jump_mm + j, mark_mm + n * m
-        jump_s += j / las.jump_speed_mm_s
-        mark_s += n * m / las.mark_speed_mm_s
         per_pass_us = (t.jump_delay_us + t.laser_on_delay_us + t.laser_off_delay_us
                        + t.mark_delay_us + float(corner_delays_us(pts, t).sum()))
-        delay_us += n * per_pass_us
+        yield j, m, j / las.jump_speed_mm_s, m / las.mark_speed_mm_s, n * per_pass_us * 1e-6
         pos = pts[-1]
-    delay_s = delay_us * 1e-6
+
+
+def estimate_time(job: MarkJob, timing: Timing | None = None, start=(0.0, 0.0, 0.0),
+                  first_path: int = 0) -> TimeEstimate:
+    """Marking time of the job from path ``first_path`` on, starting at ``start`` (3,) mm:
+    jumps at each path's jump speed, marks at its mark speed, every pass with the path's
+    delays. ``timing``: the job's, else this, else defaults."""
+    c = np.array(list(_path_costs(job, timing, start, first_path))).reshape(-1, 5).sum(0)
+    jump_mm, mark_mm, jump_s, mark_s, delay_s = map(float, c)
     return TimeEstimate(jump_s + mark_s + delay_s, jump_s, mark_s, delay_s, jump_mm, mark_mm,
                         len(job.paths) - first_path)
+
+
+def path_seconds(job: MarkJob, timing: Timing | None = None) -> np.ndarray:
+    """(N,) estimated seconds of each path (its passes, jumps and delays included)."""
+    c = np.array(list(_path_costs(job, timing, (0.0, 0.0, 0.0), 0))).reshape(-1, 5)
+    return c[:, 2:].sum(1)
+
+
+def time_left(seconds: np.ndarray, done: int, elapsed_s: float) -> float:
+    """Seconds left after ``done`` of the paths whose estimates are ``seconds`` (N,) took
+    ``elapsed_s``: the estimate of the rest, scaled by how the done ones went."""
+    est_done, rest = float(seconds[:done].sum()), float(seconds[done:].sum())
+    return rest if est_done <= 0 or elapsed_s <= 0 else elapsed_s * rest / est_done

@@ -1,6 +1,6 @@
 """Keeps the 3-D view showing the session: the cloud (and its live growth during a scan),
 the scan field and region, each pattern as placed (above the part) and as projected (on the
-surface), and a red cross where a check refused it."""
+surface, in its pen's colour), and a red cross where a check refused it."""
 
 from __future__ import annotations
 
@@ -17,10 +17,11 @@ class SceneBinding:
         self.session, self.view = session, view
         self.top_z = 0.0                    # where unprojected patterns are drawn
         self._live_range: list[float] | None = None
+        self._pen_layers: set[str] = set()
         session.cloud_changed.connect(self.show_cloud)
         session.live_points_added.connect(self.add_live_points)
         for sig in (session.placements.changed, session.selection_changed,
-                    session.plans_changed):
+                    session.plans_changed, session.pens_changed):
             sig.connect(self.show_patterns)
 
     def show_field(self, field_size_mm, z_range_mm) -> None:
@@ -59,7 +60,8 @@ class SceneBinding:
 
     def show_patterns(self) -> None:
         s = self.session
-        placed, selected, projected, warn = [], [], [], []
+        placed, selected, warn = [], [], []
+        projected: dict[str, list] = {}                   # pen colour → its paths' segments
         handles = None
         for i, p in enumerate(s.placements.items):
             try:
@@ -72,13 +74,20 @@ class SceneBinding:
             if i < len(s.plans):
                 outcome = s.plans[i]
                 if outcome.plan is not None:
-                    projected.append(sd.segments(outcome.plan.projection.paths))
+                    projected.setdefault(s.pen_of(p).colour, []).append(
+                        sd.segments(outcome.plan.projection.paths))
                 elif outcome.where is not None:
                     warn.append(self._warning_cross(outcome.where, p.width_mm))
         cat = (lambda a: np.concatenate(a) if a else np.zeros((0, 3), np.float32))
         self.view.set_lines("placed", cat(placed), sd.PLACED_COLOUR)
         self.view.set_lines("selected", cat(selected), sd.SELECTED_COLOUR)
-        self.view.set_lines("projected", cat(projected), sd.PROJECTED_COLOUR)
+        layers = {f"projected {c}" for c in projected}
+        for name in self._pen_layers - layers:
+            self.view.set_lines(name, np.zeros((0, 3), np.float32), sd.PROJECTED_COLOUR)
+        for colour, segs in projected.items():
+            rgb = tuple(int(colour[i:i + 2], 16) / 255 for i in (1, 3, 5))
+            self.view.set_lines(f"projected {colour}", cat(segs), (*rgb, 1.0))
+        self._pen_layers = layers
         self.view.set_lines("warnings", cat(warn), sd.WARNING_COLOUR)
         self.view.handles = handles
 
