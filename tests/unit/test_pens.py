@@ -205,3 +205,24 @@ def test_time_left_weighs_the_paths_still_to_mark_by_their_passes():
     # the first path took twice its estimate: the rest will too
     assert time_left(sec, 1, 2 * sec[0]) == pytest.approx(2 * (sec[1] + sec[2]))
     assert time_left(sec, 0, 0.0) == pytest.approx(sec.sum())
+
+
+def test_board_checks_cover_delays_and_the_wobble(tmp_path):
+    """Controller.check (every list built, nothing sent) refuses a negative or non-finite
+    delay, a negative wobble, and on an RTC a wobble beyond the bit range."""
+    from pathlib import Path
+
+    from insitu.devices.galvo import check_setting
+    from insitu.devices.rtc import RtcListBuilder, RtcSettings
+    from insitu.errors import SafetyError
+    with pytest.raises(SafetyError, match=r"RTC: jump delay -1 µs: expected a finite number ≥ 0"):
+        check_setting("RTC", Command("jump_delay", (-1.0,)))
+    with pytest.raises(SafetyError, match=r"LMC: laser on delay nan µs"):
+        check_setting("LMC", Command("laser_on_delay", (float("nan"),)))
+    with pytest.raises(SafetyError, match=r"LMC: wobble -0.1 mm at 100 Hz: expected finite"):
+        LmcListBuilder(HEAD, LmcSettings(bits_per_deg=1500.0)).commands(
+            [Command("set_wobble", (-0.1, 100.0))])
+    rtc = RtcListBuilder(HEAD, RtcSettings(library=Path("x.so"), correction_file=Path("x.ct5"),
+                                           k_bits_per_mm=200000.0))
+    with pytest.raises(SafetyError, match=r"RTC: wobble 5 mm is 1000000 bits, beyond"):
+        rtc.calls([Command("set_wobble", (5.0, 100.0))])
