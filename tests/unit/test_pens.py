@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from insitu.devices.galvo import Command, RecordingController, list_digest
-from insitu.devices.lmc import L_MARK, LmcListBuilder, LmcSettings
+from insitu.devices.lmc import L_MARK, L_ON_DELAY, LmcListBuilder, LmcSettings
 from insitu.errors import DeviceError, FormatError
 from insitu.formats.pens import DEFAULT_PENS, Delays, Pen, PenTable, Wobble, read_pens, write_pens
 from insitu.geometry.beams import TwoMirrorHead
@@ -168,9 +168,11 @@ def test_a_cut_path_with_passes_is_marked_again_whole_or_continued(tmp_path, cho
 # --------------------------------------------------------------------------- the boards
 def test_lmc_traces_the_wobble_in_the_list():
     b = LmcListBuilder(HEAD, LmcSettings(bits_per_deg=1500.0))
-    pen = Pen(name="p", mark_speed_mm_s=100.0, wobble=Wobble(amplitude_mm=0.5, frequency_hz=100))
+    pen = Pen(name="p", mark_speed_mm_s=100.0, wobble=Wobble(amplitude_mm=0.5, frequency_hz=100),
+              delays_us=Delays(laser_on=70.0))
     cmds = GalvoDriver(HEAD).compile(with_pen(make_job([PATH[:2]]), pen))[0]
     entries, marking = b.commands(cmds)
+    assert (L_ON_DELAY, 70, 0, 0, 0, 0) in entries                # the pen's delay, its list
     marks = np.array([e[1:3] for e in entries if e[0] == L_MARK], float)
     # 10 mm at 100 mm/s = 0.1 s = 10 turns, 16 per turn
     assert marking and len(marks) == 160

@@ -48,6 +48,14 @@ class PlacementHistory:
         self._merge_key = merge_key
         self.changed.emit()
 
+    def rewrite(self, change) -> None:
+        """Apply ``change`` (Placement → Placement) to every state, undo and redo included
+        (for what is not undoable itself, such as a pen renamed or removed)."""
+        before = self.items
+        self._states = [tuple(change(p) for p in state) for state in self._states]
+        if self.items != before:
+            self.changed.emit()
+
     def reset(self, items: tuple[Placement, ...] = ()) -> None:
         """Start a new history at ``items`` (nothing to undo)."""
         self._states, self._index, self._merge_key = [tuple(items)], 0, None
@@ -147,22 +155,20 @@ class Session:
     def set_pens(self, pens: PenTable | None, renamed: tuple[str, str] | None = None) -> None:
         """The pen table the placements are planned with (None: :data:`DEFAULT_PENS`); a
         placement naming a pen ``renamed`` (old, new) follows it, one naming a pen the table
-        no longer has takes the default."""
+        no longer has takes the default — in every state of the undo history, so that an
+        undo never brings back a pen that is gone."""
         pens = pens or DEFAULT_PENS
         if pens == self.pens:
             return
         self.pens = pens
-        items = self.placements.items
         names = dict([renamed] if renamed else [])
-        fixed = tuple(p if p.pen is None or p.pen in pens.names and p.pen not in names
-                      else replace(p, pen=names.get(p.pen)) for p in items)
-        if fixed != items:
-            self.placements.push(fixed)
+        self.placements.rewrite(lambda p: p if p.pen is None or p.pen in pens.names and (
+            p.pen not in names) else replace(p, pen=names.get(p.pen)))
         self.pens_changed.emit()
 
     def pen_of(self, placement: Placement):
         """The pen ``placement`` is marked with."""
-        return self.pens.pen(placement.pen if placement.pen in self.pens.names else None)
+        return self.pens.pen(placement.pen)
 
     # -- plans ---------------------------------------------------------------------------
     def set_plans(self, plans: list[PlanOutcome]) -> None:
