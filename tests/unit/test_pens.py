@@ -189,6 +189,10 @@ def test_lmc_wobble_needs_a_mark_speed():
     with pytest.raises(SafetyError, match="wobble needs the mark speed"):
         b.commands([Command("set_wobble", (0.1, 100.0)), Command("laser_on"),
                     Command("mark_abs_3d", (1.0, 0.0, 0.0))])
+    slow = [Command("set_mark_speed", (0.1,)), Command("set_wobble", (0.1, 50000.0)),
+            Command("laser_on"), Command("mark_abs_3d", (1.0, 0.0, 0.0))]
+    with pytest.raises(SafetyError, match=r"needs [\d,]+ list points \(at most 1,000,000"):
+        b.commands(slow)
 
 
 def test_pen_table_replaced_keeps_the_default():

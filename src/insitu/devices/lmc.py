@@ -50,6 +50,7 @@ L_JUMP, L_END, L_DELAY, L_MARK, L_JUMP_SPEED = 0x8001, 0x8002, 0x8004, 0x8005, 0
 L_ON_DELAY, L_OFF_DELAY, L_MARK_SPEED, L_JUMP_DELAY, L_POLY_DELAY = (0x8007, 0x8008, 0x800C,
                                                                      0x800D, 0x800F)
 L_WRITE_PORT, L_CURRENT, L_QSWITCH, L_READY = 0x8011, 0x8012, 0x801B, 0x8051
+WOBBLE_POINTS_MAX = 1_000_000      # list points of one wobbled mark (16 a turn)
 
 
 @dataclass(frozen=True)
@@ -130,6 +131,10 @@ class LmcListBuilder:
         length_mm = math.hypot(x - x0, y - y0) / self.units_per_mm
         turns = length_mm / self._mark_speed * hz
         n = max(int(math.ceil(turns * 16)), 1)
+        if n > WOBBLE_POINTS_MAX:
+            raise SafetyError(f"LMC: a wobble of {hz:g} Hz over {length_mm:.3g} mm at "
+                              f"{self._mark_speed:g} mm/s needs {n:,} list points (at most "
+                              f"{WOBBLE_POINTS_MAX:,} a mark): lower its frequency or mark faster")
         out = []
         for k in range(1, n + 1):
             t = k / n
