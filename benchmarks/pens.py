@@ -2,9 +2,10 @@
 
 For each pen: the job's estimated time (insitu job show's: passes, jump speed and delays),
 the simulated head's clock for the same commands (moves at the set speeds plus the delays it
-waits), the burns the simulated laser left (one per path and pass) and their mean width
-(wobble: wider by twice its amplitude), and the list sizes the boards get (RTC calls; LMC
-list entries, where a wobble is traced in the list).
+waits), the burns the simulated laser left (one per path, its passes counted in it), their
+mean width (wobble: wider by twice its amplitude) and how much light a burn's centre line
+loses (1 − 0.25^passes), and the list sizes the boards get (RTC calls; LMC list entries,
+where a wobble is traced in the list).
 
 Run: .venv/bin/python benchmarks/pens.py [--text AB] [--width 10] [--hatch 0.1]
 """
@@ -24,6 +25,7 @@ from insitu.devices.rtc import RtcListBuilder, RtcSettings
 from insitu.formats.pens import DEFAULT_PENS
 from insitu.marking import GalvoDriver, Placement, estimate_time, make_job, run_job, with_pen
 from insitu.sim.devices import SimController
+from insitu.sim.marks import mark_darkness
 from insitu.sim.rig import default_rig
 from insitu.sim.world import SimWorld
 
@@ -43,7 +45,7 @@ def main() -> None:
                       k_bits_per_mm=2000.0)
     table = Table(title=f'text:"{args.text}", {args.width:g} mm, hatch {args.hatch:g} mm: '
                         f"{len(paths)} paths on the simulated table")
-    for col in ("pen", "estimated s", "simulated s", "burns", "width mm",
+    for col in ("pen", "estimated s", "simulated s", "burns", "passes", "width mm", "darkness",
                 "RTC calls", "LMC entries", "run s"):
         table.add_column(col, justify="left" if col == "pen" else "right")
     for pen in DEFAULT_PENS.pens:
@@ -57,11 +59,14 @@ def main() -> None:
         rtc_calls = sum(len(rb.calls(c)[0]) for c in lists)
         lmc_entries = sum(len(lb.commands(c)[0]) for c in lists)
         widths = np.concatenate([b.widths for b in sim.burns])
+        centres = np.array([b.points[len(b.points) // 2] for b in sim.burns])
+        dark = mark_darkness(centres[np.isfinite(centres).all(1)], sim.burns)
         table.add_row(pen.name, f"{estimate_time(job).total_s:.3f}",
                       f"{sim.elapsed_s:.3f}", str(len(sim.burns)),
-                      f"{np.nanmean(widths):.3f}", f"{rtc_calls:,}", f"{lmc_entries:,}",
+                      str(max(b.passes for b in sim.burns)), f"{np.nanmean(widths):.3f}",
+                      f"{dark.mean():.3f}", f"{rtc_calls:,}", f"{lmc_entries:,}",
                       f"{run_s:.1f}")
-    console = Console()
+    console = Console(width=max(Console().width, 110))
     console.print(table)
     for pen in DEFAULT_PENS.pens:
         console.print(f"{pen.name}: {pen.summary()}", highlight=False)

@@ -12,7 +12,8 @@ laser on, the surface is burnt: a :class:`~insitu.sim.marks.Burn` polyline whose
 beam. The laser burns on any move while it is on (a jump with the laser on would show). A
 wobble (``set_wobble``, for the rest of its list) sweeps the spot round a circle of its
 amplitude as it moves: the burn is wider by twice the amplitude. Each pass of a path burns
-again.
+again: a burn along the last one's samples counts as its next pass (``Burn.passes``), which
+the inspection camera sees darker.
 
 Burns are kept on the world (``SimWorld.burns``), so a resumed job on a new controller adds to
 the same marks and :class:`SimInspectionCamera` sees them all.
@@ -252,8 +253,14 @@ class SimController:
             pts = np.vstack([p for p, _ in self._open])
             w = np.concatenate([w for _, w in self._open])
             burn = Burn(pts, w, self.power_pct)
-            self.burns.append(burn)
-            self.world.burns.append(burn)
+            last = self.burns[-1] if self.burns else None
+            if last is not None and self.world.burns and self.world.burns[-1] is last and (
+                    last.again(burn)):
+                burn = Burn(pts, np.fmax(w, last.widths), self.power_pct, last.passes + 1)
+                self.burns[-1] = self.world.burns[-1] = burn      # a further pass: darker
+            else:
+                self.burns.append(burn)
+                self.world.burns.append(burn)
         self._open = []
 
 
