@@ -2,7 +2,7 @@
 runs a few hundred examples of this engine with a printed seed).
 
 Each reader gets a valid seed file (PLY ascii and binary, a recording's sequence.json and its
-PNG frame, rig file, height calibration, field correction, job, project, SVG, DXF). Every
+PNG frame, rig file, height calibration, field correction, job, project, pens, SVG, DXF). Every
 example mutates it — bytes flipped, truncated, deleted, duplicated; a JSON field replaced by an
 extreme, non-finite, negative, huge or mistyped value, wrapped, stringified or deleted; a number
 of a text format replaced; a PNG header's size changed — and feeds it to the reader and the
@@ -41,7 +41,9 @@ from insitu.formats.pointcloud import PointCloud, read_ply, write_ply
 from insitu.formats.project import Project, RigChoice, ScanSettings, read_project, write_project
 from insitu.formats.sequence import Sequence, SequenceWriter
 from insitu.geometry.beams import TwoMirrorHead
-from insitu.marking import PROJECTIONS, GalvoDriver, Placement, make_job, read_job, write_job
+from insitu.formats.pens import DEFAULT_PENS, read_pens, write_pens
+from insitu.marking import (PROJECTIONS, GalvoDriver, LaserOverride, Placement, make_job,
+                            read_job, write_job)
 from insitu.patterns.dxf import load_dxf
 from insitu.patterns.svg import load_svg
 from insitu.rig.files import HeightCalibration, RigConfig, load_json_model, save_json_model
@@ -63,8 +65,11 @@ _NUMBER = re.compile(rb"-?\d+(?:\.\d+)?(?:[eE][-+]?\d+)?")
 
 # -------------------------------------------------------------------------- seed files
 def _job():
+    """Two paths, the second with a pen's settings (passes, delays, wobble)."""
     return make_job([np.array([[0.0, 0.0, 0.0], [5.0, 1.0, 0.5]]),
-                     np.array([[-3.0, 2.0, 1.0], [-3.0, 6.0, 1.0], [1.0, 6.0, 1.0]])])
+                     np.array([[-3.0, 2.0, 1.0], [-3.0, 6.0, 1.0], [1.0, 6.0, 1.0]])],
+                    overrides={1: LaserOverride.of_pen(DEFAULT_PENS.pen("bold").model_copy(
+                        update={"passes": 2}))})
 
 
 def _finite(pattern) -> None:
@@ -164,9 +169,15 @@ def _project(folder: Path):
         scan=ScanSettings((-10.0, 10.0, -40.0, 40.0), 0.25, 8.0, speed_mm_s=1500.0),
         cloud=folder / "part.ply",
         placements=(Placement(str(folder / "logo.svg"), (1.0, 2.0), 12.0, 15.0, "wrap", 0.1,
-                              45.0, True), Placement('text:"x"', (0.0, 0.0), 5.0)),
-        selected=1))
+                              45.0, True), Placement('text:"x"', (0.0, 0.0), 5.0, pen="deep")),
+        selected=1, pens=DEFAULT_PENS))
     return path, lambda p: read_project(p, Placement, PROJECTIONS)
+
+
+def _pens(folder: Path):
+    path = folder / "pens.json"
+    write_pens(path, DEFAULT_PENS)
+    return path, read_pens
 
 
 def _svg(folder: Path):
@@ -211,6 +222,7 @@ READERS: dict[str, tuple[Callable, str]] = {
     "field-correction": (_field, "json"),
     "job": (_job_file, "json"),
     "project": (_project, "json"),
+    "pens": (_pens, "json"),
     "svg": (_svg, "text"),
     "dxf": (_dxf, "text"),
 }

@@ -145,6 +145,9 @@ void set_laser_delays(int on, UINT off) {
 void set_scanner_delays(UINT j, UINT m, UINT p) {
     LOCK; call("set_scanner_delays %u %u %u", j, m, p); add(7, (int)j, (int)m, (int)p); UNLOCK;
 }
+void set_wobbel(UINT tr, UINT lo, double f) {
+    LOCK; call("set_wobbel %u %u %.3f", tr, lo, f); add(10, (int)tr, (int)lo, (int)f); UNLOCK;
+}
 void set_jump_speed(double v) { LOCK; call("set_jump_speed %.6f", v); add(8, 0, 0, 0); UNLOCK; }
 void set_mark_speed(double v) { LOCK; call("set_mark_speed %.6f", v); add(9, 0, 0, 0); UNLOCK; }
 void jump_abs_3d(int x, int y, int z) {

@@ -209,3 +209,25 @@ def test_the_list_pointer_says_how_far_a_cut_path_got(rtc, board, tmp_path):
     assert s.done == {0} and s.cut == 1 and s.cut_position is not None
     marked_in_path_1 = sum(int(r[0]) == 2 for r in board.marks())
     assert 0 < s.cut_position <= marked_in_path_1, (s.cut_position, marked_in_path_1)
+
+
+def test_pens_set_the_boards_delays_and_wobble_per_list(rtc, board):
+    """Each path's pen reaches the board: its delays, its passes marked, its wobble with
+    set_wobbel (circle: amplitude across and along, bits; Hz), off again for a list
+    without."""
+    from insitu.formats.pens import Delays, Pen, Wobble
+    from insitu.marking import LaserOverride
+
+    pen = Pen(name="p", passes=2, delays_us=Delays(laser_on=60.0, jump=400.0),
+              wobble=Wobble(amplitude_mm=0.1, frequency_hz=800.0))
+    path = np.array([[0.0, 0.0, 0.0], [10.0, 0.0, 0.0]])
+    job = make_job([path, path + [0, 5, 0]], overrides={0: LaserOverride.of_pen(pen)})
+    board.reset()
+    assert run_job(job, GalvoDriver(HEAD), rtc).state == "done"
+    calls = board.calls()
+    first, second = calls.index("execute_list 1"), len(calls)
+    assert "set_wobbel 200 200 800.000" in calls[:first]
+    assert "set_laser_delays 120 300" in calls[:first]               # 60 µs, 150 µs in ½ µs
+    assert any(c.startswith("set_scanner_delays 40 15 ") for c in calls[:first])
+    assert "set_wobbel 0 0 0.000" in calls[first:second]            # path 2: no wobble
+    assert len(board.marks()) == 2 + 1                               # 2 passes, then path 2

@@ -15,7 +15,7 @@ from insitu.geometry.beams import TwoMirrorHead
 from insitu.geometry.distortion import NoDistortion
 from insitu.marking import (GalvoDriver, Limits, estimate_time, make_job, progress_path_for,
                             read_progress, run_job, run_preview, write_job)
-from insitu.sim.marks import find_marks, render_inspection
+from insitu.sim.marks import find_marks, mark_darkness, render_inspection
 from insitu.sim.rig import default_rig
 from insitu.sim.workpieces import make_workpiece
 
@@ -270,3 +270,28 @@ def test_burns_stay_on_the_world_and_the_inspection_camera_sees_them(rig):
     after = cam.grab().astype(float)
     u, v = np.rint(rig.camera.project(np.array([[0.0, 5.0, 4.0]]))[0]).astype(int)
     assert after[v - 1:v + 2, u - 1:u + 2].min() < 0.6 * before[v - 1:v + 2, u - 1:u + 2].mean()
+
+
+def test_sim_burns_each_pass_and_a_wobble_widens_the_burn(rig):
+    from insitu.formats.pens import Pen, Wobble
+    from insitu.marking import with_pen
+
+    targets = np.array([[-10.0, 0.0, 0.0], [10.0, 0.0, 0.0]])
+    plain = SimController(plate_world(rig))
+    run_job(make_job([targets]), GalvoDriver.from_config(rig.operator.head), plain)
+    pen = Pen(name="p", passes=2, wobble=Wobble(amplitude_mm=0.2, frequency_hz=1000.0))
+    job = with_pen(make_job([targets]), pen)
+    sc = SimController(plate_world(rig))
+    run_job(job, GalvoDriver.from_config(rig.operator.head), sc)
+    assert len(plain.burns) == 1 and len(sc.burns) == 1 and sc.burns[0].passes == 2
+    np.testing.assert_allclose(np.nanmean(sc.burns[0].widths),
+                               np.nanmean(plain.burns[0].widths) + 0.4, rtol=1e-6)
+    on = sc.burns[0].points[len(sc.burns[0].points) // 2][None]       # the second pass darkens
+    assert mark_darkness(on, plain.burns)[0] == pytest.approx(0.75, abs=0.01)
+    assert mark_darkness(on, sc.burns)[0] == pytest.approx(1 - 0.25 ** 2, abs=0.01)
+    assert sc.elapsed_s == pytest.approx(estimate_time(job).total_s, rel=1e-9)
+    beside = make_job([targets + [0.0, 3.0, 0.0]])                   # wobble: its list only
+    sc.execute(GalvoDriver.from_config(rig.operator.head).compile(beside)[0])
+    assert len(sc.burns) == 2 and sc.burns[1].passes == 1
+    assert np.nanmean(sc.burns[1].widths) == pytest.approx(np.nanmean(plain.burns[0].widths),
+                                                           rel=0.02)

@@ -1,5 +1,5 @@
 """Every file the program reads, fuzzed for a bounded time: the mutation engine of
-benchmarks/fuzz.py (a few hundred examples over its eleven readers, in worker processes that
+benchmarks/fuzz.py (a few hundred examples over its twelve readers, in worker processes that
 catch hangs and crashes), arbitrary bytes, arbitrary JSON, and valid files with one field
 replaced by anything. A reader (and the first use of what it read) may only fail with an
 InsituError. Every run draws a new seed, printed; INSITU_FUZZ_SEED=N repeats a run,

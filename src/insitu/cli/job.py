@@ -113,6 +113,10 @@ def show(job_path: Annotated[Path, typer.Argument(metavar="JOB.json", help="Mark
     las = job.laser
     table.add_row("laser", f"{las.power_pct:g} %, {las.frequency_khz:g} kHz, mark "
                            f"{las.mark_speed_mm_s:g} mm/s, jump {las.jump_speed_mm_s:g} mm/s")
+    for name, idx in job.pens().items():
+        if name:
+            table.add_row(f"pen {name}", f"{len(idx):,} path{'s' * (len(idx) != 1)}: "
+                                         f"{pen_text(job, idx[0])}")
     table.add_row("estimated time", f"{e.total_s:.1f} s (mark {e.mark_mm:.0f} mm, jump "
                                     f"{e.jump_mm:.0f} mm)")
     s = history(job, progress_path_for(job_path))
@@ -124,11 +128,26 @@ def show(job_path: Annotated[Path, typer.Argument(metavar="JOB.json", help="Mark
             table.add_row("error", s.error)
         if s.cut is not None:
             pos = ("the board reported no position" if s.cut_position is None else
-                   f"{s.cut_position} of {max(len(job.paths[s.cut].points) - 1, 1)} marks done")
+                   f"{s.cut_position} of {job.path_passes(s.cut) * max(len(job.paths[s.cut].points) - 1, 1)}"
+                   " marks done")
             table.add_row("cut path", f"{s.cut + 1} ({pos}): --resume --cut-path "
                                       "remark|skip|continue")
     _variable_rows(table, job, job_path)
     console.print(table)
+
+
+def pen_text(job, i: int) -> str:
+    """Path ``i``'s laser as its pen gives it: ``80 %, 20 kHz, 200 mm/s, jump 3000 mm/s,
+    2 passes, delays 100/150/250/150/100 µs, wobble 0.1 mm 500 Hz``."""
+    las, t, w = job.path_laser(i), job.path_timing(i), job.path_wobble(i)
+    n = job.path_passes(i)
+    text = (f"{las.power_pct:g} %, {las.frequency_khz:g} kHz, {las.mark_speed_mm_s:g} mm/s, "
+            f"jump {las.jump_speed_mm_s:g} mm/s, {n} pass{'es' * (n != 1)}, delays "
+            f"{t.laser_on_delay_us:g}/{t.laser_off_delay_us:g}/{t.jump_delay_us:g}/"
+            f"{t.mark_delay_us:g}/{t.polygon_delay_us:g} µs (on/off/jump/mark/polygon)")
+    if w is not None:
+        text += f", wobble {w.amplitude_mm:g} mm {w.hz(las.mark_speed_mm_s):g} Hz"
+    return text
 
 
 def _variable_rows(table: Table, job, job_path: Path) -> None:

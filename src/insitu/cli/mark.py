@@ -12,7 +12,7 @@ from rich.text import Text
 from insitu.cli.common import (bounded, check_output, console, fail, one_line_errors,
                                progress_bar, warn)
 from insitu.cli.job import (CutPath, Field, Inspect, Preview, Restart, Resume, Rig, Seed,
-                            Workpiece, check_run_options, run_on_station)
+                            Workpiece, check_run_options, pen_text, run_on_station)
 from insitu.marking.modes import PROJECTIONS, projection_mode
 from insitu.patterns.dxf import FILL_MODES
 from insitu.patterns.load import sources_help
@@ -52,14 +52,25 @@ def mark(
                                             "code's default hatch is no coarser.")] = BEAM_MM,
     force: Annotated[bool, typer.Option(help="Write the job even when a code would not decode "
                                              "from the planned marks.")] = False,
-    power: Annotated[float, typer.Option(
-        callback=bounded("power_pct"), help="Laser power, % of full.")] = 30.0,
-    frequency: Annotated[float, typer.Option(
-        callback=bounded("frequency_khz"), help="Pulse frequency, kHz.")] = 20.0,
-    speed: Annotated[float, typer.Option(
-        callback=bounded("mark_speed_mm_s"), help="Mark speed, mm/s.")] = 500.0,
-    jump_speed: Annotated[float, typer.Option(
-        callback=bounded("jump_speed_mm_s"), help="Jump speed, mm/s.")] = 3000.0,
+    pen: Annotated[str | None, typer.Option(
+        help="The pen (named laser set: power, frequency, speeds, passes, delays, wobble) of "
+             "--pens to mark with (default: its default pen).")] = None,
+    pens: Annotated[Path | None, typer.Option(
+        metavar="PENS.json", help="Pens file (insitu-pens/1) or a project (.insitu.json) "
+                                  "whose pens --pen picks from (default: the built-in mark, "
+                                  "fine, deep, bold).")] = None,
+    power: Annotated[float | None, typer.Option(
+        callback=bounded("power_pct"), help="Laser power, % of full (default: the pen's, "
+                                            "else 30).")] = None,
+    frequency: Annotated[float | None, typer.Option(
+        callback=bounded("frequency_khz"), help="Pulse frequency, kHz (default: the pen's, "
+                                                "else 20).")] = None,
+    speed: Annotated[float | None, typer.Option(
+        callback=bounded("mark_speed_mm_s"), help="Mark speed, mm/s (default: the pen's, "
+                                                  "else 500).")] = None,
+    jump_speed: Annotated[float | None, typer.Option(
+        callback=bounded("jump_speed_mm_s"), help="Jump speed, mm/s (default: the pen's, "
+                                                  "else 3000).")] = None,
     run: Annotated[bool, typer.Option(help="Also mark the job on the rig (with --preview, --restart, "
                                            "--resume, --cut-path, --inspect).")] = False,
     preview: Preview = False, resume: Resume = False, restart: Restart = False,
@@ -82,7 +93,9 @@ def mark(
     (--var NAME=VALUE) is rendered when the job is planned; {serial} takes the counter's next
     serial, issued once the job passed its checks, never handed out again (a resume marks the
     job's own)."""
+    from insitu.formats.pens import DEFAULT_PENS, PenTable
     from insitu.formats.pointcloud import read_ply
+    from insitu.formats.project import load_pens
     from insitu.marking import LaserParams, Placement, read_job
     from insitu.services import mark as svc
     from insitu.services.station import connect
@@ -98,8 +111,17 @@ def mark(
         fail(f"--fill {fill!r}: expected one of {', '.join(FILL_MODES)}")
     placement = Placement(pattern, at, width, rotate, mode, hatch, hatch_angle, cross, fill,
                           beam)
-    laser = LaserParams(power_pct=power, frequency_khz=frequency, mark_speed_mm_s=speed,
-                        jump_speed_mm_s=jump_speed)
+    given = {k: v for k, v in (("power_pct", power), ("frequency_khz", frequency),
+                               ("mark_speed_mm_s", speed), ("jump_speed_mm_s", jump_speed))
+             if v is not None}
+    table = None
+    if pen is not None or pens is not None:     # the pen, its fields the options give replaced
+        base = (load_pens(pens) if pens is not None else DEFAULT_PENS).pen(
+            pen, "--pen" if pens is None else str(pens))
+        chosen = base.model_copy(update=given)
+        table = PenTable(default=chosen.name, pens=(chosen,))
+        given = {k: getattr(chosen, k) for k in LaserParams.model_fields}
+    laser = LaserParams(**given)
     measured = read_ply(cloud)
     with connect(rig, workpiece, seed, field=field) as station:
         if run and (warning := station.check_source(cloud, measured.rig, "cloud")):
@@ -107,7 +129,7 @@ def mark(
         with progress_bar("projecting") as progress:
             progress(0, 1)
             plan, rec = _plan(out, placement, lambda p: svc.plan_mark(
-                measured, p, station.driver, laser, force), resume, fields, counter,
+                measured, p, station.driver, laser, force, table), resume, fields, counter,
                 serial_start)
         if resume and (not out.exists() or read_job(out).digest() != plan.job.digest()):
             fail(f"--resume: {out} does not hold this job; run without --resume to start it")
@@ -157,6 +179,9 @@ def _summary(out: Path, placement, plan, field: Path | None, rec=None) -> None:
         if rec.serial is not None:
             table.add_row("serial", f"{rec.serial} (issued from {rec.counter})")
     table.add_row("marks", f"{len(plan.job.paths):,} paths, {len(pts):,} points ({fill})")
+    over = plan.job.paths[0].laser
+    if over is not None and over.pen:
+        table.add_row("pen", f"{over.pen}: {pen_text(plan.job, 0)}")
     mode = placement.mode + (f", worst stretch {plan.projection.max_stretch:.2%}"
                              if PROJECTIONS[placement.mode].stretches else "")
     table.add_row("projection", mode)

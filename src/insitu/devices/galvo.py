@@ -9,6 +9,8 @@ Commands (``Command.op``, ``args``):
   jump_abs_3d / mark_abs_3d (alpha_x_deg, alpha_y_deg, focus_mm) — move fast with the laser off
   / at mark speed with whatever is on; laser_on, laser_off, pilot_on, pilot_off;
   set_power (pct), set_frequency (kHz), set_mark_speed, set_jump_speed (mm/s);
+  set_wobble (amplitude_mm, frequency_hz): a circle traced around the moving spot while
+  marking, until the end of its list (a list without it marks without wobble);
   laser_on_delay, laser_off_delay, jump_delay, mark_delay, polygon_delay (µs): waits.
 """
 
@@ -29,6 +31,7 @@ MOVES = ("jump_abs_3d", "mark_abs_3d")
 SETTINGS = ("set_power", "set_frequency", "set_mark_speed", "set_jump_speed")
 DELAYS = ("laser_on_delay", "laser_off_delay", "jump_delay", "mark_delay", "polygon_delay")
 SWITCHES = ("laser_on", "laser_off", "pilot_on", "pilot_off")
+WOBBLE = "set_wobble"
 
 FieldCorrection = Callable[[np.ndarray], np.ndarray]
 """(N, 2) nominal commands on z = 0, mm → (N, 2) corrected commands, mm."""
@@ -48,6 +51,8 @@ class Command:
             return f"{self.op} {self.args[0]:.3f}"
         if self.op in DELAYS:
             return f"{self.op} {self.args[0]:.1f}"
+        if self.op == WOBBLE:
+            return f"{self.op} a={self.args[0]:.4f} f={self.args[1]:.1f}"
         return self.op
 
 
@@ -85,10 +90,17 @@ class ListPosition:
 
 def check_setting(device: str, command: Command) -> None:
     """SafetyError for a speed or frequency that is not a finite number > 0, a power outside
-    0 … 100 % or a non-finite move (``device`` names the board in the message)."""
+    0 … 100 %, a delay that is not a finite number ≥ 0, a wobble not ≥ 0 or a non-finite move
+    (``device`` names the board in the message)."""
     op, args = command.op, command.args
     if op in MOVES and not all(math.isfinite(a) for a in args):
         raise SafetyError(f"{device}: {op} {args}: not a finite position")
+    if op in DELAYS and not (math.isfinite(args[0]) and args[0] >= 0):
+        raise SafetyError(f"{device}: {op.replace('_', ' ')} {args[0]:g} µs: expected a finite "
+                          "number ≥ 0")
+    if op == WOBBLE and not all(math.isfinite(a) and a >= 0 for a in args):
+        raise SafetyError(f"{device}: wobble {args[0]:g} mm at {args[1]:g} Hz: expected finite "
+                          "numbers ≥ 0")
     if op == "set_power" and not 0.0 <= args[0] <= 100.0:
         raise SafetyError(f"{device}: power {args[0]:g} %: expected 0 … 100 %")
     if op in ("set_frequency", "set_mark_speed", "set_jump_speed") and not (

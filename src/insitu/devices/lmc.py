@@ -12,7 +12,10 @@ Units are converted here: mirror angles → 16-bit galvo values, 0x8000 at the c
 one, so it drives the mirrors linearly; insitu's own field correction is in the angles);
 speeds mm/s → galvo units/ms (at the field centre); delays µs (sign flag 0x8000 for
 negative), waits in 10 µs; power % → 12-bit current; frequency kHz → Q-switch period in
-1/20 µs. The board has no dynamic-focus axis: a list whose focus shifts exceed
+1/20 µs. The board has no wobble of its own: as EZCAD does, a wobble (``set_wobble``, for
+the rest of its list) is traced in the list — each mark becomes short marks along the path
+with a circle of the wobble's amplitude turning at its frequency, 16 per turn, at the mark
+speed. The board has no dynamic-focus axis: a list whose focus shifts exceed
 ``focus_tolerance_mm`` is refused (SafetyError) before anything is sent.
 """
 
@@ -47,6 +50,7 @@ L_JUMP, L_END, L_DELAY, L_MARK, L_JUMP_SPEED = 0x8001, 0x8002, 0x8004, 0x8005, 0
 L_ON_DELAY, L_OFF_DELAY, L_MARK_SPEED, L_JUMP_DELAY, L_POLY_DELAY = (0x8007, 0x8008, 0x800C,
                                                                      0x800D, 0x800F)
 L_WRITE_PORT, L_CURRENT, L_QSWITCH, L_READY = 0x8011, 0x8012, 0x801B, 0x8051
+WOBBLE_POINTS_MAX = 1_000_000      # list points of one wobbled mark (16 a turn)
 
 
 @dataclass(frozen=True)
@@ -89,6 +93,9 @@ class LmcListBuilder:
         self.units_per_mm = s.bits_per_deg * math.degrees(rad_per_mm)
         self._last = (0x8000, 0x8000)
         self._delays: dict[int, tuple] = {}
+        self._mark_speed: float | None = None
+        self._wobble = (0.0, 0.0)          # amplitude mm, Hz: for the list being built
+        self._phase = 0.0                  # turns of the wobble so far
 
     def galvo(self, joint) -> tuple[int, int]:
         ax, ay, df = (float(v) for v in joint)
@@ -102,11 +109,40 @@ class LmcListBuilder:
                               f"board's range ±{0x8000 / self.s.bits_per_deg:.2f}°")
         return x, y
 
-    def _move(self, op: int, joint) -> tuple:
-        x, y = self.galvo(joint)
+    def _move(self, op: int, x: int, y: int) -> list[tuple]:
+        if op == L_MARK and self._wobble[0] > 0 and self._wobble[1] > 0:
+            return [self._to(op, *q) for q in self._wobbled(x, y)]
+        return [self._to(op, x, y)]
+
+    def _to(self, op: int, x: int, y: int) -> tuple:
+        if not (0 <= x <= 0xFFFF and 0 <= y <= 0xFFFF):
+            raise SafetyError(f"LMC: the wobble takes the mirrors to ({x}, {y}), outside the "
+                              "board's 16-bit range")
         dist = min(int(math.hypot(x - self._last[0], y - self._last[1])), 0xFFFF)
         self._last = (x, y)
         return (op, x, y, 0, dist, 0)
+
+    def _wobbled(self, x: int, y: int) -> list[tuple[int, int]]:
+        """Galvo points of a mark from the last point to (x, y) with the wobble's circle."""
+        if self._mark_speed is None:
+            raise SafetyError("LMC: a wobble needs the mark speed, but the list sets none")
+        amp_mm, hz = self._wobble
+        (x0, y0), r = self._centre, amp_mm * self.units_per_mm
+        length_mm = math.hypot(x - x0, y - y0) / self.units_per_mm
+        turns = length_mm / self._mark_speed * hz
+        n = max(int(math.ceil(turns * 16)), 1)
+        if n > WOBBLE_POINTS_MAX:
+            raise SafetyError(f"LMC: a wobble of {hz:g} Hz over {length_mm:.3g} mm at "
+                              f"{self._mark_speed:g} mm/s needs {n:,} list points (at most "
+                              f"{WOBBLE_POINTS_MAX:,} a mark): lower its frequency or mark faster")
+        out = []
+        for k in range(1, n + 1):
+            t = k / n
+            a = 2 * math.pi * (self._phase + t * turns)
+            out.append((round(x0 + t * (x - x0) + r * math.cos(a)),
+                        round(y0 + t * (y - y0) + r * math.sin(a))))
+        self._phase = (self._phase + turns) % 1.0
+        return out
 
     def speed(self, mm_s: float) -> int:
         return min(int(round(mm_s * self.units_per_mm / 1000.0)), 0xFFFF)
@@ -120,14 +156,20 @@ class LmcListBuilder:
         longest = {op: 0.0 for op in waits}
         body: list[tuple] = []
         marking, port = False, 0
+        self._wobble, self._phase, self._centre = (0.0, 0.0), 0.0, self._last
         for c in commands:
             op = c.op
             check_setting("LMC", c)
             if op in waits:
                 longest[op] = max(longest[op], float(c.args[0]))
             elif op in ("jump_abs_3d", "mark_abs_3d"):
-                body.append(self._move(L_JUMP if op == "jump_abs_3d" else L_MARK, c.args))
+                x, y = self.galvo(c.args)
+                body += self._move(L_JUMP if op == "jump_abs_3d" else L_MARK, x, y)
+                self._centre = (x, y)
+            elif op == "set_wobble":
+                self._wobble = (float(c.args[0]), float(c.args[1]))
             elif op == "set_mark_speed":
+                self._mark_speed = float(c.args[0])
                 body.append((L_MARK_SPEED, self.speed(c.args[0]), 0, 0, 0, 0))
             elif op == "set_jump_speed":
                 body.append((L_JUMP_SPEED, self.speed(c.args[0]), 0, 0, 0, 0))
@@ -155,6 +197,7 @@ class LmcListBuilder:
 
     def forget(self) -> None:
         self._delays.clear()
+        self._mark_speed = None
 
 
 def packets(entries: list[tuple]) -> list[bytes]:

@@ -9,6 +9,8 @@ period in 1/64 µs; power % → 12-bit analog output 1. The pilot laser is a bit
 output port (``pilot_bit``). The RTC applies its scanner delays itself (jump delay after
 every jump, mark delay after every mark sequence, polygon delay at every vertex), so the
 driver's explicit delays set them; the polygon delay is the largest of the list's corners.
+A wobble is the board's own ``set_wobbel`` (amplitude in bits across and along the path, the
+frequency in Hz), switched off again before a list that does not set it.
 
 One command list = one RTC list (list 1): ``set_start_list(1)`` … ``set_end_of_list()``,
 ``execute_list(1)``, then ``get_status`` until not busy. The marking laser is enabled only
@@ -57,6 +59,7 @@ SIGNATURES: dict[str, tuple[list, type | None]] = {
     "write_da_1_list": ([_U], None), "set_laser_pulses": ([_U, _U], None),
     "set_laser_delays": ([_I, _U], None), "set_scanner_delays": ([_U, _U, _U], None),
     "set_jump_speed": ([_D], None), "set_mark_speed": ([_D], None),
+    "set_wobbel": ([_U, _U, _D], None),
     "jump_abs_3d": ([_I, _I, _I], None), "mark_abs_3d": ([_I, _I, _I], None),
 }
 
@@ -109,6 +112,7 @@ class RtcListBuilder:
     def __init__(self, head: TwoMirrorHead, settings: RtcSettings):
         self.head, self.s = head, settings
         self._delays: dict[str, tuple] = {}
+        self._wobble_on = False
         self.origin: list[int] = []
 
     def bits(self, joint: np.ndarray) -> tuple[int, int, int]:
@@ -150,6 +154,8 @@ class RtcListBuilder:
                                                  int(round(self.s.pulse_length_us * 64.0)))))
             elif op in ("pilot_on", "pilot_off"):
                 out.append(("write_io_port_mask_list", (pilot if op == "pilot_on" else 0, pilot)))
+            elif op == "set_wobble":
+                out.append(("set_wobbel", self.wobble(*c.args)))
             elif op == "laser_on":
                 marking = True
             elif op != "laser_off":
@@ -163,12 +169,26 @@ class RtcListBuilder:
             if self._delays.get(name) != args:
                 self._delays[name] = args
                 head.append((name, args))
+        wobbles = [args for name, args in out if name == "set_wobbel"]
+        if self._wobble_on and not wobbles:
+            head.append(("set_wobbel", (0, 0, 0.0)))     # the last list's wobble: off
+        self._wobble_on = any(a[0] > 0 and a[2] > 0 for a in wobbles)
         self.origin = [0] * len(head) + origin
         return head + out, marking
+
+    def wobble(self, amplitude_mm: float, frequency_hz: float) -> tuple[int, int, float]:
+        """(transversal, longitudinal bits, Hz) of a circular wobble; SafetyError beyond the
+        board's bit range."""
+        bits = int(round(amplitude_mm * self.s.k_bits_per_mm))
+        if bits > BITS_MAX:
+            raise SafetyError(f"RTC: wobble {amplitude_mm:g} mm is {bits} bits, beyond the "
+                              f"board's {BITS_MAX} at {self.s.k_bits_per_mm:g} bits/mm")
+        return bits, bits, float(frequency_hz)
 
     def forget(self) -> None:
         """The board's state is unknown (after a fault): send every setting again."""
         self._delays.clear()
+        self._wobble_on = True
 
     def commands_done(self, pointer: int, n_commands: int) -> int:
         """The board's list pointer (calls executed) → commands of the list fully done."""

@@ -62,6 +62,12 @@ BOUNDS: dict[str, Bound] = {
     "jump_speed_mm_s": Bound(1, 50000, "mm/s", "galvo jumps reach 50 m/s on the fastest heads"),
     "delay_us": Bound(0, 100000, "µs", _DELAY),
     "corner_deg": Bound(0, 180, "°", "a turn angle"),
+    "passes": Bound(1, 100, "", "a pen marks each path 1 … 100 times (deep engraving)"),
+    "wobble_amplitude_mm": Bound(0.001, 5, "mm", "a wobble widens a line by up to a few mm "
+                                 "(welding, bold marks)"),
+    "wobble_hz": Bound(1, 50000, "Hz", "galvos follow a wobble circle up to a few kHz; 50 kHz "
+                       "is beyond any"),
+    "wobble_pitch_mm": Bound(0.001, 10, "mm", "path length per wobble turn"),
     "sweeps": Bound(1, 1000, "", "back-and-forth passes of a projected line per list"),
     # -- camera (sequence.json, camera.json, height calibrations) --
     "image_px": Bound(1, 100000, "px", "image width/height: sensors are below 100k px a side"),

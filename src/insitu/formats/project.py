@@ -6,8 +6,13 @@ calibration references, cloud, placed patterns, job — with paths relative to t
      "calibration": {"height": "calib/height.json", "field": null, "camera": null},
      "scan": {"region": [-15, 15, -45, 45], "spacing_mm": 0.5, "exposure_ms": 10, "replay": null},
      "cloud": "part.cloud.ply",
-     "placements": [{"pattern": "logo.svg", "at_mm": [0, 25], "width_mm": 12, ...}],
-     "selected": 0, "job": "part.job.json"}
+     "placements": [{"pattern": "logo.svg", "at_mm": [0, 25], "width_mm": 12, ...,
+                     "pen": "deep"}],
+     "selected": 0, "job": "part.job.json",
+     "pens": [{"name": "mark", "power_pct": 30, ...}, ...], "default_pen": "mark"}
+
+``pens`` (optional; :mod:`insitu.formats.pens`): the project's pen table; a placement's
+``pen`` names one of them (of :data:`~insitu.formats.pens.DEFAULT_PENS` without a table).
 
 Saving (:func:`insitu.services.project.save_project`) writes the cloud (if it is not on disk
 yet) and the job beside the project first, then the project file, each atomically. Loading
@@ -31,6 +36,8 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError
 from insitu.errors import FormatError
 from insitu.formats.atomic import atomic_write_text
 from insitu.formats.bounds import each_within, within
+from insitu.formats.pens import (DEFAULT_PENS, PenName, PenTable, pen_table, pens_dict,
+                                 read_pens)
 from insitu.formats.validation import dump_json, one_of, read_json, validation_message
 
 PROJECT_FORMAT = "insitu-project/1"
@@ -113,6 +120,7 @@ class _Placement(_Strict):
     cross: bool = False
     fill: Literal["auto", "all", "none"] = "auto"   # a DXF's closed outlines
     beam_mm: Length = 0.05                         # strokes this wide or more: areas
+    pen: PenName | None = None                     # a pen of the table: read_project checks
 
 
 class _Project(_Strict):
@@ -126,6 +134,8 @@ class _Project(_Strict):
     placements: list[_Placement] = []
     selected: int = -1
     job: str | None = None
+    pens: list[Any] | None = None                  # checked by pen_table
+    default_pen: str | None = None
 
 
 @dataclass
@@ -133,7 +143,8 @@ class Project:
     """A project in memory, every path absolute. ``cloud`` is the .ply to read (load) or the
     one the cloud already is in (save; None: write it beside the project). ``placements``:
     dataclasses with the fields of a placement (pattern, at_mm, width_mm, rotate_deg, mode,
-    hatch_mm, hatch_angle_deg, cross, fill, beam_mm)."""
+    hatch_mm, hatch_angle_deg, cross, fill, beam_mm, pen); ``pens``: the pen table (None:
+    none saved, :data:`~insitu.formats.pens.DEFAULT_PENS` apply)."""
 
     rig: RigChoice = field(default_factory=RigChoice)
     height_cal: Path | None = None
@@ -144,6 +155,7 @@ class Project:
     placements: tuple[Any, ...] = ()
     selected: int = -1
     job: Path | None = None
+    pens: PenTable | None = None
 
 
 def beside(path: str | Path, suffix: str) -> Path:
@@ -196,8 +208,11 @@ def project_json(project: Project, path: Path) -> str:
                    exposure_ms=scan.exposure_ms, replay=_rel(scan.replay, folder),
                    speed_mm_s=scan.speed_mm_s),
         cloud=_rel(project.cloud, folder), placements=placements,
-        selected=project.selected, job=_rel(project.job, folder))
-    return dump_json(data.model_dump(mode="json")) + "\n"
+        selected=project.selected, job=_rel(project.job, folder),
+        **({} if project.pens is None else {"pens": pens_dict(project.pens)["pens"],
+                                            "default_pen": project.pens.default}))
+    unset = {"pens", "default_pen"} if project.pens is None else None
+    return dump_json(data.model_dump(mode="json", exclude=unset)) + "\n"
 
 
 def write_project(path: str | Path, project: Project) -> None:
@@ -206,12 +221,25 @@ def write_project(path: str | Path, project: Project) -> None:
     atomic_write_text(path, project_json(project, path))
 
 
+def load_pens(path: str | Path) -> PenTable:
+    """The pens of a pens file, or of a project (:data:`DEFAULT_PENS` when it saved none)."""
+    path = Path(path)
+    if not path.name.endswith(SUFFIX):
+        return read_pens(path)
+    raw = read_json(path)
+    if not isinstance(raw, dict) or raw.get("format") != PROJECT_FORMAT:
+        raise FormatError(f"{path}: format: expected {PROJECT_FORMAT!r} (a project's pens)")
+    if raw.get("pens") is None:
+        return DEFAULT_PENS
+    return pen_table(raw["pens"], raw.get("default_pen"), path, "default_pen")
+
+
 def read_project(path: str | Path, placement: Callable[..., Any],
                  modes: Collection[str]) -> Project:
     """Read and validate a project file; FormatError naming the file and the field. Each
     placed pattern is made by ``placement(pattern, at_mm, width_mm, rotate_deg, mode,
-    hatch_mm, hatch_angle_deg, cross, fill, beam_mm)``; ``modes``: the projection modes it may
-    name."""
+    hatch_mm, hatch_angle_deg, cross, fill, beam_mm, pen)``; ``modes``: the projection
+    modes it may name."""
     path = Path(path)
     raw = read_json(path)
     if not isinstance(raw, dict) or raw.get("format") != PROJECT_FORMAT:
@@ -226,16 +254,23 @@ def read_project(path: str | Path, placement: Callable[..., Any],
     except ValidationError as e:
         raise FormatError(validation_message(path, e)) from None
     folder = path.parent
+    if d.pens is None and d.default_pen is not None:
+        raise FormatError(f"{path}: default_pen: {d.default_pen!r} given, but no pens")
+    pens = None if d.pens is None else pen_table(d.pens, d.default_pen, path, "default_pen")
     placements = []
     for i, p in enumerate(d.placements):
         if p.mode not in modes:
             raise FormatError(f"{path}: placements[{i}].mode: expected {one_of(modes)}, "
                               f"got {p.mode!r}")
+        names = (pens or DEFAULT_PENS).names
+        if p.pen is not None and p.pen not in names:
+            raise FormatError(f"{path}: placements[{i}].pen: expected {one_of(names)}, "
+                              f"got {p.pen!r}")
         pattern = p.pattern if _SPEC.match(p.pattern) else str(
             _abs(p.pattern, folder, f"placements[{i}].pattern", path))
         placements.append(placement(pattern, tuple(p.at_mm), p.width_mm, p.rotate_deg, p.mode,
                                     p.hatch_mm, p.hatch_angle_deg, p.cross, p.fill,
-                                    p.beam_mm))
+                                    p.beam_mm, p.pen))
     return Project(
         rig=RigChoice(d.rig.workpiece, d.rig.seed, d.rig.binning,
                       _abs(d.rig.rig_file, folder, "rig.rig_file", path)),
@@ -247,4 +282,4 @@ def read_project(path: str | Path, placement: Callable[..., Any],
         cloud=_abs(d.cloud, folder, "cloud", path),
         placements=tuple(placements),
         selected=d.selected if -1 <= d.selected < len(placements) else -1,
-        job=_abs(d.job, folder, "job", path, must_exist=False))
+        job=_abs(d.job, folder, "job", path, must_exist=False), pens=pens)

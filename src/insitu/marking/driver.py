@@ -1,13 +1,16 @@
 """The scan-head driver: a mark job → low-level galvo commands (MeerK40t balormk's driver).
 
 Each 3-D target becomes mirror angles and a focus shift with the two-mirror kinematics
-(Mikkelstrup et al. Eqs. 3–5), through a field correction when one is configured. Per path:
+(Mikkelstrup et al. Eqs. 3–5), through a field correction when one is configured. Per path
+(one list), with the path's laser, delays and wobble (:meth:`MarkJob.path_laser` …):
 
     [set_jump_speed]  jump_abs_3d  jump_delay  [set_power set_frequency set_mark_speed]
-    laser_on  laser_on_delay  mark_abs_3d …(polygon_delay at corners)…  laser_off_delay
-    laser_off  mark_delay
+    [set_wobble]  laser_on  laser_on_delay  mark_abs_3d …(polygon_delay at corners)…
+    laser_off_delay  laser_off  mark_delay
 
-Settings are sent only when they change. The whole job is compiled, and checked against the
+and for each further pass ``jump_abs_3d jump_delay laser_on … mark_delay`` again (a path's
+passes are one list: a cut path marked again repeats them all). Settings are sent only when
+they change; ``set_wobble`` in every list whose path wobbles (it holds for its list only). The whole job is compiled, and checked against the
 field and the focus range, before the first command is sent (:mod:`.run` executes it).
 """
 
@@ -22,6 +25,7 @@ from insitu.devices.galvo import Command, FieldCorrection, joint_from_targets
 from insitu.geometry.beams import TwoMirrorHead
 from insitu.geometry.field import check_in_field
 from insitu.marking.checks import Limits, check_targets, point_name
+from insitu.formats.pens import Wobble
 from insitu.marking.job import LaserParams, MarkJob, Timing, corner_delays_us
 
 
@@ -80,29 +84,36 @@ class GalvoDriver:
         """Check the job, then one command list per path from ``first_path`` on (settings
         state fresh at ``first_path``). Raises SafetyError before anything is sent."""
         self.check(job)
-        timing = job.timing or self.timing
         state = _State()
-        return [self._path(job.paths[i].points, job.path_laser(i), timing, state)
+        return [self._path(job.paths[i].points, job.path_laser(i),
+                           job.path_timing(i, self.timing), state, job.path_passes(i),
+                           job.path_wobble(i))
                 for i in range(first_path, len(job.paths))]
 
-    def _path(self, pts: np.ndarray, laser: LaserParams, t: Timing, s: _State) -> list[Command]:
+    def _path(self, pts: np.ndarray, laser: LaserParams, t: Timing, s: _State, passes: int = 1,
+              wobble: Wobble | None = None) -> list[Command]:
         j = self.joints(pts)
         cmds: list[Command] = []
         _set(cmds, s, "jump_speed", "set_jump_speed", laser.jump_speed_mm_s)
-        cmds += [Command("jump_abs_3d", tuple(map(float, j[0]))),
-                 Command("jump_delay", (t.jump_delay_us,))]
-        _set(cmds, s, "power", "set_power", laser.power_pct)
-        _set(cmds, s, "frequency", "set_frequency", laser.frequency_khz)
-        _set(cmds, s, "mark_speed", "set_mark_speed", laser.mark_speed_mm_s)
-        cmds += [Command("laser_on"), Command("laser_on_delay", (t.laser_on_delay_us,))]
         corners = corner_delays_us(pts, t)
         marks = j[1:] if len(j) > 1 else j[:1]         # a one-point path marks a dot
-        for k, q in enumerate(marks, start=1):
-            cmds.append(Command("mark_abs_3d", tuple(map(float, q))))
-            if k < len(corners) and corners[k] > 0:
-                cmds.append(Command("polygon_delay", (float(corners[k]),)))
-        cmds += [Command("laser_off_delay", (t.laser_off_delay_us,)), Command("laser_off"),
-                 Command("mark_delay", (t.mark_delay_us,))]
+        for n in range(passes):
+            cmds += [Command("jump_abs_3d", tuple(map(float, j[0]))),
+                     Command("jump_delay", (t.jump_delay_us,))]
+            if n == 0:
+                _set(cmds, s, "power", "set_power", laser.power_pct)
+                _set(cmds, s, "frequency", "set_frequency", laser.frequency_khz)
+                _set(cmds, s, "mark_speed", "set_mark_speed", laser.mark_speed_mm_s)
+                if wobble is not None:
+                    cmds.append(Command("set_wobble", (float(wobble.amplitude_mm), float(
+                        wobble.hz(laser.mark_speed_mm_s)))))
+            cmds += [Command("laser_on"), Command("laser_on_delay", (t.laser_on_delay_us,))]
+            for k, q in enumerate(marks, start=1):
+                cmds.append(Command("mark_abs_3d", tuple(map(float, q))))
+                if k < len(corners) and corners[k] > 0:
+                    cmds.append(Command("polygon_delay", (float(corners[k]),)))
+            cmds += [Command("laser_off_delay", (t.laser_off_delay_us,)), Command("laser_off"),
+                     Command("mark_delay", (t.mark_delay_us,))]
         return cmds
 
     def preview(self, job: MarkJob, outline: str = "hull", speed_mm_s: float = 1000.0,

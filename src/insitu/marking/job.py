@@ -3,7 +3,9 @@
 Each path: jump (laser off) to its first point, then mark (laser on) through the rest. Points:
 (N, 3) float64 arrays, world frame, mm, stored to 1 nm. A path's own ``laser`` overrides the
 job's, field by field. ``timing`` (an addition of ours; optional) holds the scan-head delays,
-µs. Written atomically; read back with validation (one-line FormatError naming the field).
+µs. A path's ``laser`` may also carry (our additions, optional): ``pen`` (the pen's name),
+``passes``, ``delays_us`` and ``wobble`` (:mod:`insitu.formats.pens`) — a job without them
+marks each path once with the job's timing and no wobble. Written atomically; read back with validation (one-line FormatError naming the field).
 """
 
 from __future__ import annotations
@@ -20,6 +22,7 @@ from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, PlainSeriali
 from insitu.errors import FormatError
 from insitu.formats.atomic import atomic_write_text
 from insitu.formats.bounds import within
+from insitu.formats.pens import Delays, Passes, Pen, PenName, Wobble
 from insitu.formats.validation import bad, read_json, validation_message
 
 JOB_FORMAT = "insitu-job/1"
@@ -87,12 +90,24 @@ class LaserParams(_Model):
 
 
 class LaserOverride(_Model):
-    """A path's own laser parameters; None: the job's."""
+    """A path's own laser parameters; None: the job's (``passes``: 1, ``delays_us``: the
+    job's timing, ``wobble``: off). ``pen``: the name of the pen they came from."""
 
+    pen: PenName | None = None
     power_pct: Percent | None = None
     frequency_khz: Frequency | None = None
     mark_speed_mm_s: MarkSpeed | None = None
     jump_speed_mm_s: JumpSpeed | None = None
+    passes: Passes | None = None
+    delays_us: Delays | None = None
+    wobble: Wobble | None = None
+
+    @classmethod
+    def of_pen(cls, pen: Pen) -> "LaserOverride":
+        """Every setting of ``pen`` (wobble only when on)."""
+        return cls(pen=pen.name, power_pct=pen.power_pct, frequency_khz=pen.frequency_khz,
+                   mark_speed_mm_s=pen.mark_speed_mm_s, jump_speed_mm_s=pen.jump_speed_mm_s,
+                   passes=pen.passes, delays_us=pen.delays_us, wobble=pen.wobble)
 
 
 class Timing(_Model):
@@ -131,18 +146,57 @@ class MarkJob(_Model):
         over = self.paths[i].laser
         if over is None:
             return self.laser
-        return self.laser.model_copy(update={k: v for k, v in over.model_dump().items()
-                                             if v is not None and k in LaserParams.model_fields})
+        return self.laser.model_copy(update={k: getattr(over, k) for k in LaserParams.model_fields
+                                             if getattr(over, k) is not None})
+
+    def path_timing(self, i: int, timing: Timing | None = None) -> Timing:
+        """The delays of path ``i``: its own ``delays_us``, else the job's timing, else
+        ``timing``, else the defaults (the corner threshold is always the job's)."""
+        base = self.timing or timing or Timing()
+        over = self.paths[i].laser
+        d = over.delays_us if over is not None else None
+        if d is None:
+            return base
+        return base.model_copy(update={"laser_on_delay_us": d.laser_on,
+                                       "laser_off_delay_us": d.laser_off,
+                                       "jump_delay_us": d.jump, "mark_delay_us": d.mark,
+                                       "polygon_delay_us": d.polygon})
+
+    def path_passes(self, i: int) -> int:
+        """How many times path ``i`` is marked (1 unless its ``laser`` says)."""
+        over = self.paths[i].laser
+        return over.passes if over is not None and over.passes is not None else 1
+
+    def path_wobble(self, i: int) -> Wobble | None:
+        over = self.paths[i].laser
+        return None if over is None else over.wobble
+
+    def pens(self) -> dict[str, list[int]]:
+        """Pen name → the paths marked with it, in order of first use ("" for paths
+        without)."""
+        out: dict[str, list[int]] = {}
+        for i, p in enumerate(self.paths):
+            out.setdefault(p.laser.pen if p.laser is not None and p.laser.pen else "", []).append(i)
+        return out
 
     def digest(self) -> str:
-        """sha256 of what would be marked (points, lasers, timing): identifies the job."""
+        """sha256 of what would be marked (points, lasers, timing): identifies the job. The
+        path keys added with pens count only when set (an older job's digest is unchanged)."""
         h = hashlib.sha256()
         h.update(self.laser.model_dump_json().encode())
         h.update((self.timing.model_dump_json() if self.timing else "").encode())
         for p in self.paths:
             h.update(np.ascontiguousarray(p.points).tobytes())
-            h.update((p.laser.model_dump_json() if p.laser else "-").encode())
+            h.update((p.laser.model_dump_json(exclude=_unset_additions(p.laser))
+                      if p.laser else "-").encode())
         return h.hexdigest()
+
+
+_ADDED = ("pen", "passes", "delays_us", "wobble")
+
+
+def _unset_additions(over: LaserOverride) -> set[str]:
+    return {k for k in _ADDED if getattr(over, k) is None}
 
 
 def make_job(paths: list[np.ndarray], laser: LaserParams | None = None,
@@ -152,6 +206,13 @@ def make_job(paths: list[np.ndarray], laser: LaserParams | None = None,
     overrides = overrides or {}
     return MarkJob(laser=laser or LaserParams(), timing=timing,
                    paths=[MarkPath(points=p, laser=overrides.get(i)) for i, p in enumerate(paths)])
+
+
+def with_pen(job: MarkJob, pen: Pen) -> MarkJob:
+    """``job`` with every path marked by ``pen`` (its settings in each path's ``laser``)."""
+    over = LaserOverride.of_pen(pen)
+    return job.model_copy(update={"paths": [p.model_copy(update={"laser": over})
+                                            for p in job.paths]})
 
 
 def job_json(job: MarkJob) -> str:
@@ -221,24 +282,41 @@ class TimeEstimate:
     paths: int
 
 
+def _path_costs(job: MarkJob, timing: Timing | None, start, first_path: int):
+    """Per path from ``first_path`` on: (jump mm, mark mm, jump s, mark s, delays s) — each
+    pass its jump (the first from where the last path ended, the others back to the path's
+    start), its marks and its delays (jump, laser on and off, mark, polygon at corners)."""
+    pos = np.asarray(start, float)
+    for i in range(first_path, len(job.paths)):
+        pts, las, t = job.paths[i].points, job.path_laser(i), job.path_timing(i, timing)
+        n = job.path_passes(i)
+        m = n * float(np.linalg.norm(np.diff(pts, axis=0), axis=1).sum())
+        j = float(np.linalg.norm(pts[0] - pos)) + (n - 1) * float(np.linalg.norm(pts[-1] - pts[0]))
+        per_pass_us = (t.jump_delay_us + t.laser_on_delay_us + t.laser_off_delay_us
+                       + t.mark_delay_us + float(corner_delays_us(pts, t).sum()))
+        yield j, m, j / las.jump_speed_mm_s, m / las.mark_speed_mm_s, n * per_pass_us * 1e-6
+        pos = pts[-1]
+
+
 def estimate_time(job: MarkJob, timing: Timing | None = None, start=(0.0, 0.0, 0.0),
                   first_path: int = 0) -> TimeEstimate:
     """Marking time of the job from path ``first_path`` on, starting at ``start`` (3,) mm:
-    jumps at jump speed, marks at mark speed, per path jump + laser on + laser off + mark
-    delays, and polygon delays at corners. ``timing``: the job's, else this, else defaults."""
-    t = job.timing or timing or Timing()
-    pos = np.asarray(start, float)
-    jump_s = mark_s = delay_us = jump_mm = mark_mm = 0.0
-    per_path_us = t.jump_delay_us + t.laser_on_delay_us + t.laser_off_delay_us + t.mark_delay_us
-    for i in range(first_path, len(job.paths)):
-        pts, las = job.paths[i].points, job.path_laser(i)
-        j = float(np.linalg.norm(pts[0] - pos))
-        m = float(np.linalg.norm(np.diff(pts, axis=0), axis=1).sum())
-        jump_mm, mark_mm = jump_mm + j, mark_mm + m
-        jump_s += j / las.jump_speed_mm_s
-        mark_s += m / las.mark_speed_mm_s
-        delay_us += per_path_us + float(corner_delays_us(pts, t).sum())
-        pos = pts[-1]
-    delay_s = delay_us * 1e-6
+    jumps at each path's jump speed, marks at its mark speed, every pass with the path's
+    delays. ``timing``: the job's, else this, else defaults."""
+    c = np.array(list(_path_costs(job, timing, start, first_path))).reshape(-1, 5).sum(0)
+    jump_mm, mark_mm, jump_s, mark_s, delay_s = map(float, c)
     return TimeEstimate(jump_s + mark_s + delay_s, jump_s, mark_s, delay_s, jump_mm, mark_mm,
                         len(job.paths) - first_path)
+
+
+def path_seconds(job: MarkJob, timing: Timing | None = None) -> np.ndarray:
+    """(N,) estimated seconds of each path (its passes, jumps and delays included)."""
+    c = np.array(list(_path_costs(job, timing, (0.0, 0.0, 0.0), 0))).reshape(-1, 5)
+    return c[:, 2:].sum(1)
+
+
+def time_left(seconds: np.ndarray, done: int, elapsed_s: float) -> float:
+    """Seconds left after ``done`` of the paths whose estimates are ``seconds`` (N,) took
+    ``elapsed_s``: the estimate of the rest, scaled by how the done ones went."""
+    est_done, rest = float(seconds[:done].sum()), float(seconds[done:].sum())
+    return rest if est_done <= 0 or elapsed_s <= 0 else elapsed_s * rest / est_done

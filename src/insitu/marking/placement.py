@@ -22,7 +22,8 @@ class Placement:
     ``mode``: a key of ``marking.PROJECTIONS``; ``hatch_mm``: fill spacing (None: outlines
     only — but a code is hatched along its modules); ``hatch_angle_deg``, ``cross``: the
     hatch's direction(s); ``fill``: a DXF's closed outlines, auto|all|none; ``beam_mm``: the
-    beam's width (strokes at least this wide, once placed, are marked as areas)."""
+    beam's width (strokes at least this wide, once placed, are marked as areas); ``pen``:
+    the name of its pen (:mod:`insitu.formats.pens`; None: the table's default)."""
 
     pattern: str
     at_mm: tuple[float, float]
@@ -34,6 +35,7 @@ class Placement:
     cross: bool = False
     fill: str = "auto"
     beam_mm: float = BEAM_MM
+    pen: str | None = None
 
     def placed(self) -> Pattern:
         """The pattern loaded and moved to its place, world mm (FormatError if it cannot be).

@@ -21,7 +21,8 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
-from insitu.devices.galvo import Command, check_lists, list_digest, position_of
+from insitu.devices.galvo import (SETTINGS, WOBBLE, Command, check_lists, list_digest,
+                                  position_of)
 from insitu.errors import ConfigError, DeviceError, FormatError, SafetyError
 from insitu.marking.driver import GalvoDriver
 from insitu.marking.job import MarkJob
@@ -54,22 +55,32 @@ def _marks(commands) -> int:
 
 
 def resume_list(commands: list[Command], skip_marks: int) -> list[Command]:
-    """A path's list without its first ``skip_marks`` marks: its settings, the jump going to
-    where the last skipped mark ended, then the laser on and the remaining marks. Empty when
-    no mark is left."""
+    """A path's list without its first ``skip_marks`` marks (counted over all its passes):
+    its settings, the jump of the pass the board stopped in going to where the last skipped
+    mark ended, then the laser on, that pass's remaining marks and the passes after it; a
+    pass left without marks keeps only its settings. Empty when no mark is left."""
     out: list[Command] = []
-    seen = 0
+    seen, jump = 0, 0
     for c in commands:
+        if c.op == "jump_abs_3d":
+            jump = len(out)
         if c.op != "mark_abs_3d":
             out.append(c)
             continue
         seen += 1
         if seen <= skip_marks:
-            jump = next(j for j, d in enumerate(out) if d.op == "jump_abs_3d")
             out[jump] = Command("jump_abs_3d", c.args)
             continue
         out.append(c)
-    return out if seen > skip_marks else []
+    if seen <= skip_marks:
+        return []
+    starts = [i for i, c in enumerate(out) if c.op == "jump_abs_3d"] + [len(out)]
+    kept = out[:starts[0]]
+    for a, b in zip(starts, starts[1:]):
+        part = out[a:b]
+        kept += part if any(c.op == "mark_abs_3d" for c in part) else [
+            c for c in part if c.op in SETTINGS or c.op == WOBBLE]
+    return kept
 
 
 def history(job: MarkJob, progress_path: str | Path | None,

@@ -15,10 +15,12 @@ import numpy as np
 from insitu.devices.galvo import check_lists
 from insitu.errors import FormatError, InsituError, SafetyError
 from insitu.formats.atomic import atomic_write_bytes
+from insitu.formats.pens import DEFAULT_PENS, PenTable
 from insitu.formats.pointcloud import PointCloud, read_ply
 from insitu.marking import (GalvoDriver, JournalSummary, LaserParams, MarkJob, Placement,
                             Projection, RunResult, TimeEstimate, estimate_time, history,
-                            plan_job, progress_path_for, run_job, run_preview, write_job)
+                            plan_job, progress_path_for, run_job, run_preview, with_pen,
+                            write_job)
 from insitu.marking.verify import CodeCheck, check_code, unrolled
 from insitu.patterns import Pattern
 from insitu.services.common import Progress
@@ -57,11 +59,17 @@ def check_codes(job: MarkJob, pattern: Pattern, projection: Projection,
 
 
 def plan_mark(cloud: PointCloud | str | Path, placement: Placement, driver: GalvoDriver,
-              laser: LaserParams | None = None, force: bool = False) -> MarkPlan:
+              laser: LaserParams | None = None, force: bool = False,
+              pens: PenTable | None = None) -> MarkPlan:
     """Place, project and check: SafetyError (naming the place) for a pattern outside the
     field or focus range, over a hole or a wall, or whose corrected commands leave the field;
-    FormatError for a bad pattern, or for a code that would not decode from the planned marks
-    (unless ``force``). Nothing is written or fired."""
+    FormatError for a bad pattern, a pen not in ``pens``, or a code that would not decode from
+    the planned marks (unless ``force``). With ``pens`` (or a placement naming a pen: then of
+    :data:`DEFAULT_PENS`) every path carries its pen's settings. Nothing is written or
+    fired."""
+    pen = None
+    if pens is not None or placement.pen is not None:
+        pen = (pens or DEFAULT_PENS).pen(placement.pen, f"placement {placement.pattern}")
     pattern = placement.placed()
     polylines = placement.polylines(pattern)
     if not isinstance(cloud, PointCloud):
@@ -69,6 +77,8 @@ def plan_mark(cloud: PointCloud | str | Path, placement: Placement, driver: Galv
     job, proj = plan_job(polylines, cloud, driver.limits, placement.mode, laser,
                          anchor=placement.at_mm)
     job = job.model_copy(update={"rig": cloud.rig})     # the job records the cloud's rig
+    if pen is not None:
+        job = with_pen(job, pen)
     driver.check(job)
     codes = check_codes(job, pattern, proj, placement.beam_mm)
     bad = [c for c in codes if not c.ok]
@@ -93,14 +103,15 @@ class PlanOutcome:
 
 
 def plan_all(cloud: PointCloud, placements, driver: GalvoDriver,
-             laser: LaserParams | None = None) -> list[PlanOutcome]:
+             laser: LaserParams | None = None, pens: PenTable | None = None
+             ) -> list[PlanOutcome]:
     """:func:`plan_mark` of each placement; a refusal is kept as its message (and place).
     A code whose quiet zone another placement's marks enter is refused, and so is the
     placement whose marks enter it (each naming the other, the place where they meet)."""
     out = []
     for p in placements:
         try:
-            out.append(PlanOutcome(plan=plan_mark(cloud, p, driver, laser)))
+            out.append(PlanOutcome(plan=plan_mark(cloud, p, driver, laser, pens=pens)))
         except SafetyError as e:
             out.append(PlanOutcome(error=str(e), where=e.where_mm))
         except InsituError as e:

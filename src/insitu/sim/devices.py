@@ -9,7 +9,11 @@ the nominal forward model, and the true beam for that command (true mirror geome
 true field distortion, ``rig.beams``) is ray-cast into the true scene. Where it hits, with the
 laser on, the surface is burnt: a :class:`~insitu.sim.marks.Burn` polyline whose width is the
 1/e² spot diameter at the hit, growing with the distance from the dynamic focus along the true
-beam. The laser burns on any move while it is on (a jump with the laser on would show).
+beam. The laser burns on any move while it is on (a jump with the laser on would show). A
+wobble (``set_wobble``, for the rest of its list) sweeps the spot round a circle of its
+amplitude as it moves: the burn is wider by twice the amplitude. Each pass of a path burns
+again: a burn along the last one's samples counts as its next pass (``Burn.passes``), which
+the inspection camera sees darker.
 
 Burns are kept on the world (``SimWorld.burns``), so a resumed job on a new controller adds to
 the same marks and :class:`SimInspectionCamera` sees them all.
@@ -126,6 +130,7 @@ class SimController:
         self.power_pct = 0.0
         self.frequency_khz = 20.0
         self.speed = {"mark": 500.0, "jump": 3000.0}
+        self.wobble_mm = 0.0
         self.elapsed_s = 0.0
         self._open: list[tuple[np.ndarray, np.ndarray]] = []
         self._stopped = False
@@ -148,6 +153,7 @@ class SimController:
         digest = list_digest(commands)
         self._position = ListPosition(digest, 0)
         self._note(f"L {digest} {len(commands)}")
+        self.wobble_mm = 0.0                   # a wobble holds for its list only
         for i, c in enumerate(commands):
             if self._stopped:               # laser_off (from any thread) stops the list
                 break
@@ -197,6 +203,8 @@ class SimController:
             self.frequency_khz = float(c.args[0])
         elif op in ("set_mark_speed", "set_jump_speed"):
             self.speed[op[4:8]] = float(c.args[0])
+        elif op == "set_wobble":
+            self.wobble_mm = float(c.args[0]) if c.args[1] > 0 else 0.0
         elif op.endswith("_delay"):
             self.elapsed_s += float(c.args[0]) * 1e-6
         else:
@@ -238,15 +246,21 @@ class SimController:
         s_hit = np.einsum("ij,ij->i", hits.points - origins, dirs)
         width = 2.0 * rig.optics.beam_radius_mm(s_hit - s_focus)
         pts = np.where(hits.hit[:, None], hits.points, np.nan)
-        return pts, np.where(hits.hit, width, np.nan)
+        return pts, np.where(hits.hit, width + 2.0 * self.wobble_mm, np.nan)
 
     def _close_burn(self) -> None:
         if self._open:
             pts = np.vstack([p for p, _ in self._open])
             w = np.concatenate([w for _, w in self._open])
             burn = Burn(pts, w, self.power_pct)
-            self.burns.append(burn)
-            self.world.burns.append(burn)
+            last = self.burns[-1] if self.burns else None
+            if last is not None and self.world.burns and self.world.burns[-1] is last and (
+                    last.again(burn)):
+                burn = Burn(pts, np.fmax(w, last.widths), self.power_pct, last.passes + 1)
+                self.burns[-1] = self.world.burns[-1] = burn      # a further pass: darker
+            else:
+                self.burns.append(burn)
+                self.world.burns.append(burn)
         self._open = []
 
 

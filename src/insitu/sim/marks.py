@@ -27,23 +27,31 @@ MARK_CONTRAST = 0.75      # a mark's centre reflects 25 % of the bare surface's 
 @dataclass(frozen=True)
 class Burn:
     """points: (N, 3) mm on the true surface (NaN rows where the beam missed every part);
-    widths: (N,) mm, 1/e² diameter of the spot there; power_pct of the laser."""
+    widths: (N,) mm, 1/e² diameter of the spot there; power_pct of the laser; ``passes``:
+    how many times the beam went this way (each pass darkens what the last one left)."""
 
     points: np.ndarray
     widths: np.ndarray
     power_pct: float = 0.0
+    passes: int = 1
+
+    def again(self, other: "Burn") -> bool:
+        """Whether ``other`` is another pass along this burn (same samples)."""
+        return (self.points.shape == other.points.shape
+                and np.array_equal(self.points, other.points, equal_nan=True))
 
 
-def _burn_samples(burns: list[Burn]) -> tuple[np.ndarray, np.ndarray]:
-    """Burn polylines resampled to ≤ a quarter of their width: (M, 3) points, (M,) radii."""
-    pts, rad = [], []
+def _burn_samples(burns: list[Burn]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Burn polylines resampled to ≤ a quarter of their width: (M, 3) points, (M,) radii,
+    (M,) passes."""
+    pts, rad, passes = [], [], []
     for b in burns:
         p, w = np.asarray(b.points, float), np.asarray(b.widths, float)
         ok = np.isfinite(p).all(1) & np.isfinite(w)
         for run in np.split(np.arange(len(p)), np.flatnonzero(np.diff(ok.astype(int)) != 0) + 1):
             if not ok[run[0]]:
                 continue
-            q, r = p[run], w[run] / 2
+            q, r, k0 = p[run], w[run] / 2, len(rad)
             pts.append(q[:1])
             rad.append(r[:1])
             if len(q) > 1:
@@ -53,17 +61,19 @@ def _burn_samples(burns: list[Burn]) -> tuple[np.ndarray, np.ndarray]:
                     t = (np.arange(1, n[i] + 1) / n[i])[:, None]
                     pts.append(q[i] + t * (q[i + 1] - q[i]))
                     rad.append(r[i] + t[:, 0] * (r[i + 1] - r[i]))
+            passes.append(np.full(sum(map(len, rad[k0:])), b.passes))
     if not pts:
-        return np.zeros((0, 3)), np.zeros(0)
-    return np.vstack(pts), np.concatenate(rad)
+        return np.zeros((0, 3)), np.zeros(0), np.zeros(0)
+    return np.vstack(pts), np.concatenate(rad), np.concatenate(passes)
 
 
 def mark_darkness(points: np.ndarray, burns: list[Burn],
                   contrast: float = MARK_CONTRAST) -> np.ndarray:
-    """(N,) fraction of light a surface point (N, 3) loses to the burns: contrast ×
-    exp(−2 d²/r²), d its distance to the nearest burn sample, r the spot radius there."""
+    """(N,) fraction of light a surface point (N, 3) loses to the burns: c × exp(−2 d²/r²),
+    d its distance to the nearest burn sample, r the spot radius there, c = 1 − (1 −
+    contrast)^passes (each pass darkens what the last one left)."""
     out = np.zeros(len(points))
-    samples, radius = _burn_samples(burns)
+    samples, radius, passes = _burn_samples(burns)
     if len(samples) == 0 or len(points) == 0:
         return out
     tree = cKDTree(samples)
@@ -72,8 +82,8 @@ def mark_darkness(points: np.ndarray, burns: list[Burn],
     d, idx = d.reshape(len(points), k), idx.reshape(len(points), k)
     ok = np.isfinite(d)
     r = np.append(radius, 1.0)[idx]
-    dark = np.where(ok, np.exp(-2 * (np.where(ok, d, 0) / r) ** 2), 0.0).max(1)
-    return contrast * dark
+    c = 1.0 - (1.0 - contrast) ** np.append(passes, 1.0)[idx]
+    return np.where(ok, c * np.exp(-2 * (np.where(ok, d, 0) / r) ** 2), 0.0).max(1)
 
 
 class RoomLightView:

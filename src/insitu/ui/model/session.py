@@ -9,6 +9,7 @@ from pathlib import Path
 
 from psygnal import Signal
 
+from insitu.formats.pens import DEFAULT_PENS, PenTable
 from insitu.formats.pointcloud import PointCloud
 from insitu.formats.project import RigChoice
 from insitu.marking import MarkJob
@@ -47,6 +48,14 @@ class PlacementHistory:
         self._merge_key = merge_key
         self.changed.emit()
 
+    def rewrite(self, change) -> None:
+        """Apply ``change`` (Placement → Placement) to every state, undo and redo included
+        (for what is not undoable itself, such as a pen renamed or removed)."""
+        before = self.items
+        self._states = [tuple(change(p) for p in state) for state in self._states]
+        if self.items != before:
+            self.changed.emit()
+
     def reset(self, items: tuple[Placement, ...] = ()) -> None:
         """Start a new history at ``items`` (nothing to undo)."""
         self._states, self._index, self._merge_key = [tuple(items)], 0, None
@@ -79,6 +88,7 @@ class Session:
     live_points_added = Signal(object)      # (K, 3) float64 mm: points of one scan frame
     selection_changed = Signal()
     plans_changed = Signal()
+    pens_changed = Signal()
 
     def __init__(self) -> None:
         self.rig_choice = RigChoice()
@@ -92,6 +102,7 @@ class Session:
         self.selected = -1
         self.plans: list[PlanOutcome] = []
         self.project_path: Path | None = None
+        self.pens: PenTable = DEFAULT_PENS
         self.placements.changed.connect(self._clamp_selection)
 
     # -- cloud ---------------------------------------------------------------------------
@@ -139,6 +150,25 @@ class Session:
         elif self.selected < 0 and n:
             self.selected = 0
             self.selection_changed.emit()
+
+    # -- pens ----------------------------------------------------------------------------
+    def set_pens(self, pens: PenTable | None, renamed: tuple[str, str] | None = None) -> None:
+        """The pen table the placements are planned with (None: :data:`DEFAULT_PENS`); a
+        placement naming a pen ``renamed`` (old, new) follows it, one naming a pen the table
+        no longer has takes the default — in every state of the undo history, so that an
+        undo never brings back a pen that is gone."""
+        pens = pens or DEFAULT_PENS
+        if pens == self.pens:
+            return
+        self.pens = pens
+        names = dict([renamed] if renamed else [])
+        self.placements.rewrite(lambda p: p if p.pen is None or p.pen in pens.names and (
+            p.pen not in names) else replace(p, pen=names.get(p.pen)))
+        self.pens_changed.emit()
+
+    def pen_of(self, placement: Placement):
+        """The pen ``placement`` is marked with."""
+        return self.pens.pen(placement.pen)
 
     # -- plans ---------------------------------------------------------------------------
     def set_plans(self, plans: list[PlanOutcome]) -> None:

@@ -78,7 +78,8 @@ class MainWindow(QMainWindow):
         self._plan_timer = QTimer(self, singleShot=True, interval=PLAN_DELAY_MS)
         self._plan_timer.timeout.connect(self.plan)
         self._plan_again = False
-        for sig in (self.session.placements.changed, self.session.cloud_changed):
+        for sig in (self.session.placements.changed, self.session.cloud_changed,
+                    self.session.pens_changed):
             sig.connect(lambda: self._plan_timer.start())
         self.view.pattern_moved.connect(self._moved)
         self.view.rotate_dragged.connect(self._rotated)
@@ -291,14 +292,15 @@ class MainWindow(QMainWindow):
         if self.runner.running("plan"):
             self._plan_again = True
             return
-        driver, path = self.station.driver, self.job_path()
-        self.runner.start("plan", lambda p, c, f: (items, ops.plan_preview(cloud, items, driver,
-                                                                            path)),
+        driver, path, pens = self.station.driver, self.job_path(), s.pens
+        self.runner.start("plan", lambda p, c, f: (items, pens, ops.plan_preview(
+            cloud, items, driver, path, pens)),
                           self._planned, lambda m, _c: self.show_error(m))
 
     def _planned(self, result) -> None:
-        items, plans = result
-        if items == self.session.placements.items and not self._plan_again:
+        items, pens, plans = result
+        current = (self.session.placements.items, self.session.pens)
+        if (items, pens) == current and not self._plan_again:
             self.session.set_plans(plans)
         else:
             self._plan_again = False
@@ -344,6 +346,7 @@ class MainWindow(QMainWindow):
             self.calib_label.setText(f"height calibration {age_text(opened.height_cal.created)}")
         self.binding.show_region(pr.scan.region)
         s.set_cloud(opened.cloud, pr.cloud)
+        s.set_pens(pr.pens)
         s.placements.reset(pr.placements)
         s.select(pr.selected)
         self._remember(path)
@@ -360,7 +363,7 @@ class MainWindow(QMainWindow):
         s = self.session
         project = Project(s.rig_choice, s.height_cal_path, s.field_path, s.camera_cal_path,
                           self.scan_panel.settings(), s.cloud_path, s.placements.items,
-                          s.selected, None)
+                          s.selected, None, s.pens)
         # a job with variable data is written when it is marked, with the serial it takes
         job = None if is_templated(s.placements.items) else self.mark_panel.job()
         try:

@@ -6,16 +6,19 @@ from __future__ import annotations
 
 import time
 
+import numpy as np
+
 from PySide6.QtWidgets import QMessageBox, QVBoxLayout, QWidget
 
 from insitu.errors import InsituError
 
-from insitu.marking import LaserParams, MarkJob, estimate_time
+from insitu.marking import LaserParams, MarkJob, estimate_time, path_seconds, time_left
 from insitu.services.mark import StationRun
 from insitu.services.serials import is_templated
 from insitu.ui.model import operations as ops
 from insitu.ui.model import scene_data as sd
 from insitu.ui.qt.forms import icon, load_form
+from insitu.ui.qt.pens_panel import PensRow
 
 
 class MarkPanel(QWidget):
@@ -30,13 +33,18 @@ class MarkPanel(QWidget):
         ui.markButton.clicked.connect(self.mark)
         ui.abortButton.clicked.connect(self.abort)
         ui.abortButton.setIcon(icon("abort"))
+        self.pens_row = PensRow(self.session, self)     # each placement's pen sets its laser
+        ui.layout().insertWidget(0, self.pens_row)
+        ui.laserBox.hide()
         for spin in (ui.powerSpin, ui.frequencySpin, ui.speedSpin):
             spin.valueChanged.connect(self.refresh)
         self.session.plans_changed.connect(self.refresh)
         self.session.cloud_changed.connect(self.refresh)
         self.session.rig_changed.connect(self.refresh)
+        self.session.pens_changed.connect(self.refresh)
         window.runner.busy_changed.connect(self._busy)
         self._t0 = 0.0
+        self._seconds = np.zeros(0)
         self.last_result = None
         self.refresh()
 
@@ -89,10 +97,11 @@ class MarkPanel(QWidget):
             return
         path, items = self.window_.job_path(), self.session.placements.items
         if is_templated(items):           # a new part: planned again with the serial it takes
-            cloud, laser = self.session.cloud, self.laser()
+            cloud, laser, pens = self.session.cloud, self.laser(), self.session.pens
 
             def work(progress, cancel, _f):
-                return ops.mark_serial(items, cloud, laser, station, path, progress, cancel)
+                return ops.mark_serial(items, cloud, laser, station, path, progress, cancel,
+                                       pens)
         else:
             try:
                 choice = self.ask_resume(ops.unfinished(job, path))
@@ -107,6 +116,7 @@ class MarkPanel(QWidget):
         task = self.window_.runner.start("mark", work, self._marked, self._failed)
         if task is not None:
             self._t0 = time.perf_counter()
+            self._seconds = path_seconds(job, station.driver.timing)   # passes, delays
             self.ui.progressBar.setValue(0)
             self.ui.resultLabel.setText("marking…")
             task.progress.connect(self._progress)
@@ -143,7 +153,8 @@ class MarkPanel(QWidget):
         self.ui.progressBar.setMaximum(total)
         self.ui.progressBar.setValue(done)
         elapsed = time.perf_counter() - self._t0
-        left = elapsed / max(done, 1) * (total - done)
+        left = (time_left(self._seconds, done, elapsed) if len(self._seconds) == total
+                else elapsed / max(done, 1) * (total - done))
         self.ui.timeLabel.setText(f"path {done} of {total}, about {left:.1f} s left")
 
     def _marked(self, outcome: StationRun) -> None:

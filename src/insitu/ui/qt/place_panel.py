@@ -16,6 +16,7 @@ from insitu.patterns import FILE_SUFFIXES, is_spec
 from insitu.marking import Placement
 from insitu.ui.model.scene_data import base_pattern, code_hatch
 from insitu.ui.qt.forms import load_form
+from insitu.ui.qt.pens_panel import add_pen_chooser
 
 PATTERN_FILES = f"Patterns ({' '.join('*' + s for s in FILE_SUFFIXES)})"
 
@@ -49,6 +50,7 @@ class PlacePanel(QWidget):
         ui.modeCombo.currentIndexChanged.connect(lambda _i: self._edited("mode"))
         ui.hatchCheck.toggled.connect(lambda _b: self._edited("hatch_mm"))
         ui.crossCheck.toggled.connect(lambda _b: self._edited("cross"))
+        self.pen_chooser = add_pen_chooser(ui.placeBox.layout(), self.session, ui.placeBox)
         self.session.placements.changed.connect(self.refresh)
         self.session.selection_changed.connect(self.refresh)
         self.session.plans_changed.connect(self.show_outcome)

@@ -1,7 +1,8 @@
 """Keeps the 3-D view showing the session: the cloud (and its live growth during a scan;
 with the camera's ambient gray when it has one), the scan field and region, each pattern
-once — its projected paths on the surface when it has a plan, else as placed, above the
-part — and a red cross where a check refused it; frames the cloud and the patterns."""
+once — its projected paths on the surface in its pen's colour when it has a plan, else as
+placed, above the part — and a red cross where a check refused it; frames the cloud and the
+patterns."""
 
 from __future__ import annotations
 
@@ -18,10 +19,11 @@ class SceneBinding:
         self.session, self.view = session, view
         self.top_z = 0.0                    # where unprojected patterns are drawn
         self._live_range: list[float] | None = None
+        self._pen_layers: set[str] = set()
         session.cloud_changed.connect(self.show_cloud)
         session.live_points_added.connect(self.add_live_points)
         for sig in (session.placements.changed, session.selection_changed,
-                    session.plans_changed):
+                    session.plans_changed, session.pens_changed):
             sig.connect(self.show_patterns)
 
     def show_field(self, field_size_mm, z_range_mm) -> None:
@@ -89,7 +91,8 @@ class SceneBinding:
         """Each pattern once: its projected paths where it will be marked when it has a
         plan (the selected one's handles and outline at their height), else as placed."""
         s = self.session
-        placed, selected, projected, warn = [], [], [], []
+        placed, selected, warn = [], [], []
+        projected: dict[str, list] = {}                   # pen colour → its paths' segments
         handles, handle_z = None, self.top_z
         for i, p in enumerate(s.placements.items):
             outcome = s.plans[i] if i < len(s.plans) else None
@@ -101,7 +104,7 @@ class SceneBinding:
                 except InsituError:
                     continue
             if paths is not None:
-                projected.append(sd.segments(paths))
+                projected.setdefault(s.pen_of(p).colour, []).append(sd.segments(paths))
                 if i == s.selected and len(outcome.plan.projection.points):
                     handle_z = float(np.median(outcome.plan.projection.points[:, 2]))
                 continue
@@ -115,7 +118,13 @@ class SceneBinding:
         cat = (lambda a: np.concatenate(a) if a else np.zeros((0, 3), np.float32))
         self.view.set_lines("placed", cat(placed), sd.PLACED_COLOUR)
         self.view.set_lines("selected", cat(selected), sd.SELECTED_COLOUR)
-        self.view.set_lines("projected", cat(projected), sd.PROJECTED_COLOUR)
+        layers = {f"projected {c}" for c in projected}
+        for name in self._pen_layers - layers:
+            self.view.set_lines(name, np.zeros((0, 3), np.float32), sd.PROJECTED_COLOUR)
+        for colour, segs in projected.items():
+            rgb = tuple(int(colour[i:i + 2], 16) / 255 for i in (1, 3, 5))
+            self.view.set_lines(f"projected {colour}", cat(segs), (*rgb, 1.0))
+        self._pen_layers = layers
         self.view.set_lines("warnings", cat(warn), sd.WARNING_COLOUR)
         self.view.handles = handles
         self.view.handle_z = handle_z
