@@ -122,7 +122,7 @@ def render_inspection(rig: SimRig, scene: Scene, burns: list[Burn],
     view = view or RoomLightView(rig, scene, ideal)
     H, W = view.shape
     shade = view.shade.copy()
-    samples, radius = _burn_samples(burns)
+    samples, radius, _ = _burn_samples(burns)
     if len(samples):              # only the pixels near a burn can be darker
         reach = 2.0 * float(radius.max()) + 1e-3
         near = ((view.points >= samples.min(0) - reach)
