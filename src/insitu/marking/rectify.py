@@ -27,6 +27,7 @@ from insitu.patterns.model import Pattern
 
 MAX_PX = 1200          # the picture's longer side at most, px
 _OCCLUSION_TOL_MM = 0.2
+_WRAP_GRID_MM = 0.25     # the wrap map's gradient grid at least this coarse (smooth surfaces)
 
 
 @dataclass(frozen=True)
@@ -99,9 +100,9 @@ def surface_points(frame: MarkFrame, surf: Surface, projection: Projection) -> n
     if projection.direction_deg is not None and projection.anchor is not None:
         xy = _unrolled_to_world(xy, surf, np.asarray(projection.anchor, np.float64),
                                 math.radians(projection.direction_deg))
-    # z on a grid about half the cloud's spacing, bilinear in between (NaN spreads: masked)
+    # z on a grid about the cloud's spacing, bilinear in between (NaN spreads: masked)
     h, w = frame.shape
-    k = max(1, int(0.5 * surf.spacing_mm / frame.px_mm))
+    k = max(1, int(surf.spacing_mm / frame.px_mm))
     coarse = xy.reshape(h, w, 2)[::k, ::k]
     s = surf.sample(coarse.reshape(-1, 2))
     zc = np.where(s.unmeasured, np.nan, s.z).reshape(coarse.shape[:2])
@@ -128,7 +129,7 @@ def _unrolled_to_world(xy: np.ndarray, surf: Surface, anchor: np.ndarray,
     c, s = math.cos(theta_rad), math.sin(theta_rad)
     ab = rel @ np.array([[c, -s], [s, c]])
     radius = float(np.max(np.linalg.norm(rel, axis=1)))
-    h = max(surf.spacing_mm, 2 * (radius + 1.0) / _MAX_GRID)
+    h = max(surf.spacing_mm, 2 * (radius + 1.0) / _MAX_GRID, _WRAP_GRID_MM)
     grad = _GradientGrid(surf, anchor, radius + 4 * h, h)
     amap = ArcLengthMap(grad, anchor, theta_rad, (ab[:, 0].min(), ab[:, 0].max()),
                         (ab[:, 1].min(), ab[:, 1].max()), h)
