@@ -199,3 +199,27 @@ def test_inspect_reads_a_saved_frame_back(marked, tmp_path):
                                    "--at", "0.5", "-30", "--rotate", "25", "-o",
                                    str(tmp_path / "q.png")])
     assert res.exit_code == 1 and isinstance(res.exception, SystemExit)
+
+
+@pytest.mark.parametrize("spec", ['qr:"SN 0042"', 'microqr:"SN42"', 'datamatrix:"SN 0042"',
+                                  'code128:"SN 0042"'])
+def test_a_perfect_mark_grades_a_and_a_blurred_faint_one_lower(spec):
+    from insitu.marking.readback import _grade, decode_picture
+    from insitu.marking.verify import render
+
+    placement = Placement(f"{spec};module=0.3", (1.0, -2.0), None, 30.0)
+    pattern = placement.placed()
+    module = 0.3
+    frame = mark_frame(pattern, 2 * module, module / 8)
+    drawn = render(placement.polylines(pattern), frame.origin, frame.axes, frame.size_mm,
+                   placement.beam_mm, frame.px_mm).astype(np.float32)
+    symbology = spec.split(":")[0]
+    assert decode_picture(drawn, symbology, 8.0) == pattern.code.text
+    perfect = _grade(drawn, frame, pattern, module, (0.0, 0.0), True)
+    assert perfect.overall == 4, perfect.summary()
+    assert (perfect.axial_grade is None) == (symbology == "code128")
+    poor = ndimage.gaussian_filter(drawn, 4.0) * 0.15 + 180
+    rng = np.random.default_rng(1)
+    poor = poor + rng.normal(0, 3, poor.shape).astype(np.float32)
+    low = _grade(poor, frame, pattern, module, (0.0, 0.0), True)
+    assert low.overall < 4 and low.cell_contrast < 0.2 * perfect.cell_contrast, low.summary()

@@ -23,6 +23,9 @@ What is measured, and how it differs from the standards' exact methods:
   wrong side of GT; the worst segment's count graded 0 A, 1 B, 2 C, 3 D, more F (ISO/IEC
   18004's finder rule, applied to every segment; 15415's Data Matrix segment rule is
   finer). Not graded for Code 128.
+* Code 128 is a linear symbol (ISO/IEC 15416 grades it by scan reflectance profiles): its
+  bars are graded here as modules (contrast, modulation, margin, decode); axial and grid
+  nonuniformity do not apply (None).
 * **Decode**: A when the reader decoded the symbol, else F.
 
 Each parameter is graded 4…0 (A…F); the overall grade is the lowest.
@@ -44,6 +47,7 @@ _CC = (0.30, 0.25, 0.20, 0.15)
 _AN = (0.06, 0.08, 0.10, 0.12)
 _GN = (0.38, 0.50, 0.63, 0.75)
 TILE = 4                               # modules per tile side of the grid measurement
+FIXED_SYMBOLOGIES = ("qr", "microqr", "datamatrix")     # 2-D matrix codes: a module grid
 
 
 def letter(grade: int) -> str:
@@ -74,26 +78,28 @@ class Grades:
     reflectance_margin: int
     fixed_errors: int | None
     fixed_pattern: int | None
-    axial_nonuniformity: float
-    axial_grade: int
-    grid_nonuniformity: float
-    grid_grade: int
+    axial_nonuniformity: float | None
+    axial_grade: int | None
+    grid_nonuniformity: float | None
+    grid_grade: int | None
     inverted: bool
 
     @property
     def overall(self) -> int:
-        g = [self.decode, self.cell_contrast_grade, self.cell_modulation,
-             self.reflectance_margin, self.axial_grade, self.grid_grade]
-        return min(g + ([self.fixed_pattern] if self.fixed_pattern is not None else []))
+        return min(g for g in (self.decode, self.cell_contrast_grade, self.cell_modulation,
+                               self.reflectance_margin, self.fixed_pattern, self.axial_grade,
+                               self.grid_grade) if g is not None)
 
     def summary(self) -> str:
         """One line: overall letter and each parameter's."""
-        fpd = "" if self.fixed_pattern is None else f" FPD {letter(self.fixed_pattern)}"
+        fpd = "" if self.fixed_pattern is None else f", FPD {letter(self.fixed_pattern)}"
+        grid = ("" if self.axial_grade is None else
+                f", AN {self.axial_nonuniformity:.3f} {letter(self.axial_grade)}, GN "
+                f"{self.grid_nonuniformity:.2f} {letter(self.grid_grade)}")
         return (f"{letter(self.overall)} (decode {letter(self.decode)}, CC "
                 f"{self.cell_contrast:.2f} {letter(self.cell_contrast_grade)}, CM "
-                f"{letter(self.cell_modulation)}, RM {letter(self.reflectance_margin)}{fpd}, "
-                f"AN {self.axial_nonuniformity:.3f} {letter(self.axial_grade)}, GN "
-                f"{self.grid_nonuniformity:.2f} {letter(self.grid_grade)})")
+                f"{letter(self.cell_modulation)}, RM {letter(self.reflectance_margin)}"
+                f"{fpd}{grid})")
 
 
 def fixed_segments(symbology: str, rows: int, cols: int) -> list[np.ndarray]:
@@ -207,7 +213,9 @@ def grade_symbol(picture: np.ndarray, matrix: np.ndarray, centre00: np.ndarray,
     jj, ii = np.meshgrid(np.arange(cols), np.arange(rows))
     nominal = centre00 + jj[..., None] * col_step + ii[..., None] * row_step
     pitch = float((np.linalg.norm(col_step) + np.linalg.norm(row_step)) / 2)
-    mods, found, score = measure_grid(pic, matrix, centre00, col_step, row_step)
+    linear = symbology not in FIXED_SYMBOLOGIES
+    mods, found, score = (measure_grid(pic, matrix, centre00, col_step, row_step) if not linear
+                          else (np.zeros((0, 2)), np.zeros((0, 2)), np.zeros(0)))
     good = score > 0.3
     if good.sum() >= 3:
         A = np.column_stack([mods[good], np.ones(good.sum())])
@@ -244,5 +252,7 @@ def grade_symbol(picture: np.ndarray, matrix: np.ndarray, centre00: np.ndarray,
         decode=4 if decoded else 0, cell_contrast=cc, cell_contrast_grade=_at_least(cc, _CC),
         cell_modulation=_uec_grade(mgrade, budget), reflectance_margin=_uec_grade(margin, budget),
         fixed_errors=errors, fixed_pattern=None if errors is None else max(0, 4 - errors),
-        axial_nonuniformity=float(an), axial_grade=_at_most(an, _AN),
-        grid_nonuniformity=float(gn), grid_grade=_at_most(gn, _GN), inverted=bool(inverted))
+        axial_nonuniformity=None if linear else float(an),
+        axial_grade=None if linear else _at_most(an, _AN),
+        grid_nonuniformity=None if linear else float(gn),
+        grid_grade=None if linear else _at_most(gn, _GN), inverted=bool(inverted))
