@@ -79,8 +79,9 @@ def cloud_figure(cloud: PointCloud, title: str):
     fig.suptitle(f"{title} — {len(pts):,} points, top view", fontsize=11)
     lo, hi = np.percentile(pts[:, 2], [0.5, 99.5])
     panels = [("height", "turbo", (lo, hi), "height z, mm")]
-    if ambient is not None:
-        panels.append(("camera (room light, laser off)", "gray", (0.0, 1.0),
+    if ambient is not None:         # stretched to the brightest: a 12-bit camera's frames
+        top = max(float(np.percentile(values[1], 99.5)), 0.01)   # fill a 16-bit scale to 1/16
+        panels.append(("camera (room light, laser off)", "gray", (0.0, top),
                        "grey value, fraction of full scale"))
     for k, (name, cmap, (vmin, vmax), label) in enumerate(panels):
         ax = fig.add_subplot(1, len(panels), k + 1)
