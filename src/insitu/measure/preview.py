@@ -89,7 +89,7 @@ def cloud_figure(cloud: PointCloud, title: str):
                        vmax=vmax, interpolation="nearest")
         ax.set(title=name, xlabel="x, mm", ylabel="y, mm", aspect="equal")
         ax.set_facecolor("white")
-        ax.grid(True, color="0.8", linewidth=0.5)
+        ax.grid(True, color="0.45", alpha=0.5, linewidth=0.5)
         bar = fig.colorbar(im, ax=ax, shrink=0.9, pad=0.02)
         bar.set_label(label)
         length = nice_length(max(w, h))
