@@ -250,3 +250,14 @@ def test_a_camera_that_gives_no_room_light_frame_still_scans(monkeypatch, tmp_pa
     seq = Sequence.open(record_scan(station, tmp_path / "rec", spacing=4.0,
                                     region=(-12, 12, -44, 44)))
     assert seq.ambient is None and not (seq.folder / "ambient.png").exists() and len(seq) == 7
+
+
+def test_the_camera_panel_is_stretched_to_the_brightest_point(tmp_path):
+    """A 12-bit camera's frames fill a 16-bit full scale to 1/16: still readable."""
+    x, y = np.meshgrid(np.linspace(-10, 10, 200), np.linspace(-20, 20, 400))
+    pts = np.column_stack([x.ravel(), y.ravel(), np.zeros(x.size)])
+    amb = np.where(pts[:, 0] > 0, 0.06, 0.02).astype(np.float32)      # Mono12 in uint16
+    save_cloud_picture(PointCloud(pts, {"ambient": amb}), tmp_path / "p.png")
+    img = cv2.imread(str(tmp_path / "p.png"), cv2.IMREAD_GRAYSCALE)
+    right = img[:, img.shape[1] // 2:]
+    assert (right > 230).mean() > 0.1 and ((right > 60) & (right < 110)).mean() > 0.1

@@ -1,5 +1,7 @@
-"""scripts/setup.sh says what it installs, and that pip takes a while; silent when all is there.
-Run against stand-ins for dpkg-query, apt-get, sudo and the virtual environment's pip."""
+"""What the operator is told: scripts/setup.sh says what it installs and that pip takes a
+while (run against stand-ins for dpkg-query, apt-get, sudo and the virtual environment's pip;
+silent when all is there); `insitu galvo correct --help` and the operator guide say how to
+write targets.csv."""
 
 from __future__ import annotations
 
@@ -46,3 +48,18 @@ def test_setup_says_what_it_installs_and_is_silent_when_done(tmp_path):
     calls = (tmp_path / "calls").read_text()
     assert "apt-get install" in calls and "xauth" in calls and "pip install -e" in calls
     assert _setup(tmp_path, "nothing-missing") == ""             # everything there: quiet
+
+
+def test_the_targets_csv_of_galvo_correct_is_explained(monkeypatch):
+    from typer.testing import CliRunner
+
+    from insitu.cli.main import app
+
+    monkeypatch.setenv("COLUMNS", "200")
+    res = CliRunner().invoke(app, ["galvo", "correct", "--help"])
+    text = " ".join(res.output.replace("│", " ").split())
+    for words in ("the header x,y, then one target per line", "x and y in mm",
+                  "focal plane z = 0", "origin at the field centre", "-40.5,12.25"):
+        assert words in text, text
+    guide = " ".join((ROOT / "docs" / "operator-guide.md").read_text().split())
+    assert "targets.csv" in guide and "one target per line" in guide

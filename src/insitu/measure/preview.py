@@ -79,8 +79,9 @@ def cloud_figure(cloud: PointCloud, title: str):
     fig.suptitle(f"{title} — {len(pts):,} points, top view", fontsize=11)
     lo, hi = np.percentile(pts[:, 2], [0.5, 99.5])
     panels = [("height", "turbo", (lo, hi), "height z, mm")]
-    if ambient is not None:
-        panels.append(("camera (room light, laser off)", "gray", (0.0, 1.0),
+    if ambient is not None:         # stretched to the brightest: a 12-bit camera's frames
+        top = max(float(np.percentile(values[1], 99.5)), 0.01)   # fill a 16-bit scale to 1/16
+        panels.append(("camera (room light, laser off)", "gray", (0.0, top),
                        "grey value, fraction of full scale"))
     for k, (name, cmap, (vmin, vmax), label) in enumerate(panels):
         ax = fig.add_subplot(1, len(panels), k + 1)
@@ -88,7 +89,7 @@ def cloud_figure(cloud: PointCloud, title: str):
                        vmax=vmax, interpolation="nearest")
         ax.set(title=name, xlabel="x, mm", ylabel="y, mm", aspect="equal")
         ax.set_facecolor("white")
-        ax.grid(True, color="0.8", linewidth=0.5)
+        ax.grid(True, color="0.45", alpha=0.5, linewidth=0.5)
         bar = fig.colorbar(im, ax=ax, shrink=0.9, pad=0.02)
         bar.set_label(label)
         length = nice_length(max(w, h))
