@@ -20,6 +20,7 @@ from insitu.marking.readback_picture import readback_picture
 from insitu.marking.surface import Surface
 from insitu.patterns.vector import BEAM_MM
 from insitu.services.mark import MarkPlan, save_image
+from insitu.services.room_light import station_room_light
 
 if TYPE_CHECKING:
     from insitu.services.station import Station
@@ -67,9 +68,9 @@ def read_back_image(image: np.ndarray, camera: CameraModel, cloud: PointCloud,
 def read_back(station: Station, plans: Sequence[MarkPlan], cloud: PointCloud,
               image: np.ndarray | None = None, beam_mm: float = BEAM_MM) -> ReadBack:
     """:func:`read_back_image` with the station's camera: its model as calibrated, and a
-    frame grabbed now (the laser off) unless ``image`` is given."""
+    frame under the room light now (the laser off, auto-exposed) unless ``image`` is given."""
     if image is None:
-        image = station.devices.camera.grab()
+        image = station_room_light(station).image
     return read_back_image(image, station.rig.camera, cloud, plans, beam_mm)
 
 
