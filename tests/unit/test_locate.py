@@ -198,3 +198,24 @@ def test_pose_json_refuses_a_tilted_pose(tmp_path):
     (tmp_path / "far.json").write_text(json.dumps({**good, "fitness": 1.5}))
     with pytest.raises(ConfigError, match="fitness: 1.5 is outside 0 … 1"):
         load_pose(tmp_path / "far.json")
+
+
+def test_pose_of_a_small_simulated_scan(refs):
+    """A real (simulated) scan at binning 4: found where it lies, within the rig's own
+    calibration offset (~0.1 mm) and the coarse frame's precision; the default precision
+    check refuses it as too coarse, naming the numbers."""
+    from insitu.measure.locate import LocateSettings
+    from insitu.services import scan_live
+    from insitu.services.locate import locate_cloud
+    from insitu.services.station import simulated
+    from insitu.sim.world import sim_world
+
+    truth = (8.0, -6.0, 140.0)
+    with simulated(sim_world("step-block", binning=4, pose=truth)) as station:
+        cloud = scan_live(station).cloud
+    with pytest.raises(LocateRefused, match="not pinned down .* scan finer"):
+        locate_cloud(refs["step-block"], cloud)
+    pose = locate_cloud(refs["step-block"], cloud, LocateSettings(max_sigma_mm=0.1))
+    mm, deg = _err(pose, truth)
+    assert mm < 0.2 and deg < 0.15, (mm, deg)
+    assert pose.best.edges > 50
