@@ -3,7 +3,8 @@ random poses located against their meshes, and patterns marked where they belong
 
 1. Locate: the step block, the arc and the insert at N random poses each (x, y within
    ±25 mm, any turn about z), scanned with Method 2 (height calibration recorded and fitted on
-   the same rig), located against the part's own mesh (`locate_part`, as `insitu locate`).
+   the same rig; lines 0.5 mm apart, 0.25 mm on the 16 mm insert: at 0.5 mm its edges do not
+   pin the pose down to 0.03 mm and it is refused), located against the part's own mesh (`locate_part`, as `insitu locate`).
    The arc (2-fold) and the insert (3-fold) are symmetric: each is located without a
    symmetry breaker (it must be refused, never wrong) and with `prefer_angle` — a window
    ±50° wide around a rough orientation (the true turn ± up to 30°, as an operator loading
@@ -50,6 +51,7 @@ from insitu.sim.world import SimWorld, sim_world
 
 console = Console(width=150)
 PARTS = {"step-block": 1, "arc": 2, "insert": 3}          # name: fold of its symmetry
+SPACING = {"step-block": 0.5, "arc": 0.5, "insert": 0.25}  # scan line spacing, mm
 SQUARE = ('<svg xmlns="http://www.w3.org/2000/svg" width="3mm" height="3mm" '
           'viewBox="0 0 3 3"><rect x="0" y="0" width="3" height="3" fill="none" '
           'stroke="black" stroke-width="0.01"/></svg>')
@@ -65,12 +67,13 @@ def height_cal(cache: Path, rig, seed: int) -> HeightCalibration:
 
 
 def scan(cache: Path, name: str, pose, rig, seed: int, cal, tag: str) -> PointCloud:
-    """The cloud of ``name`` at ``pose`` (cached)."""
-    path = cache / f"{tag}.ply"
+    """The cloud of ``name`` at ``pose`` (cached), lines ``SPACING[name]`` apart."""
+    spacing = SPACING.get(name, 0.5)
+    path = cache / (f"{tag}.ply" if spacing == 0.5 else f"{tag}-sp{spacing:g}.ply")
     if not path.exists():
         world = sim_world(name, seed=seed, rig=rig, pose=pose)
         with simulated(world) as station:
-            write_ply(path, scan_live(station, height_cal=cal).cloud)
+            write_ply(path, scan_live(station, spacing, height_cal=cal).cloud)
     return read_ply(path)
 
 
