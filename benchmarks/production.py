@@ -166,13 +166,22 @@ def marking(args, rig, cal, cache: Path) -> None:
     for name, at in MARK_AT.items():
         wp = make_workpiece(name)
         ref = reference_from_mesh(wp.vertices, wp.triangles, name)
-        for i in range(args.marks):
+        done = 0
+        for i in range(3 * args.marks):
+            if done == args.marks:
+                break
             pose = random_pose(rng)
             cloud = scan(cache, name, pose, rig, args.seed, cal,
                          f"mark-{name}-{i}-b{args.binning}-s{args.seed}")
             prefer = (pose[2] - 50, pose[2] + 50) if PARTS[name] > 1 else None
-            got = locate_part(ref, cloud.points, prefer_angle=prefer,
-                              lines=cloud.attributes.get("line"))
+            try:
+                got = locate_part(ref, cloud.points, prefer_angle=prefer,
+                                  lines=cloud.attributes.get("line"))
+            except LocateRefused as e:
+                tab.add_row(name, f"({pose[0]:.1f}, {pose[1]:.1f}, {pose[2]:.1f})",
+                            f"({at[0]:g}, {at[1]:g})", f"refused ({e.reason}): not marked")
+                continue
+            done += 1
             placement = part_placement(Placement(str(cache / "square.svg"), at, 3.0, 0.0),
                                        got.T_world_part)
             plan = plan_mark(cloud, placement, driver)

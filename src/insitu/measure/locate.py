@@ -336,6 +336,9 @@ def _choose(sols: list[Solution], n: int, where: str, s: LocateSettings,
                             f"RMSE ≤ {s.max_rmse_mm:g} mm)")
     if best.sigma_mm is not None:
         spread = float(np.hypot(best.sigma_mm, np.radians(best.sigma_deg) * radius_mm))
+        if not np.isfinite(spread):
+            raise LocateRefused("poor-fit", f"the scan's edges do not match the reference's "
+                                f"at {best.describe()}: x, y and the turn are not pinned down")
         if not spread <= s.max_sigma_mm:
             raise LocateRefused(
                 "poor-fit", f"x, y and the turn are not pinned down by the edges the scan lines "
