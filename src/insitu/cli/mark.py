@@ -11,7 +11,7 @@ from rich.text import Text
 
 from insitu.cli.common import (bounded, check_output, console, fail, one_line_errors,
                                progress_bar, warn)
-from insitu.cli.job import (CutPath, Field, Preview, Restart, Resume, Rig, Seed,
+from insitu.cli.job import (CutPath, Field, PartPose, Preview, Restart, Resume, Rig, Seed,
                             Workpiece, check_run_options, pen_text, run_on_station)
 from insitu.marking.modes import PROJECTIONS, projection_mode
 from insitu.patterns.dxf import FILL_MODES
@@ -25,14 +25,18 @@ def mark(
     pattern: Annotated[str, typer.Option(help=f"A file or spec: {sources_help()}.")],
     at: Annotated[tuple[float, float], typer.Option(metavar="X Y",
         callback=bounded("position_mm"), help="Centre of the pattern X Y, mm, "
-                                              "world frame.")],
+                                              "world frame (the part's with --part-pose).")],
     out: Annotated[Path, typer.Option("-o", "--output", help="Mark job to write (.json).")],
     width: Annotated[float | None, typer.Option(
         callback=bounded("length_mm"),
         help="Width of the pattern, mm (before --rotate; a code's without its quiet zone; "
              "default: the size it loads at, e.g. a code's ;module=).")] = None,
     rotate: Annotated[float, typer.Option(
-        callback=bounded("angle_deg"), help="Rotation, degrees CCW about +z.")] = 0.0,
+        callback=bounded("angle_deg"), help="Rotation, degrees CCW about +z (from the "
+                                            "part's x axis with --part-pose).")] = 0.0,
+    part_pose: Annotated[Path | None, typer.Option(
+        help="POSE.json of `insitu locate`: --at, --rotate and --hatch-angle are then in the "
+             "part's own frame, moved to where the part lies.")] = None,
     mode: Annotated[str, typer.Option(help="; ".join(f"{k}: {m.description}" for k, m in
                                                      PROJECTIONS.items()) + ".")] = "planar",
     hatch: Annotated[float | None, typer.Option(
@@ -81,6 +85,7 @@ def mark(
              "NAME.raw.png) and print what was decoded, the offset and the grade.")] = None,
     rig: Rig = None,
     field: Field = None, workpiece: Workpiece = "step-block", seed: Seed = 0,
+    pose: PartPose = (0.0, 0.0, 0.0),
     fields: Annotated[list[str] | None, typer.Option(
         "--var", metavar="NAME=VALUE", help="A value for {NAME} in the pattern's text "
         "(again for more fields); {serial}, {date}, {time} are built in.")] = None,
@@ -116,6 +121,14 @@ def mark(
         fail(f"--fill {fill!r}: expected one of {', '.join(FILL_MODES)}")
     placement = Placement(pattern, at, width, rotate, mode, hatch, hatch_angle, cross, fill,
                           beam)
+    located = None
+    if part_pose is not None:
+        from insitu.measure.pose_file import load_pose
+
+        located = load_pose(part_pose)
+        if len(located.inputs) > 1 and Path(located.inputs[1]).name != cloud.name:
+            warn(f"{part_pose} was located on {located.inputs[1]}, not on {cloud}")
+        placement = svc.part_placement(placement, located.matrix)
     given = {k: v for k, v in (("power_pct", power), ("frequency_khz", frequency),
                                ("mark_speed_mm_s", speed), ("jump_speed_mm_s", jump_speed))
              if v is not None}
@@ -128,7 +141,7 @@ def mark(
         given = {k: getattr(chosen, k) for k in LaserParams.model_fields}
     laser = LaserParams(**given)
     measured = read_ply(cloud)
-    with connect(rig, workpiece, seed, field=field) as station:
+    with connect(rig, workpiece, seed, field=field, pose=pose) as station:
         if run and (warning := station.check_source(cloud, measured.rig, "cloud")):
             warn(warning)
         with progress_bar("projecting") as progress:
@@ -138,7 +151,7 @@ def mark(
                 serial_start)
         if resume and (not out.exists() or read_job(out).digest() != plan.job.digest()):
             fail(f"--resume: {out} does not hold this job; run without --resume to start it")
-        _summary(out, placement, plan, station.field, rec)
+        _summary(out, placement, plan, station.field, rec, part_pose, located)
         if run:
             run_on_station(station, plan.job, out, resume, preview, inspect, restart, cut_path,
                            read=([plan], measured))
@@ -164,11 +177,17 @@ def _plan(out: Path, placement, plan_mark, resume: bool, fields, counter, start)
     return done.result, done.record
 
 
-def _summary(out: Path, placement, plan, field: Path | None, rec=None) -> None:
+def _summary(out: Path, placement, plan, field: Path | None, rec=None,
+             part_pose: Path | None = None, located=None) -> None:
     pts = plan.projection.points
     (cx, cy), (w, h) = plan.pattern.centre, plan.pattern.size
     e = plan.estimate
     table = Table(title=f"mark job → {out}", show_header=False)
+    if located is not None:
+        table.add_row("part pose", f"{part_pose}: x {located.x_mm:.3f}, y {located.y_mm:.3f} "
+                                   f"mm, turned {located.angle_deg:.3f}°; placed at world "
+                                   f"({placement.at_mm[0]:.3f}, {placement.at_mm[1]:.3f}), "
+                                   f"{placement.rotate_deg:.3f}°")
     table.add_row("pattern", f"{plan.pattern.name}: {w:.3f} × {h:.3f} mm, centre "
                              f"({cx:.3f}, {cy:.3f})")
     fill = (f"hatch {placement.hatch_mm:g} mm at {placement.hatch_angle_deg:g}°"

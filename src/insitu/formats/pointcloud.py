@@ -20,7 +20,7 @@ import numpy as np
 from insitu.errors import FormatError
 from insitu.formats.atomic import atomic_file
 from insitu.formats.bounds import BOUNDS
-from insitu.formats.limits import MAX_CLOUD_BYTES, read_limited
+from insitu.formats.limits import MAX_CLOUD_BYTES, check_file, read_limited
 from insitu.formats.rig_record import RigRecord, from_ply_header, ply_line
 
 _ATTRIBUTES = ("intensity", "line", "quality", "ambient")
@@ -110,6 +110,15 @@ def _check_ambient(path: Path, ambient: np.ndarray) -> None:
         i = int(np.argmax(out))
         raise FormatError(f"{path}: vertex {i}: ambient {bound.problem(ambient[i])} "
                           f"({int(out.sum())} of {len(ambient)} vertices)")
+
+
+def ply_face_count(path: str | Path) -> int:
+    """How many faces the PLY file ``path`` declares in its header (0: a point cloud)."""
+    path = Path(path)
+    check_file(path, MAX_CLOUD_BYTES, "PLY file", missing="no such PLY file")
+    with open(path, "rb") as f:
+        head = f.read(_MAX_HEADER)
+    return _header(path, head)[1].get("face", (0, []))[0]
 
 
 def _header(path: Path, data: bytes) -> tuple[str, dict[str, tuple[int, list[tuple]]], int]:

@@ -1,0 +1,184 @@
+"""The last step of locating a part: x, y and the turn from the top's edges, as each scan line
+measures them.
+
+A scan line samples the surface densely along itself (a pixel apart) but the lines lie
+0.5 mm apart: point-to-plane ICP gets no hold in x, y from flat tops, and an edge is only
+known where a line crosses it. There it is known well: the last point of a top before the
+surface drops (to the table, a lower step or a hole, or down a wall) lies within one sample
+spacing inside the edge (and a line loses a little more where its light is cut by the edge).
+Each such *edge sample* e with its outward line direction u gives the distance s, along u,
+from e to the reference's edge (found on the reference's height image seen from above); the
+fit turns and shifts the part until every s is the same b, fitted along (least squares, Huber
+weights). Only the upper side of a drop is used: the lower side lies
+in the shadow of the wall or hidden behind its top.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from insitu.measure.height_image import HeightImage, sample
+
+DROP_MM = 0.5
+FLAT_MM = 0.15
+REACH_MM = 0.6
+STEEP = 2.0
+LOOK = 8
+"""Points along the line looked at for the drop."""
+SEARCH_MM = 1.0
+MIN_FOUND = 0.7
+"""At the fitted pose this share of the edge samples must find the reference's edge."""
+CORNER_MM = 0.3
+MIN_COS = 0.2
+"""Lines crossing an edge more obliquely than this (cosine to its normal) are not used."""
+HUBER_MM = 0.05
+
+
+def edge_samples(points: np.ndarray, lines: np.ndarray,
+                 table: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The scan's edge samples: (points (K, 3), outward unit directions along their lines
+    (K, 2)) from ``points`` (N, 3) world frame, their ``lines`` (N,) index and whether each
+    is the table (N,) bool. A point ends a top when the point before it on its line lies
+    within ``FLAT_MM`` of its height, the next one lower by more than that or down a slope
+    steeper than ``STEEP`` (a wall), and the line falls ``DROP_MM`` below it: at the next
+    point, however far (past a shadow), or within ``REACH_MM`` (down a wall). A top cut
+    short by something higher in the way is no edge: the reference shows no drop there, and
+    :func:`edge_distance` finds none."""
+    order = np.lexsort((_along(points, lines), lines))
+    p, ln, top = points[order], lines[order], ~table[order]
+    out_p, out_u = [], []
+    for q, l2, t2 in ((p, ln, top), (p[::-1], ln[::-1], top[::-1])):   # both ways along
+        n = len(q)
+        i = np.arange(1, max(n - 1, 1))
+        ok = (l2[i - 1] == l2[i]) & (l2[i + 1] == l2[i]) & t2[i] & t2[i - 1]
+        ok &= np.abs(q[i, 2] - q[i - 1, 2]) < FLAT_MM
+        dz = q[i, 2] - q[i + 1, 2]
+        ok &= (dz > FLAT_MM) | (dz > np.maximum(STEEP * np.linalg.norm(q[i + 1, :2] - q[i, :2],
+                                                                       axis=1), 0.03))
+        fall = q[i, 2] - q[i + 1, 2]          # the next point, however far (past a shadow)
+        for k in range(2, LOOK + 1):
+            j = np.minimum(i + k, n - 1)
+            near = (l2[j] == l2[i]) & (np.linalg.norm(q[j, :2] - q[i, :2], axis=1) <= REACH_MM)
+            fall = np.maximum(fall, np.where(near, q[i, 2] - q[j, 2], 0.0))
+        k = i[ok & (fall > DROP_MM)]
+        d = q[k + 1, :2] - q[k - 1, :2]
+        out_p.append(q[k])
+        out_u.append(d / np.maximum(np.linalg.norm(d, axis=1, keepdims=True), 1e-12))
+    return np.vstack(out_p), np.vstack(out_u)
+
+
+def _along(points: np.ndarray, lines: np.ndarray) -> np.ndarray:
+    """Each point's position along its line's main direction, mm."""
+    out = np.zeros(len(points))
+    for i in np.unique(lines):
+        sel = lines == i
+        xy = points[sel, :2]
+        d = xy - xy.mean(axis=0)
+        axis = np.linalg.svd(d[:: max(1, len(d) // 200)], full_matrices=False)[2][0] \
+            if len(d) > 1 else np.array([0.0, 1.0])
+        out[sel] = d @ axis
+    return out
+
+
+def edge_distance(heights: HeightImage, e: np.ndarray,
+                  u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(distance s (K,) mm, the edge's outward unit normal there (K, 2)): s along ``u``
+    (K, 2) from each edge sample ``e`` (K, 3) (part frame) to where the reference's height
+    first falls below halfway between the sample's height and the reference's height
+    ``SEARCH_MM`` beyond; NaN where it does not within ±``SEARCH_MM``, or where the edge
+    turns within ``CORNER_MM`` (a corner holds no direction)."""
+    s = np.arange(-SEARCH_MM, SEARCH_MM + 1e-9, 0.02)
+    xy = e[:, None, :2] + s[None, :, None] * u[:, None, :]
+    cols = (xy[..., 0] - heights.x0_mm) / heights.px_mm
+    rows = (xy[..., 1] - heights.y0_mm) / heights.px_mm
+    h = sample([heights.z], cols.ravel(), rows.ravel())[0].reshape(xy.shape[:2])
+    level = (e[:, 2] + h[:, -1]) / 2
+    below = h < level[:, None]
+    # the first crossing at or after the sample's own height
+    start = np.argmin(np.abs(s))
+    below[:, :start] = False
+    j = np.argmax(below, axis=1)
+    found = below[np.arange(len(e)), j] & (j > 0) & (h[:, -1] < e[:, 2] - DROP_MM / 2)
+    j = np.maximum(j, 1)
+    h0, h1 = h[np.arange(len(e)), j - 1], h[np.arange(len(e)), j]
+    f = np.clip((h0 - level) / np.where(h0 - h1 != 0, h0 - h1, 1.0), 0.0, 1.0)
+    dist = np.where(found, s[j - 1] + f * (s[j] - s[j - 1]), np.nan)
+    at = e[:, :2] + np.nan_to_num(dist)[:, None] * u
+    d = 2 * heights.px_mm
+    c = (at[:, 0] - heights.x0_mm) / heights.px_mm
+    r = (at[:, 1] - heights.y0_mm) / heights.px_mm
+    hx0, hx1, hy0, hy1 = sample([heights.z], np.concatenate([c - 2, c + 2, c, c]),
+                                np.concatenate([r, r, r - 2, r + 2]))[0].reshape(4, -1)
+    g = np.column_stack([hx1 - hx0, hy1 - hy0]) / (2 * d)
+    n = -g / np.maximum(np.linalg.norm(g, axis=1, keepdims=True), 1e-12)
+    # a straight edge: the normal the same 0.3 mm along it either way (not a corner)
+    for side in (-1.0, 1.0):
+        at2 = at + side * CORNER_MM * np.column_stack([-n[:, 1], n[:, 0]])
+        c = (at2[:, 0] - heights.x0_mm) / heights.px_mm
+        r = (at2[:, 1] - heights.y0_mm) / heights.px_mm
+        hx0, hx1, hy0, hy1 = sample([heights.z], np.concatenate([c - 2, c + 2, c, c]),
+                                    np.concatenate([r, r, r - 2, r + 2]))[0].reshape(4, -1)
+        g2 = -np.column_stack([hx1 - hx0, hy1 - hy0])
+        cos = np.einsum("ij,ij->i", g2, n) / np.maximum(np.linalg.norm(g2, axis=1), 1e-12)
+        dist = np.where(cos > np.cos(np.radians(20)), dist, np.nan)
+    return dist, n
+
+
+@dataclass(frozen=True)
+class EdgeFit:
+    """A corrected point is ``Rz(angle_rad) @ p + shift_mm`` (x, y only); ``b_mm``: how far
+    inside its edge each top's last point lies along its line (half a sample spacing and
+    what the scan loses at an edge); ``samples`` used; ``sigma_mm``, ``sigma_deg``: 1σ of
+    the shift (its worst direction) and of the turn, from the residuals' spread — large
+    when the edges the lines cross do not pin the part down (edges along the lines)."""
+
+    angle_rad: float
+    shift_mm: np.ndarray
+    b_mm: float
+    samples: int
+    sigma_mm: float
+    sigma_deg: float
+
+
+def align_edges(heights: HeightImage, e: np.ndarray, u: np.ndarray,
+                iterations: int = 10) -> EdgeFit | None:
+    """The correction that moves the edge samples ``e`` (K, 3), part frame, with outward
+    directions ``u`` (K, 2), so that each lies the same distance b inside the reference's
+    edge (least squares on the normal distances, Huber weights). None when fewer than 20
+    samples, or less than ``MIN_FOUND`` of them, find an edge (the scan's edges are not the
+    reference's there), or the edges cannot hold the turn, both shifts and b."""
+    theta, t, b = 0.0, np.zeros(2), 0.0
+    c = e[:, :2].mean(axis=0) if len(e) else np.zeros(2)
+    used = 0
+    for _ in range(iterations):
+        R = np.array([[np.cos(theta), -np.sin(theta)], [np.sin(theta), np.cos(theta)]])
+        pe = np.column_stack([(e[:, :2] - c) @ R.T + c + t, e[:, 2]])
+        ue = u @ R.T
+        s, n = edge_distance(heights, pe, ue)
+        nu = np.einsum("ij,ij->i", n, ue)
+        ok = np.isfinite(s) & (nu > MIN_COS)
+        used = int(ok.sum())
+        if used < 20:
+            return None
+        n, nu = n[ok], nu[ok]
+        r = (s[ok] - b) * nu                      # the normal distance left to the edge
+        d = pe[ok, :2] - c - t
+        J = np.column_stack([-n[:, 0] * d[:, 1] + n[:, 1] * d[:, 0], n, -nu])
+        w = np.minimum(1.0, HUBER_MM / np.maximum(np.abs(r - np.median(r)), 1e-12))
+        A = J.T @ (J * w[:, None])
+        if np.linalg.cond(A) > 1e6:
+            return None
+        x = np.linalg.solve(A, J.T @ (w * r))
+        theta, t, b = theta + x[0], t + x[1:3], b - x[3]
+        if abs(x[0]) < 1e-7 and np.linalg.norm(x[1:]) < 1e-4:
+            break
+    if used < MIN_FOUND * len(e):
+        return None
+    R = np.array([[np.cos(theta), -np.sin(theta)], [np.sin(theta), np.cos(theta)]])
+    spread = 1.4826 * np.median(np.abs(r - np.median(r)))
+    cov = spread ** 2 * np.linalg.inv(A)
+    return EdgeFit(float(theta), c - R @ c + t, float(b), used,
+                   float(np.sqrt(np.linalg.eigvalsh(cov[1:3, 1:3]).max())),
+                   float(np.degrees(np.sqrt(cov[0, 0]))))

@@ -1,0 +1,114 @@
+"""A part seen from straight above: heights on a grid of its own frame, the table around it
+— exactly from a mesh (ray cast), or from a scan (its points splatted). The edge step of
+locating (:mod:`insitu.measure.edge_align`) finds the reference's edges on it.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+PX_MM = 0.1
+SIGMA_MM = 0.25
+MARGIN_MM = 4.0
+SUPERSAMPLE = 4
+"""Rays per pixel side when a mesh is seen from above: its edges land between pixels."""
+COVER_MM = 0.3
+"""A pixel is measured when a scan point lies within this (half the line spacing and a
+little)."""
+
+
+@dataclass(frozen=True, eq=False)
+class HeightImage:
+    """Heights seen from above on a grid of the part frame: ``z`` (H, W) float32 mm, the
+    pixel (row r, column c) at x = x0_mm + c·px_mm, y = y0_mm + r·px_mm."""
+
+    z: np.ndarray
+    x0_mm: float
+    y0_mm: float
+    px_mm: float = PX_MM
+
+
+
+def mesh_height_image(vertices: np.ndarray, triangles: np.ndarray, base_z: float,
+                      px_mm: float = PX_MM) -> HeightImage:
+    """The mesh (part frame, mm) seen from straight above, the table at ``base_z`` around it,
+    over its footprint plus ``MARGIN_MM``: ray cast with Open3D, ``SUPERSAMPLE``² rays a
+    pixel averaged (an edge between pixel centres is not rounded to one)."""
+    import open3d as o3d
+
+    v = np.asarray(vertices, np.float64)
+    lo, hi = v[:, :2].min(axis=0) - MARGIN_MM, v[:, :2].max(axis=0) + MARGIN_MM
+    xs, ys = np.arange(lo[0], hi[0], px_mm), np.arange(lo[1], hi[1], px_mm)
+    sub = (np.arange(SUPERSAMPLE) + 0.5) / SUPERSAMPLE - 0.5      # rays spread over a pixel
+    X, Y = np.meshgrid((xs[:, None] + sub * px_mm).ravel(), (ys[:, None] + sub * px_mm).ravel())
+    top = float(v[:, 2].max() + 1.0)
+    scene = o3d.t.geometry.RaycastingScene()
+    scene.add_triangles(o3d.core.Tensor(v.astype(np.float32)),
+                        o3d.core.Tensor(np.asarray(triangles, np.uint32)))
+    rays = np.zeros((X.size, 6), np.float32)
+    rays[:, 0], rays[:, 1], rays[:, 2], rays[:, 5] = X.ravel(), Y.ravel(), top, -1.0
+    t = scene.cast_rays(o3d.core.Tensor(rays))["t_hit"].numpy()
+    z = np.where(np.isfinite(t), top - t, base_z).reshape(len(ys), SUPERSAMPLE, len(xs),
+                                                        SUPERSAMPLE).mean(axis=(1, 3))
+    z = z.astype(np.float32)
+    return HeightImage(z, float(xs[0]), float(ys[0]), px_mm)
+
+
+def splat(points: np.ndarray, like: HeightImage) -> tuple[np.ndarray, np.ndarray]:
+    """(heights (H, W) float32, measured (H, W) bool) of ``points`` (N, 3), part frame, on
+    ``like``'s grid: bilinear splats spread by a Gaussian of ``SIGMA_MM`` and normalised
+    (the gaps between scan lines fill); measured within ``COVER_MM`` of a point."""
+    h, w = like.z.shape
+    c = (points[:, 0] - like.x0_mm) / like.px_mm
+    r = (points[:, 1] - like.y0_mm) / like.px_mm
+    inside = (c >= 0) & (c < w - 1) & (r >= 0) & (r < h - 1)
+    c, r, z = c[inside], r[inside], points[inside, 2]
+    c0, r0 = np.floor(c).astype(np.int64), np.floor(r).astype(np.int64)
+    fc, fr = c - c0, r - r0
+    W = np.zeros(h * w)
+    Z = np.zeros(h * w)
+    for dr, dc, wt in ((0, 0, (1 - fr) * (1 - fc)), (0, 1, (1 - fr) * fc),
+                       (1, 0, fr * (1 - fc)), (1, 1, fr * fc)):
+        idx = (r0 + dr) * w + (c0 + dc)
+        W += np.bincount(idx, wt, h * w)
+        Z += np.bincount(idx, wt * z, h * w)
+    s = SIGMA_MM / like.px_mm
+    Wb = cv2.GaussianBlur(W.reshape(h, w).astype(np.float32), (0, 0), s)
+    Zb = cv2.GaussianBlur(Z.reshape(h, w).astype(np.float32), (0, 0), s)
+    support = cv2.dilate((W.reshape(h, w) > 0).astype(np.uint8),
+                         _disk(COVER_MM / like.px_mm)).astype(bool)
+    return np.where(support, Zb / np.maximum(Wb, 1e-12), 0.0).astype(np.float32), support
+
+
+def _disk(radius_px: float) -> np.ndarray:
+    n = int(np.ceil(radius_px))
+    return cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * n + 1, 2 * n + 1))
+
+
+def sample(images, cols: np.ndarray, rows: np.ndarray) -> list[np.ndarray]:
+    """Each of ``images`` (H, W) at the fractional pixels (cols, rows) (N,), bilinear."""
+    n = len(cols)
+    k = -(-n // 1024) * 1024                 # cv2.remap takes under 32767 rows: fold them
+    mx = np.zeros(k, np.float32)
+    my = np.zeros(k, np.float32)
+    mx[:n], my[:n] = cols, rows
+    return [cv2.remap(np.asarray(im, np.float32), mx.reshape(-1, 1024), my.reshape(-1, 1024),
+                      cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE).ravel()[:n]
+            .astype(np.float64) for im in images]
+
+
+def splat_image(points: np.ndarray, part: np.ndarray, base_z: float,
+                px_mm: float = PX_MM) -> HeightImage:
+    """A scan's height image as a reference: ``points`` (N, 3) splatted over the footprint of
+    ``part`` (its points above the table) plus ``MARGIN_MM``; unsupported pixels (shadows)
+    take the table's height ``base_z``."""
+    lo = part[:, :2].min(axis=0) - MARGIN_MM
+    hi = part[:, :2].max(axis=0) + MARGIN_MM
+    shape = (int(np.ceil((hi[1] - lo[1]) / px_mm)), int(np.ceil((hi[0] - lo[0]) / px_mm)))
+    grid = HeightImage(np.zeros(shape, np.float32), float(lo[0]), float(lo[1]), px_mm)
+    img, support = splat(points, grid)
+    return HeightImage(np.where(support, img, base_z).astype(np.float32), grid.x0_mm,
+                       grid.y0_mm, px_mm)
