@@ -105,6 +105,7 @@ def main(argv: list[str] | None = None) -> int:
                 "cloud_points": s.cloud.points.tolist(),
                 "pattern_points": plan.projection.points.tolist() if plan else []}
         args.view_png.with_suffix(".json").write_text(json.dumps(info))
+    window.saved.mark_clean()        # a scripted session: nothing to save
     window.close()
     return 0
 
