@@ -92,34 +92,38 @@ def test_mark_arms_shows_the_job_and_fires_only_when_confirmed(qtbot, window):
 
 
 # -- 2. resume ----------------------------------------------------------------------------
-def test_resume_after_an_abort_marks_the_rest(qtbot, window, tmp_path):
+def test_resume_after_a_fault_marks_the_rest(qtbot, window, tmp_path, monkeypatch):
+    from insitu.errors import DeviceError
+    from insitu.sim.devices import SimController
+
     scan_recording(qtbot, window)
-    place(qtbot, window, spec='qr:"insitu"', at=(0.0, 28.0), width=10.1)
-    window.session.update_selected(hatch_mm=0.03)
-    qtbot.waitUntil(lambda: window.mark_panel.job() is not None
-                    and len(window.mark_panel.job().paths) > 200
-                    and not window._plan_timer.isActive()
-                    and not window.runner.running("plan"), timeout=WAIT_MS)
+    place(qtbot, window)
     mark, panel = window.mark_panel.ui, window.mark_panel
     assert window.save(tmp_path / "r.insitu.json")
     assert not panel.resume_button.isEnabled()                      # nothing unfinished
     total = len(panel.job().paths)
+    execute, calls = SimController.execute, []
+
+    def failing(self, commands):
+        calls.append(1)
+        if len(calls) == 4:
+            raise DeviceError("scan head: list timed out")
+        return execute(self, commands)
+
+    monkeypatch.setattr(SimController, "execute", failing)
     qtbot.mouseClick(mark.markButton, Qt.LeftButton)
     fire(qtbot, window)
-    qtbot.waitUntil(lambda: mark.progressBar.value() >= 5, timeout=WAIT_MS)
-    qtbot.mouseClick(mark.abortButton, Qt.LeftButton)
-    qtbot.waitUntil(lambda: not window.runner.running("mark"), timeout=WAIT_MS)
-    assert panel.resume_button.isEnabled()                          # the journal: unfinished
+    qtbot.waitUntil(lambda: "timed out" in mark.resultLabel.text(), timeout=WAIT_MS)
+    qtbot.waitUntil(panel.resume_button.isEnabled, timeout=WAIT_MS)  # the journal: unfinished
     offered = []
-    answer_box("Mark the cut path again" if "aborted" in mark.resultLabel.text() else "Resume",
-               offered)
+    answer_box("Mark the cut path again", offered)
     qtbot.mouseClick(panel.resume_button, Qt.LeftButton)
     fire(qtbot, window)
-    qtbot.waitUntil(lambda: panel.last_result is not None and not window.runner.running("mark")
-                    and panel.last_result.state == "done", timeout=WAIT_MS)
+    qtbot.waitUntil(lambda: panel.last_result is not None and not window.runner.running("mark"),
+                    timeout=WAIT_MS)
     r = panel.last_result
-    assert r.completed == r.total == total and r.start_path >= 5
-    assert offered and "paths" in offered[0]
+    assert (r.state, r.completed, r.total) == ("done", total, total) and r.start_path == 3
+    assert offered and "interrupted after 3 of" in offered[0]
     assert not panel.resume_button.isEnabled()                      # finished
 
 
@@ -133,7 +137,8 @@ def test_quit_asks_to_save_a_placement(qtbot, window, tmp_path):
     assert window.saved.changes() == ["placements"]
     seen = []
     answer_box(CANCEL, seen)
-    QTest.keySequence(window, QKeySequence.StandardKey.Quit)       # Ctrl+Q
+    assert window.quit_action.shortcut() == QKeySequence("Ctrl+Q")
+    window.quit_action.trigger()                                    # Ctrl+Q
     qtbot.waitUntil(lambda: bool(seen), timeout=WAIT_MS)
     assert window.isVisible() and window.session.current().at_mm == (2.0, 28.0)
     assert "placements" in seen[0]
@@ -172,7 +177,7 @@ def test_quit_while_marking_asks_to_abort_first(qtbot, window):
     answer_box("Abort and quit")
     answer_box(DISCARD, after_ms=300)
     assert window.close()
-    assert not window.runner.running("mark") and window.station is None
+    assert not window.runner.running("mark") and window.station.world.laser.kind == "off"
 
 
 # -- 4. clouds and jobs of the commands ---------------------------------------------------
@@ -214,6 +219,7 @@ def test_open_a_cloud_a_job_and_export(qtbot, window, tmp_path):
     assert read_job(job_file).digest() == exported.digest()        # the file left as it is
 
 
+@pytest.mark.qt_no_exception_capture   # offscreen Qt paints the 3-D view once here, no GL
 def test_a_job_for_another_workpiece_is_refused(qtbot, window, tmp_path):
     scan_recording(qtbot, window)
     place(qtbot, window)
@@ -269,7 +275,7 @@ def test_help_menu_guide_shortcuts_and_about(qtbot, window):
     rows = {table.item(r, 0).text(): table.item(r, 1).text() for r in range(table.rowCount())}
     native = QKeySequence.SequenceFormat.NativeText
     assert rows["Undo"] == QKeySequence(QKeySequence.StandardKey.Undo).toString(native)
-    assert rows["Quit"] == QKeySequence(QKeySequence.StandardKey.Quit).toString(native)
+    assert rows["Quit"] == QKeySequence("Ctrl+Q").toString(native)
     assert rows["Test action"] == QKeySequence("Ctrl+Alt+T").toString(native)
     assert rows["Top view"] == "1"
     with_keys = {a.text().replace("&", "").rstrip("…") for a in window.findChildren(QAction)
@@ -307,13 +313,14 @@ def test_a_refusal_on_its_row_and_in_the_status_bar_then_cleared(qtbot, window, 
     planned(qtbot, window)
     item = window.place_panel.ui.patternList.item(0)
     assert item.toolTip().startswith("refused:") and item.foreground().color().red() > 200
+    assert item.foreground().color().green() < 150
     assert window.message_label.text().startswith("placement 1 refused:")
     assert mark.resultLabel.text() == "" and mark.timeLabel.text() == ""   # not "done: …"
     assert "refused" in mark.jobLabel.text()
     window.session.update_selected(at_mm=(0.0, 28.0))               # OK again
     planned(qtbot, window)
+    item = window.place_panel.ui.patternList.item(0)
     assert window.message_label.text() == "" and item.toolTip() == ""
-    assert window.place_panel.ui.patternList.item(0).toolTip() == ""
 
 
 def test_scan_and_the_status_bar_agree_on_the_rig(qtbot, tmp_path):

@@ -41,12 +41,22 @@ class ZoomView(QGraphicsView):
     def wheelEvent(self, e) -> None:
         self.zoom_by(ZOOM_STEP if e.angleDelta().y() > 0 else 1 / ZOOM_STEP)
 
+    def _key_action(self, e):
+        return {Qt.Key.Key_Plus: lambda: self.zoom_by(ZOOM_STEP),
+                Qt.Key.Key_Equal: lambda: self.zoom_by(ZOOM_STEP),
+                Qt.Key.Key_Minus: lambda: self.zoom_by(1 / ZOOM_STEP),
+                Qt.Key.Key_0: self.fit, Qt.Key.Key_1: self.actual_size}.get(Qt.Key(e.key()))
+
+    def event(self, e) -> bool:
+        """The zoom keys are this view's while it has focus (not the main window's view
+        keys 1–4)."""
+        if e.type() == QEvent.Type.ShortcutOverride and self._key_action(e) is not None:
+            e.accept()
+            return True
+        return super().event(e)
+
     def keyPressEvent(self, e) -> None:
-        actions = {Qt.Key.Key_Plus: lambda: self.zoom_by(ZOOM_STEP),
-                   Qt.Key.Key_Equal: lambda: self.zoom_by(ZOOM_STEP),
-                   Qt.Key.Key_Minus: lambda: self.zoom_by(1 / ZOOM_STEP),
-                   Qt.Key.Key_0: self.fit, Qt.Key.Key_1: self.actual_size}
-        action = actions.get(Qt.Key(e.key()))
+        action = self._key_action(e)
         if action is None:
             super().keyPressEvent(e)
         else:

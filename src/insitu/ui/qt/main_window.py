@@ -144,7 +144,7 @@ class MainWindow(QMainWindow):
         self.recent_menu = f.addMenu("Open &recent")
         self.export_action = self._action(f, "&Export job…", self._export_dialog)
         f.addSeparator()
-        self._action(f, "&Quit", self.close, QKeySequence.Quit)
+        self.quit_action = self._action(f, "&Quit", self.close, "Ctrl+Q")  # every platform
         e = mb.addMenu("&Edit")
         self.undo_action = self._action(e, "&Undo", self.session.placements.undo,
                                         QKeySequence.Undo, "undo")
