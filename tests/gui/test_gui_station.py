@@ -210,6 +210,8 @@ def test_open_a_cloud_a_job_and_export(qtbot, window, tmp_path):
     assert window.view.renderer.lines["job"][0].count == 2 * sum(
         len(p.points) - 1 for p in exported.paths)
     assert window.mark_panel.ui.jobLabel.text().startswith("job file exported.json")
+    window.mark_panel.ui.powerSpin.setValue(55.0)                   # the file's laser counts
+    assert window.mark_panel.job().laser == exported.laser
     qtbot.waitUntil(window.mark_panel.ui.markButton.isEnabled, timeout=WAIT_MS)
     qtbot.mouseClick(window.mark_panel.ui.markButton, Qt.LeftButton)
     fire(qtbot, window)
