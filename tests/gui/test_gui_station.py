@@ -252,6 +252,13 @@ def test_insitu_mark_writes_a_project_the_gui_opens(qtbot, tmp_path):
                                    str(tmp_path / "job.json"), "--project",
                                    str(tmp_path / "p.insitu.json")])
     assert res.exit_code == 0, res.output
+    bad = CliRunner().invoke(app, ["mark", "--cloud", str(tmp_path / "c.ply"), "--pattern",
+                                   'text:"AB"', "--at", "0", "28", "-o",
+                                   str(tmp_path / "other.json"), "--project",
+                                   str(tmp_path / "p.json")])
+    assert isinstance(bad.exception, SystemExit) and bad.exit_code == 1
+    assert "expected a *.insitu.json file name" in bad.output
+    assert not (tmp_path / "other.json").exists()                   # refused before planning
     w = MainWindow(QSettings(str(tmp_path / "settings.ini"), QSettings.IniFormat))
     qtbot.addWidget(w)
     w.open_project(tmp_path / "p.insitu.json")
