@@ -20,6 +20,7 @@ class ArmDialog(QDialog):
         super().__init__(parent)
         self.setWindowTitle("Armed: confirm to mark")
         self.setWindowModality(Qt.WindowModality.WindowModal)
+        self.setMinimumWidth(520)
         lay = QVBoxLayout(self)
         head = QLabel("The laser is armed. Check what will be marked, then fire or cancel.")
         head.setWordWrap(True)
