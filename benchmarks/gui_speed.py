@@ -153,6 +153,7 @@ def main() -> None:
                           "< 1 s", "", "")
             table.add_row(f"scan {lines} lines at {size} px: whole scan", f"{total:.1f} s", "",
                           "", "")
+        window.saved.mark_clean()        # a scripted session: nothing to save
         window.close()
     Console().print(table)
 

@@ -32,7 +32,6 @@ def height_cal_file(tmp_path_factory):
 @pytest.fixture
 def window(qtbot, tmp_path, height_cal_file):
     w = MainWindow(QSettings(str(tmp_path / "settings.ini"), QSettings.IniFormat))
-    qtbot.addWidget(w)
     w.resize(1200, 800)
     w.show()
     w.connect_rig(RigChoice(binning=4))
@@ -41,6 +40,9 @@ def window(qtbot, tmp_path, height_cal_file):
                     timeout=WAIT_MS)
     yield w
     w.runner.wait_all()
+    w.saved.mark_clean()                # closing asks nothing: the test's session is dropped
+    w.close()
+    w.deleteLater()
 
 
 def scan_recording(qtbot, w):
@@ -58,6 +60,13 @@ def place(qtbot, w, spec='text:"AB"', at=(0.0, 28.0), width=12.0):
     qtbot.waitUntil(lambda: len(w.session.plans) == len(w.session.placements.items)
                     and not w.runner.running("plan") and not w._plan_timer.isActive(),
                     timeout=WAIT_MS)
+
+
+def fire(qtbot, w):
+    """Confirm the armed job: press the arming dialog's Fire button."""
+    qtbot.waitUntil(lambda: w.mark_panel.arm_dialog is not None
+                    and w.mark_panel.arm_dialog.isVisible(), timeout=WAIT_MS)
+    qtbot.mouseClick(w.mark_panel.arm_dialog.fire_button, Qt.LeftButton)
 
 
 def test_scan_a_recording_shows_progress_frames_and_the_cloud(qtbot, window):
@@ -157,6 +166,7 @@ def test_typed_values_check_and_mark_the_job(qtbot, window, tmp_path):
     mark = window.mark_panel.ui
     assert mark.markButton.isEnabled() and not mark.abortButton.isEnabled()
     qtbot.mouseClick(mark.markButton, Qt.LeftButton)
+    fire(qtbot, window)
     qtbot.waitUntil(lambda: window.mark_panel.last_result is not None, timeout=WAIT_MS)
     r = window.mark_panel.last_result
     assert (r.state, r.completed, r.total) == ("done", len(job.paths), len(job.paths))
@@ -296,7 +306,8 @@ def test_pilot_preview_then_abort_stops_mid_job(qtbot, window, tmp_path):
     window.session.update_selected(hatch_mm=0.03)
     qtbot.waitUntil(lambda: window.mark_panel.job() is not None
                     and len(window.mark_panel.job().paths) > 200
-                    and not window._plan_timer.isActive(), timeout=WAIT_MS)
+                    and not window._plan_timer.isActive()
+                    and not window.runner.running("plan"), timeout=WAIT_MS)
     mark, world = window.mark_panel.ui, window.station.world
     qtbot.mouseClick(mark.previewButton, Qt.LeftButton)
     qtbot.waitUntil(lambda: window.view.renderer.lines.get("pilot", (None,))[0] is not None
@@ -304,7 +315,9 @@ def test_pilot_preview_then_abort_stops_mid_job(qtbot, window, tmp_path):
     assert not world.burns and world.laser.kind == "off"      # the pilot burns nothing
     assert window.save(tmp_path / "a.insitu.json")
     total = len(window.mark_panel.job().paths)
+    qtbot.waitUntil(mark.markButton.isEnabled, timeout=WAIT_MS)     # the preview has ended
     qtbot.mouseClick(mark.markButton, Qt.LeftButton)
+    fire(qtbot, window)
     qtbot.waitUntil(lambda: mark.progressBar.value() >= 5, timeout=WAIT_MS)
     assert mark.abortButton.isEnabled() and "left" in mark.timeLabel.text()
     qtbot.mouseClick(mark.abortButton, Qt.LeftButton)
@@ -331,6 +344,7 @@ def test_variable_data_previews_the_next_serial_and_marking_takes_it(qtbot, wind
     assert not (tmp_path / "m.job.json").exists()             # written when marked, not saved
     qtbot.waitUntil(mark.markButton.isEnabled, timeout=WAIT_MS)
     window.mark_panel.mark()                                          # refused: no counter
+    fire(qtbot, window)
     qtbot.waitUntil(lambda: "no serial counter" in mark.resultLabel.text(), timeout=WAIT_MS)
     assert window.mark_panel.last_result is None
     counter = tmp_path / "serial.counter.json"
@@ -343,6 +357,7 @@ def test_variable_data_previews_the_next_serial_and_marking_takes_it(qtbot, wind
         qtbot.waitUntil(lambda: mark.markButton.isEnabled()
                         and not window.runner.running("mark"), timeout=WAIT_MS)
         window.mark_panel.mark()
+        fire(qtbot, window)
         qtbot.waitUntil(lambda: window.mark_panel.last_result is not None, timeout=WAIT_MS)
         assert window.mark_panel.last_result.state == "done"
         rec = read_job(tmp_path / "m.job.json").model_extra["variable_data"]

@@ -221,3 +221,76 @@ def test_a_code_hatch_follows_its_width_and_rotation_until_the_operator_sets_it(
     s.add_placement(Placement('text:"A"', (0.0, 0.0), 5.0, hatch_mm=0.1))
     s.update_selected(width_mm=8.0)                            # not a code: untouched
     assert s.current().hatch_mm == 0.1 and sd.code_hatch(s.current()) is None
+
+
+# -- unsaved changes, time left, the arming summary ---------------------------------------
+def test_saved_state_names_what_changed_and_compares_the_cloud_by_identity():
+    from insitu.ui.model.dirty import SavedState
+
+    s = Session()
+    cloud = PointCloud(np.zeros((3, 3)))
+    state = lambda: {"placements": s.placements.items, "cloud": s.cloud}   # noqa: E731
+    saved = SavedState(state)
+    assert not saved.dirty()
+    s.add_placement(Placement('text:"A"', (0.0, 0.0), 5.0))
+    assert saved.changes() == ["placements"]
+    s.set_cloud(cloud)
+    assert saved.changes() == ["placements", "cloud"]
+    saved.mark_clean()
+    assert not saved.dirty()
+    s.set_cloud(PointCloud(np.zeros((3, 3))))              # equal points, another cloud
+    assert saved.changes() == ["cloud"]
+    s.placements.undo()
+    s.placements.redo()
+    s.set_cloud(cloud)
+    assert not saved.dirty()
+
+
+def test_time_left_counts_down_without_jumps_and_rises_on_a_real_slowdown():
+    from insitu.ui.model.time_left import TimeLeft
+
+    # a short first path, then long ones: elapsed/done × left jumps (1.7 s → 13 s)
+    path_s = np.r_[0.02, np.full(99, 0.13)]
+    t, shown = TimeLeft(path_s), []
+    elapsed = np.cumsum(path_s)
+    for done in range(1, 100):
+        shown.append(t.update(done, float(elapsed[done - 1])))
+    assert shown[0] == pytest.approx(path_s[1:].sum(), rel=0.05)
+    assert np.all(np.diff(shown) <= 1e-9)                   # monotone: never up
+    assert shown[-1] == pytest.approx(0.13, abs=0.05)
+    naive = [elapsed[d - 1] / d * (100 - d) for d in (1, 2)]
+    assert naive[1] / naive[0] > 3                          # what the old estimate did
+    # the board slows to 3× the plan half-way: the estimate rises to the truth
+    t = TimeLeft(np.full(100, 0.1))
+    now = 0.0
+    for done in range(1, 101):
+        now += 0.1 if done <= 50 else 0.3
+        left = t.update(done, now)
+        if done == 50:
+            before = left
+        if done == 70:
+            assert left > before and left == pytest.approx(30 * 0.3, rel=0.3)
+    assert left == 0.0
+
+
+def test_path_seconds_add_up_to_the_jobs_estimate():
+    from insitu.marking import estimate_time, make_job, path_seconds
+
+    job = make_job([np.array([[0, 0, 0], [10, 0, 0.0]]), np.array([[10, 5, 0], [0, 5, 0.0]]),
+                    np.array([[0, 10, 0], [5, 10, 0.0], [5, 15, 0.0]])])
+    assert path_seconds(job).sum() == pytest.approx(estimate_time(job).total_s)
+
+
+def test_arm_rows_say_what_will_be_marked():
+    from insitu.marking import make_job
+    from insitu.ui.model.arming import arm_rows
+
+    job = make_job([np.array([[0, 0, 1], [10, 0, 1.0]]), np.array([[10, 5, 2], [0, 5, 2.0]])])
+    job = job.model_copy(update={"rig": {"workpiece": "arc", "seed": 0, "binning": 1}})
+    rows = dict(arm_rows(job, ["logo.svg"], "sim camera · sim head", first_path=1,
+                         choice={"resume": True, "cut_path": "skip"}))
+    assert rows["patterns"] == "logo.svg" and rows["paths"] == "1 of 2"
+    assert rows["marked length"].startswith("10 mm")
+    assert rows["extent, mm"] == "x 0.00 … 10.00, y 0.00 … 5.00, z 1.00 … 2.00"
+    assert "workpiece arc" in rows["planned on"] and rows["run"] == "resume, cut path: skip"
+    assert rows["laser"].startswith("30 %, 20 kHz")

@@ -202,15 +202,16 @@ def test_pen_table_replaced_keeps_the_default():
 
 
 def test_time_left_weighs_the_paths_still_to_mark_by_their_passes():
-    from insitu.marking import LaserOverride, path_seconds, time_left
+    from insitu.marking import LaserOverride, path_seconds
+    from insitu.ui.model.time_left import TimeLeft
     job = make_job([PATH, PATH, PATH], overrides={2: LaserOverride.of_pen(
         Pen(name="p", passes=3))})
     sec = path_seconds(job)
     assert sec.sum() == pytest.approx(estimate_time(job).total_s)
     assert sec[2] > 2.5 * sec[1]
     # the first path took twice its estimate: the rest will too
-    assert time_left(sec, 1, 2 * sec[0]) == pytest.approx(2 * (sec[1] + sec[2]))
-    assert time_left(sec, 0, 0.0) == pytest.approx(sec.sum())
+    assert TimeLeft(sec).update(0, 0.0) == pytest.approx(sec.sum())
+    assert TimeLeft(sec).update(2, 0.0) == pytest.approx(sec[2])
 
 
 def test_board_checks_cover_delays_and_the_wobble(tmp_path):

@@ -93,6 +93,9 @@ def mark(
         help="Serial counter for {serial} (default: serial.counter.json beside the job).")] = None,
     serial_start: Annotated[int | None, typer.Option(
         help="Create the serial counter, its first serial this.")] = None,
+    project: Annotated[Path | None, typer.Option(
+        metavar="P.insitu.json", help="Also write a project naming the cloud, this placement, "
+        "the rig and the job, to go on with it in insitu gui.")] = None,
 ) -> None:
     """Place a pattern with its centre at X Y, WIDTH mm wide, turned by --rotate; project it
     onto the measured surface (--mode) and write the mark job. The job is refused,
@@ -111,6 +114,8 @@ def mark(
     from insitu.services.station import connect
 
     check_output(out, ".json")
+    if project is not None:
+        check_project_output(project)
     projection_mode(mode)
     if inspect is not None:
         check_output(inspect, ".png")
@@ -152,9 +157,34 @@ def mark(
         if resume and (not out.exists() or read_job(out).digest() != plan.job.digest()):
             fail(f"--resume: {out} does not hold this job; run without --resume to start it")
         _summary(out, placement, plan, station.field, rec, part_pose, located)
+        if project is not None:
+            write_mark_project(project, cloud, measured.rig, placement, out, rig, field,
+                               workpiece, seed)
+            console.print(f"wrote {project} (insitu gui {project})", highlight=False)
         if run:
             run_on_station(station, plan.job, out, resume, preview, inspect, restart, cut_path,
                            read=([plan], measured))
+
+
+def check_project_output(path: Path) -> None:
+    """A project's name ends in .insitu.json, in a folder that exists."""
+    from insitu.formats.project import SUFFIX
+
+    check_output(path)
+    if not path.name.endswith(SUFFIX):
+        fail(f"--project {path}: expected a *{SUFFIX} file name")
+
+
+def write_mark_project(path: Path, cloud: Path, record, placement, job: Path, rig, field,
+                       workpiece: str, seed: int) -> None:
+    """The project of ``insitu gui`` holding what ``insitu mark`` planned: the cloud, the
+    placement, the rig (the cloud's binning), the field correction and the job."""
+    from insitu.formats.project import SIM_BINNING, Project, RigChoice, write_project
+
+    binning = int((record or {}).get("binning", SIM_BINNING))
+    write_project(path, Project(rig=RigChoice(workpiece, seed, binning, rig),
+                                field_correction=field, cloud=cloud, placements=(placement,),
+                                selected=0, job=job))
 
 
 def _plan(out: Path, placement, plan_mark, resume: bool, fields, counter, start):

@@ -10,7 +10,7 @@ from insitu.marking.checks import Limits, check_projection, check_targets
 from insitu.marking.driver import GalvoDriver, preview_outlines
 from insitu.marking.job import (LaserOverride, LaserParams, MarkJob, MarkPath, TimeEstimate,
                                 Timing, estimate_time, make_job, path_seconds, read_job,
-                                time_left, with_pen,
+                                with_pen,
                                 write_job)
 from insitu.marking.plan import plan_job
 from insitu.marking.modes import PROJECTIONS, ProjectionMode, project, projection_mode
@@ -28,5 +28,5 @@ __all__ = [
     "Timing", "check_projection", "check_targets", "densify", "estimate_time", "make_job",
     "plan_job", "preview_outlines", "progress_path_for", "project", "project_planar",
     "project_wrap", "projection_mode", "read_job", "read_progress", "run_job",
-    "run_preview", "path_seconds", "time_left", "with_pen", "write_job",
+    "run_preview", "path_seconds", "with_pen", "write_job",
 ]

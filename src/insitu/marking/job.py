@@ -314,10 +314,3 @@ def path_seconds(job: MarkJob, timing: Timing | None = None) -> np.ndarray:
     """(N,) estimated seconds of each path (its passes, jumps and delays included)."""
     c = np.array(list(_path_costs(job, timing, (0.0, 0.0, 0.0), 0))).reshape(-1, 5)
     return c[:, 2:].sum(1)
-
-
-def time_left(seconds: np.ndarray, done: int, elapsed_s: float) -> float:
-    """Seconds left after ``done`` of the paths whose estimates are ``seconds`` (N,) took
-    ``elapsed_s``: the estimate of the rest, scaled by how the done ones went."""
-    est_done, rest = float(seconds[:done].sum()), float(seconds[done:].sum())
-    return rest if est_done <= 0 or elapsed_s <= 0 else elapsed_s * rest / est_done

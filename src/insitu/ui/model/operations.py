@@ -23,6 +23,8 @@ from insitu.services.common import Progress
 from insitu.services.station import Station
 from insitu.services.station import connect as connect_station
 
+NO_RIG = "connect the rig first (Rig ▸ Connect)"
+
 
 def connect(choice: RigChoice, field: Path | None = None) -> Station:
     """The station of ``choice`` (its rig file, or the simulated rig), its camera answering."""
@@ -44,7 +46,7 @@ def scan(station: Station | None, settings: ScanSettings, height_cal, progress: 
         return services.scan_replay(settings.replay, height_cal, progress=progress,
                                     cancel=cancel, on_frame=on_frame)
     if station is None:
-        raise InsituError("connect the rig first (Rig ▸ Connect)")
+        raise InsituError(NO_RIG)
     return services.scan_live(station, settings.spacing_mm, settings.region, height_cal,
                               progress=progress, cancel=cancel, on_frame=on_frame,
                               exposure_ms=settings.exposure_ms, speed_mm_s=settings.speed_mm_s)
@@ -60,15 +62,17 @@ def preview(job: MarkJob, station: Station) -> list[np.ndarray]:
 
 def mark(job: MarkJob, station: Station, job_path: Path | None, progress: Progress,
          cancel: threading.Event, resume: bool = False, restart: bool = False,
-         cut_path: str | None = None, outcomes=None, cloud=None) -> mark_svc.StationRun:
-    """Write ``job`` to ``job_path`` (when given, unless resuming; its journal is kept beside
-    it), mark it (``resume`` / ``restart`` / ``cut_path`` as
-    :func:`~insitu.marking.run_job`), image the part and read the marks of ``outcomes``
-    (the plans of ``job``'s placements, on ``cloud``) back. Setting ``cancel`` stops the
-    laser before the next command. A job planned for another rig or workpiece is refused
+         cut_path: str | None = None, outcomes=None, cloud=None, write: bool = True
+         ) -> mark_svc.StationRun:
+    """Write ``job`` to ``job_path`` (when given and ``write``, unless resuming; its journal
+    is kept beside it; ``write`` False: the job is that file, as ``insitu job run``), mark it
+    (``resume`` / ``restart`` / ``cut_path`` as :func:`~insitu.marking.run_job`), image the
+    part and read the marks of ``outcomes`` (the plans of ``job``'s placements, on ``cloud``)
+    back. Setting ``cancel`` stops the laser before the next command. A job planned for
+    another rig or workpiece is refused
     (SafetyError), nothing written or fired."""
     station.check_source(job_path or Path("the job"), job.rig, "job")
-    if job_path is not None and not resume:
+    if job_path is not None and write and not resume:
         mark_svc.save_job(job_path, job)
     run = mark_svc.mark_on_station(station, job, job_path, resume=resume, restart=restart,
                                    cut_path=cut_path, image=True, cancel=cancel,

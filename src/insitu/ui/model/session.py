@@ -4,7 +4,7 @@ here draws or blocks."""
 
 from __future__ import annotations
 
-from dataclasses import replace
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 from psygnal import Signal
@@ -80,6 +80,15 @@ class PlacementHistory:
             self.changed.emit()
 
 
+@dataclass(frozen=True)
+class JobFile:
+    """A mark job opened from ``path`` (made by ``insitu mark`` or exported): marked as it
+    is, its journal beside it, as ``insitu job run`` does."""
+
+    path: Path
+    job: MarkJob
+
+
 class Session:
     """Everything one project holds. Signals carry no payload; read the attributes."""
 
@@ -89,6 +98,7 @@ class Session:
     selection_changed = Signal()
     plans_changed = Signal()
     pens_changed = Signal()
+    job_file_changed = Signal()
 
     def __init__(self) -> None:
         self.rig_choice = RigChoice()
@@ -103,7 +113,9 @@ class Session:
         self.plans: list[PlanOutcome] = []
         self.project_path: Path | None = None
         self.pens: PenTable = DEFAULT_PENS
+        self.job_file: JobFile | None = None
         self.placements.changed.connect(self._clamp_selection)
+        self.placements.changed.connect(self._placed)
 
     # -- cloud ---------------------------------------------------------------------------
     def set_cloud(self, cloud: PointCloud | None, path: Path | None = None) -> None:
@@ -170,16 +182,30 @@ class Session:
         """The pen ``placement`` is marked with."""
         return self.pens.pen(placement.pen)
 
+    # -- a job file ----------------------------------------------------------------------
+    def set_job_file(self, job_file: JobFile | None) -> None:
+        """Mark ``job_file`` instead of the placements (None: the placements again)."""
+        if job_file is not self.job_file:
+            self.job_file = job_file
+            self.job_file_changed.emit()
+
+    def _placed(self) -> None:
+        """Placing a pattern ends the opened job: the placements are marked again."""
+        if self.placements.items:
+            self.set_job_file(None)
+
     # -- plans ---------------------------------------------------------------------------
     def set_plans(self, plans: list[PlanOutcome]) -> None:
         self.plans = list(plans)
         self.plans_changed.emit()
 
     def job(self) -> MarkJob | None:
-        """One job marking every placement in order (each was checked by ``plan_mark``), or
-        None while any is refused or not yet planned."""
+        """The opened job file's job, else one job marking every placement in order (each
+        was checked by ``plan_mark``), or None while any is refused or not yet planned."""
         from insitu.ui.model.operations import joined
 
+        if self.job_file is not None:
+            return self.job_file.job
         if len(self.plans) != len(self.placements.items):
             return None
         return joined(self.plans)

@@ -13,6 +13,7 @@ from PySide6.QtWidgets import (QFileDialog, QTableWidgetItem, QTabWidget, QVBoxL
 from insitu.ui.model import operations as ops
 from insitu.ui.qt.camera_image import to_qimage
 from insitu.ui.qt.forms import load_form
+from insitu.ui.qt.image_window import Clicks, ImageWindow
 
 GUIDES = {
     "camera": "Record the checkerboard in several poses, with the head's axis lines drawn on "
@@ -40,6 +41,11 @@ class CalibratePage(QWidget):
         ui.outputBrowse.clicked.connect(self._browse_output)
         ui.runButton.clicked.connect(self.run)
         window.runner.busy_changed.connect(self._busy)
+        self.picture: QPixmap | None = None         # the report at full size
+        self.picture_window: ImageWindow | None = None
+        self._clicks = Clicks(self)
+        ui.pictureLabel.installEventFilter(self._clicks)
+        self._clicks.clicked.connect(self.show_picture)
 
     @property
     def task_name(self) -> str:
@@ -83,10 +89,23 @@ class CalibratePage(QWidget):
             ui.residualsTable.setItem(row, 0, QTableWidgetItem(k))
             ui.residualsTable.setItem(row, 1, QTableWidgetItem(f"{v:.4g}"))
         ui.residualsTable.resizeColumnsToContents()
-        pix = QPixmap.fromImage(to_qimage(outcome.picture))
+        self.picture = pix = QPixmap.fromImage(to_qimage(outcome.picture))
         ui.pictureLabel.setPixmap(pix.scaled(ui.pictureLabel.width(), 240, Qt.KeepAspectRatio,
                                              Qt.SmoothTransformation))
+        ui.pictureLabel.setToolTip("click: the picture at full size, with zoom")
+        ui.pictureLabel.setCursor(Qt.CursorShape.PointingHandCursor)
+        self.picture_name = outcome.path.with_suffix(".png").name
         self.window_.calibration_done(self.kind, outcome.path)
+
+    def show_picture(self) -> None:
+        """The report picture at full size in a zoomable window (nothing before one)."""
+        if self.picture is None:
+            return
+        if self.picture_window is not None:
+            self.picture_window.close()
+        self.picture_window = ImageWindow(self.picture, f"{self.kind} calibration — "
+                                                        f"{self.picture_name}", self)
+        self.picture_window.show()
 
     def _failed(self, message: str, _cancelled: bool) -> None:
         self.ui.notesLabel.setText(message)

@@ -1,6 +1,7 @@
 """The main window of ``insitu gui``: the 3-D view in the middle, docks for Scan, Place, Mark,
 Calibrate and the camera; menus, toolbar, status bar (camera, scan head, calibration age),
-project files with recent files, undo/redo, drag-and-drop of patterns and projects."""
+project files with recent files (and clouds and jobs: :mod:`insitu.ui.qt.open_files`),
+unsaved changes asked about, undo/redo, drag-and-drop of patterns, projects, clouds, jobs."""
 
 from __future__ import annotations
 
@@ -21,11 +22,16 @@ from insitu.services.project import OpenedProject, open_project, save_project
 from insitu.services.serials import is_templated
 from insitu.services.station import Station
 from insitu.ui.model import operations as ops
+from insitu.ui.model.dirty import SavedState
 from insitu.ui.model.session import Session
 from insitu.ui.qt.calibrate_panel import CalibratePanel
 from insitu.ui.qt.camera_window import CameraDock
+from insitu.ui.qt.dialogs import ask_abort, ask_save
 from insitu.ui.qt.forms import icon
+from insitu.ui.qt.help import add_help_menu
+from insitu.ui.qt.keys import route_undo
 from insitu.ui.qt.mark_panel import MarkPanel
+from insitu.ui.qt import open_files
 from insitu.ui.qt.place_panel import PlacePanel
 from insitu.ui.qt.scan_panel import ScanPanel
 from insitu.ui.qt.scene_binding import SceneBinding
@@ -33,7 +39,6 @@ from insitu.ui.qt.view3d import View3D
 from insitu.ui.qt.view_menu import ViewMenu
 from insitu.ui.qt.workers import TaskRunner
 
-PROJECT_FILES = f"insitu projects (*{SUFFIX})"
 MAX_RECENT = 8
 PLAN_DELAY_MS = 150
 
@@ -75,12 +80,15 @@ class MainWindow(QMainWindow):
         self._docks()
         self._status_bar()
         self._actions()
+        self.saved = SavedState(self._kept_state)
+        route_undo(self.place_panel, self.undo_action, self.redo_action)
         self._plan_timer = QTimer(self, singleShot=True, interval=PLAN_DELAY_MS)
         self._plan_timer.timeout.connect(self.plan)
         self._plan_again = False
         for sig in (self.session.placements.changed, self.session.cloud_changed,
                     self.session.pens_changed):
             sig.connect(lambda: self._plan_timer.start())
+        self.session.job_file_changed.connect(lambda: open_files.show_job_file(self))
         self.view.pattern_moved.connect(self._moved)
         self.view.rotate_dragged.connect(self._rotated)
         self.view.scale_dragged.connect(self._scaled)
@@ -114,6 +122,7 @@ class MainWindow(QMainWindow):
         self.head_label = QLabel("scan head: not connected")
         self.calib_label = QLabel("no height calibration")
         self.gl_label = QLabel("GL: —")
+        self._message_source: str | None = None
         bar.addWidget(self.message_label, 1)
         for w in (self.camera_label, self.head_label, self.calib_label, self.gl_label):
             bar.addPermanentWidget(w)
@@ -133,13 +142,13 @@ class MainWindow(QMainWindow):
         tb.setObjectName("mainToolBar")
         f = mb.addMenu("&File")
         self._action(f, "&New project", self.new_project, QKeySequence.New)
-        tb.addAction(self._action(f, "&Open project…", self._open_dialog, QKeySequence.Open,
-                                  "open"))
+        tb.addAction(self._action(f, "&Open…", self._open_dialog, QKeySequence.Open, "open"))
         tb.addAction(self._action(f, "&Save project", self.save, QKeySequence.Save, "save"))
         self._action(f, "Save project &as…", self._save_dialog, QKeySequence.SaveAs)
         self.recent_menu = f.addMenu("Open &recent")
+        self.export_action = self._action(f, "&Export job…", self._export_dialog)
         f.addSeparator()
-        self._action(f, "&Quit", self.close, QKeySequence.Quit)
+        self.quit_action = self._action(f, "&Quit", self.close, "Ctrl+Q")  # every platform
         e = mb.addMenu("&Edit")
         self.undo_action = self._action(e, "&Undo", self.session.placements.undo,
                                         QKeySequence.Undo, "undo")
@@ -156,6 +165,7 @@ class MainWindow(QMainWindow):
         tb.addAction(self.connect_action)
         self._rig_named()
         self._action(r, "Connect with a rig &file…", self._rig_file_dialog)
+        add_help_menu(self)
         self._update_recent()
 
     def _undo_state(self) -> None:
@@ -163,14 +173,23 @@ class MainWindow(QMainWindow):
         self.redo_action.setEnabled(self.session.placements.can_redo())
 
     # -- messages ------------------------------------------------------------------------
-    def show_message(self, text: str) -> None:
+    def show_message(self, text: str, source: str | None = None) -> None:
+        """One line in the status bar, replacing the last; ``source`` names the state it
+        tells of, so :meth:`clear_message` takes it away once that no longer holds."""
         self.message_label.setStyleSheet("")
         self.message_label.setText(text)
+        self._message_source = source
 
-    def show_error(self, text: str) -> None:
+    def show_error(self, text: str, source: str | None = None) -> None:
         """One line in the status bar, in red (no dialog: the station keeps running)."""
         self.message_label.setStyleSheet("color: #ff6b5e;")
         self.message_label.setText(text.splitlines()[0] if text else "error")
+        self._message_source = source
+
+    def clear_message(self, source: str) -> None:
+        """Take away the message of ``source`` (and only it): what it said no longer holds."""
+        if self._message_source == source:
+            self.show_message("")
 
     # -- rig -----------------------------------------------------------------------------
     def _rig_named(self) -> None:
@@ -187,6 +206,8 @@ class MainWindow(QMainWindow):
             self.station = None
         self.camera_label.setText("camera: not connected")
         self.head_label.setText("scan head: not connected")
+        self.clear_message("rig")
+        self.session.rig_changed.emit()
         self._plan_timer.start()
 
     def connect_rig(self, choice: RigChoice | None = None) -> None:
@@ -219,7 +240,7 @@ class MainWindow(QMainWindow):
                                 (hx, hy, max(nominal.z_range_mm)))
         self.session.rig_changed.emit()
         self._plan_timer.start()
-        self.show_message("rig connected")
+        self.show_message("rig connected", "rig")
 
     def _rig_file_dialog(self) -> None:
         path, _ = QFileDialog.getOpenFileName(self, "Rig file", "", "Rig files (*.json)")
@@ -302,6 +323,12 @@ class MainWindow(QMainWindow):
         current = (self.session.placements.items, self.session.pens)
         if (items, pens) == current and not self._plan_again:
             self.session.set_plans(plans)
+            refused = [(i, p.error) for i, p in enumerate(plans) if p.error]
+            if refused:
+                i, why = refused[0]
+                self.show_error(f"placement {i + 1} refused: {why}", "plan")
+            else:
+                self.clear_message("plan")
         else:
             self._plan_again = False
             self._plan_timer.start()
@@ -311,19 +338,50 @@ class MainWindow(QMainWindow):
         p = self.session.project_path
         return None if p is None else beside(p, ".job.json")
 
+    def _kept_state(self) -> dict:
+        """What a project file keeps of the session (see :class:`SavedState`)."""
+        s = self.session
+        return {"placements": s.placements.items, "cloud": s.cloud,
+                "height calibration": s.height_cal_path, "field correction": s.field_path,
+                "camera calibration": s.camera_cal_path,
+                "scan settings": self.scan_panel.settings()}
+
+    def may_discard(self, what: str) -> bool:
+        """True when the session may be replaced (``what``: "quitting", …): nothing unsaved,
+        or the operator saved it or chose to discard it."""
+        if not self.saved.dirty():
+            return True
+        answer = ask_save(self, self.saved.changes(), what)
+        return answer == "discard" or (answer == "save" and self.save())
+
     def new_project(self) -> None:
+        if not self.may_discard("starting a new project"):
+            return
+        self.session.set_job_file(None)
         self.session.set_cloud(None)
         self.session.placements.reset()
         self.session.project_path = None
         self.setWindowTitle("insitu")
+        self.saved.mark_clean()
 
     def _open_dialog(self) -> None:
-        path, _ = QFileDialog.getOpenFileName(self, "Open project", "", PROJECT_FILES)
+        path, _ = QFileDialog.getOpenFileName(self, "Open", "", open_files.OPEN_FILTERS)
         if path:
-            self.open_project(Path(path))
+            self.open_file(Path(path))
+
+    def open_file(self, path: Path) -> None:
+        """Open a project, a point cloud or a mark job (by its name), after asking to save
+        unsaved changes where it replaces them."""
+        open_files.open_file(self, path)
+
+    def _export_dialog(self) -> None:
+        path, _ = QFileDialog.getSaveFileName(self, "Export job", "", open_files.JOB_FILES)
+        if path:
+            open_files.export_job(self, Path(path if path.endswith(".json") else
+                                             path + ".json"))
 
     def _save_dialog(self) -> None:
-        path, _ = QFileDialog.getSaveFileName(self, "Save project", "", PROJECT_FILES)
+        path, _ = QFileDialog.getSaveFileName(self, "Save project", "", open_files.PROJECT_FILES)
         if path:
             self.save(Path(path if path.endswith(SUFFIX) else path + SUFFIX))
 
@@ -345,10 +403,12 @@ class MainWindow(QMainWindow):
         if opened.height_cal is not None:
             self.calib_label.setText(f"height calibration {age_text(opened.height_cal.created)}")
         self.binding.show_region(pr.scan.region)
+        s.set_job_file(None)
         s.set_cloud(opened.cloud, pr.cloud)
         s.set_pens(pr.pens)
         s.placements.reset(pr.placements)
         s.select(pr.selected)
+        self.saved.mark_clean()
         self._remember(path)
         self.setWindowTitle(f"insitu — {path.name}")
         self.show_message(f"opened {path}; rig not connected: "
@@ -372,6 +432,7 @@ class MainWindow(QMainWindow):
             self.show_error(str(e))
             return False
         s.project_path, s.cloud_path = path, written.cloud
+        self.saved.mark_clean()
         self._remember(path)
         self.setWindowTitle(f"insitu — {path.name}")
         self.show_message(f"saved {path}")
@@ -389,7 +450,7 @@ class MainWindow(QMainWindow):
     def _update_recent(self) -> None:
         self.recent_menu.clear()
         for p in self.recent_files():
-            self.recent_menu.addAction(p, lambda p=p: self.open_project(Path(p)))
+            self.recent_menu.addAction(p, lambda p=p: self.open_file(Path(p)))
         self.recent_menu.setEnabled(bool(self.recent_files()))
 
     # -- drag and drop -------------------------------------------------------------------
@@ -400,15 +461,26 @@ class MainWindow(QMainWindow):
     def dropEvent(self, e) -> None:
         for url in e.mimeData().urls():
             path = Path(url.toLocalFile())
-            if path.name.endswith(SUFFIX):
-                self.open_project(path)
+            if open_files.kind_of(path) is not None:
+                self.open_file(path)
             elif path.suffix.lower() in FILE_SUFFIXES:
                 self.place_panel.add_pattern(str(path))
                 self.docks["place"].raise_()
             else:
-                self.show_error(f"{path.name}: not a pattern (SVG, DXF, image) or a project")
+                self.show_error(f"{path.name}: not a pattern (SVG, DXF, image), a project, a "
+                                "point cloud (.ply) or a mark job (.json)")
 
     def closeEvent(self, e) -> None:
+        """Quit only when no marking runs (or the operator aborts it) and nothing unsaved is
+        lost (Save / Discard / Cancel)."""
+        if self.runner.running("mark"):
+            if not ask_abort(self):
+                e.ignore()
+                return
+            self.mark_panel.abort()
+        if not self.may_discard("quitting"):
+            e.ignore()
+            return
         self.runner.wait_all()
         if self.station is not None:
             self.station.close()            # laser off, devices released

@@ -1,25 +1,29 @@
-"""The Mark dock: laser settings, the job's size and time, Preview (pilot laser), Mark with
-progress and time left, and ABORT, which stops the laser before the next command. The
+"""The Mark dock: the pens, the job's size and time, Preview (pilot laser), Mark — armed
+first (what will be marked, confirmed by the operator) — with progress and time left, Resume
+of an unfinished job, and ABORT, which stops the laser before the next command. The
 inspection goes to the camera dock: each mark read back (rectified onto the surface, the
 plan over it, decoded and graded), or the camera's frame when it was not read."""
 
 from __future__ import annotations
 
 import time
+from pathlib import Path
 
-import numpy as np
-
-from PySide6.QtWidgets import QMessageBox, QVBoxLayout, QWidget
+from PySide6.QtWidgets import QHBoxLayout, QMessageBox, QPushButton, QVBoxLayout, QWidget
 
 from insitu.errors import InsituError
 
-from insitu.marking import LaserParams, MarkJob, estimate_time, path_seconds, time_left
+from insitu.marking import LaserParams, MarkJob, estimate_time, path_seconds
 from insitu.services.mark import StationRun
 from insitu.services.serials import is_templated
 from insitu.ui.model import operations as ops
 from insitu.ui.model import scene_data as sd
+from insitu.ui.model.arming import arm_rows
+from insitu.ui.model.time_left import TimeLeft
+from insitu.ui.qt.dialogs import ArmDialog
 from insitu.ui.qt.forms import icon, load_form
 from insitu.ui.qt.pens_panel import PensRow
+from insitu.ui.qt.place_panel import short_name
 
 
 class MarkPanel(QWidget):
@@ -32,6 +36,11 @@ class MarkPanel(QWidget):
         ui = self.ui
         ui.previewButton.clicked.connect(self.preview)
         ui.markButton.clicked.connect(self.mark)
+        self.resume_button = QPushButton("Resume", ui)
+        self.resume_button.setObjectName("resumeButton")
+        self.resume_button.setToolTip("Continue the unfinished job its journal records")
+        ui.findChild(QHBoxLayout, "buttons").insertWidget(2, self.resume_button)
+        self.resume_button.clicked.connect(self.resume)
         ui.abortButton.clicked.connect(self.abort)
         ui.abortButton.setIcon(icon("abort"))
         self.pens_row = PensRow(self.session, self)     # each placement's pen sets its laser
@@ -43,9 +52,13 @@ class MarkPanel(QWidget):
         self.session.cloud_changed.connect(self.refresh)
         self.session.rig_changed.connect(self.refresh)
         self.session.pens_changed.connect(self.refresh)
+        self.session.job_file_changed.connect(self.refresh)
         window.runner.busy_changed.connect(self._busy)
         self._t0 = 0.0
-        self._seconds = np.zeros(0)
+        self._time_left: TimeLeft | None = None
+        self.arm_dialog: ArmDialog | None = None
+        self._armed: str | None = None          # the armed job's digest
+        self._result_of: str | None = None      # the digest of the job the result is of
         self.last_result = None
         self.last_readback = None
         self.refresh()
@@ -56,28 +69,59 @@ class MarkPanel(QWidget):
                            mark_speed_mm_s=ui.speedSpin.value())
 
     def job(self) -> MarkJob | None:
-        """The session's job with these laser settings, or None (nothing placed or refused)."""
+        """The opened job file's job as it is, else the session's job with these laser
+        settings, or None (nothing placed or refused)."""
+        if self.session.job_file is not None:
+            return self.session.job_file.job
         job = self.session.job()
         return None if job is None else job.model_copy(update={"laser": self.laser()})
+
+    def job_path(self) -> Path | None:
+        """Where the job is kept, its journal beside it: the opened job file, else beside the
+        project."""
+        jf = self.session.job_file
+        return jf.path if jf is not None else self.window_.job_path()
 
     def refresh(self) -> None:
         job, station = self.job(), self.window_.station
         busy = self.window_.runner.running("mark") or self.window_.runner.running("preview")
+        digest = None if job is None else job.digest()
+        if self._armed is not None and digest != self._armed:
+            self.disarm("disarmed: the job changed")
+        if not busy and digest != self._result_of:   # a result is of the job it was, only
+            self._result_of = None
+            self.ui.resultLabel.setText("")
+            self.ui.timeLabel.setText("")
+            self.ui.progressBar.setValue(0)
         if job is None:
-            refused = [p.error for p in self.session.plans if p.error]
-            self.ui.jobLabel.setText(f"no job: {refused[0]}" if refused else
+            refused = [(i, p.error) for i, p in enumerate(self.session.plans) if p.error]
+            self.ui.jobLabel.setText(f"no job: placement {refused[0][0] + 1} refused: "
+                                     f"{refused[0][1]}" if refused else
                                      "no job: place a pattern on a cloud")
         else:
             e = estimate_time(job, station.driver.timing if station else None)
-            self.ui.jobLabel.setText(f"{len(job.paths)} paths, mark {e.mark_mm:.0f} mm, "
+            jf = self.session.job_file
+            self.ui.jobLabel.setText((f"job file {jf.path.name}: " if jf else "")
+                                     + f"{len(job.paths)} paths, mark {e.mark_mm:.0f} mm, "
                                      f"about {e.total_s:.1f} s" + self._serial_note())
-        ok = job is not None and station is not None and not busy
-        self.ui.previewButton.setEnabled(ok)
+        ok = job is not None and station is not None and not busy and self._armed is None
+        self.ui.previewButton.setEnabled(job is not None and station is not None and not busy)
         self.ui.markButton.setEnabled(ok)
+        self.resume_button.setEnabled(ok and self._unfinished(job) is not None)
+
+    def _unfinished(self, job: MarkJob | None):
+        """The journal's summary of an unfinished run of ``job`` (None: none or unreadable)."""
+        if job is None or (self.session.job_file is None
+                           and is_templated(self.session.placements.items)):
+            return None
+        try:
+            return ops.unfinished(job, self.job_path())
+        except InsituError:
+            return None
 
     def _serial_note(self) -> str:
         """What the job's variable data shows: the next serial, as a preview."""
-        if not is_templated(self.session.placements.items):
+        if self.session.job_file is not None or not is_templated(self.session.placements.items):
             return ""
         return (f"; serial {ops.preview_serial(self.window_.job_path())} shown as a preview "
                 "(taken when marked)")
@@ -94,34 +138,90 @@ class MarkPanel(QWidget):
         self.window_.show_message("pilot preview drawn (red); the laser is off")
 
     def mark(self) -> None:
+        """Arm the job (after asking how to go on with an unfinished earlier run of it)."""
+        self._arm(resume_only=False)
+
+    def resume(self) -> None:
+        """Arm the unfinished job its journal records, after asking how to go on."""
+        self._arm(resume_only=True)
+
+    def _arm(self, resume_only: bool) -> None:
         job, station = self.job(), self.window_.station
-        if job is None or station is None:
+        if job is None or station is None or self._armed is not None:
             return
-        path, items = self.window_.job_path(), self.session.placements.items
-        if is_templated(items):           # a new part: planned again with the serial it takes
-            cloud, laser, pens = self.session.cloud, self.laser(), self.session.pens
+        summary, choice = None, {}
+        if self.session.job_file is not None or not is_templated(self.session.placements.items):
+            try:
+                summary = ops.unfinished(job, self.job_path())
+            except InsituError as e:
+                self.window_.show_error(str(e))
+                return
+            if resume_only and summary is None:
+                return
+            choice = self.ask_resume(summary)
+            if choice is None:
+                return
+        first = 0
+        if summary is not None and choice.get("resume"):
+            first = len(summary.done | summary.skipped)
+        names = [short_name(p.pattern) for p in self.session.placements.items
+                 if self.session.job_file is None]
+        rows = arm_rows(job, names, " · ".join(station.describe()), station.driver.timing,
+                        first, self.job_path(), choice)
+        self._armed = self._result_of = job.digest()
+        self.arm_dialog = dlg = ArmDialog(rows, self)
+        dlg.accepted.connect(lambda: self._fire(job, choice, first))
+        dlg.rejected.connect(lambda: self.disarm("disarmed: nothing was marked"))
+        self.ui.resultLabel.setText("armed: confirm in the dialog (Esc disarms)")
+        self.refresh()
+        dlg.open()
+
+    def disarm(self, why: str) -> None:
+        """Forget the armed job (its dialog closed); ``why`` shown."""
+        dlg, self.arm_dialog, self._armed = self.arm_dialog, None, None
+        if dlg is not None:
+            dlg.blockSignals(True)
+            dlg.reject()
+            dlg.deleteLater()
+            job = self.job()
+            self._result_of = None if job is None else job.digest()
+            self.ui.resultLabel.setText(why)
+            self.refresh()
+
+    def _fire(self, job: MarkJob, choice: dict, first: int) -> None:
+        """The operator confirmed: mark ``job`` — if it is still the armed one and the
+        station still connected."""
+        armed, station = self._armed, self.window_.station
+        if self.arm_dialog is not None:
+            self.arm_dialog.deleteLater()
+        self.arm_dialog, self._armed = None, None
+        current = self.job()
+        if current is None or current.digest() != armed or station is None:
+            self.ui.resultLabel.setText("disarmed: the job or the station changed; nothing "
+                                        "was marked")
+            self.refresh()
+            return
+        path, items = self.job_path(), self.session.placements.items
+        if self.session.job_file is None and is_templated(items):
+            cloud, laser = self.session.cloud, self.laser()   # planned again with its serial
+            pens = self.session.pens
 
             def work(progress, cancel, _f):
                 return ops.mark_serial(items, cloud, laser, station, path, progress, cancel,
                                        pens)
         else:
-            try:
-                choice = self.ask_resume(ops.unfinished(job, path))
-            except InsituError as e:
-                self.window_.show_error(str(e))
-                return
-            if choice is None:
-                return
-
-            plans, cloud = list(self.session.plans), self.session.cloud
+            write = self.session.job_file is None       # an opened job file: marked as is
+            plans = list(self.session.plans) if write else None     # what is read back
+            cloud = self.session.cloud
 
             def work(progress, cancel, _f):
-                return ops.mark(job, station, path, progress, cancel, outcomes=plans,
-                                cloud=cloud, **choice)
+                return ops.mark(job, station, path, progress, cancel, write=write,
+                                outcomes=plans, cloud=cloud, **choice)
         task = self.window_.runner.start("mark", work, self._marked, self._failed)
         if task is not None:
             self._t0 = time.perf_counter()
-            self._seconds = path_seconds(job, station.driver.timing)   # passes, delays
+            self._time_left = TimeLeft(path_seconds(job, station.driver.timing), first)
+            self._result_of = armed
             self.ui.progressBar.setValue(0)
             self.ui.resultLabel.setText("marking…")
             task.progress.connect(self._progress)
@@ -157,9 +257,7 @@ class MarkPanel(QWidget):
     def _progress(self, done: int, total: int) -> None:
         self.ui.progressBar.setMaximum(total)
         self.ui.progressBar.setValue(done)
-        elapsed = time.perf_counter() - self._t0
-        left = (time_left(self._seconds, done, elapsed) if len(self._seconds) == total
-                else elapsed / max(done, 1) * (total - done))
+        left = self._time_left.update(done, time.perf_counter() - self._t0)
         self.ui.timeLabel.setText(f"path {done} of {total}, about {left:.1f} s left")
 
     def _marked(self, outcome: StationRun) -> None:

@@ -8,6 +8,7 @@ from dataclasses import replace
 from pathlib import Path
 
 from PySide6.QtCore import Qt
+from PySide6.QtGui import QBrush, QColor
 from PySide6.QtWidgets import QFileDialog, QInputDialog, QVBoxLayout, QWidget
 
 from insitu.errors import InsituError
@@ -18,6 +19,7 @@ from insitu.ui.model.scene_data import base_pattern, code_hatch
 from insitu.ui.qt.forms import load_form
 from insitu.ui.qt.pens_panel import add_pen_chooser
 
+REFUSED_COLOUR = "#ff6b5e"
 PATTERN_FILES = f"Patterns ({' '.join('*' + s for s in FILE_SUFFIXES)})"
 
 
@@ -151,6 +153,11 @@ class PlacePanel(QWidget):
                           f"mm, about {plan.estimate.total_s:.1f} s"), False
             text += "".join(f"\n{n}" for n in plan.pattern.notes if n.startswith("warning:"))
         label.setText(text)
+        for row in range(self.ui.patternList.count()):      # each refusal on its row
+            item = self.ui.patternList.item(row)
+            error = s.plans[row].error if row < len(s.plans) else None
+            item.setForeground(QBrush(QColor(REFUSED_COLOUR)) if error else QBrush())
+            item.setToolTip(f"refused: {error}" if error else "")
         label.setProperty("warning", warn)
         label.style().unpolish(label)
         label.style().polish(label)

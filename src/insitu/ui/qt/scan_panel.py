@@ -10,6 +10,7 @@ from PySide6.QtWidgets import QFileDialog, QVBoxLayout, QWidget
 
 from insitu.formats.project import ScanSettings
 from insitu.ui.model import operations as ops
+from insitu.ui.model.operations import NO_RIG
 from insitu.ui.qt.forms import load_form
 
 
@@ -31,6 +32,7 @@ class ScanPanel(QWidget):
             lambda: window.load_height_cal(self._path(ui.heightCalEdit.text())))
         ui.sourceCombo.currentIndexChanged.connect(self._source_changed)
         self._region_enabled(True)
+        window.session.rig_changed.connect(self._can_scan)
         self._source_changed(0)
         window.runner.busy_changed.connect(self._busy)
 
@@ -76,6 +78,20 @@ class ScanPanel(QWidget):
             w.setEnabled(live)
         for w in (self.ui.replayEdit, self.ui.replayBrowse):
             w.setEnabled(not live)
+        self._can_scan()
+
+    def _can_scan(self) -> None:
+        """Scan is enabled when it can run — a recording, or the rig connected (the window's
+        station: the one truth the status bar shows too); a refusal that no longer holds
+        goes."""
+        w = self.window_
+        live, busy = self.ui.sourceCombo.currentIndex() == 0, w.runner.running("scan")
+        no_rig = live and w.station is None
+        self.ui.scanButton.setEnabled(not busy and not no_rig)
+        self.ui.scanButton.setToolTip(NO_RIG if no_rig else "")
+        if not no_rig and self.ui.summaryLabel.text() == NO_RIG:
+            self.ui.summaryLabel.setText("")
+            w.clear_message("scan")
 
     def _browse_replay(self) -> None:
         folder = QFileDialog.getExistingDirectory(self, "Recorded scan folder")
@@ -134,9 +150,9 @@ class ScanPanel(QWidget):
             self.window_.session.set_cloud(partial.cloud)
             message += f" (kept {len(partial.cloud):,} points measured before)"
         self.ui.summaryLabel.setText(message)
-        self.window_.show_error(message)
+        self.window_.show_error(message, "scan")
 
     def _busy(self, name: str, busy: bool) -> None:
         if name == "scan":
-            self.ui.scanButton.setEnabled(not busy)
+            self._can_scan()
             self.ui.cancelButton.setEnabled(busy)

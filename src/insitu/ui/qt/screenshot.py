@@ -167,6 +167,7 @@ def main(argv: list[str] | None = None) -> int:
                 args.view_png.with_name(f"{args.view_png.stem}-{k}{args.view_png.suffix}")
             window.view.grabFramebuffer().save(str(v))
             v.with_suffix(".json").write_text(json.dumps(view_info(window)))
+    window.saved.mark_clean()        # a scripted session: nothing to save
     window.close()
     return 0
 
