@@ -4,7 +4,7 @@ of the commands, the GUI and the project files."""
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -34,6 +34,17 @@ class Placement:
     cross: bool = False
     fill: str = "auto"
     beam_mm: float = BEAM_MM
+
+    def in_world(self, T_world_part: np.ndarray) -> Placement:
+        """This placement, given in a part's frame, moved where the part lies:
+        ``T_world_part`` (4, 4) maps part points (mm) into the world. The centre is mapped,
+        the rotation and the hatch direction turn by the pose's angle about +z (a part lies
+        flat on the table: its pose is x, y and a turn about z)."""
+        T = np.asarray(T_world_part, float)
+        x, y = (T[:2, :2] @ np.asarray(self.at_mm, float)) + T[:2, 3]
+        turn = math.degrees(math.atan2(T[1, 0], T[0, 0]))
+        return replace(self, at_mm=(float(x), float(y)), rotate_deg=self.rotate_deg + turn,
+                       hatch_angle_deg=self.hatch_angle_deg + turn)
 
     def placed(self) -> Pattern:
         """The pattern loaded and moved to its place, world mm (FormatError if it cannot be).

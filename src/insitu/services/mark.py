@@ -107,6 +107,15 @@ def plan_all(cloud: PointCloud, placements, driver: GalvoDriver,
     return _quiet_zones_clear(out)
 
 
+def joined(outcomes: list[PlanOutcome]) -> MarkJob | None:
+    """One job marking every planned placement in order (None: none, or one refused)."""
+    if not outcomes or any(o.plan is None for o in outcomes):
+        return None
+    first = outcomes[0].plan.job
+    return first.model_copy(update={"paths": [path for o in outcomes
+                                              for path in o.plan.job.paths]})
+
+
 def _quiet_zones_clear(outcomes: list[PlanOutcome]) -> list[PlanOutcome]:
     """``outcomes`` with a refusal for each code whose frame — symbol and quiet zone —
     another planned pattern's marks (world x, y, as placed) reach into, and for that

@@ -87,6 +87,16 @@ class Station:
                               f"the station is {describe(self.record)}; nothing marked")
         return None
 
+    def part_feeder(self, workpiece: str, seed: int | None):
+        """On the simulated rig, ``present(part) -> T_world_part``: a fresh ``workpiece`` put
+        on the table for each part, at a random pose drawn from (``seed``, part) (None: where
+        the reference lay); None on a real rig (the operator puts the parts on)."""
+        if self.world is None:
+            return None
+        from insitu.sim.feeder import SimFeeder
+
+        return SimFeeder(self.world, workpiece, seed).present
+
     def default_region(self) -> tuple[float, float, float, float]:
         """Where to scan when no region is given: the simulated parts' footprint; a real rig
         does not know where its part is (ConfigError)."""

@@ -148,7 +148,7 @@ class Session:
     def job(self) -> MarkJob | None:
         """One job marking every placement in order (each was checked by ``plan_mark``), or
         None while any is refused or not yet planned."""
-        from insitu.ui.model.operations import joined
+        from insitu.services.mark import joined
 
         if len(self.plans) != len(self.placements.items):
             return None
