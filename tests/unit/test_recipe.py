@@ -16,7 +16,8 @@ from insitu.formats.pointcloud import PointCloud, write_ply
 from insitu.formats.recipe import Recipe, RecipeScan, read_recipe, reference_kind, write_recipe
 from insitu.marking import Placement
 from insitu.marking.modes import PROJECTIONS
-from insitu.sim.feeder import part_pose, pose_matrix
+from insitu.geometry.pose import pose_matrix
+from insitu.sim.feeder import part_pose
 
 runner = CliRunner()
 

@@ -121,7 +121,7 @@ def produce(
                 progress(rec.part, count)
 
             run = production.Production(r, station, log, count, production.recipe_locator(r),
-                                        production.recipe_read_back(r), present, start, cancel,
+                                        production.read_part, present, start, cancel,
                                         cal, on_record)
             try:
                 with cancel_on_signals(cancel):

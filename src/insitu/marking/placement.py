@@ -9,6 +9,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from insitu.errors import FormatError
+from insitu.geometry.pose import flat_pose
 from insitu.marking.modes import projection_mode
 from insitu.patterns import Pattern, hatch, load_pattern, order_paths
 from insitu.patterns.vector import BEAM_MM
@@ -42,7 +43,7 @@ class Placement:
         flat on the table: its pose is x, y and a turn about z)."""
         T = np.asarray(T_world_part, float)
         x, y = (T[:2, :2] @ np.asarray(self.at_mm, float)) + T[:2, 3]
-        turn = math.degrees(math.atan2(T[1, 0], T[0, 0]))
+        turn = flat_pose(T)[2]
         return replace(self, at_mm=(float(x), float(y)), rotate_deg=self.rotate_deg + turn,
                        hatch_angle_deg=self.hatch_angle_deg + turn)
 

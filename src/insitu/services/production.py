@@ -27,6 +27,7 @@ from insitu.errors import DeviceError, FormatError, InsituError
 from insitu.formats.pointcloud import PointCloud, read_ply, write_ply
 from insitu.formats.production_log import PartRecord, append_record, read_log
 from insitu.formats.recipe import Recipe
+from insitu.geometry.pose import flat_pose, pose_matrix
 from insitu.marking import LaserParams, MarkJob, read_job
 from insitu.services import mark as mark_svc
 from insitu.services import serials
@@ -61,15 +62,15 @@ class Located:
 
     def pose(self) -> tuple[float, float, float]:
         """(x mm, y mm, angle_deg about +z)."""
-        T = self.T_world_part
-        return float(T[0, 3]), float(T[1, 3]), float(np.degrees(np.arctan2(T[1, 0], T[0, 0])))
+        return flat_pose(self.T_world_part)
 
 
 @dataclass(frozen=True)
-class ReadBack:
-    """What the camera read of the marked part: ``decoded`` text (None: no code, or none
-    read), whether it is what was planned (``ok``), the print ``grade`` (A … F) and the mark's
-    ``offset_mm`` from its planned place."""
+class PartReading:
+    """What the camera read of the marked part, one value for the log: ``decoded`` texts
+    (" | " between codes; None: no code read), whether every mark is what was planned
+    (``ok``), the worst code's print ``grade`` (A … F) and the largest ``offset_mm`` of a
+    mark from its planned place."""
 
     decoded: str | None = None
     ok: bool | None = None
@@ -78,7 +79,55 @@ class ReadBack:
 
 
 Locator = Callable[[PointCloud], Located]
-ReadBackFn = Callable[[Station, MarkJob, PointCloud, list], ReadBack]
+
+
+def load_reference(recipe: Recipe):
+    """The recipe's part reference (:class:`~insitu.measure.part_reference.PartReference`):
+    its mesh sampled, or its first scan with the table taken away."""
+    from insitu.measure.part_reference import reference_from_cloud, reference_from_mesh
+
+    path = recipe.reference
+    if recipe.reference_kind == "cloud":
+        return reference_from_cloud(read_ply(path).points, path.name)
+    import open3d as o3d
+
+    mesh = o3d.io.read_triangle_mesh(str(path))
+    if len(mesh.triangles) == 0:
+        raise FormatError(f"{path}: no triangles (not a readable STL/PLY/OBJ mesh)")
+    return reference_from_mesh(np.asarray(mesh.vertices), np.asarray(mesh.triangles),
+                               path.name)
+
+
+def recipe_locator(recipe: Recipe) -> Locator:
+    """``locate(cloud) -> Located`` against the recipe's reference (loaded once), keeping
+    a symmetric part's turn within the recipe's ``prefer_angle_deg``; it raises the
+    registration's one-line refusal (part not found, partly scanned, poor fit, ambiguous)."""
+    from insitu.measure.locate import locate_part
+
+    reference = load_reference(recipe)
+
+    def locate(cloud: PointCloud) -> Located:
+        pose = locate_part(reference, cloud.points, prefer_angle=recipe.prefer_angle_deg)
+        return Located(pose.T_world_part, pose.best.fitness, pose.best.rmse_mm)
+    return locate
+ReadBackFn = Callable[[Station, list, PointCloud, Path], PartReading]
+
+
+def read_part(station: Station, plans: list, cloud: PointCloud, picture: Path) -> PartReading:
+    """Read the part's marks back (:func:`insitu.services.inspect.read_back`: the camera's
+    frame rectified onto the measured surface, each code decoded and graded) and write the
+    read-back picture to ``picture`` (the raw frame beside it)."""
+    from insitu.services.inspect import read_back, save_read_back
+    from insitu.vision.dpm_grade import letter
+
+    got = read_back(station, plans, cloud)
+    save_read_back(picture, got)
+    texts = [r.decoded for r in got.readings if r.text is not None and r.decoded is not None]
+    grades = [r.grades.overall for r in got.readings if r.grades is not None]
+    offsets = [float(np.hypot(*r.offset_mm)) for r in got.readings if r.offset_mm is not None]
+    return PartReading(" | ".join(texts) if texts else None, got.ok,
+                       letter(min(grades)) if grades else None,
+                       max(offsets) if offsets else None)
 
 
 @dataclass
@@ -215,8 +264,8 @@ def _run_part(run: Production, part: _Part) -> PartRecord:
     try:
         located = _stage(run, part, "locate", lambda: run.locate(cloud))
         x, y, a = located.pose()
-        part.fields.update(x_mm=round(x, 4), y_mm=round(y, 4), angle_deg=round(a, 4),
-                           fitness=round(located.fitness, 4), rmse_mm=round(located.rmse_mm, 4))
+        part.fields.update(x_mm=x, y_mm=y, angle_deg=a, fitness=round(located.fitness, 4),
+                           rmse_mm=round(located.rmse_mm, 4))
         planned = _stage(run, part, "plan", lambda: plan_part(run, part, cloud, located))
     except (Cancelled, DeviceError):
         raise
@@ -225,11 +274,12 @@ def _run_part(run: Production, part: _Part) -> PartRecord:
             raise
         return part.record("refused", _text(e))
     _stage(run, part, "mark", lambda: mark_svc.mark_on_station(
-        run.station, planned, part.job, cancel=run.cancel))
-    return _read(run, part, planned, cloud)
+        run.station, planned.job, part.job, cancel=run.cancel))
+    return _read(run, part, planned.result, cloud)
 
 
-def plan_part(run: Production, part: _Part, cloud: PointCloud, located: Located) -> MarkJob:
+def plan_part(run: Production, part: _Part, cloud: PointCloud,
+              located: Located) -> serials.Planned:
     """The recipe's job for this part (its serial and job file noted as soon as written)."""
     def save(p: Path, job: MarkJob):
         part.job = p
@@ -237,21 +287,13 @@ def plan_part(run: Production, part: _Part, cloud: PointCloud, located: Located)
         return mark_svc.save_job(p, job)
 
     return plan_recipe(run.recipe, cloud, located, run.station.driver,
-                       run.job_path(part.number), save).job
+                       run.job_path(part.number), save)
 
 
-def plan_recipe(recipe: Recipe, cloud: PointCloud, located: Located, driver,
-                job_path: Path, save: Callable[[Path, MarkJob], Any] = mark_svc.save_job
-                ) -> serials.Planned:
-    """Every placement of ``recipe`` moved where the part lies, planned on its ``cloud`` and
-    written to ``job_path`` as one job, with the serial the recipe's counter issues (created
-    with its first serial when missing); InsituError naming the first placement refused."""
+def _planner(recipe: Recipe, cloud: PointCloud, located: Located, driver):
+    """(placements in the world, ``plan(rendered placements) -> outcomes``, ``job_of``)."""
     laser = LaserParams(**recipe.laser)
     placements = [p.in_world(located.T_world_part) for p in recipe.placements]
-    counter = (recipe.counter if recipe.counter is not None
-               else Path(job_path).parent / serials.COUNTER_NAME)
-    start = (recipe.serial_start if recipe.serial_start is not None and not counter.exists()
-             else None)
 
     def job_of(outcomes) -> MarkJob:
         job = mark_svc.joined(outcomes)
@@ -260,17 +302,32 @@ def plan_recipe(recipe: Recipe, cloud: PointCloud, located: Located, driver,
             raise InsituError(f"placement {i + 1}: {o.error}")
         return job.model_copy(update={"laser": laser})
 
-    return serials.plan_and_save(
-        job_path, placements, lambda ps: mark_svc.plan_all(cloud, ps, driver, laser),
-        job_of, counter=counter, fields=recipe.fields, start=start, save=save)
+    return placements, lambda ps: mark_svc.plan_all(cloud, ps, driver, laser), job_of
 
 
-def _read(run: Production, part: _Part, job: MarkJob, cloud: PointCloud,
+def plan_recipe(recipe: Recipe, cloud: PointCloud, located: Located, driver,
+                job_path: Path, save: Callable[[Path, MarkJob], Any] = mark_svc.save_job
+                ) -> serials.Planned:
+    """Every placement of ``recipe`` moved where the part lies, planned on its ``cloud`` and
+    written to ``job_path`` as one job, with the serial the recipe's counter issues (created
+    with its first serial when missing); InsituError naming the first placement refused.
+    ``result``: each placement's :class:`~insitu.services.mark.PlanOutcome`."""
+    placements, plan, job_of = _planner(recipe, cloud, located, driver)
+    counter = (recipe.counter if recipe.counter is not None
+               else Path(job_path).parent / serials.COUNTER_NAME)
+    start = (recipe.serial_start if recipe.serial_start is not None and not counter.exists()
+             else None)
+    return serials.plan_and_save(job_path, placements, plan, job_of, counter=counter,
+                                 fields=recipe.fields, start=start, save=save)
+
+
+def _read(run: Production, part: _Part, outcomes, cloud: PointCloud,
           resumed: bool = False) -> PartRecord:
     if run.read_back is None:
         return part.record("marked", resumed=resumed)
-    got = _stage(run, part, "read", lambda: run.read_back(run.station, job, cloud,
-                                                          list(run.recipe.placements)))
+    plans = [o.plan for o in outcomes]
+    got = _stage(run, part, "read", lambda: run.read_back(
+        run.station, plans, cloud, run.log.parent / f"part-{part.number:04d}.readback.png"))
     return part.record("marked", decoded=got.decoded, decode_ok=got.ok, grade=got.grade,
                        offset_mm=None if got.offset_mm is None else round(got.offset_mm, 4),
                        resumed=resumed)
@@ -278,10 +335,11 @@ def _read(run: Production, part: _Part, job: MarkJob, cloud: PointCloud,
 
 def _finish(run: Production, part: _Part, last: PartRecord) -> PartRecord:
     """The interrupted part, still on the table, with its own job and serial: the paths its
-    journal does not record as done (a cut path marked again whole), then the read-back."""
-    if last.job is None:
+    journal does not record as done (a cut path marked again whole), then the read-back of
+    the job planned again as it was (its recorded serial, on its cloud and pose)."""
+    if last.job is None or last.x_mm is None:
         raise FormatError(f"{run.log}: part {last.part} holds serial {last.serial} but names no "
-                          "job to finish")
+                          "job and pose to finish")
     path = run.log.parent / last.job
     job = read_job(path)
     part.serial, part.job = last.serial, path
@@ -294,5 +352,10 @@ def _finish(run: Production, part: _Part, last: PartRecord) -> PartRecord:
             run.station, job, path, resume=left is not None,
             cut_path="remark" if left is not None and left.cut is not None else None,
             cancel=run.cancel))
-    return _read(run, part, job, read_ply(run.cloud_path(part.number)), resumed=True)
+    cloud = read_ply(run.cloud_path(part.number))
+    located = Located(pose_matrix(last.x_mm, last.y_mm, last.angle_deg), last.fitness or 0.0,
+                      last.rmse_mm or 0.0)
+    placements, plan, _ = _planner(run.recipe, cloud, located, run.station.driver)
+    return _read(run, part, serials.replan(path, placements, plan, run.recipe.fields), cloud,
+                 resumed=True)
 

@@ -8,6 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
+from insitu.geometry.pose import pose_matrix
 from insitu.sim.workpieces import Workpiece, load_mesh_workpiece, make_workpiece
 from insitu.sim.world import SimWorld
 
@@ -23,15 +24,6 @@ def part_pose(seed: int | None, part: int, range_mm: float = POSE_RANGE_MM
     rng = np.random.default_rng([int(seed), int(part)])
     x, y = rng.uniform(-range_mm, range_mm, 2)
     return float(x), float(y), float(rng.uniform(0.0, 360.0))
-
-
-def pose_matrix(x: float, y: float, angle_deg: float) -> np.ndarray:
-    """T_world_part (4, 4) of a part turned by ``angle_deg`` about +z, then moved by x, y."""
-    a = np.radians(angle_deg)
-    T = np.eye(4)
-    T[:2, :2] = [[np.cos(a), -np.sin(a)], [np.sin(a), np.cos(a)]]
-    T[:2, 3] = x, y
-    return T
 
 
 def _part(workpiece: str, x: float, y: float, angle_deg: float) -> Workpiece:
