@@ -1,0 +1,310 @@
+"""Locate a part lying flat on the table in a scan: its pose ``T_world_part`` (a turn about z
+and a shift), or a refusal naming why — never a doubtful pose.
+
+1. The table is taken away (:func:`~insitu.measure.part_reference.find_table`).
+2. Global step, two ways, on a ``voxel_mm`` grid: FPFH features matched by RANSAC
+   (``open3d.pipelines.registration``), and a search over turns about z (every
+   ``turn_step_deg``, x, y from the tops' centroids) for parts with few features; each start
+   refined by a coarse flat ICP.
+3. Fine step: point-to-plane ICP of the scan (thinned to ``fine_voxel_mm``, table excluded)
+   onto the dense reference, restricted to the 4 degrees of freedom of a part lying flat
+   (:mod:`insitu.measure.flat_icp`).
+4. Each distinct solution is scored: ``fitness`` (the scan's points within ``inlier_mm`` of
+   the reference's surface), ``coverage`` (the reference's top measured by the scan) and the
+   inliers' RMSE. The best is refused when it fits poorly or is only partly in the scan, and
+   when a second distinct solution scores within ``ambiguity`` of it (a symmetric part)
+   unless ``prefer_angle`` picks exactly one of them.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import asdict, dataclass
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from insitu.errors import MeasurementError
+from insitu.measure.flat_icp import Fit, Pose4, apply, icp_flat, inverse, matrix, rot_z, score
+from insitu.measure.height_align import align
+from insitu.measure.part_reference import (PartReference, above_table, coarse_features,
+                                           find_table, thin)
+
+MIN_POINTS = 200
+MAX_FINE_POINTS = 40_000
+
+
+class LocateRefused(MeasurementError):
+    """The part's pose is not given: ``reason`` is "no-part", "poor-fit", "partial",
+    "ambiguous" or "not-preferred"; the message names the numbers."""
+
+    def __init__(self, reason: str, message: str):
+        super().__init__(message)
+        self.reason = reason
+
+
+@dataclass(frozen=True)
+class LocateSettings:
+    """Thresholds and grids of :func:`locate_part` (mm, degrees, fractions 0 … 1).
+    ``table_z_mm``: the table's height when known (None: found in the scan)."""
+
+    table_band_mm: float = 0.5
+    table_z_mm: float | None = None
+    voxel_mm: float = 1.0
+    fine_voxel_mm: float = 0.3
+    inlier_mm: float = 0.3
+    cover_mm: float = 1.0
+    min_fitness: float = 0.85
+    min_coverage: float = 0.8
+    max_rmse_mm: float = 0.12
+    ambiguity: float = 0.05
+    turn_step_deg: float = 5.0
+    turn_candidates: int = 6
+
+
+@dataclass(frozen=True)
+class Solution:
+    """One pose of the part: world x, y, z (mm) of its frame's origin and its turn about z
+    (degrees, −180 … 180); ``fitness``, ``coverage`` and ``rmse_mm`` as in the module's
+    docstring; ``score`` = fitness × coverage."""
+
+    x_mm: float
+    y_mm: float
+    z_mm: float
+    angle_deg: float
+    fitness: float
+    coverage: float
+    rmse_mm: float
+
+    @property
+    def score(self) -> float:
+        return self.fitness * self.coverage
+
+    @property
+    def T_world_part(self) -> np.ndarray:
+        """(4, 4): part-frame points → world."""
+        return matrix((np.radians(self.angle_deg), np.array([self.x_mm, self.y_mm, self.z_mm])))
+
+    def describe(self) -> str:
+        return (f"x {self.x_mm:.3f} y {self.y_mm:.3f} mm, {self.angle_deg:.2f}° (fitness "
+                f"{self.fitness:.1%}, coverage {self.coverage:.1%})")
+
+
+@dataclass(frozen=True)
+class PartPose:
+    """Where the part lies: ``best`` solution, the ``second`` best distinct one (None: none
+    found), the table's height (None: no table in the scan), the part's points used and the
+    time taken, s."""
+
+    best: Solution
+    second: Solution | None
+    table_z_mm: float | None
+    points: int
+    seconds: float
+
+    @property
+    def T_world_part(self) -> np.ndarray:
+        """(4, 4) float64: maps part-frame points (mm) to world points (mm)."""
+        return self.best.T_world_part
+
+    def to_dict(self) -> dict:
+        """The numbers of POSE.json (without its envelope)."""
+        b = self.best
+        return {"T_world_part": self.T_world_part.tolist(), "x_mm": b.x_mm, "y_mm": b.y_mm,
+                "z_mm": b.z_mm, "angle_deg": b.angle_deg, "fitness": b.fitness,
+                "coverage": b.coverage, "inlier_rmse_mm": b.rmse_mm,
+                "second": None if self.second is None else {**asdict(self.second),
+                                                             "score": self.second.score},
+                "table_z_mm": self.table_z_mm, "points": self.points,
+                "seconds": self.seconds}
+
+
+def locate_part(reference: PartReference, points: np.ndarray,
+                settings: LocateSettings = LocateSettings(),
+                prefer_angle: tuple[float, float] | None = None) -> PartPose:
+    """The pose of ``reference``'s part in a scan ``points`` (N, 3) float64, mm, world
+    frame (table included or not). ``prefer_angle`` (lo, hi) degrees: of solutions that fit
+    nearly equally well (a symmetric part), take the one turned within lo … hi (wrapping
+    around 360°). Raises :class:`LocateRefused` (a MeasurementError) naming why when the
+    part is not found, fits poorly, is only partly in the scan or is ambiguous."""
+    t0 = time.perf_counter()
+    s = settings
+    pts = np.asarray(points, np.float64)
+    table = s.table_z_mm if s.table_z_mm is not None else find_table(pts, s.table_band_mm)
+    part = pts[above_table(pts, table, s.table_band_mm)]
+    where = "no table found" if table is None else f"the table at z = {table:.2f} mm"
+    if len(part) < MIN_POINTS:
+        raise LocateRefused("no-part", f"no part in the scan: {len(part)} points above "
+                                       f"{where} (at least {MIN_POINTS} needed)")
+    fine = _subsample(thin(part, s.fine_voxel_mm), MAX_FINE_POINTS)
+    z0 = reference.base_z_mm - (table if table is not None else part[:, 2].min())
+    fits = _global(reference, part, s, z0)
+    sols = _refine(reference, fine, fits, s)
+    sols = _aligned(reference, pts, fine, sols, s)
+    pose = _choose(sols, len(part), where, s, prefer_angle)
+    return PartPose(pose[0], pose[1], table, len(part), time.perf_counter() - t0)
+
+
+def _subsample(points: np.ndarray, n: int) -> np.ndarray:
+    if len(points) <= n:
+        return points
+    return points[np.random.default_rng(0).choice(len(points), n, replace=False)]
+
+
+def _global(ref: PartReference, part: np.ndarray, s: LocateSettings, z0: float) -> list[Fit]:
+    """Coarse fits (world → part) from the turn search and from FPFH + RANSAC."""
+    v = s.voxel_mm
+    rp, rn, rf = ref.coarse(v)
+    rtree = ref.__dict__.setdefault("_coarse_tree", {}).setdefault(v, cKDTree(rp))
+    cp, _, cf = coarse_features(part, None, v)
+    starts = _turn_search(rp, rtree, cp, ref.top_centroid, z0, s)
+    fp = _fpfh_start(cp, cf, rp, rf, v)
+    if fp is not None:
+        starts.append(fp)
+    return [icp_flat(cp, rp, rn, rtree, p, (4 * v, 2 * v, v), iterations=10, inlier_mm=v)
+            for p in starts]
+
+
+def _turn_search(rp, rtree, cp, centre_r, z0: float, s: LocateSettings) -> list[Pose4]:
+    """Starts at the best-scoring turns (at least 20° apart): the scan's centroid on the
+    reference's top centroid, z from the table."""
+    angles = np.radians(np.arange(0.0, 360.0, s.turn_step_deg))
+    cs = cp[:, :2].mean(axis=0)
+    poses = []
+    for a in angles:
+        t = np.append(centre_r - rot_z(a)[:2, :2] @ cs, z0)
+        poses.append((a, t))
+    mapped = np.concatenate([apply(p, cp) for p in poses])
+    dist, _ = rtree.query(mapped, distance_upper_bound=2 * s.voxel_mm)
+    score = np.isfinite(dist).reshape(len(angles), -1).mean(axis=1)
+    chosen: list[int] = []
+    for i in np.argsort(-score):
+        gap = [abs((np.degrees(angles[i] - angles[j]) + 180) % 360 - 180) for j in chosen]
+        if all(g >= 20 for g in gap):
+            chosen.append(int(i))
+        if len(chosen) == s.turn_candidates:
+            break
+    return [poses[i] for i in chosen]
+
+
+def _fpfh_start(cp, cf, rp, rf, v: float) -> Pose4 | None:
+    """FPFH + RANSAC (Open3D) start, flattened to a turn about z; None when it tilts the
+    part more than 10°."""
+    import open3d as o3d
+
+    reg = o3d.pipelines.registration
+    src, dst = (o3d.geometry.PointCloud(o3d.utility.Vector3dVector(np.ascontiguousarray(p)))
+                for p in (cp, rp))
+    fs, fd = reg.Feature(), reg.Feature()
+    fs.data, fd.data = np.ascontiguousarray(cf), np.ascontiguousarray(rf)
+    o3d.utility.random.seed(0)
+    res = reg.registration_ransac_based_on_feature_matching(
+        src, dst, fs, fd, False, 1.5 * v, reg.TransformationEstimationPointToPoint(False), 3,
+        [reg.CorrespondenceCheckerBasedOnEdgeLength(0.9),
+         reg.CorrespondenceCheckerBasedOnDistance(1.5 * v)],
+        reg.RANSACConvergenceCriteria(50_000, 0.999))
+    T = np.asarray(res.transformation)
+    if res.fitness == 0 or T[2, 2] < np.cos(np.radians(10)):
+        return None
+    return float(np.arctan2(T[1, 0], T[0, 0])), T[:3, 3].copy()
+
+
+def _refine(ref: PartReference, fine: np.ndarray, fits: list[Fit],
+            s: LocateSettings) -> list[Solution]:
+    """Fine ICP of each distinct coarse fit; the distinct solutions, best first."""
+    scan_tree = cKDTree(fine)
+    sols: list[Solution] = []
+    for f in sorted(fits, key=lambda f: -f.fitness):
+        if any(not _distinct(f.pose, _pose_of(o)) for o in sols):
+            continue
+        fit = icp_flat(fine, ref.points, ref.normals, ref.tree, f.pose, (1.0, 0.5, s.inlier_mm),
+                       iterations=15, inlier_mm=s.inlier_mm)
+        sol = _solution(fit, ref, scan_tree, s.cover_mm)
+        if all(_distinct(fit.pose, _pose_of(o)) for o in sols):
+            sols.append(sol)
+    return sorted(sols, key=lambda o: -o.score)
+
+
+def _aligned(ref: PartReference, pts: np.ndarray, fine: np.ndarray, sols: list[Solution],
+             s: LocateSettings) -> list[Solution]:
+    """The solutions within reach of the best (those that may be chosen) with x, y and the
+    turn refined on the height images (:func:`insitu.measure.height_align.align`), z kept."""
+    if not sols:
+        return sols
+    scan_tree = cKDTree(fine)
+    out = []
+    for sol in sols:
+        if sol.score < sols[0].score - 2 * s.ambiguity:
+            out.append(sol)
+            continue
+        a, t = _pose_of(sol)
+        for _ in range(2):
+            step = align(ref.heights, apply((a, t), pts))
+            if step is None:
+                break
+            da, shift = step
+            a, t = a + da, rot_z(da) @ t + np.append(shift, 0.0)
+        fit = score((a, t), fine, ref.points, ref.normals, ref.tree, s.inlier_mm)
+        out.append(_solution(fit, ref, scan_tree, s.cover_mm))
+    return sorted(out, key=lambda o: -o.score)
+
+
+def _pose_of(sol: Solution) -> Pose4:
+    """World → part pose of ``sol``."""
+    return inverse((np.radians(sol.angle_deg), np.array([sol.x_mm, sol.y_mm, sol.z_mm])))
+
+
+_PROBE = np.array([[x, y, 0.0] for x in (-20, 0, 20) for y in (-20, 0, 20)])
+
+
+def _distinct(a: Pose4, b: Pose4, tol_mm: float = 1.0) -> bool:
+    """Whether two world → part poses move points 20 mm around the origin apart by more
+    than ``tol_mm``."""
+    return bool(np.max(np.linalg.norm(apply(a, _PROBE) - apply(b, _PROBE), axis=1)) > tol_mm)
+
+
+def _solution(fit: Fit, ref: PartReference, scan_tree: cKDTree, cover_mm: float) -> Solution:
+    a, t = inverse(fit.pose)
+    top = apply((a, t), ref.top)
+    dist, _ = scan_tree.query(top, distance_upper_bound=cover_mm)
+    cover = float(np.isfinite(dist).mean()) if len(top) else 0.0
+    ang = (np.degrees(a) + 180.0) % 360.0 - 180.0
+    return Solution(float(t[0]), float(t[1]), float(t[2]), float(ang), fit.fitness, cover,
+                    fit.rmse_mm)
+
+
+def _in_range(angle: float, lo: float, hi: float) -> bool:
+    return (angle - lo) % 360.0 <= (hi - lo) % 360.0 or (hi - lo) >= 360.0
+
+
+def _choose(sols: list[Solution], n: int, where: str, s: LocateSettings,
+            prefer: tuple[float, float] | None) -> tuple[Solution, Solution | None]:
+    """(best, second) or LocateRefused."""
+    if not sols or sols[0].fitness < s.min_fitness * 0.6:
+        fit = sols[0].fitness if sols else 0.0
+        raise LocateRefused("no-part", f"part not found: the reference fits {fit:.0%} of the "
+                                       f"{n:,} points above {where} (at least "
+                                       f"{s.min_fitness:.0%} needed)")
+    near = [o for o in sols if o.score >= sols[0].score - s.ambiguity]
+    if prefer is not None:
+        pick = [o for o in near if _in_range(o.angle_deg, *prefer)]
+        if not pick:
+            raise LocateRefused("not-preferred", "no well-fitting pose turned within "
+                                f"{prefer[0]:g} … {prefer[1]:g}°: found "
+                                + "; ".join(o.describe() for o in near))
+        near = pick
+    if len(near) > 1:
+        raise LocateRefused("ambiguous", f"ambiguous: {near[0].describe()} and "
+                            f"{near[1].describe()} fit nearly equally (a symmetric part?): "
+                            "say which with --prefer-angle LO HI")
+    best = near[0]
+    second = next((o for o in sols if o is not best), None)
+    if best.fitness < s.min_fitness or best.rmse_mm > s.max_rmse_mm:
+        raise LocateRefused("poor-fit", f"fits poorly: {best.describe()}, inlier RMSE "
+                            f"{best.rmse_mm:.3f} mm (needed: fitness ≥ {s.min_fitness:.0%}, "
+                            f"RMSE ≤ {s.max_rmse_mm:g} mm)")
+    if best.coverage < s.min_coverage:
+        raise LocateRefused("partial", f"only partly in the scan: {best.coverage:.0%} of the "
+                            f"reference's top measured (at least {s.min_coverage:.0%} needed) "
+                            f"at {best.describe()}")
+    return best, second
