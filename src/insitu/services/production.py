@@ -273,9 +273,16 @@ def _run_part(run: Production, part: _Part) -> PartRecord:
         if part.serial is not None:
             raise
         return part.record("refused", _text(e))
-    _stage(run, part, "mark", lambda: mark_svc.mark_on_station(
-        run.station, planned.job, part.job, cancel=run.cancel))
+    _stage(run, part, "mark", lambda: _mark(run, planned.job, part.job))
     return _read(run, part, planned.result, cloud)
+
+
+def _mark(run: Production, job: MarkJob, path: Path, **resume) -> None:
+    """Mark the part's job; Cancelled when the run was stopped between its paths."""
+    done = mark_svc.mark_on_station(run.station, job, path, cancel=run.cancel, **resume)
+    if done.result.state != "done":
+        raise Cancelled(f"marking {done.result.state} after {done.result.completed} of "
+                        f"{done.result.total} paths; the laser is off")
 
 
 def plan_part(run: Production, part: _Part, cloud: PointCloud,
@@ -348,10 +355,9 @@ def _finish(run: Production, part: _Part, last: PartRecord) -> PartRecord:
     left = mark_svc.unfinished(job, path)
     done = left is None and mark_svc.history(job, mark_svc.progress_path_for(path)) is not None
     if not done:
-        _stage(run, part, "mark", lambda: mark_svc.mark_on_station(
-            run.station, job, path, resume=left is not None,
-            cut_path="remark" if left is not None and left.cut is not None else None,
-            cancel=run.cancel))
+        _stage(run, part, "mark", lambda: _mark(
+            run, job, path, resume=left is not None,
+            cut_path="remark" if left is not None and left.cut is not None else None))
     cloud = read_ply(run.cloud_path(part.number))
     located = Located(pose_matrix(last.x_mm, last.y_mm, last.angle_deg), last.fitness or 0.0,
                       last.rmse_mm or 0.0)
