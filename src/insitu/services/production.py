@@ -109,6 +109,7 @@ def recipe_locator(recipe: Recipe) -> Locator:
     def locate(cloud: PointCloud) -> Located:
         pose = locate_part(reference, cloud.points, prefer_angle=recipe.prefer_angle_deg)
         return Located(pose.T_world_part, pose.best.fitness, pose.best.rmse_mm)
+    locate.reference = reference
     return locate
 ReadBackFn = Callable[[Station, list, PointCloud, Path], PartReading]
 
