@@ -65,6 +65,17 @@ def bounded(name: str) -> Callable:
     return callback
 
 
+def bounded_each(*names: str) -> Callable:
+    """A typer option ``callback`` for a tuple: its i-th number within ``BOUNDS[names[i]]``."""
+    checks = [bounded(n) for n in names]
+
+    def callback(param: typer.CallbackParam, value):
+        for check, v in zip(checks, value or ()):
+            check(param, v)
+        return value
+    return callback
+
+
 def one_line_errors(command: Callable) -> Callable:
     """Decorate a command: an InsituError becomes one line on stderr and exit code 1."""
     @functools.wraps(command)

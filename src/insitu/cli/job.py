@@ -11,8 +11,8 @@ import numpy as np
 import typer
 from rich.table import Table
 
-from insitu.cli.common import (bounded, check_output, console, one_line_errors, progress_bar,
-                               warn)
+from insitu.cli.common import (bounded, bounded_each, check_output, console, one_line_errors,
+                               progress_bar, warn)
 from insitu.errors import InsituError
 
 app = typer.Typer(help="Mark jobs: show one, or mark it on the rig.", no_args_is_help=True,
@@ -34,6 +34,11 @@ Field = Annotated[Path | None, typer.Option(help="Field correction (FIELD.json) 
                                                  "(default: the rig file's).")]
 Workpiece = Annotated[str, typer.Option(help="Simulated rig: the part on the table.")]
 Seed = Annotated[int, typer.Option(help="Simulated rig: seed.", callback=bounded("seed"))]
+PartPose = Annotated[tuple[float, float, float], typer.Option(
+    "--pose", metavar="X Y ANGLE_DEG",
+    callback=bounded_each("position_mm", "position_mm", "angle_deg"),
+    help="Simulated rig: where the part lies — its origin at X Y, mm, turned ANGLE_DEG "
+         "about +z (a cloud measured at another pose is another placement).")]
 
 
 class Stopped(InsituError):
@@ -157,6 +162,7 @@ def run(
     resume: Resume = False, restart: Restart = False, cut_path: CutPath = None,
     preview: Preview = False, inspect: Inspect = None, rig: Rig = None,
     field: Field = None, workpiece: Workpiece = "step-block", seed: Seed = 0,
+    pose: PartPose = (0.0, 0.0, 0.0),
 ) -> None:
     """Mark a job file on the rig. Every target is checked against the scan field, the focus
     range (after the field correction) and the board's limits before the first command; the
@@ -171,7 +177,7 @@ def run(
     if inspect is not None:
         check_output(inspect, ".png")
     job = read_job(job_path)
-    with connect(rig, workpiece, seed, field=field) as station:
+    with connect(rig, workpiece, seed, field=field, pose=pose) as station:
         if warning := station.check_source(job_path, job.rig, "job"):
             warn(warning)
         run_on_station(station, job, job_path, resume, preview, inspect, restart, cut_path)

@@ -11,8 +11,8 @@ from rich.text import Text
 
 from insitu.cli.common import (bounded, check_output, console, fail, missing,
                                one_line_errors, progress_bar, warn)
-from insitu.cli.job import (CutPath, Field, Inspect, Preview, Restart, Resume, Rig, Seed,
-                            Workpiece, check_run_options, run_on_station)
+from insitu.cli.job import (CutPath, Field, Inspect, PartPose, Preview, Restart, Resume, Rig,
+                            Seed, Workpiece, check_run_options, run_on_station)
 from insitu.marking.modes import PROJECTIONS, projection_mode
 from insitu.patterns.dxf import FILL_MODES
 from insitu.patterns.load import sources_help
@@ -71,6 +71,7 @@ def mark(
     preview: Preview = False, resume: Resume = False, restart: Restart = False,
     cut_path: CutPath = None, inspect: Inspect = None, rig: Rig = None,
     field: Field = None, workpiece: Workpiece = "step-block", seed: Seed = 0,
+    pose: PartPose = (0.0, 0.0, 0.0),
     fields: Annotated[list[str] | None, typer.Option(
         "--var", metavar="NAME=VALUE", help="A value for {NAME} in the pattern's text "
         "(again for more fields); {serial}, {date}, {time} are built in.")] = None,
@@ -119,7 +120,7 @@ def mark(
     laser = LaserParams(power_pct=power, frequency_khz=frequency, mark_speed_mm_s=speed,
                         jump_speed_mm_s=jump_speed)
     measured = read_ply(cloud)
-    with connect(rig, workpiece, seed, field=field) as station:
+    with connect(rig, workpiece, seed, field=field, pose=pose) as station:
         if run and (warning := station.check_source(cloud, measured.rig, "cloud")):
             warn(warning)
         with progress_bar("projecting") as progress:

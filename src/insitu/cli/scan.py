@@ -9,6 +9,7 @@ import typer
 from rich.table import Table
 
 from insitu.cli.common import bounded, check_output, console, fail, one_line_errors, progress_bar
+from insitu.cli.job import PartPose
 from insitu.formats.project import SIM_BINNING
 from insitu.formats.validation import one_of
 from insitu.measure.height_models import HEIGHT_MODELS
@@ -30,6 +31,7 @@ def scan(
                                                      HEIGHT_MODELS.items()) + ".")] = None,
     rig: Annotated[Path | None, typer.Option(help="Rig file (default: the simulated rig).")] = None,
     workpiece: Annotated[str, typer.Option(help="Simulated rig: the part on the table.")] = "step-block",
+    pose: PartPose = (0.0, 0.0, 0.0),
     spacing: Annotated[float, typer.Option(
         callback=bounded("spacing_mm"), help="Line spacing, mm.")] = 0.5,
     region: Annotated[tuple[float, float, float, float] | None,
@@ -66,7 +68,7 @@ def scan(
         if replay is not None:
             result = services.scan_replay(replay, cal, height_model, progress=progress)
         else:
-            with connect(rig, workpiece, seed, binning) as station:
+            with connect(rig, workpiece, seed, binning, pose=pose) as station:
                 result = _live(station, out, spacing=spacing, region=region, height_cal=cal,
                                model=height_model, progress=progress, speed_mm_s=line_speed)
     services.save_cloud(result, out)

@@ -9,6 +9,7 @@ import typer
 
 from insitu.cli.common import (bounded, check_output, console, fail, one_line_errors,
                                parse_heights, progress_bar)
+from insitu.cli.job import PartPose
 from insitu.formats.project import SIM_BINNING
 from insitu.services import record
 from insitu.sim.workpieces import WORKPIECES
@@ -25,6 +26,7 @@ def record_cmd(
     out: Annotated[Path, typer.Option("-o", "--output", help="Folder to write (replaced if it exists).")],
     workpiece: Annotated[str, typer.Option(help=f"For a scan: {', '.join(WORKPIECES)} or a "
                                                 "mesh file (STL/PLY/OBJ).")] = "step-block",
+    pose: PartPose = (0.0, 0.0, 0.0),
     spacing: Annotated[float, typer.Option(
         callback=bounded("spacing_mm"), help="Scan line spacing, mm.")] = 0.5,
     region: Annotated[tuple[float, float, float, float] | None,
@@ -77,7 +79,10 @@ def record_cmd(
     rig = default_rig(seed, binning)
     if camera_moved_deg or camera_moved_mm:
         rig = move_camera(rig, camera_moved_deg, camera_moved_mm, seed)
-    world = sim_world(workpiece if kind == "scan" else "step-block", rig=rig, seed=seed)
+    if any(pose) and kind != "scan":
+        fail("--pose places the part for a scan; calibrations clear the table")
+    world = sim_world(workpiece if kind == "scan" else "step-block", rig=rig, seed=seed,
+                      pose=pose if kind == "scan" else (0.0, 0.0, 0.0))
     board = BoardViews(world, views) if kind == "camera-calibration" else None
     with progress_bar(f"recording {kind}") as progress, simulated(world) as station:
         record.record(station, kind, out, spacing=spacing, region=region, grid=grid,

@@ -120,6 +120,12 @@ BOUNDS: dict[str, Bound] = {
     "parts": Bound(1, 1000000, "", "parts of one production run: a shift marks thousands"),
     "board_corners": Bound(2, 200, "", "inner corners of a checkerboard along a side"),
     "move_mm": Bound(-1000, 1000, "mm", "a simulated knock of the camera"),
+    # -- locating a part (POSE.json, insitu locate) --
+    "fraction": Bound(0, 1, "", "a share of points: 0 … 1"),
+    "residual_mm": Bound(0, 100, "mm", "a fit's RMSE: a part located within 100 mm of its "
+                         "surface has not been located"),
+    "duration_s": Bound(0, 86400, "s", "a step of a station's work takes less than a day"),
+    "point_count": Bound(0, 1e9, "", "a cloud of the largest fields at 10 µm is 1e9 points"),
 }
 
 

@@ -123,7 +123,8 @@ class MarkJob(_Model):
     units: Literal["mm"] = "mm"
     laser: LaserParams = LaserParams()
     timing: Timing | None = None
-    rig: dict[Literal["workpiece", "seed", "binning", "rig_file"], str | int] | None = None
+    rig: dict[Literal["workpiece", "seed", "binning", "rig_file", "pose"],
+              str | int | list[float]] | None = None
     paths: Annotated[list[MarkPath], Field(min_length=1)]
 
     def path_laser(self, i: int) -> LaserParams:

@@ -26,7 +26,7 @@ from scipy.spatial import cKDTree
 
 from insitu.errors import MeasurementError
 from insitu.measure.flat_icp import Fit, Pose4, apply, icp_flat, inverse, matrix, rot_z, score
-from insitu.measure.height_align import align
+from insitu.measure.edge_align import align_edges, edge_samples
 from insitu.measure.part_reference import (PartReference, above_table, coarse_features,
                                            find_table, thin)
 
@@ -121,9 +121,12 @@ class PartPose:
 
 def locate_part(reference: PartReference, points: np.ndarray,
                 settings: LocateSettings = LocateSettings(),
-                prefer_angle: tuple[float, float] | None = None) -> PartPose:
+                prefer_angle: tuple[float, float] | None = None,
+                lines: np.ndarray | None = None) -> PartPose:
     """The pose of ``reference``'s part in a scan ``points`` (N, 3) float64, mm, world
-    frame (table included or not). ``prefer_angle`` (lo, hi) degrees: of solutions that fit
+    frame (table included or not); ``lines`` (N,) int: each point's scan line (the cloud's
+    ``line`` attribute), for the edge step — without it x, y and the turn are the ICP's,
+    a few tenths of a mm off on flat parts. ``prefer_angle`` (lo, hi) degrees: of solutions that fit
     nearly equally well (a symmetric part), take the one turned within lo … hi (wrapping
     around 360°). Raises :class:`LocateRefused` (a MeasurementError) naming why when the
     part is not found, fits poorly, is only partly in the scan or is ambiguous."""
@@ -131,7 +134,8 @@ def locate_part(reference: PartReference, points: np.ndarray,
     s = settings
     pts = np.asarray(points, np.float64)
     table = s.table_z_mm if s.table_z_mm is not None else find_table(pts, s.table_band_mm)
-    part = pts[above_table(pts, table, s.table_band_mm)]
+    up = above_table(pts, table, s.table_band_mm)
+    part = pts[up]
     where = "no table found" if table is None else f"the table at z = {table:.2f} mm"
     if len(part) < MIN_POINTS:
         raise LocateRefused("no-part", f"no part in the scan: {len(part)} points above "
@@ -140,7 +144,8 @@ def locate_part(reference: PartReference, points: np.ndarray,
     z0 = reference.base_z_mm - (table if table is not None else part[:, 2].min())
     fits = _global(reference, part, s, z0)
     sols = _refine(reference, fine, fits, s)
-    sols = _aligned(reference, pts, fine, sols, s)
+    sols = _aligned(reference, pts, None if lines is None else np.asarray(lines), ~up, fine,
+                    sols, s)
     pose = _choose(sols, len(part), where, s, prefer_angle)
     return PartPose(pose[0], pose[1], table, len(part), time.perf_counter() - t0)
 
@@ -225,11 +230,13 @@ def _refine(ref: PartReference, fine: np.ndarray, fits: list[Fit],
     return sorted(sols, key=lambda o: -o.score)
 
 
-def _aligned(ref: PartReference, pts: np.ndarray, fine: np.ndarray, sols: list[Solution],
+def _aligned(ref: PartReference, pts: np.ndarray, lines: np.ndarray | None,
+             table: np.ndarray, fine: np.ndarray, sols: list[Solution],
              s: LocateSettings) -> list[Solution]:
     """The solutions within reach of the best (those that may be chosen) with x, y and the
-    turn refined on the height images (:func:`insitu.measure.height_align.align`), z kept."""
-    if not sols:
+    turn refined on the edges the scan lines cross (:mod:`insitu.measure.edge_align`), z
+    kept; unchanged without line indices or too few edge samples."""
+    if not sols or lines is None:
         return sols
     scan_tree = cKDTree(fine)
     out = []
@@ -238,15 +245,26 @@ def _aligned(ref: PartReference, pts: np.ndarray, fine: np.ndarray, sols: list[S
             out.append(sol)
             continue
         a, t = _pose_of(sol)
-        for _ in range(2):
-            step = align(ref.heights, apply((a, t), pts))
+        for _ in range(2):                   # the walls as the better pose tells them apart
+            e, u = edge_samples(pts, lines, _on_walls(ref, apply((a, t), pts)), table)
+            step = align_edges(ref.heights, apply((a, t), e), u @ rot_z(a)[:2, :2].T)
             if step is None:
                 break
-            da, shift = step
+            da, shift, _, _ = step
             a, t = a + da, rot_z(da) @ t + np.append(shift, 0.0)
         fit = score((a, t), fine, ref.points, ref.normals, ref.tree, s.inlier_mm)
         out.append(_solution(fit, ref, scan_tree, s.cover_mm))
     return sorted(out, key=lambda o: -o.score)
+
+
+def _on_walls(ref: PartReference, p: np.ndarray, reach_mm: float = 1.0) -> np.ndarray:
+    """(N,) bool: points of ``p`` (N, 3), part frame, nearest a steep face of the reference
+    (a height image seen from above has no walls)."""
+    dist, idx = ref.tree.query(p, distance_upper_bound=reach_mm)
+    found = np.isfinite(dist)
+    steep = np.zeros(len(p), bool)
+    steep[found] = np.abs(ref.normals[idx[found], 2]) < 0.5
+    return steep
 
 
 def _pose_of(sol: Solution) -> Pose4:

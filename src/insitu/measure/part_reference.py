@@ -16,7 +16,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from insitu.errors import MeasurementError
-from insitu.measure.height_align import HeightImage, mesh_height_image, splat_image
+from insitu.measure.height_image import HeightImage, mesh_height_image, splat_image
 
 UP_NZ = -0.2
 """Mesh faces whose normal's z is below this face the table: no camera above sees them."""
@@ -31,7 +31,7 @@ class PartReference:
     the surfaces visible from above; ``base_z_mm``: the height it rests on (a mesh's lowest
     z; a scan's table); ``kind``: "mesh" or "cloud"; ``source``: where it came from (a file
     name); ``spacing_mm``: the samples' mean spacing; ``heights``: the part and the table
-    around it seen from above (:mod:`insitu.measure.height_align`)."""
+    around it seen from above (:mod:`insitu.measure.height_image`)."""
 
     points: np.ndarray
     normals: np.ndarray

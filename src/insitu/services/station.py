@@ -93,9 +93,17 @@ class Station:
         the reference lay); None on a real rig (the operator puts the parts on)."""
         if self.world is None:
             return None
+        from insitu.geometry.pose import flat_pose
         from insitu.sim.feeder import SimFeeder
 
-        return SimFeeder(self.world, workpiece, seed).present
+        feeder = SimFeeder(self.world, workpiece, seed)
+
+        def present(part: int):
+            T = feeder.present(part)          # clouds and jobs record where the part lies
+            rest = {k: v for k, v in (self.record or {}).items() if k != "pose"}
+            self.record = {**rest, **pose_record(flat_pose(T))}
+            return T
+        return present
 
     def default_region(self) -> tuple[float, float, float, float]:
         """Where to scan when no region is given: the simulated parts' footprint; a real rig
@@ -115,21 +123,29 @@ def simulated(world: SimWorld, field: Path | None = None,
     return Station(world.rig.operator, RigConfig(), world, field, record=record)
 
 
+def pose_record(pose: tuple[float, float, float]) -> RigRecord:
+    """The record's ``pose`` entry of a simulated part at ``pose`` (none at the origin)."""
+    return {"pose": [float(v) for v in pose]} if any(pose) else {}
+
+
 def connect(rig_file: Path | None = None, workpiece: str = "step-block", seed: int = 0,
-            binning: int = SIM_BINNING, field: Path | None = None) -> Station:
+            binning: int = SIM_BINNING, field: Path | None = None,
+            pose: tuple[float, float, float] = (0.0, 0.0, 0.0)) -> Station:
     """The station a rig file names (devices chosen by it, never probed), or the simulated
-    rig with ``workpiece`` on the table. A rig file with simulated devices simulates
-    ``workpiece`` with its ``sim_seed``, the operator knowing what its calibration files say.
-    ``field``: the field correction file to apply (default: the rig file's, if it names one)."""
+    rig with ``workpiece`` on the table at ``pose`` (x, y mm, turn about z, degrees). A rig
+    file with simulated devices simulates ``workpiece`` with its ``sim_seed``, the operator
+    knowing what its calibration files say. ``field``: the field correction file to apply
+    (default: the rig file's, if it names one)."""
     from insitu.sim.world import sim_world      # the simulator (Open3D) only when simulated
 
     if rig_file is None:
-        return simulated(sim_world(workpiece, seed=seed, binning=binning), field,
-                         {"workpiece": workpiece, "seed": seed, "binning": binning})
+        return simulated(sim_world(workpiece, seed=seed, binning=binning, pose=pose), field,
+                         {"workpiece": workpiece, "seed": seed, "binning": binning,
+                          **pose_record(pose)})
     cfg = load_json_model(rig_file, RigConfig)
     world = None
     if simulated_devices(cfg):
-        world = sim_world(workpiece, seed=cfg.sim_seed, binning=binning)
+        world = sim_world(workpiece, seed=cfg.sim_seed, binning=binning, pose=pose)
     rig = rig_model(cfg, world.rig.operator if world is not None else None)
     if world is not None and cfg.camera in ("sim", "replay"):
         size, sim = (rig.camera.width, rig.camera.height), world.rig.camera
@@ -140,6 +156,6 @@ def connect(rig_file: Path | None = None, workpiece: str = "step-block", seed: i
         world.rig = replace(world.rig, operator=rig)
     record: RigRecord = {"rig_file": Path(rig_file).name}
     if world is not None:
-        record |= {"workpiece": workpiece, "seed": cfg.sim_seed}
+        record |= {"workpiece": workpiece, "seed": cfg.sim_seed, **pose_record(pose)}
     return Station(rig, cfg, world, field if field is not None else rig.field_correction,
                    Path(rig_file), record)

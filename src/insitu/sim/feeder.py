@@ -9,7 +9,8 @@ from pathlib import Path
 import numpy as np
 
 from insitu.geometry.pose import pose_matrix
-from insitu.sim.workpieces import Workpiece, load_mesh_workpiece, make_workpiece
+from insitu.sim.workpieces import (Workpiece, load_mesh_workpiece, make_workpiece,
+                                   random_pose)
 from insitu.sim.world import SimWorld
 
 POSE_RANGE_MM = 25.0       # a part lies within ±25 mm of where the recipe's reference lay
@@ -21,9 +22,7 @@ def part_pose(seed: int | None, part: int, range_mm: float = POSE_RANGE_MM
     turn about z, drawn from (``seed``, ``part``); (0, 0, 0) without a seed."""
     if seed is None:
         return 0.0, 0.0, 0.0
-    rng = np.random.default_rng([int(seed), int(part)])
-    x, y = rng.uniform(-range_mm, range_mm, 2)
-    return float(x), float(y), float(rng.uniform(0.0, 360.0))
+    return random_pose(np.random.default_rng([int(seed), int(part)]), range_mm)
 
 
 def _part(workpiece: str, x: float, y: float, angle_deg: float) -> Workpiece:

@@ -318,6 +318,34 @@ def _raycast_height(vertices: np.ndarray, triangles: np.ndarray) -> HeightFn:
     return height
 
 
+Pose = tuple[float, float, float]
+"""Where a part lies on the table: x, y (mm) of its own frame's origin and its turn about +z,
+degrees."""
+
+
+def random_pose(rng: np.random.Generator, half_mm: float = 25.0) -> Pose:
+    """A pose drawn uniformly: x, y within ±``half_mm`` mm, any turn (−180 … 180°)."""
+    x, y = rng.uniform(-half_mm, half_mm, 2)
+    return float(x), float(y), float(rng.uniform(-180.0, 180.0))
+
+
+def part_matrix(part: Workpiece) -> np.ndarray:
+    """(4, 4) ``T_world_part`` of a placed part: its own frame's points → world, mm."""
+    a = np.radians(part.params.get("angle_deg", 0.0))
+    T = np.eye(4)
+    T[:2, :2] = [[np.cos(a), -np.sin(a)], [np.sin(a), np.cos(a)]]
+    T[:2, 3] = part.params.get("x", 0.0), part.params.get("y", 0.0)
+    return T
+
+
+def workpiece_at(name: str, pose: Pose = (0.0, 0.0, 0.0)) -> Workpiece:
+    """Catalogue part or mesh file ``name`` placed at ``pose`` (see :data:`Pose`)."""
+    x, y, angle = pose
+    if Path(name).suffix.lower() in MESH_SUFFIXES:
+        return load_mesh_workpiece(name, x, y, angle)
+    return make_workpiece(name, x=x, y=y, angle_deg=angle)
+
+
 def load_mesh_workpiece(path: str | Path, x: float = 0.0, y: float = 0.0,
                         angle_deg: float = 0.0) -> Workpiece:
     """A part from an STL, PLY or OBJ mesh in mm, world frame, placed like the catalogue.

@@ -6,14 +6,14 @@ simulated motors."""
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from pathlib import Path
 
 import numpy as np
 
 from insitu.sim.render import Renderer
 from insitu.sim.rig import SimRig, default_rig
 from insitu.sim.scene import Scene
-from insitu.sim.workpieces import Workpiece, load_mesh_workpiece, make_workpiece
+from insitu.sim.workpieces import (Pose, Workpiece, load_mesh_workpiece, make_workpiece,
+                                   part_matrix, workpiece_at)
 
 
 @dataclass
@@ -69,10 +69,22 @@ class SimWorld:
         return (lo[0] - margin, hi[0] + margin, lo[1] - 2 * margin, hi[1] + 2 * margin)
 
     def truth(self, **extra) -> dict:
-        """The true rig and parts, with ``extra`` (a recording's ``truth.json``)."""
+        """The true rig and parts, each with its pose ``T_world_part`` (4 × 4: its own frame
+        → world), with ``extra`` (a recording's ``truth.json``)."""
         return {"rig": self.rig.truth_dict(),
-                "workpieces": [{"name": p.name, "params": p.params} for p in self.parts],
+                "workpieces": [{"name": p.name, "params": p.params,
+                                "T_world_part": part_matrix(p).tolist()} for p in self.parts],
                 **extra}
+
+    def place_part(self, pose: Pose, index: int = 0) -> None:
+        """Put part ``index`` down again at ``pose`` (x, y mm, turn about z, degrees)."""
+        part, (x, y, angle) = self.parts[index], pose
+        if "path" in part.params:
+            self.parts[index] = load_mesh_workpiece(part.params["path"], x, y, angle)
+        else:
+            self.parts[index] = make_workpiece(part.name, **{**part.params, "x": x, "y": y,
+                                                             "angle_deg": angle})
+        self.invalidate()
 
     def clear_table(self) -> None:
         """Take the parts off the table (for a calibration on the plate)."""
@@ -81,8 +93,8 @@ class SimWorld:
 
 
 def sim_world(workpiece: str = "step-block", seed: int = 0, binning: int = 1,
-              rig: SimRig | None = None) -> SimWorld:
-    """The simulated station with ``workpiece`` (a catalogue name or a mesh file) on the table."""
-    part = (load_mesh_workpiece(workpiece) if Path(workpiece).suffix.lower() in
-            (".stl", ".ply", ".obj") else make_workpiece(workpiece))
-    return SimWorld(rig or default_rig(seed=seed, binning=binning), parts=[part], seed=seed)
+              rig: SimRig | None = None, pose: Pose = (0.0, 0.0, 0.0)) -> SimWorld:
+    """The simulated station with ``workpiece`` (a catalogue name or a mesh file) on the
+    table at ``pose`` (x, y mm, turn about z, degrees)."""
+    return SimWorld(rig or default_rig(seed=seed, binning=binning),
+                    parts=[workpiece_at(workpiece, pose)], seed=seed)

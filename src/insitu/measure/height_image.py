@@ -1,12 +1,6 @@
-"""The last step of locating a part: align the scan's height image to the reference's, seen
-from above in the part's frame, with OpenCV's ECC (a Euclidean warp: a turn and a shift).
-
-Point-to-plane ICP gets no hold in x, y from flat tops; the outline does, and a height image
-holds it on both sides — the part's top inside, the table (or a lower step) outside. Scan
-points are splatted onto the image and spread by a Gaussian (normalised convolution, so the
-gaps between scan lines fill); the reference's exact height image gets the same blur. Pixels
-without support all around (shadows beside walls, the scan's border) are left out, so a
-one-sided edge cannot pull the fit.
+"""A part seen from straight above: heights on a grid of its own frame, the table around it
+— exactly from a mesh (ray cast), or from a scan (its points splatted). The edge step of
+locating (:mod:`insitu.measure.edge_align`) finds the reference's edges on it.
 """
 
 from __future__ import annotations
@@ -17,13 +11,13 @@ import cv2
 import numpy as np
 
 PX_MM = 0.1
-SIGMA_MM = 0.5
+SIGMA_MM = 0.25
 MARGIN_MM = 4.0
 SUPERSAMPLE = 4
 """Rays per pixel side when a mesh is seen from above: its edges land between pixels."""
-SUPPORT = 0.8
-"""A scan pixel is compared when its blurred sample weight is at least this share of the
-typical weight (full support around it)."""
+COVER_MM = 0.3
+"""A pixel is measured when a scan point lies within this (half the line spacing and a
+little)."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -36,12 +30,6 @@ class HeightImage:
     y0_mm: float
     px_mm: float = PX_MM
 
-    def blurred(self) -> np.ndarray:
-        """``z`` under the splatting's Gaussian, float32 (cached)."""
-        if "_blur" not in self.__dict__:
-            s = SIGMA_MM / self.px_mm
-            self.__dict__["_blur"] = cv2.GaussianBlur(self.z, (0, 0), s)
-        return self.__dict__["_blur"]
 
 
 def mesh_height_image(vertices: np.ndarray, triangles: np.ndarray, base_z: float,
@@ -70,9 +58,9 @@ def mesh_height_image(vertices: np.ndarray, triangles: np.ndarray, base_z: float
 
 
 def splat(points: np.ndarray, like: HeightImage) -> tuple[np.ndarray, np.ndarray]:
-    """(heights (H, W) float32, support (H, W) bool) of ``points`` (N, 3), part frame, on
-    ``like``'s grid: bilinear splats spread by the Gaussian and normalised; support where
-    the spread weight is at least ``SUPPORT`` × its typical value."""
+    """(heights (H, W) float32, measured (H, W) bool) of ``points`` (N, 3), part frame, on
+    ``like``'s grid: bilinear splats spread by a Gaussian of ``SIGMA_MM`` and normalised
+    (the gaps between scan lines fill); measured within ``COVER_MM`` of a point."""
     h, w = like.z.shape
     c = (points[:, 0] - like.x0_mm) / like.px_mm
     r = (points[:, 1] - like.y0_mm) / like.px_mm
@@ -90,36 +78,26 @@ def splat(points: np.ndarray, like: HeightImage) -> tuple[np.ndarray, np.ndarray
     s = SIGMA_MM / like.px_mm
     Wb = cv2.GaussianBlur(W.reshape(h, w).astype(np.float32), (0, 0), s)
     Zb = cv2.GaussianBlur(Z.reshape(h, w).astype(np.float32), (0, 0), s)
-    full = np.percentile(Wb[Wb > 0], 90) if (Wb > 0).any() else 1.0
-    support = Wb >= SUPPORT * full
+    support = cv2.dilate((W.reshape(h, w) > 0).astype(np.uint8),
+                         _disk(COVER_MM / like.px_mm)).astype(bool)
     return np.where(support, Zb / np.maximum(Wb, 1e-12), 0.0).astype(np.float32), support
 
 
-def align(reference: HeightImage, points_part: np.ndarray,
-          iterations: int = 60) -> tuple[float, np.ndarray] | None:
-    """The small correction (angle_rad, (2,) shift mm) to apply, in the part frame, to
-    ``points_part`` (N, 3) — scan points mapped into the part frame by an estimate of the
-    pose — so that their height image matches the reference's: a corrected point is
-    ``Rz(angle) @ p + shift`` (x, y only). None when ECC does not converge or too few
-    pixels are supported."""
-    img, support = splat(points_part, reference)
-    if support.sum() < 500:
-        return None
-    warp = np.eye(2, 3, dtype=np.float32)
-    crit = (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, iterations, 1e-6)
-    try:
-        _, warp = cv2.findTransformECC(reference.blurred(), img, warp, cv2.MOTION_EUCLIDEAN,
-                                       crit, support.astype(np.uint8), 1)
-    except cv2.error:
-        return None
-    # template pixel x ↦ scan pixel W(x): the scan's points sit at W of where they belong
-    A, b = warp[:, :2].astype(np.float64), warp[:, 2].astype(np.float64) * reference.px_mm
-    o = np.array([reference.x0_mm, reference.y0_mm])
-    # W in mm: q ↦ A (q − o) + o + b; its inverse maps the scan's points home
-    Ai = A.T
-    angle = float(np.arctan2(Ai[1, 0], Ai[0, 0]))
-    shift = o - Ai @ (o + b)
-    return angle, shift
+def _disk(radius_px: float) -> np.ndarray:
+    n = int(np.ceil(radius_px))
+    return cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * n + 1, 2 * n + 1))
+
+
+def sample(images, cols: np.ndarray, rows: np.ndarray) -> list[np.ndarray]:
+    """Each of ``images`` (H, W) at the fractional pixels (cols, rows) (N,), bilinear."""
+    n = len(cols)
+    k = -(-n // 1024) * 1024                 # cv2.remap takes under 32767 rows: fold them
+    mx = np.zeros(k, np.float32)
+    my = np.zeros(k, np.float32)
+    mx[:n], my[:n] = cols, rows
+    return [cv2.remap(np.asarray(im, np.float32), mx.reshape(-1, 1024), my.reshape(-1, 1024),
+                      cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE).ravel()[:n]
+            .astype(np.float64) for im in images]
 
 
 def splat_image(points: np.ndarray, part: np.ndarray, base_z: float,
@@ -132,7 +110,5 @@ def splat_image(points: np.ndarray, part: np.ndarray, base_z: float,
     shape = (int(np.ceil((hi[1] - lo[1]) / px_mm)), int(np.ceil((hi[0] - lo[0]) / px_mm)))
     grid = HeightImage(np.zeros(shape, np.float32), float(lo[0]), float(lo[1]), px_mm)
     img, support = splat(points, grid)
-    out = HeightImage(np.where(support, img, base_z).astype(np.float32), grid.x0_mm,
-                      grid.y0_mm, px_mm)
-    out.__dict__["_blur"] = out.z          # already spread like a scan
-    return out
+    return HeightImage(np.where(support, img, base_z).astype(np.float32), grid.x0_mm,
+                       grid.y0_mm, px_mm)
