@@ -161,7 +161,11 @@ def test_typed_values_check_and_mark_the_job(qtbot, window, tmp_path):
     r = window.mark_panel.last_result
     assert (r.state, r.completed, r.total) == ("done", len(job.paths), len(job.paths))
     assert window.station.world.burns and window.station.world.laser.kind == "off"
-    assert window.camera_image.caption.startswith("inspection")
+    # the inspection: the mark read back, rectified onto the cloud with the plan over it
+    rb = window.mark_panel.last_readback
+    assert rb is not None and len(rb.readings) == 1 and rb.readings[0].offset_mm is not None
+    assert window.camera_image.caption == "inspection: in place"
+    assert window.camera_image.image.width() == rb.picture.shape[1]
     assert (tmp_path / "m.job.progress.json").exists() and (tmp_path / "m.job.json").exists()
     assert mark.progressBar.value() == len(job.paths)
 

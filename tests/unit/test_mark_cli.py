@@ -125,7 +125,8 @@ def test_run_marks_the_part_records_progress_resumes_and_inspects(files, tmp_pat
     assert res.exit_code == 0, res.output
     progress = json.loads((tmp_path / "job.progress.json").read_text())
     assert progress["state"] == "done" and progress["completed"] == len(read_job(out).paths)
-    assert img.stat().st_size > 10_000
+    assert img.stat().st_size > 10_000 and (tmp_path / "inspect.raw.png").stat().st_size > 10_000
+    assert "read back by the camera" in res.output and "wrote " in res.output
     res = _run(*args, "--resume")
     assert res.exit_code == 0 and "nothing left to mark: " in res.output, res.output
     # a job that no longer matches the file cannot be resumed

@@ -10,6 +10,7 @@ from typing import Annotated
 import numpy as np
 import typer
 from rich.table import Table
+from rich.text import Text
 
 from insitu.cli.common import (bounded, bounded_each, check_output, console, one_line_errors,
                                progress_bar, warn)
@@ -79,15 +80,20 @@ def check_run_options(resume: bool, restart: bool, cut_path: str | None) -> None
 
 def run_on_station(station, job, job_path: Path, resume: bool, preview: bool,
                    inspect: Path | None, restart: bool = False,
-                   cut_path: str | None = None) -> None:
+                   cut_path: str | None = None, read=None) -> None:
     """:func:`insitu.services.mark.mark_on_station` with a progress bar (SIGTERM and SIGHUP
-    stop it like Ctrl-C), then say how far it got and where the camera's image went."""
+    stop it like Ctrl-C), then say how far it got and where the camera's image went. With
+    ``read`` = (plans, cloud), ``inspect`` gets the marks read back
+    (:mod:`insitu.services.inspect`: the rectified picture with the plan, the raw frame
+    beside it) and their table is printed; else the raw frame."""
     from insitu.marking import journal_path_for
     from insitu.services.mark import mark_on_station
 
     with stop_on_signals(), progress_bar("marking", "paths") as progress:
         run = mark_on_station(station, job, job_path, resume=resume, restart=restart,
-                              cut_path=cut_path, preview=preview, inspect=inspect,
+                              cut_path=cut_path, preview=preview,
+                              inspect=inspect if read is None else None,
+                              image=read is not None and inspect is not None,
                               progress=progress)
     r = run.result
     done = (f"marked paths {r.start_path + 1}…{r.completed} of {r.total}"
@@ -96,8 +102,29 @@ def run_on_station(station, job, job_path: Path, resume: bool, preview: bool,
     cut = f", cut path {r.cut + 1}: {r.cut_choice}" if r.cut is not None else ""
     console.print(f"{done} ({r.state}{cut}); journal in {journal_path_for(job_path)}",
                   highlight=False)
-    if inspect is not None:
+    if inspect is not None and read is not None:
+        from insitu.services.inspect import read_back, save_read_back
+
+        with progress_bar("reading back", "marks") as progress:
+            progress(0, 1)
+            result = read_back(station, read[0], read[1], image=run.image)
+        raw = save_read_back(inspect, result)
+        print_read_back(result)
+        console.print(f"wrote {inspect} (the raw frame: {raw})", highlight=False)
+    elif inspect is not None:
         console.print(f"wrote {inspect}", highlight=False)
+
+
+def print_read_back(result) -> None:
+    """The read-back table: per mark, decoded, = plan?, offset, grade."""
+    from insitu.services.inspect import table_rows
+
+    table = Table(title="read back by the camera")
+    for head in ("mark", "planned", "decoded", "= plan", "offset u, v mm", "grade"):
+        table.add_column(head)
+    for row in table_rows(result):
+        table.add_row(*(Text(c) for c in row))
+    console.print(table)
 
 
 @app.command("show")

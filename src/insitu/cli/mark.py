@@ -11,8 +11,8 @@ from rich.text import Text
 
 from insitu.cli.common import (bounded, check_output, console, fail, missing,
                                one_line_errors, progress_bar, warn)
-from insitu.cli.job import (CutPath, Field, Inspect, PartPose, Preview, Restart, Resume, Rig,
-                            Seed, Workpiece, check_run_options, run_on_station)
+from insitu.cli.job import (CutPath, Field, PartPose, Preview, Restart, Resume, Rig, Seed,
+                            Workpiece, check_run_options, run_on_station)
 from insitu.marking.modes import PROJECTIONS, projection_mode
 from insitu.patterns.dxf import FILL_MODES
 from insitu.patterns.load import sources_help
@@ -69,7 +69,12 @@ def mark(
     run: Annotated[bool, typer.Option(help="Also mark the job on the rig (with --preview, --restart, "
                                            "--resume, --cut-path, --inspect).")] = False,
     preview: Preview = False, resume: Resume = False, restart: Restart = False,
-    cut_path: CutPath = None, inspect: Inspect = None, rig: Rig = None,
+    cut_path: CutPath = None,
+    inspect: Annotated[Path | None, typer.Option(
+        help="Read the marks back with the camera: write the picture of each mark rectified "
+             "onto the surface with the plan over it (.png; the raw frame beside it as "
+             "NAME.raw.png) and print what was decoded, the offset and the grade.")] = None,
+    rig: Rig = None,
     field: Field = None, workpiece: Workpiece = "step-block", seed: Seed = 0,
     pose: PartPose = (0.0, 0.0, 0.0),
     fields: Annotated[list[str] | None, typer.Option(
@@ -132,7 +137,8 @@ def mark(
             fail(f"--resume: {out} does not hold this job; run without --resume to start it")
         _summary(out, placement, plan, station.field, rec)
         if run:
-            run_on_station(station, plan.job, out, resume, preview, inspect, restart, cut_path)
+            run_on_station(station, plan.job, out, resume, preview, inspect, restart, cut_path,
+                           read=([plan], measured))
 
 
 def _plan(out: Path, placement, plan_mark, resume: bool, fields, counter, start):

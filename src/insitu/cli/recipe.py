@@ -221,4 +221,5 @@ def mark_recipe(recipe_path: Path, cloud: Path, out: Path, run: bool, preview: b
         table.add_row("marks", f"{len(planned.job.paths):,} paths")
         console.print(table)
         if run:
-            run_on_station(station, planned.job, out, False, preview, inspect)
+            run_on_station(station, planned.job, out, False, preview, inspect,
+                           read=([o.plan for o in planned.result], measured))

@@ -223,11 +223,13 @@ def mark(job: MarkJob, driver: GalvoDriver, controller, progress_path: str | Pat
 @dataclass(frozen=True)
 class StationRun:
     """A job marked on the station: ``result``, the ``progress_path`` recording it (None:
-    not recorded) and the camera's ``image`` (H, W) of the marked part (None: not asked)."""
+    not recorded), the camera's ``image`` (H, W) of the marked part (None: not asked) and
+    the marks read back from it (``insitu.services.inspect.ReadBack``; None: not read)."""
 
     result: RunResult
     progress_path: Path | None
     image: np.ndarray | None = None
+    readback: object | None = None
 
 
 def mark_on_station(station: Station, job: MarkJob, job_path: str | Path | None = None, *,

@@ -78,22 +78,31 @@ def mark_darkness(points: np.ndarray, burns: list[Burn],
 
 def render_inspection(rig: SimRig, scene: Scene, burns: list[Burn],
                       exposure_ms: float = 12 * NOMINAL_EXPOSURE_MS, seed: int = 0,
-                      ideal: bool = False, contrast: float = MARK_CONTRAST) -> np.ndarray:
+                      ideal: bool = False, contrast: float = MARK_CONTRAST,
+                      window: tuple[int, int, int, int] | None = None) -> np.ndarray:
     """(H, W) frame of the true camera under room light, marks darker. One ray per pixel
-    centre. ``ideal``: untextured, noise-free float32; else 8-bit with shot and read noise."""
+    centre. ``ideal``: untextured, noise-free float32; else 8-bit with shot and read noise.
+    ``window`` (row0, row1, col0, col1): only those pixels rendered (the rest dark, as if
+    unlit), for speed."""
     cam, o = rig.camera, rig.optics
     H, W = cam.height, cam.width
+    r0, r1, c0, c1 = window if window is not None else (0, H, 0, W)
     u, v = np.meshgrid(np.arange(W, dtype=np.float64), np.arange(H, dtype=np.float64))
-    origin, dirs = cam.rays(np.column_stack([u.ravel(), v.ravel()]))
+    lit = np.zeros((H, W), bool)
+    lit[max(r0, 0):r1, max(c0, 0):c1] = True
+    lit = lit.ravel()
+    origin, dirs = cam.rays(np.column_stack([u.ravel()[lit], v.ravel()[lit]]))
     hits = scene.cast(np.broadcast_to(origin, dirs.shape), dirs)
-    shade = np.zeros(H * W)
+    shade = np.zeros(int(lit.sum()))
     p, part, nrm = hits.points[hits.hit], hits.part[hits.hit], hits.normals[hits.hit]
     albedo = (np.array([scene.materials[i].albedo for i in part]) if ideal
               else scene.albedo(p, part))
     albedo = albedo * (1.0 - mark_darkness(p, burns, contrast))
     shade[hits.hit] = (o.ambient_dn * albedo * (0.6 + 0.4 * np.abs(nrm[:, 2]))
                        * exposure_ms / NOMINAL_EXPOSURE_MS)
-    img = shade.reshape(H, W).astype(np.float32)
+    img = np.zeros(H * W, np.float32)
+    img[lit] = shade
+    img = img.reshape(H, W)
     if ideal:
         return img
     rng = np.random.default_rng(seed)

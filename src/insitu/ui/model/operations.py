@@ -6,6 +6,7 @@ is long."""
 
 from __future__ import annotations
 
+import dataclasses
 import threading
 from dataclasses import dataclass
 from pathlib import Path
@@ -59,18 +60,33 @@ def preview(job: MarkJob, station: Station) -> list[np.ndarray]:
 
 def mark(job: MarkJob, station: Station, job_path: Path | None, progress: Progress,
          cancel: threading.Event, resume: bool = False, restart: bool = False,
-         cut_path: str | None = None) -> mark_svc.StationRun:
+         cut_path: str | None = None, outcomes=None, cloud=None) -> mark_svc.StationRun:
     """Write ``job`` to ``job_path`` (when given, unless resuming; its journal is kept beside
     it), mark it (``resume`` / ``restart`` / ``cut_path`` as
-    :func:`~insitu.marking.run_job`) and image the part. Setting ``cancel`` stops the laser
-    before the next command. A job planned for another rig or workpiece is refused
+    :func:`~insitu.marking.run_job`), image the part and read the marks of ``outcomes``
+    (the plans of ``job``'s placements, on ``cloud``) back. Setting ``cancel`` stops the
+    laser before the next command. A job planned for another rig or workpiece is refused
     (SafetyError), nothing written or fired."""
     station.check_source(job_path or Path("the job"), job.rig, "job")
     if job_path is not None and not resume:
         mark_svc.save_job(job_path, job)
-    return mark_svc.mark_on_station(station, job, job_path, resume=resume, restart=restart,
-                                    cut_path=cut_path, image=True, cancel=cancel,
-                                    progress=progress)
+    run = mark_svc.mark_on_station(station, job, job_path, resume=resume, restart=restart,
+                                   cut_path=cut_path, image=True, cancel=cancel,
+                                   progress=progress)
+    return read_back(run, station, outcomes, cloud)
+
+
+def read_back(run: mark_svc.StationRun, station: Station, outcomes, cloud
+              ) -> mark_svc.StationRun:
+    """``run`` with the marks of ``outcomes`` read back from its image when it finished
+    (:func:`insitu.services.inspect.read_back`); unchanged when there is nothing to read."""
+    from insitu.services.inspect import read_back as read
+
+    if (run.image is None or run.result.state != "done" or cloud is None or not outcomes
+            or any(o.plan is None for o in outcomes)):
+        return run
+    result = read(station, [o.plan for o in outcomes], cloud, image=run.image)
+    return dataclasses.replace(run, readback=result)
 
 
 def preview_serial(job_path: Path | None) -> int:
@@ -123,8 +139,9 @@ def mark_serial(items, cloud, laser, station: Station, job_path: Path | None,
     done = plan_and_save(job_path, items,
                          lambda ps: mark_svc.plan_all(cloud, ps, station.driver, laser),
                          job_of, counter=counter)
-    return mark_svc.mark_on_station(station, done.job, job_path, image=True, cancel=cancel,
-                                    progress=progress)
+    run = mark_svc.mark_on_station(station, done.job, job_path, image=True, cancel=cancel,
+                                   progress=progress)
+    return read_back(run, station, done.result, cloud)
 
 
 def unfinished(job: MarkJob, job_path: Path | None):

@@ -1,6 +1,7 @@
 """The Mark dock: laser settings, the job's size and time, Preview (pilot laser), Mark with
 progress and time left, and ABORT, which stops the laser before the next command. The
-inspection image of the marked part goes to the camera dock."""
+inspection goes to the camera dock: each mark read back (rectified onto the surface, the
+plan over it, decoded and graded), or the camera's frame when it was not read."""
 
 from __future__ import annotations
 
@@ -38,6 +39,7 @@ class MarkPanel(QWidget):
         window.runner.busy_changed.connect(self._busy)
         self._t0 = 0.0
         self.last_result = None
+        self.last_readback = None
         self.refresh()
 
     def laser(self) -> LaserParams:
@@ -102,8 +104,11 @@ class MarkPanel(QWidget):
             if choice is None:
                 return
 
+            plans, cloud = list(self.session.plans), self.session.cloud
+
             def work(progress, cancel, _f):
-                return ops.mark(job, station, path, progress, cancel, **choice)
+                return ops.mark(job, station, path, progress, cancel, outcomes=plans,
+                                cloud=cloud, **choice)
         task = self.window_.runner.start("mark", work, self._marked, self._failed)
         if task is not None:
             self._t0 = time.perf_counter()
@@ -151,7 +156,14 @@ class MarkPanel(QWidget):
         r = outcome.result
         self.ui.resultLabel.setText(f"{r.state}: paths {r.completed} of {r.total} marked; "
                                     "the laser is off")
-        self.window_.camera_image.show_image(outcome.image, None, "inspection: marked part")
+        rb = self.last_readback = outcome.readback
+        if rb is None:
+            self.window_.camera_image.show_image(outcome.image, None, "inspection: marked part")
+        else:                                   # each mark rectified, the plan over it
+            read = ", ".join(f"{r.decoded or 'NOT decoded'} {'=' if r.ok else '!='} plan"
+                             if r.text is not None else ("in place" if r.ok else "off plan")
+                             for r in rb.readings)
+            self.window_.camera_image.show_image(rb.picture, None, f"inspection: {read}")
         self.window_.show_message(f"marking {r.state}")
 
     def _failed(self, message: str, _cancelled: bool) -> None:
