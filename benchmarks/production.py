@@ -135,7 +135,8 @@ def main() -> None:
         t_cal = time.perf_counter() - t0
         records, truths, offsets = run(args, folder, field, height)
         t_run = time.perf_counter() - t0 - t_cal
-        issued = [i.serial for i in read_counter(folder / "serial.counter.json").issued]
+        counter = folder / "serial.counter.json"
+        issued = [i.serial for i in read_counter(counter).issued] if counter.exists() else []
     last = {r.part: r for r in records}
     tab = Table(title=f"produce: {args.count} parts of the {PART}, random poses (seed "
                       f"{args.seed}), binning {args.binning}, QR {args.module} mm modules; "
@@ -167,7 +168,8 @@ def main() -> None:
               f"{args.count}")
     s.add_row("parts marked", f"{len(marked)}", f"{args.count}")
     s.add_row("serials issued (counter)", f"{issued[:3]}…{issued[-2:]} ({len(issued)}, "
-              f"distinct {len(set(issued))})", f"1 … {len(marked)} once each")
+              f"distinct {len(set(issued))}; = 1 … {len(marked)}: "
+              f"{issued == list(range(1, len(marked) + 1))})", f"1 … {len(marked)} once each")
     s.add_row("serials marked (log)", "1 … {} each once: {}".format(
         len(marked), sorted(serials) == list(range(1, len(marked) + 1))
         and set(serials.values()) == {1}), "yes")

@@ -186,13 +186,46 @@ def test_mark_recipe_locates_and_writes_one_job(recipe, tmp_path):
     job = read_job(out)
     serial = job_variables(job).serial
     assert serial is not None and read_counter(recipe.parent / "serial.counter.json").next > serial
+    from insitu.cli.recipe import read
+    from insitu.formats.pointcloud import read_ply
+
+    r = read(recipe)
+    located = production.recipe_locator(r)(read_ply(cloud))
+    moved = r.placements[0].in_world(located.T_world_part)
+    rendered = render_placement(moved, Variables(serial))
+    plan = np.vstack(rendered.polylines(rendered.placed()))
     pts = np.vstack([p.points for p in job.paths])[:, :2]
-    c = np.array([np.cos(np.radians(a)), np.sin(np.radians(a))])
-    centre = np.array([x, y]) + [c[0] * AT[0] - c[1] * AT[1], c[1] * AT[0] + c[0] * AT[1]]
-    assert np.linalg.norm((pts.min(0) + pts.max(0)) / 2 - centre) < 0.5
+    # the job marks the recipe's placement moved by the located pose (projection aside) …
+    assert np.linalg.norm((pts.min(0) + pts.max(0)) / 2 - (plan.min(0) + plan.max(0)) / 2) < 0.05
+    # … and the part was found where it lies (its accuracy: test_locate, the benchmark)
+    assert np.linalg.norm(np.subtract(located.pose()[:2], (x, y))) < 3.0
 
 
 def test_mark_without_recipe_still_needs_pattern_and_at(tmp_path):
     res = CliRunner().invoke(app, ["mark", "--cloud", "x.ply", "--at", "0", "0",
                                    "-o", str(tmp_path / "j.json")])
     assert res.exit_code == 2 and "--pattern: missing" in res.output
+
+
+def test_produce_command_logs_a_part_set_aside_and_refuses_to_overwrite_a_log(recipe, tmp_path):
+    """The arc on the table where the recipe's step block is expected: not found, no serial;
+    the command's plain progress and per-part lines; a second run needs --resume."""
+    from insitu.cli.recipe import read
+    from insitu.formats.recipe import write_recipe as write
+    from dataclasses import replace
+
+    write(recipe, replace(read(recipe), workpiece="arc"))
+    args = ["produce", str(recipe), "--count", "1", "--binning", str(BINNING), "--no-wait"]
+    res = CliRunner().invoke(app, args)
+    assert res.exit_code == 0, res.output
+    assert "part 1 refused: no serial" in res.output and "producing: 1 of 1 parts" in res.output
+    assert "0 of 1 parts marked" in res.output
+    log = tmp_path / "recipe.production.jsonl"
+    (rec,) = read_log(log)
+    assert rec.outcome == "refused" and rec.serial is None
+    assert not (tmp_path / "serial.counter.json").exists()
+    res = CliRunner().invoke(app, args)
+    assert res.exit_code == 1 and isinstance(res.exception, SystemExit)
+    assert "holds 1 records of an earlier run: --resume to continue it" in res.output
+    res = CliRunner().invoke(app, args + ["--resume"])
+    assert res.exit_code == 0 and len(read_log(log)) == 1       # the run was complete

@@ -98,6 +98,7 @@ def produce(
     from insitu import services
     from insitu.cli.recipe import read
     from insitu.cli.scan import _rig_height_calibration
+    from insitu.formats.production_log import read_log
     from insitu.services import production
     from insitu.services.station import connect
 
@@ -123,10 +124,13 @@ def produce(
             run = production.Production(r, station, log, count, production.recipe_locator(r),
                                         production.read_part, present, start, cancel,
                                         cal, on_record)
+            before = len(read_log(log))
             try:
                 with cancel_on_signals(cancel):
                     records = production.produce(run, resume)
             except InsituError as e:
+                if len(read_log(log)) == before:      # refused before any part
+                    raise
                 fail(f"{e}; the laser is off; logged in {log}: --resume continues the run")
     marked = sum(rec.outcome == "marked" for rec in records)
     console.print(f"{marked} of {len(records)} parts marked; log {log} and "

@@ -111,6 +111,8 @@ def recipe_locator(recipe: Recipe) -> Locator:
         return Located(pose.T_world_part, pose.best.fitness, pose.best.rmse_mm)
     locate.reference = reference
     return locate
+
+
 ReadBackFn = Callable[[Station, list, PointCloud, Path], PartReading]
 
 
