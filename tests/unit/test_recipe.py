@@ -153,3 +153,25 @@ def test_recipe_new_refuses_a_pattern_that_does_not_load(tmp_path, reference):
                               "--at", "0", "0", "-o", str(tmp_path / "r.json")])
     assert res.exit_code == 1 and isinstance(res.exception, SystemExit)
     assert "nope" in res.output and not (tmp_path / "r.json").exists()
+
+
+def test_a_mesh_reference_is_sampled_in_the_part_frame(tmp_path):
+    import open3d as o3d
+
+    from insitu.services.production import load_reference
+    from insitu.sim.workpieces import make_workpiece
+
+    part = make_workpiece("step-block")
+    mesh = o3d.geometry.TriangleMesh(o3d.utility.Vector3dVector(np.array(part.vertices)),
+                                     o3d.utility.Vector3iVector(np.array(part.triangles)))
+    mesh.compute_triangle_normals()
+    path = tmp_path / "step.stl"
+    assert o3d.io.write_triangle_mesh(str(path), mesh)
+    assert reference_kind(path) == "mesh"
+    ref = load_reference(Recipe(path, "mesh", (Placement("text:A", (0.0, 0.0), 2.0),)))
+    assert ref.kind == "mesh" and len(ref.points) > 1000
+    lo, hi = part.bounds()
+    assert (ref.points.min(0) >= lo - 1e-6).all() and (ref.points.max(0) <= hi + 1e-6).all()
+    (tmp_path / "empty.obj").write_text("# nothing\n")
+    with pytest.raises(FormatError, match=r"empty\.obj: no triangles"):
+        load_reference(Recipe(tmp_path / "empty.obj", "mesh", ()))
