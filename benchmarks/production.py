@@ -1,193 +1,221 @@
-"""Production on the simulated rig, no hand on the keyboard: a recipe marked on N parts, each
-put on the table at a random pose, located, marked and read back — and a camera fault injected
-at one part, the run resumed from its log.
+"""Production without fixtures, on the simulated rig (realistic calibration errors): parts at
+random poses located against their meshes, and patterns marked where they belong on them.
 
-1. The station as an operator has it: the field correction fitted from marked circles and the
-   height calibration (Method 2), through the same services as `insitu calibrate field` /
-   `height`; the recipe's reference is a first scan of the part where it lay.
-2. `produce` (services.production, as `insitu produce RECIPE --random-poses SEED --no-wait`):
-   the camera stops delivering frames during the scan of part --fault-at; the run ends with
-   the laser off and that part logged as a fault; a second run with --resume finishes it.
-3. Per part: the located pose against the truth; where the code was marked on the part
-   against the recipe's place (the simulator's burns, in the part's frame, against the
-   planned marks' box: the placement error); the read-back (decoded = planned, grade, offset
-   of the mark against the plan as the camera measures it); the time per stage.
-4. The log: every part's last record "marked", serials 1 … N each issued exactly once (the
-   counter and the log agree), the faulted part without a serial.
+1. Locate: the step block, the arc and the insert at N random poses each (x, y within
+   ±25 mm, any turn about z), scanned with Method 2 (height calibration recorded and fitted on
+   the same rig), located against the part's own mesh (`locate_part`, as `insitu locate`).
+   The arc (2-fold) and the insert (3-fold) are symmetric: each is located without a
+   symmetry breaker (it must be refused, never wrong) and with `prefer_angle` — a window
+   ±50° wide around a rough orientation (the true turn ± up to 30°, as an operator loading
+   parts roughly oriented would give). Error of the located pose against the truth
+   (the simulator's T_world_part): |x, y| mm and the turn, degrees; the mean error vector is
+   the rig's own calibration offset (the scan and the marks share it), the scatter around it
+   the locating's own.
+2. Time to locate a scan of about 200 k points (binning 1) on one core.
+3. Mark: a 3 mm square placed in the part's frame (`--part-pose`) on the step block's top
+   step and the arc's crest at a few poses, marked with the flawless field correction (the
+   field calibration's own error is benchmarks/mark_end_to_end.py's); the burnt square's
+   centre (the simulator's truth) mapped into the part's true frame against where it was
+   asked.
 
-Run: .venv/bin/python benchmarks/production.py [--count 20] [--binning 2] [--seed 1]
-     [--fault-at 7] [--module 0.35]
+4. Produce: benchmarks/production_run.py — --parts parts at random poses through `produce`,
+   a camera fault at part 7 and the run resumed: log, serials, marks on the part, read-back.
+
+Scans are cached in --cache (default /tmp/insitu-production-bench).
+Run: .venv/bin/python benchmarks/production.py [--poses 20] [--binning 2] [--seed 0]
 """
 
 from __future__ import annotations
 
 import argparse
-import tempfile
+import json
+import os
 import time
-from collections import Counter
 from pathlib import Path
 
 import numpy as np
 from rich.console import Console
 from rich.table import Table
 
-from insitu.calibrate.field_file import save_field_correction
-from insitu.errors import DeviceError
-from insitu.formats.counter import read_counter
-from insitu.formats.pointcloud import write_ply
-from insitu.formats.production_log import read_log
-from insitu.formats.recipe import Recipe, RecipeScan, write_recipe
-from insitu.geometry.pose import flat_pose
-from insitu.marking import Placement
-from insitu.patterns.fields import Variables
-from insitu.services import calibrate_height, production
-from insitu.services.field import calibrate_field
-from insitu.services.record import record_height_calibration, record_marked_field_calibration
-from insitu.services.scan import scan_live
-from insitu.services.serials import render_placement
-from insitu.services.station import connect, simulated
-from insitu.sim.marks import burnt_centre
+from insitu.formats.pointcloud import PointCloud, read_ply, write_ply
+from insitu.marking import GalvoDriver, Placement, run_job
+from insitu.measure.locate import LocateRefused, locate_part
+from insitu.measure.part_reference import reference_from_mesh
+from insitu.rig.files import load_json_model, save_json_model, HeightCalibration
+from insitu.services import calibrate_height, scan_live
+from insitu.services.mark import part_placement, plan_mark
+from insitu.services.record import record_height_calibration
+from insitu.services.station import simulated
+from insitu.sim.devices import SimController
+from insitu.sim.rig import default_rig
+from insitu.sim.workpieces import make_workpiece, part_matrix, random_pose
 from insitu.sim.world import SimWorld, sim_world
 
-console = Console(width=160)
-PART = "step-block"
-AT = (0.0, -30.0)           # on the 3 mm step, part frame
+console = Console(width=150)
+PARTS = {"step-block": 1, "arc": 2, "insert": 3}          # name: fold of its symmetry
+SQUARE = ('<svg xmlns="http://www.w3.org/2000/svg" width="3mm" height="3mm" '
+          'viewBox="0 0 3 3"><rect x="0" y="0" width="3" height="3" fill="none" '
+          'stroke="black" stroke-width="0.01"/></svg>')
+MARK_AT = {"step-block": (0.0, 30.0), "arc": (0.0, 5.0)}   # part frame, mm
 
 
-def calibrations(folder: Path, seed: int, binning: int):
-    """(field correction file, height calibration) fitted from simulated recordings."""
-    rig = sim_world(PART, seed=seed, binning=binning).rig
-    record_marked_field_calibration(simulated(SimWorld(rig, seed=seed)), folder / "field")
-    field = folder / "field.json"
-    save_field_correction(field, calibrate_field(folder / "field", "rbf"))
-    record_height_calibration(simulated(SimWorld(rig, seed=seed)), folder / "hcal")
-    return field, calibrate_height(folder / "hcal")
+def height_cal(cache: Path, rig, seed: int) -> HeightCalibration:
+    path = cache / "height.json"
+    if not path.exists():
+        record_height_calibration(simulated(SimWorld(rig, seed=seed)), cache / "hcal")
+        save_json_model(path, calibrate_height(cache / "hcal"))
+    return load_json_model(path, HeightCalibration)
 
 
-def placement(module_mm: float) -> Placement:
-    return Placement('qr:"{serial:05d}";ec=M', AT, 21 * module_mm, 20.0)
+def scan(cache: Path, name: str, pose, rig, seed: int, cal, tag: str) -> PointCloud:
+    """The cloud of ``name`` at ``pose`` (cached)."""
+    path = cache / f"{tag}.ply"
+    if not path.exists():
+        world = sim_world(name, seed=seed, rig=rig, pose=pose)
+        with simulated(world) as station:
+            write_ply(path, scan_live(station, height_cal=cal).cloud)
+    return read_ply(path)
 
 
-def truth_offset(world, T_world_part, p: Placement, serial: int) -> float:
-    """|burnt box centre − planned box centre| in the part's frame, mm."""
-    r = render_placement(p, Variables(serial))
-    plan = np.vstack(r.polylines(r.placed()))
-    return float(np.linalg.norm(burnt_centre(world.burns, T_world_part)
-                                - (plan.min(0) + plan.max(0)) / 2))
+def angle_err(a: float, b: float, fold: int = 1) -> float:
+    """|a − b| degrees, modulo the part's symmetry."""
+    period = 360.0 / fold
+    return abs((a - b + period / 2) % period - period / 2)
 
 
-def run(args, folder: Path, field: Path, height) -> tuple[list, dict, dict]:
-    """Both runs of produce; (records, truths by part, truth offsets by part)."""
-    recipe_path = folder / "recipe.json"
-    p = placement(args.module)
-    with connect(None, PART, args.seed, args.binning, field=field) as station:
-        write_ply(folder / "ref.ply", scan_live(station, 0.5, height_cal=height).cloud)
-    write_recipe(recipe_path, Recipe(folder / "ref.ply", "cloud", (p,),
-                                     scan=RecipeScan(margin_mm=4.0), serial_start=1,
-                                     workpiece=PART))
-    from insitu.cli.recipe import read
+def locate_table(args, rig, cal, cache: Path) -> None:
+    tab = Table(title=f"located against the mesh, {args.poses} random poses each (±25 mm, any "
+                      f"turn), binning {args.binning}; errors against the simulator's truth")
+    for col in ("part", "breaker", "located", "refused", "wrong", "|xy| max / mean, mm",
+                "mean error (x, y), mm", "|xy − mean| max, mm", "turn max / mean, °",
+                "time median, s"):
+        tab.add_column(col)
+    for k, (name, fold) in enumerate(PARTS.items()):
+        wp = make_workpiece(name)
+        ref = reference_from_mesh(wp.vertices, wp.triangles, name)
+        rng = np.random.default_rng(1000 * args.seed + k)
+        poses = [random_pose(rng) for _ in range(args.poses)]
+        rough = rng.uniform(-30, 30, args.poses)
+        for breaker in ((False, True) if fold > 1 else (False,)):
+            errs, turns, times, refused, wrong = [], [], [], [], 0
+            for i, pose in enumerate(poses):
+                cloud = scan(cache, name, pose, rig, args.seed, cal,
+                             f"{name}-{i}-b{args.binning}-s{args.seed}")
+                prefer = ((pose[2] + rough[i] - 50, pose[2] + rough[i] + 50) if breaker
+                          else None)
+                t = time.perf_counter()
+                try:
+                    got = locate_part(ref, cloud.points, prefer_angle=prefer,
+                                      lines=cloud.attributes.get("line"))
+                except LocateRefused as e:
+                    refused.append(e.reason)
+                    continue
+                times.append(time.perf_counter() - t)
+                b = got.best
+                turn = angle_err(b.angle_deg, pose[2])
+                e = np.array([b.x_mm - pose[0], b.y_mm - pose[1]])
+                if turn > 1.0 or np.hypot(*e) > 1.0:
+                    wrong += 1
+                    console.print(f"WRONG {name} pose {pose}: {b.describe()}")
+                    continue
+                errs.append(e)
+                turns.append(turn)
+            e = np.array(errs).reshape(-1, 2)
+            m = e.mean(0) if len(e) else np.zeros(2)
+            n = np.linalg.norm(e, axis=1)
+            tab.add_row(name, "prefer-angle ±50°" if breaker else "none", str(len(e)),
+                        f"{len(refused)}" + (f" ({', '.join(sorted(set(refused)))})"
+                                             if refused else ""), str(wrong),
+                        f"{n.max():.3f} / {n.mean():.3f}" if len(n) else "–",
+                        f"({m[0]:+.3f}, {m[1]:+.3f})" if len(n) else "–",
+                        f"{np.linalg.norm(e - m, axis=1).max():.3f}" if len(n) else "–",
+                        f"{max(turns):.3f} / {np.mean(turns):.3f}" if turns else "–",
+                        f"{np.median(times):.2f}" if times else "–")
+    console.print(tab)
 
-    recipe = read(recipe_path)
-    log = folder / "run.jsonl"
-    truths, offsets = {}, {}
-    locate = production.recipe_locator(recipe)
-    for attempt in ("first", "resumed"):
-        with connect(None, PART, args.seed, args.binning, field=field) as station:
-            present = station.part_feeder(PART, args.seed)
-            cam = station.devices.camera
 
-            def put(k, present=present):
-                truths[k] = present(k)
+def timing(args, rig1, cal1, cache: Path) -> None:
+    """Locate a binning-1 scan of the step block (about 200 k points) on one core."""
+    os.sched_setaffinity(0, {sorted(os.sched_getaffinity(0))[0]})
+    pose = (14.0, -9.0, 37.0)
+    cloud = scan(cache, "step-block", pose, rig1, args.seed, cal1, f"timing-b1-s{args.seed}")
+    wp = make_workpiece("step-block")
+    t = time.perf_counter()
+    ref = reference_from_mesh(wp.vertices, wp.triangles, "step-block")
+    t_ref = time.perf_counter() - t
+    runs = []
+    for _ in range(3):
+        t = time.perf_counter()
+        got = locate_part(ref, cloud.points, lines=cloud.attributes.get("line"))
+        runs.append(time.perf_counter() - t)
+    b = got.best
+    console.print(f"one core: locating {len(cloud.points):,} points took {min(runs):.2f} s "
+                  f"(best of 3; {max(runs):.2f} s worst), the mesh reference {t_ref:.2f} s "
+                  f"once; error {np.hypot(b.x_mm - pose[0], b.y_mm - pose[1]):.3f} mm, "
+                  f"{angle_err(b.angle_deg, pose[2]):.3f}°")
 
-            def stage(k, name, cam=cam, attempt=attempt):
-                if attempt == "first" and k == args.fault_at and name == "scan":
-                    cam.fail_after(20)
 
-            def seen(rec, station=station):
-                if rec.outcome == "marked":
-                    offsets[rec.part] = truth_offset(station.world, truths[rec.part], p,
-                                                     rec.serial)
-                console.print(f"part {rec.part}: {rec.outcome}, serial {rec.serial}, "
-                              f"{rec.error or ''}", highlight=False)
-
-            job = production.Production(recipe, station, log, args.count, locate,
-                                        production.read_part, put, height_cal=height,
-                                        on_record=seen, on_stage=stage)
-            try:
-                production.produce(job, resume=attempt == "resumed")
-            except DeviceError as e:
-                console.print(f"run stopped as expected: {e}", highlight=False)
-    return read_log(log), truths, offsets
+def marking(args, rig, cal, cache: Path) -> None:
+    (cache / "square.svg").write_text(SQUARE)
+    tab = Table(title="a 3 mm square marked in the part's frame (--part-pose), flawless field "
+                      "correction: the burnt square's centre in the part's true frame")
+    for col in ("part", "pose (x, y, °)", "asked (part frame)", "burnt − asked, mm"):
+        tab.add_column(col)
+    driver = GalvoDriver.from_config(rig.operator.head, rig.ideal_correction())
+    rng = np.random.default_rng(7 + args.seed)
+    for name, at in MARK_AT.items():
+        wp = make_workpiece(name)
+        ref = reference_from_mesh(wp.vertices, wp.triangles, name)
+        for i in range(args.marks):
+            pose = random_pose(rng)
+            cloud = scan(cache, name, pose, rig, args.seed, cal,
+                         f"mark-{name}-{i}-b{args.binning}-s{args.seed}")
+            prefer = (pose[2] - 50, pose[2] + 50) if PARTS[name] > 1 else None
+            got = locate_part(ref, cloud.points, prefer_angle=prefer,
+                              lines=cloud.attributes.get("line"))
+            placement = part_placement(Placement(str(cache / "square.svg"), at, 3.0, 0.0),
+                                       got.T_world_part)
+            plan = plan_mark(cloud, placement, driver)
+            world = sim_world(name, seed=args.seed, rig=rig, pose=pose)
+            run_job(plan.job, driver, SimController(world), None)
+            burnt = np.vstack([b.points[np.isfinite(b.points).all(1)] for b in world.burns])
+            T = part_matrix(world.parts[0])
+            c = np.linalg.solve(T, np.append(burnt.mean(axis=0), 1.0))[:2]
+            tab.add_row(name, f"({pose[0]:.1f}, {pose[1]:.1f}, {pose[2]:.1f})",
+                        f"({at[0]:g}, {at[1]:g})", f"{np.hypot(*(c - at)):.3f}")
+    console.print(tab)
 
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--count", type=int, default=20)
+    ap.add_argument("--poses", type=int, default=20)
+    ap.add_argument("--marks", type=int, default=3)
     ap.add_argument("--binning", type=int, default=2)
-    ap.add_argument("--seed", type=int, default=1)
-    ap.add_argument("--fault-at", type=int, default=7)
-    ap.add_argument("--module", type=float, default=0.35)
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--cache", type=Path, default=Path("/tmp/insitu-production-bench"))
+    ap.add_argument("--parts", type=int, default=20, help="parts of the produce run")
+    ap.add_argument("--skip", default="",
+                    help="comma-separated: locate, timing, marking, produce")
     args = ap.parse_args()
-    with tempfile.TemporaryDirectory() as tmp:
-        folder = Path(tmp)
-        t0 = time.perf_counter()
-        field, height = calibrations(folder, args.seed, args.binning)
-        t_cal = time.perf_counter() - t0
-        records, truths, offsets = run(args, folder, field, height)
-        t_run = time.perf_counter() - t0 - t_cal
-        counter = folder / "serial.counter.json"
-        issued = [i.serial for i in read_counter(counter).issued] if counter.exists() else []
-    last = {r.part: r for r in records}
-    tab = Table(title=f"produce: {args.count} parts of the {PART}, random poses (seed "
-                      f"{args.seed}), binning {args.binning}, QR {args.module} mm modules; "
-                      f"camera fault at part {args.fault_at}, resumed")
-    for c in ("part", "serial", "outcome", "pose truth (x, y, °)", "pose error mm / °",
-              "on part vs recipe mm (truth)", "read back", "grade", "offset read mm",
-              "scan/locate/plan/mark/read s"):
-        tab.add_column(c)
-    for r in records:
-        tx, ty, ta = flat_pose(truths[r.part])
-        err = "-"
-        if r.x_mm is not None:
-            da = (r.angle_deg - ta + 180) % 360 - 180
-            err = f"{np.hypot(r.x_mm - tx, r.y_mm - ty):.3f} / {abs(da):.3f}"
-        times = "/".join("-" if getattr(r, f"{s}_s") is None else f"{getattr(r, f'{s}_s'):.1f}"
-                         for s in ("scan", "locate", "plan", "mark", "read"))
-        tab.add_row(str(r.part), str(r.serial), r.outcome + (" (resumed)" if r.resumed else ""),
-                    f"{tx:.2f}, {ty:.2f}, {ta:.1f}", err,
-                    f"{offsets[r.part]:.3f}" if r.outcome == "marked" else "-",
-                    "-" if r.decoded is None else f"{r.decoded} ({'=' if r.decode_ok else '≠'} plan)",
-                    r.grade or "-", "-" if r.offset_mm is None else f"{r.offset_mm:.3f}", times)
-    console.print(tab)
-    marked = [r for r in last.values() if r.outcome == "marked"]
-    serials = Counter(r.serial for r in records if r.serial is not None and r.outcome == "marked")
-    s = Table(title="production: what must be true")
-    for c in ("check", "measured", "required"):
-        s.add_column(c)
-    s.add_row("log complete: parts with a last record", f"{len(last)} of {args.count}",
-              f"{args.count}")
-    s.add_row("parts marked", f"{len(marked)}", f"{args.count}")
-    s.add_row("serials issued (counter)", f"{issued[:3]}…{issued[-2:]} ({len(issued)}, "
-              f"distinct {len(set(issued))}; = 1 … {len(marked)}: "
-              f"{issued == list(range(1, len(marked) + 1))})", f"1 … {len(marked)} once each")
-    s.add_row("serials marked (log)", "1 … {} each once: {}".format(
-        len(marked), sorted(serials) == list(range(1, len(marked) + 1))
-        and set(serials.values()) == {1}), "yes")
-    s.add_row("faulted part", "; ".join(f"part {r.part} {r.outcome}, serial {r.serial}"
-                                        for r in records if r.outcome == "fault"), "no serial")
-    off = np.array([offsets[r.part] for r in marked]) if marked else np.array([np.nan])
-    s.add_row("code centre on the part vs recipe (truth)",
-              f"max {off.max():.3f}, mean {off.mean():.3f} mm", "≤ 0.10 mm")
-    rb = np.array([r.offset_mm for r in marked if r.offset_mm is not None] or [np.nan])
-    s.add_row("code centre as read back vs plan", f"max {rb.max():.3f}, mean {rb.mean():.3f} mm",
-              "≤ 0.10 mm")
-    s.add_row("decoded = planned", f"{sum(bool(r.decode_ok) for r in marked)} of {len(marked)}",
-              "all")
-    s.add_row("grades", " ".join(f"{g}×{n}" for g, n in sorted(Counter(
-        r.grade for r in marked).items(), key=lambda kv: str(kv[0]))), "reported")
-    s.add_row("time", f"calibrations {t_cal:.0f} s; {len(records)} part records in {t_run:.0f} s "
-                      f"({t_run / max(len(records), 1):.1f} s each)", "")
-    console.print(s)
+    skip = set(args.skip.split(","))
+    args.cache.mkdir(parents=True, exist_ok=True)
+    rig = default_rig(seed=args.seed, binning=args.binning)
+    (args.cache / f"b{args.binning}").mkdir(exist_ok=True)
+    cal = height_cal(args.cache / f"b{args.binning}", rig, args.seed)
+    if "locate" not in skip:
+        locate_table(args, rig, cal, args.cache)
+    if "marking" not in skip:
+        marking(args, rig, cal, args.cache)
+    if "timing" not in skip:
+        rig1 = default_rig(seed=args.seed, binning=1)
+        (args.cache / "b1").mkdir(exist_ok=True)
+        timing(args, rig1, height_cal(args.cache / "b1", rig1, args.seed), args.cache)
+    if "produce" not in skip:
+        from production_run import report      # beside this script
+
+        report(argparse.Namespace(count=args.parts, binning=args.binning, seed=args.seed + 1,
+                                  fault_at=7, module=0.35))
+    console.print(json.dumps({"binning": args.binning, "poses": args.poses}))
 
 
 if __name__ == "__main__":

@@ -22,7 +22,7 @@ runner = CliRunner()
     (["sim", "record", "--region", "1", "2", "x", "4"],
      "error: --region: expected 4 numbers X0 X1 Y0 Y1, got '1 2 x 4'"),
     (["gui", "--binning", "x"], "error: --binning: expected a whole number, got 'x'"),
-    (["mark", "--bogus"], "error: No such option: --bogus (see 'insitu mark --help')"),
+    (["mark", "--quux"], "error: No such option: --quux (see 'insitu mark --help')"),
     (["calibrate", "nothing"], "error: No such command 'nothing'. (see 'insitu calibrate --help')"),
 ])
 def test_usage_errors_are_one_line(args, line):

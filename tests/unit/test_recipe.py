@@ -158,7 +158,7 @@ def test_recipe_new_refuses_a_pattern_that_does_not_load(tmp_path, reference):
 def test_a_mesh_reference_is_sampled_in_the_part_frame(tmp_path):
     import open3d as o3d
 
-    from insitu.services.production import load_reference
+    from insitu.services.production import recipe_locator
     from insitu.sim.workpieces import make_workpiece
 
     part = make_workpiece("step-block")
@@ -168,10 +168,10 @@ def test_a_mesh_reference_is_sampled_in_the_part_frame(tmp_path):
     path = tmp_path / "step.stl"
     assert o3d.io.write_triangle_mesh(str(path), mesh)
     assert reference_kind(path) == "mesh"
-    ref = load_reference(Recipe(path, "mesh", (Placement("text:A", (0.0, 0.0), 2.0),)))
+    ref = recipe_locator(Recipe(path, "mesh", (Placement("text:A", (0.0, 0.0), 2.0),))).reference
     assert ref.kind == "mesh" and len(ref.points) > 1000
     lo, hi = part.bounds()
     assert (ref.points.min(0) >= lo - 1e-6).all() and (ref.points.max(0) <= hi + 1e-6).all()
     (tmp_path / "empty.obj").write_text("# nothing\n")
     with pytest.raises(FormatError, match=r"empty\.obj: no triangles"):
-        load_reference(Recipe(tmp_path / "empty.obj", "mesh", ()))
+        recipe_locator(Recipe(tmp_path / "empty.obj", "mesh", ()))

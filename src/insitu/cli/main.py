@@ -16,6 +16,7 @@ from insitu.cli import centres as centres_cmd
 from insitu.cli import field as field_cmd
 from insitu.cli import inspect as inspect_cmd
 from insitu.cli import job as job_cmd
+from insitu.cli import locate as locate_cmd
 from insitu.cli import mark as mark_cmd
 from insitu.cli import pattern as pattern_cmd
 from insitu.cli import produce as produce_cmd
@@ -60,6 +61,7 @@ app = typer.Typer(cls=OneLineUsage, help=__doc__.split("\n")[0] if __doc__ else 
 app.command("scan")(scan_cmd.scan)
 app.command("mark")(mark_cmd.mark)
 app.command("inspect")(inspect_cmd.inspect)
+app.command("locate")(locate_cmd.locate)
 app.command("record")(record_cmd.record)
 app.command("centres")(centres_cmd.centres)
 calibrate_cmd.app.command("camera")(camera_cmd.camera)

@@ -27,7 +27,8 @@ def mark(
         help=f"A file or spec: {sources_help()}. Required without --recipe.")] = None,
     at: Annotated[tuple[float, float] | None, typer.Option(metavar="X Y",
         callback=bounded("position_mm"), help="Centre of the pattern X Y, mm, "
-                                              "world frame. Required without --recipe.")] = None,
+                                              "world frame (the part's with --part-pose). "
+                                              "Required without --recipe.")] = None,
     recipe: Annotated[Path | None, typer.Option(
         help="A production recipe (insitu recipe new): locate its part in the cloud and "
              "plan all its placements, moved where the part lies, as one job (with --run, "
@@ -38,7 +39,11 @@ def mark(
         help="Width of the pattern, mm (before --rotate; a code's without its quiet zone; "
              "default: the size it loads at, e.g. a code's ;module=).")] = None,
     rotate: Annotated[float, typer.Option(
-        callback=bounded("angle_deg"), help="Rotation, degrees CCW about +z.")] = 0.0,
+        callback=bounded("angle_deg"), help="Rotation, degrees CCW about +z (from the "
+                                            "part's x axis with --part-pose).")] = 0.0,
+    part_pose: Annotated[Path | None, typer.Option(
+        help="POSE.json of `insitu locate`: --at, --rotate and --hatch-angle are then in the "
+             "part's own frame, moved to where the part lies.")] = None,
     mode: Annotated[str, typer.Option(help="; ".join(f"{k}: {m.description}" for k, m in
                                                      PROJECTIONS.items()) + ".")] = "planar",
     hatch: Annotated[float | None, typer.Option(
@@ -122,6 +127,14 @@ def mark(
         fail(f"--fill {fill!r}: expected one of {', '.join(FILL_MODES)}")
     placement = Placement(pattern, at, width, rotate, mode, hatch, hatch_angle, cross, fill,
                           beam)
+    located = None
+    if part_pose is not None:
+        from insitu.measure.pose_file import load_pose
+
+        located = load_pose(part_pose)
+        if len(located.inputs) > 1 and Path(located.inputs[1]).name != cloud.name:
+            warn(f"{part_pose} was located on {located.inputs[1]}, not on {cloud}")
+        placement = svc.part_placement(placement, located.matrix)
     laser = LaserParams(power_pct=power, frequency_khz=frequency, mark_speed_mm_s=speed,
                         jump_speed_mm_s=jump_speed)
     measured = read_ply(cloud)
@@ -135,7 +148,7 @@ def mark(
                 serial_start)
         if resume and (not out.exists() or read_job(out).digest() != plan.job.digest()):
             fail(f"--resume: {out} does not hold this job; run without --resume to start it")
-        _summary(out, placement, plan, station.field, rec)
+        _summary(out, placement, plan, station.field, rec, part_pose, located)
         if run:
             run_on_station(station, plan.job, out, resume, preview, inspect, restart, cut_path,
                            read=([plan], measured))
@@ -161,11 +174,17 @@ def _plan(out: Path, placement, plan_mark, resume: bool, fields, counter, start)
     return done.result, done.record
 
 
-def _summary(out: Path, placement, plan, field: Path | None, rec=None) -> None:
+def _summary(out: Path, placement, plan, field: Path | None, rec=None,
+             part_pose: Path | None = None, located=None) -> None:
     pts = plan.projection.points
     (cx, cy), (w, h) = plan.pattern.centre, plan.pattern.size
     e = plan.estimate
     table = Table(title=f"mark job → {out}", show_header=False)
+    if located is not None:
+        table.add_row("part pose", f"{part_pose}: x {located.x_mm:.3f}, y {located.y_mm:.3f} "
+                                   f"mm, turned {located.angle_deg:.3f}°; placed at world "
+                                   f"({placement.at_mm[0]:.3f}, {placement.at_mm[1]:.3f}), "
+                                   f"{placement.rotate_deg:.3f}°")
     table.add_row("pattern", f"{plan.pattern.name}: {w:.3f} × {h:.3f} mm, centre "
                              f"({cx:.3f}, {cy:.3f})")
     fill = (f"hatch {placement.hatch_mm:g} mm at {placement.hatch_angle_deg:g}°"

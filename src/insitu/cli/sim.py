@@ -91,6 +91,25 @@ def record_cmd(
     console.print(f"wrote {out}")
 
 
+@app.command("export-part")
+@one_line_errors
+def export_part(
+    name: Annotated[str, typer.Argument(help=f"{', '.join(WORKPIECES)}.")],
+    out: Annotated[Path, typer.Option("-o", "--output", help="Mesh to write (.stl, .ply or "
+                                                             ".obj).")],
+) -> None:
+    """Write a simulated part's mesh in its own frame (mm; it stands on z = 0): the
+    reference `insitu locate` finds it by."""
+    from insitu.formats.mesh import write_mesh
+    from insitu.sim.workpieces import make_workpiece
+
+    if name not in WORKPIECES:
+        fail(f"NAME {name!r}: expected one of {', '.join(WORKPIECES)}")
+    part = make_workpiece(name)
+    write_mesh(out, part.vertices, part.triangles)
+    console.print(f"wrote {out} ({len(part.triangles):,} triangles)", highlight=False)
+
+
 @app.command("calib")
 @one_line_errors
 def calib_cmd(

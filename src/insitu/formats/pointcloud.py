@@ -18,7 +18,7 @@ import numpy as np
 
 from insitu.errors import FormatError
 from insitu.formats.atomic import atomic_file
-from insitu.formats.limits import MAX_CLOUD_BYTES, read_limited
+from insitu.formats.limits import MAX_CLOUD_BYTES, check_file, read_limited
 from insitu.formats.rig_record import RigRecord, from_ply_header, ply_line
 
 _ATTRIBUTES = ("intensity", "line", "quality")
@@ -93,6 +93,15 @@ def read_ply(path: str | Path) -> PointCloud:
     attrs = {n: np.ascontiguousarray(v[n]).astype(v[n].dtype.newbyteorder("="))
              for n in _ATTRIBUTES if n in v.dtype.names}
     return PointCloud(pts, attrs, from_ply_header(path, data[:start].decode("latin-1")))
+
+
+def ply_face_count(path: str | Path) -> int:
+    """How many faces the PLY file ``path`` declares in its header (0: a point cloud)."""
+    path = Path(path)
+    check_file(path, MAX_CLOUD_BYTES, "PLY file", missing="no such PLY file")
+    with open(path, "rb") as f:
+        head = f.read(_MAX_HEADER)
+    return _header(path, head)[1].get("face", (0, []))[0]
 
 
 def _header(path: Path, data: bytes) -> tuple[str, dict[str, tuple[int, list[tuple]]], int]:

@@ -32,13 +32,13 @@ from insitu.errors import FormatError
 from insitu.formats.atomic import atomic_write_text
 from insitu.formats.bounds import each_within, within
 from insitu.formats.counter import Serial
+from insitu.formats.mesh import MESH_SUFFIXES, is_mesh_file
 from insitu.formats.project import (_SPEC, Exposure, Length, Region, Spacing, Speed,
                                     _abs, _Placement, _rel, _Strict)
 from insitu.formats.validation import dump_json, one_of, read_json, validation_message
 
 RECIPE_FORMAT = "insitu-recipe/1"
 SCHEMA_VERSION = 1
-MESH_SUFFIXES = (".stl", ".ply", ".obj")
 COUNTER = "serial.counter.json"
 
 
@@ -127,22 +127,13 @@ class Recipe:
 
 
 def reference_kind(path: str | Path) -> str:
-    """"mesh" (STL/PLY mesh/OBJ) or "cloud" (a scan's .ply): a .ply is a cloud when it names
-    no faces (FormatError for another suffix)."""
+    """"mesh" (STL, OBJ, a PLY with faces) or "cloud" (a scan's .ply); FormatError for
+    another suffix."""
     path = Path(path)
-    suffix = path.suffix.lower()
-    if suffix not in MESH_SUFFIXES:
+    if path.suffix.lower() not in MESH_SUFFIXES:
         raise FormatError(f"{path}: expected a mesh ({', '.join(MESH_SUFFIXES)}) or a scan's "
                           "cloud (.ply)")
-    if suffix != ".ply":
-        return "mesh"
-    from insitu.formats.limits import check_file
-    from insitu.formats.pointcloud import MAX_CLOUD_BYTES
-
-    check_file(path, MAX_CLOUD_BYTES, "reference", missing="no such reference file")
-    with open(path, "rb") as f:
-        head = f.read(4096).split(b"end_header")[0]
-    return "mesh" if b"element face" in head and b"element face 0" not in head else "cloud"
+    return "mesh" if is_mesh_file(path) else "cloud"
 
 
 def recipe_json(recipe: Recipe, path: Path) -> str:

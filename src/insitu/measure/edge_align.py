@@ -15,40 +15,55 @@ in the shadow of the wall or hidden behind its top.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
 from insitu.measure.height_image import HeightImage, sample
 
 DROP_MM = 0.5
-"""A top ends where the next point along the line lies this much lower (or on a wall)."""
 FLAT_MM = 0.15
-"""...and the point before it on the top lies within this height of it."""
+REACH_MM = 0.6
+STEEP = 2.0
+LOOK = 8
+"""Points along the line looked at for the drop."""
 SEARCH_MM = 1.0
+CORNER_MM = 0.3
+MIN_COS = 0.2
+"""Lines crossing an edge more obliquely than this (cosine to its normal) are not used."""
 HUBER_MM = 0.05
 
 
-def edge_samples(points: np.ndarray, lines: np.ndarray, wall: np.ndarray,
+def edge_samples(points: np.ndarray, lines: np.ndarray,
                  table: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The scan's edge samples: (points (K, 3), outward unit directions along their lines
-    (K, 2)) from ``points`` (N, 3) world
-    frame, their ``lines`` (N,) index, and whether each lies on a wall or the table (N,)
-    bool."""
+    (K, 2)) from ``points`` (N, 3) world frame, their ``lines`` (N,) index and whether each
+    is the table (N,) bool. A point ends a top when the point before it on its line lies
+    within ``FLAT_MM`` of its height, the next one lower by more than that or down a slope
+    steeper than ``STEEP`` (a wall), and the line falls ``DROP_MM`` below it: at the next
+    point, however far (past a shadow), or within ``REACH_MM`` (down a wall). A top cut
+    short by something higher in the way is no edge: the reference shows no drop there, and
+    :func:`edge_distance` finds none."""
     order = np.lexsort((_along(points, lines), lines))
-    p, ln, w, tb = points[order], lines[order], wall[order], table[order]
-    top = ~w & ~tb
+    p, ln, top = points[order], lines[order], ~table[order]
     out_p, out_u = [], []
-    for step in (1, -1):                       # forward along the line, then backward
-        q, l2, w2, t2 = (p, ln, w, top) if step == 1 else (p[::-1], ln[::-1], w[::-1],
-                                                            top[::-1])
-        prev, cur, nxt = q[:-2], q[1:-1], q[2:]
-        same = (l2[:-2] == l2[1:-1]) & (l2[1:-1] == l2[2:])
-        flat = np.abs(cur[:, 2] - prev[:, 2]) < FLAT_MM
-        drop = w2[2:] | (cur[:, 2] - nxt[:, 2] > DROP_MM)
-        k = np.flatnonzero(same & t2[1:-1] & t2[:-2] & flat & drop)
-        d = nxt[k, :2] - prev[k, :2]
-        u = d / np.maximum(np.linalg.norm(d, axis=1, keepdims=True), 1e-12)
-        out_p.append(cur[k])
-        out_u.append(u)
+    for q, l2, t2 in ((p, ln, top), (p[::-1], ln[::-1], top[::-1])):   # both ways along
+        n = len(q)
+        i = np.arange(1, max(n - 1, 1))
+        ok = (l2[i - 1] == l2[i]) & (l2[i + 1] == l2[i]) & t2[i] & t2[i - 1]
+        ok &= np.abs(q[i, 2] - q[i - 1, 2]) < FLAT_MM
+        dz = q[i, 2] - q[i + 1, 2]
+        ok &= (dz > FLAT_MM) | (dz > np.maximum(STEEP * np.linalg.norm(q[i + 1, :2] - q[i, :2],
+                                                                       axis=1), 0.03))
+        fall = q[i, 2] - q[i + 1, 2]          # the next point, however far (past a shadow)
+        for k in range(2, LOOK + 1):
+            j = np.minimum(i + k, n - 1)
+            near = (l2[j] == l2[i]) & (np.linalg.norm(q[j, :2] - q[i, :2], axis=1) <= REACH_MM)
+            fall = np.maximum(fall, np.where(near, q[i, 2] - q[j, 2], 0.0))
+        k = i[ok & (fall > DROP_MM)]
+        d = q[k + 1, :2] - q[k - 1, :2]
+        out_p.append(q[k])
+        out_u.append(d / np.maximum(np.linalg.norm(d, axis=1, keepdims=True), 1e-12))
     return np.vstack(out_p), np.vstack(out_u)
 
 
@@ -65,11 +80,13 @@ def _along(points: np.ndarray, lines: np.ndarray) -> np.ndarray:
     return out
 
 
-def edge_distance(heights: HeightImage, e: np.ndarray, u: np.ndarray) -> np.ndarray:
-    """(K,) distance s, mm, along ``u`` (K, 2) from each edge sample ``e`` (K, 3) (part
-    frame) to where the reference's height first falls below halfway between the sample's
-    height and the reference's height ``SEARCH_MM`` beyond; NaN where it does not within
-    ±``SEARCH_MM``."""
+def edge_distance(heights: HeightImage, e: np.ndarray,
+                  u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(distance s (K,) mm, the edge's outward unit normal there (K, 2)): s along ``u``
+    (K, 2) from each edge sample ``e`` (K, 3) (part frame) to where the reference's height
+    first falls below halfway between the sample's height and the reference's height
+    ``SEARCH_MM`` beyond; NaN where it does not within ±``SEARCH_MM``, or where the edge
+    turns within ``CORNER_MM`` (a corner holds no direction)."""
     s = np.arange(-SEARCH_MM, SEARCH_MM + 1e-9, 0.02)
     xy = e[:, None, :2] + s[None, :, None] * u[:, None, :]
     cols = (xy[..., 0] - heights.x0_mm) / heights.px_mm
@@ -85,17 +102,50 @@ def edge_distance(heights: HeightImage, e: np.ndarray, u: np.ndarray) -> np.ndar
     j = np.maximum(j, 1)
     h0, h1 = h[np.arange(len(e)), j - 1], h[np.arange(len(e)), j]
     f = np.clip((h0 - level) / np.where(h0 - h1 != 0, h0 - h1, 1.0), 0.0, 1.0)
-    return np.where(found, s[j - 1] + f * (s[j] - s[j - 1]), np.nan)
+    dist = np.where(found, s[j - 1] + f * (s[j] - s[j - 1]), np.nan)
+    at = e[:, :2] + np.nan_to_num(dist)[:, None] * u
+    d = 2 * heights.px_mm
+    c = (at[:, 0] - heights.x0_mm) / heights.px_mm
+    r = (at[:, 1] - heights.y0_mm) / heights.px_mm
+    hx0, hx1, hy0, hy1 = sample([heights.z], np.concatenate([c - 2, c + 2, c, c]),
+                                np.concatenate([r, r, r - 2, r + 2]))[0].reshape(4, -1)
+    g = np.column_stack([hx1 - hx0, hy1 - hy0]) / (2 * d)
+    n = -g / np.maximum(np.linalg.norm(g, axis=1, keepdims=True), 1e-12)
+    # a straight edge: the normal the same 0.3 mm along it either way (not a corner)
+    for side in (-1.0, 1.0):
+        at2 = at + side * CORNER_MM * np.column_stack([-n[:, 1], n[:, 0]])
+        c = (at2[:, 0] - heights.x0_mm) / heights.px_mm
+        r = (at2[:, 1] - heights.y0_mm) / heights.px_mm
+        hx0, hx1, hy0, hy1 = sample([heights.z], np.concatenate([c - 2, c + 2, c, c]),
+                                    np.concatenate([r, r, r - 2, r + 2]))[0].reshape(4, -1)
+        g2 = -np.column_stack([hx1 - hx0, hy1 - hy0])
+        cos = np.einsum("ij,ij->i", g2, n) / np.maximum(np.linalg.norm(g2, axis=1), 1e-12)
+        dist = np.where(cos > np.cos(np.radians(20)), dist, np.nan)
+    return dist, n
+
+
+@dataclass(frozen=True)
+class EdgeFit:
+    """A corrected point is ``Rz(angle_rad) @ p + shift_mm`` (x, y only); ``b_mm``: how far
+    inside its edge each top's last point lies along its line (half a sample spacing and
+    what the scan loses at an edge); ``samples`` used; ``sigma_mm``, ``sigma_deg``: 1σ of
+    the shift (its worst direction) and of the turn, from the residuals' spread — large
+    when the edges the lines cross do not pin the part down (edges along the lines)."""
+
+    angle_rad: float
+    shift_mm: np.ndarray
+    b_mm: float
+    samples: int
+    sigma_mm: float
+    sigma_deg: float
 
 
 def align_edges(heights: HeightImage, e: np.ndarray, u: np.ndarray,
-                iterations: int = 10) -> tuple[float, np.ndarray, float, int] | None:
-    """The correction (angle_rad, (2,) shift mm) that moves the edge samples ``e`` (K, 3),
-    part frame, with outward directions ``u`` (K, 2), so that each lies the same distance b
-    inside the reference's edge (a corrected point is ``Rz(angle) @ p + shift``, x, y only),
-    with that b, mm (half a sample spacing and whatever the scan loses at an edge), and the
-    samples used. None when fewer than 20 samples find an edge or the edges do not hold the
-    turn, both shifts and b (edges in one direction only)."""
+                iterations: int = 10) -> EdgeFit | None:
+    """The correction that moves the edge samples ``e`` (K, 3), part frame, with outward
+    directions ``u`` (K, 2), so that each lies the same distance b inside the reference's
+    edge (least squares on the normal distances, Huber weights). None when fewer than 20
+    samples find an edge or the edges cannot hold the turn, both shifts and b."""
     theta, t, b = 0.0, np.zeros(2), 0.0
     c = e[:, :2].mean(axis=0) if len(e) else np.zeros(2)
     used = 0
@@ -103,15 +153,16 @@ def align_edges(heights: HeightImage, e: np.ndarray, u: np.ndarray,
         R = np.array([[np.cos(theta), -np.sin(theta)], [np.sin(theta), np.cos(theta)]])
         pe = np.column_stack([(e[:, :2] - c) @ R.T + c + t, e[:, 2]])
         ue = u @ R.T
-        s = edge_distance(heights, pe, ue)
-        ok = np.isfinite(s)
+        s, n = edge_distance(heights, pe, ue)
+        nu = np.einsum("ij,ij->i", n, ue)
+        ok = np.isfinite(s) & (nu > MIN_COS)
         used = int(ok.sum())
         if used < 20:
             return None
-        r = s[ok] - b
+        n, nu = n[ok], nu[ok]
+        r = (s[ok] - b) * nu                      # the normal distance left to the edge
         d = pe[ok, :2] - c - t
-        J = np.column_stack([-ue[ok, 0] * d[:, 1] + ue[ok, 1] * d[:, 0], ue[ok],
-                             -np.ones(used)])
+        J = np.column_stack([-n[:, 0] * d[:, 1] + n[:, 1] * d[:, 0], n, -nu])
         w = np.minimum(1.0, HUBER_MM / np.maximum(np.abs(r - np.median(r)), 1e-12))
         A = J.T @ (J * w[:, None])
         if np.linalg.cond(A) > 1e6:
@@ -121,4 +172,8 @@ def align_edges(heights: HeightImage, e: np.ndarray, u: np.ndarray,
         if abs(x[0]) < 1e-7 and np.linalg.norm(x[1:]) < 1e-4:
             break
     R = np.array([[np.cos(theta), -np.sin(theta)], [np.sin(theta), np.cos(theta)]])
-    return float(theta), c - R @ c + t, float(b), used
+    spread = 1.4826 * np.median(np.abs(r - np.median(r)))
+    cov = spread ** 2 * np.linalg.inv(A)
+    return EdgeFit(float(theta), c - R @ c + t, float(b), used,
+                   float(np.sqrt(np.linalg.eigvalsh(cov[1:3, 1:3]).max())),
+                   float(np.degrees(np.sqrt(cov[0, 0]))))

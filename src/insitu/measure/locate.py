@@ -8,18 +8,20 @@ and a shift), or a refusal naming why — never a doubtful pose.
    refined by a coarse flat ICP.
 3. Fine step: point-to-plane ICP of the scan (thinned to ``fine_voxel_mm``, table excluded)
    onto the dense reference, restricted to the 4 degrees of freedom of a part lying flat
-   (:mod:`insitu.measure.flat_icp`).
+   (:mod:`insitu.measure.flat_icp`); then x, y and the turn from the edges the scan lines
+   cross (:mod:`insitu.measure.edge_align`), which flat tops do not give the ICP.
 4. Each distinct solution is scored: ``fitness`` (the scan's points within ``inlier_mm`` of
    the reference's surface), ``coverage`` (the reference's top measured by the scan) and the
-   inliers' RMSE. The best is refused when it fits poorly or is only partly in the scan, and
+   inliers' RMSE. The best is refused when it fits poorly or is only partly in the scan;
    when a second distinct solution scores within ``ambiguity`` of it (a symmetric part)
-   unless ``prefer_angle`` picks exactly one of them.
+   unless ``prefer_angle`` picks exactly one of them; and when the edges leave the pose
+   uncertain by more than ``max_sigma_mm`` (1σ, at the part's rim).
 """
 
 from __future__ import annotations
 
 import time
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy.spatial import cKDTree
@@ -58,6 +60,7 @@ class LocateSettings:
     min_coverage: float = 0.8
     max_rmse_mm: float = 0.12
     ambiguity: float = 0.05
+    max_sigma_mm: float = 0.03
     turn_step_deg: float = 5.0
     turn_candidates: int = 6
 
@@ -66,7 +69,9 @@ class LocateSettings:
 class Solution:
     """One pose of the part: world x, y, z (mm) of its frame's origin and its turn about z
     (degrees, −180 … 180); ``fitness``, ``coverage`` and ``rmse_mm`` as in the module's
-    docstring; ``score`` = fitness × coverage."""
+    docstring; ``score`` = fitness × coverage; ``edges``: the edge samples that fixed x, y
+    and the turn (0: not refined, the ICP's), ``sigma_mm`` and ``sigma_deg`` their 1σ
+    (None: not refined; inf: the edges could not fix them)."""
 
     x_mm: float
     y_mm: float
@@ -75,6 +80,9 @@ class Solution:
     fitness: float
     coverage: float
     rmse_mm: float
+    edges: int = 0
+    sigma_mm: float | None = None
+    sigma_deg: float | None = None
 
     @property
     def score(self) -> float:
@@ -109,12 +117,15 @@ class PartPose:
 
     def to_dict(self) -> dict:
         """The numbers of POSE.json (without its envelope)."""
-        b = self.best
+        b, s = self.best, self.second
+        finite = lambda v: v if v is not None and np.isfinite(v) else None   # noqa: E731
         return {"T_world_part": self.T_world_part.tolist(), "x_mm": b.x_mm, "y_mm": b.y_mm,
                 "z_mm": b.z_mm, "angle_deg": b.angle_deg, "fitness": b.fitness,
-                "coverage": b.coverage, "inlier_rmse_mm": b.rmse_mm,
-                "second": None if self.second is None else {**asdict(self.second),
-                                                             "score": self.second.score},
+                "coverage": b.coverage, "inlier_rmse_mm": b.rmse_mm, "edge_samples": b.edges,
+                "sigma_mm": finite(b.sigma_mm), "sigma_deg": finite(b.sigma_deg),
+                "second": None if s is None else {
+                    k: getattr(s, k) for k in ("x_mm", "y_mm", "z_mm", "angle_deg", "fitness",
+                                               "coverage", "rmse_mm")} | {"score": s.score},
                 "table_z_mm": self.table_z_mm, "points": self.points,
                 "seconds": self.seconds}
 
@@ -146,7 +157,8 @@ def locate_part(reference: PartReference, points: np.ndarray,
     sols = _refine(reference, fine, fits, s)
     sols = _aligned(reference, pts, None if lines is None else np.asarray(lines), ~up, fine,
                     sols, s)
-    pose = _choose(sols, len(part), where, s, prefer_angle)
+    rim = float(np.linalg.norm(reference.top[:, :2] - reference.top_centroid, axis=1).max())
+    pose = _choose(sols, len(part), where, s, prefer_angle, rim)
     return PartPose(pose[0], pose[1], table, len(part), time.perf_counter() - t0)
 
 
@@ -239,32 +251,27 @@ def _aligned(ref: PartReference, pts: np.ndarray, lines: np.ndarray | None,
     if not sols or lines is None:
         return sols
     scan_tree = cKDTree(fine)
+    e, u = edge_samples(pts, lines, table)
     out = []
     for sol in sols:
         if sol.score < sols[0].score - 2 * s.ambiguity:
             out.append(sol)
             continue
         a, t = _pose_of(sol)
-        for _ in range(2):                   # the walls as the better pose tells them apart
-            e, u = edge_samples(pts, lines, _on_walls(ref, apply((a, t), pts)), table)
-            step = align_edges(ref.heights, apply((a, t), e), u @ rot_z(a)[:2, :2].T)
-            if step is None:
-                break
-            da, shift, _, _ = step
-            a, t = a + da, rot_z(da) @ t + np.append(shift, 0.0)
+        step = align_edges(ref.heights, apply((a, t), e), u @ rot_z(a)[:2, :2].T)
+        edges = (0, np.inf, np.inf)
+        if step is not None:
+            a = a + step.angle_rad
+            t = rot_z(step.angle_rad) @ t + np.append(step.shift_mm, 0.0)
+            edges = (step.samples, step.sigma_mm, step.sigma_deg)
         fit = score((a, t), fine, ref.points, ref.normals, ref.tree, s.inlier_mm)
-        out.append(_solution(fit, ref, scan_tree, s.cover_mm))
-    return sorted(out, key=lambda o: -o.score)
-
-
-def _on_walls(ref: PartReference, p: np.ndarray, reach_mm: float = 1.0) -> np.ndarray:
-    """(N,) bool: points of ``p`` (N, 3), part frame, nearest a steep face of the reference
-    (a height image seen from above has no walls)."""
-    dist, idx = ref.tree.query(p, distance_upper_bound=reach_mm)
-    found = np.isfinite(dist)
-    steep = np.zeros(len(p), bool)
-    steep[found] = np.abs(ref.normals[idx[found], 2]) < 0.5
-    return steep
+        out.append(replace(_solution(fit, ref, scan_tree, s.cover_mm), edges=edges[0],
+                           sigma_mm=edges[1], sigma_deg=edges[2]))
+    kept: list[Solution] = []                 # two starts may have met on the same edges
+    for sol in sorted(out, key=lambda o: -o.score):
+        if all(_distinct(_pose_of(sol), _pose_of(k)) for k in kept):
+            kept.append(sol)
+    return kept
 
 
 def _pose_of(sol: Solution) -> Pose4:
@@ -296,14 +303,20 @@ def _in_range(angle: float, lo: float, hi: float) -> bool:
 
 
 def _choose(sols: list[Solution], n: int, where: str, s: LocateSettings,
-            prefer: tuple[float, float] | None) -> tuple[Solution, Solution | None]:
+            prefer: tuple[float, float] | None, radius_mm: float
+            ) -> tuple[Solution, Solution | None]:
     """(best, second) or LocateRefused."""
-    if not sols or sols[0].fitness < s.min_fitness * 0.6:
-        fit = sols[0].fitness if sols else 0.0
-        raise LocateRefused("no-part", f"part not found: the reference fits {fit:.0%} of the "
-                                       f"{n:,} points above {where} (at least "
-                                       f"{s.min_fitness:.0%} needed)")
-    near = [o for o in sols if o.score >= sols[0].score - s.ambiguity]
+    top = sols[0] if sols else None
+    if top is None or top.fitness < s.min_fitness * 0.6 or top.coverage < s.min_coverage / 2:
+        fit, cover = (top.fitness, top.coverage) if top else (0.0, 0.0)
+        raise LocateRefused("no-part", f"part not found: at best the reference fits "
+                                       f"{fit:.0%} of the {n:,} points above {where} and "
+                                       f"covers {cover:.0%} of its top")
+    if top.coverage < s.min_coverage:
+        raise LocateRefused("partial", f"only partly in the scan: {top.coverage:.0%} of the "
+                            f"reference's top measured (at least {s.min_coverage:.0%} needed) "
+                            f"at {top.describe()}")
+    near = [o for o in sols if o.score >= top.score - s.ambiguity]
     if prefer is not None:
         pick = [o for o in near if _in_range(o.angle_deg, *prefer)]
         if not pick:
@@ -321,8 +334,12 @@ def _choose(sols: list[Solution], n: int, where: str, s: LocateSettings,
         raise LocateRefused("poor-fit", f"fits poorly: {best.describe()}, inlier RMSE "
                             f"{best.rmse_mm:.3f} mm (needed: fitness ≥ {s.min_fitness:.0%}, "
                             f"RMSE ≤ {s.max_rmse_mm:g} mm)")
-    if best.coverage < s.min_coverage:
-        raise LocateRefused("partial", f"only partly in the scan: {best.coverage:.0%} of the "
-                            f"reference's top measured (at least {s.min_coverage:.0%} needed) "
-                            f"at {best.describe()}")
+    if best.sigma_mm is not None:
+        spread = float(np.hypot(best.sigma_mm, np.radians(best.sigma_deg) * radius_mm))
+        if not spread <= s.max_sigma_mm:
+            raise LocateRefused(
+                "poor-fit", f"x, y and the turn are not pinned down: the scan lines cross too "
+                f"few of the part's edges ({best.edges} samples; 1σ {best.sigma_mm:.3f} mm and "
+                f"{best.sigma_deg:.3f}°, {spread:.3f} mm at the part's rim, at most "
+                f"{s.max_sigma_mm:g} mm) — its edges run along the lines: turn it or the scan")
     return best, second

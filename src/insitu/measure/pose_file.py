@@ -49,6 +49,9 @@ class PoseFile(CalibrationEnvelope):
     fitness: Share
     coverage: Share
     inlier_rmse_mm: Rmse
+    edge_samples: Count = 0
+    sigma_mm: Rmse | None = None
+    sigma_deg: Deg | None = None
     second: SolutionSpec | None = None
     table_z_mm: Mm | None = None
     points: Count = 0

@@ -81,33 +81,17 @@ class PartReading:
 Locator = Callable[[PointCloud], Located]
 
 
-def load_reference(recipe: Recipe):
-    """The recipe's part reference (:class:`~insitu.measure.part_reference.PartReference`):
-    its mesh sampled, or its first scan with the table taken away."""
-    from insitu.measure.part_reference import reference_from_cloud, reference_from_mesh
-
-    path = recipe.reference
-    if recipe.reference_kind == "cloud":
-        return reference_from_cloud(read_ply(path).points, path.name)
-    import open3d as o3d
-
-    mesh = o3d.io.read_triangle_mesh(str(path))
-    if len(mesh.triangles) == 0:
-        raise FormatError(f"{path}: no triangles (not a readable STL/PLY/OBJ mesh)")
-    return reference_from_mesh(np.asarray(mesh.vertices), np.asarray(mesh.triangles),
-                               path.name)
-
-
 def recipe_locator(recipe: Recipe) -> Locator:
-    """``locate(cloud) -> Located`` against the recipe's reference (loaded once), keeping
-    a symmetric part's turn within the recipe's ``prefer_angle_deg``; it raises the
-    registration's one-line refusal (part not found, partly scanned, poor fit, ambiguous)."""
-    from insitu.measure.locate import locate_part
+    """``locate(cloud) -> Located`` against the recipe's reference (read once:
+    :func:`insitu.services.locate.load_reference`), keeping a symmetric part's turn within
+    the recipe's ``prefer_angle_deg``; it raises the registration's one-line refusal (part
+    not found, partly scanned, poor fit, ambiguous). ``locate.reference``: the reference."""
+    from insitu.services.locate import load_reference, locate_cloud
 
-    reference = load_reference(recipe)
+    reference = load_reference(recipe.reference)
 
     def locate(cloud: PointCloud) -> Located:
-        pose = locate_part(reference, cloud.points, prefer_angle=recipe.prefer_angle_deg)
+        pose = locate_cloud(reference, cloud, prefer_angle=recipe.prefer_angle_deg)
         return Located(pose.T_world_part, pose.best.fitness, pose.best.rmse_mm)
     locate.reference = reference
     return locate

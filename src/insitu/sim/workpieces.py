@@ -15,7 +15,8 @@ from typing import TYPE_CHECKING, Callable
 
 import numpy as np
 
-from insitu.errors import ConfigError, FormatError
+from insitu.errors import ConfigError
+from insitu.formats.mesh import MESH_SUFFIXES, read_mesh
 from insitu.sim import meshes
 
 if TYPE_CHECKING:                       # open3d takes 0.4 s to import: only where it is used
@@ -26,7 +27,6 @@ HeightFn = Callable[[np.ndarray, np.ndarray], np.ndarray]
 TOL_MM = 1e-3
 """Tessellation tolerance: chord error of curved edges, interpolation error of surfaces."""
 
-MESH_SUFFIXES = (".stl", ".ply", ".obj")
 
 
 @dataclass(frozen=True, eq=False)
@@ -354,24 +354,7 @@ def load_mesh_workpiece(path: str | Path, x: float = 0.0, y: float = 0.0,
     the file is missing, unreadable or has no triangles.
     """
     path = Path(path)
-    if not path.is_file():
-        raise FormatError(f"{path}: no such mesh file")
-    if path.suffix.lower() not in MESH_SUFFIXES:
-        raise FormatError(f"{path}: unsupported mesh format {path.suffix!r}; "
-                          "expected .stl, .ply or .obj")
-    import open3d as o3d
-
-    try:
-        with o3d.utility.VerbosityContextManager(o3d.utility.VerbosityLevel.Error):
-            mesh = o3d.io.read_triangle_mesh(str(path))
-    except Exception as exc:                     # noqa: BLE001 — Open3D raises RuntimeError
-        raise FormatError(f"{path}: unreadable mesh ({exc})".splitlines()[0]) from None
-    mesh.remove_duplicated_vertices()
-    v, t = np.asarray(mesh.vertices, np.float64), np.asarray(mesh.triangles, np.int64)
-    if len(t) == 0 or len(v) == 0:
-        raise FormatError(f"{path}: no triangles (not a readable STL/PLY/OBJ mesh)")
-    if not np.all(np.isfinite(v)) or t.min() < 0 or t.max() >= len(v):
-        raise FormatError(f"{path}: invalid mesh (non-finite vertices or bad triangle indices)")
+    v, t = read_mesh(path)
     v = meshes.place(v, x, y, angle_deg)
     params = {"path": str(path), "x": float(x), "y": float(y), "angle_deg": float(angle_deg)}
     return Workpiece(path.stem, v, t.astype(np.int32), params, _raycast_height(v, t))

@@ -1,0 +1,68 @@
+"""``insitu locate REFERENCE CLOUD -o POSE.json``: where the part lies in a scan."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated
+
+import typer
+from rich.table import Table
+
+from insitu.cli.common import (bounded, bounded_each, check_output, console, one_line_errors,
+                               progress_bar)
+from insitu.measure.locate import LocateSettings
+
+_D = LocateSettings()
+
+
+@one_line_errors
+def locate(
+    reference: Annotated[Path, typer.Argument(
+        metavar="REFERENCE", help="The part: a mesh (STL, OBJ, PLY with faces) in its own "
+                                  "frame, mm, or a first scan's cloud (.ply).")],
+    cloud: Annotated[Path, typer.Argument(metavar="CLOUD.ply", help="The scan to find it in.")],
+    out: Annotated[Path, typer.Option("-o", "--output", help="POSE.json to write.")],
+    prefer_angle: Annotated[tuple[float, float] | None, typer.Option(
+        metavar="LO HI", callback=bounded_each("angle_deg", "angle_deg"),
+        help="A symmetric part: of poses that fit equally well, take the one turned within "
+             "LO … HI degrees (e.g. -60 60 when parts are loaded roughly square).")] = None,
+    min_fitness: Annotated[float, typer.Option(
+        callback=bounded("fraction"), help="Share of the scan's points above the table the "
+                                           "part must explain.")] = _D.min_fitness,
+    min_coverage: Annotated[float, typer.Option(
+        callback=bounded("fraction"), help="Share of the part's top the scan must "
+                                           "measure.")] = _D.min_coverage,
+    max_rmse: Annotated[float, typer.Option(
+        callback=bounded("residual_mm"), help="Largest RMSE of the fit, mm.")] = _D.max_rmse_mm,
+    table_z: Annotated[float | None, typer.Option(
+        callback=bounded("position_mm"), help="Height of the table, mm (default: found in "
+                                              "the scan).")] = None,
+) -> None:
+    """Find the part of REFERENCE in CLOUD: the table taken away, a global registration
+    (FPFH features + RANSAC, and a search over turns about z), point-to-plane ICP kept flat
+    on the table, then x, y and the turn from the edges the scan lines cross. Writes
+    POSE.json (T_world_part maps the part's frame to the world). Refused, nothing written,
+    when the part is not found, fits poorly, is only partly in the scan, or when a symmetric
+    part fits nearly equally well turned (say which with --prefer-angle)."""
+    from insitu.services.locate import locate as svc
+
+    check_output(out, ".json")
+    settings = LocateSettings(min_fitness=min_fitness, min_coverage=min_coverage,
+                              max_rmse_mm=max_rmse, table_z_mm=table_z)
+    with progress_bar("locating") as progress:
+        progress(0, 1)
+        pose = svc(reference, cloud, out, settings, prefer_angle)
+    b, s = pose.best, pose.second
+    table = Table(title=f"part pose → {out}", show_header=False)
+    table.add_row("position, mm", f"x {b.x_mm:.3f}, y {b.y_mm:.3f}, z {b.z_mm:.3f}")
+    table.add_row("turn about z", f"{b.angle_deg:.3f}°")
+    table.add_row("fit", f"fitness {b.fitness:.1%}, coverage {b.coverage:.1%}, inlier RMSE "
+                         f"{b.rmse_mm:.3f} mm")
+    table.add_row("edges", f"{b.edges} samples, 1σ {b.sigma_mm:.3f} mm, {b.sigma_deg:.3f}°"
+                  if b.edges else "not used (the cloud has no scan-line indices): x, y and "
+                                  "the turn from the ICP, a few tenths of a mm")
+    table.add_row("second best", "none" if s is None else s.describe())
+    table.add_row("table", "not found" if pose.table_z_mm is None
+                  else f"z {pose.table_z_mm:.3f} mm")
+    table.add_row("points", f"{pose.points:,} above the table, {pose.seconds:.2f} s")
+    console.print(table)
