@@ -5,7 +5,7 @@ at one part, the run resumed from its log.
 
 1. The station as an operator has it: the field correction fitted from marked circles and the
    height calibration (Method 2), through the same services as `insitu calibrate field` /
-   `height`; the recipe's reference is a first scan of the part where it lay.
+   `height`; the recipe's reference is the part's mesh (as `insitu sim export-part` writes).
 2. `produce` (services.production, as `insitu produce RECIPE --random-poses SEED --no-wait`):
    the camera stops delivering frames during the scan of part --fault-at; the run ends with
    the laser off and that part logged as a fault; a second run with --resume finishes it.
@@ -35,7 +35,7 @@ from rich.table import Table
 from insitu.calibrate.field_file import save_field_correction
 from insitu.errors import DeviceError
 from insitu.formats.counter import read_counter
-from insitu.formats.pointcloud import write_ply
+from insitu.formats.mesh import write_mesh
 from insitu.formats.production_log import read_log
 from insitu.formats.recipe import Recipe, RecipeScan, write_recipe
 from insitu.geometry.pose import flat_pose
@@ -44,10 +44,10 @@ from insitu.patterns.fields import Variables
 from insitu.services import calibrate_height, production
 from insitu.services.field import calibrate_field
 from insitu.services.record import record_height_calibration, record_marked_field_calibration
-from insitu.services.scan import scan_live
 from insitu.services.serials import render_placement
 from insitu.services.station import connect, simulated
 from insitu.sim.marks import burnt_centre
+from insitu.sim.workpieces import make_workpiece
 from insitu.sim.world import SimWorld, sim_world
 
 console = Console(width=160)
@@ -81,9 +81,9 @@ def run(args, folder: Path, field: Path, height) -> tuple[list, dict, dict]:
     """Both runs of produce; (records, truths by part, truth offsets by part)."""
     recipe_path = folder / "recipe.json"
     p = placement(args.module)
-    with connect(None, PART, args.seed, args.binning, field=field) as station:
-        write_ply(folder / "ref.ply", scan_live(station, 0.5, height_cal=height).cloud)
-    write_recipe(recipe_path, Recipe(folder / "ref.ply", "cloud", (p,),
+    part = make_workpiece(PART)                 # the part's mesh in its own frame
+    write_mesh(folder / "part.stl", np.array(part.vertices), np.array(part.triangles))
+    write_recipe(recipe_path, Recipe(folder / "part.stl", "mesh", (p,),
                                      scan=RecipeScan(margin_mm=4.0), serial_start=1,
                                      workpiece=PART))
     from insitu.cli.recipe import read

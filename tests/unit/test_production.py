@@ -23,7 +23,6 @@ from insitu.services.scan import Cancelled, scan_live
 from insitu.patterns.fields import Variables
 from insitu.services.serials import job_variables, render_placement
 from insitu.sim.marks import burnt_centre
-from insitu.sim.workpieces import make_workpiece
 from insitu.services.station import connect
 
 BINNING = 4
@@ -168,12 +167,37 @@ def test_a_part_not_found_is_set_aside_without_a_serial(recipe, tmp_path):
     assert rec.outcome == "refused" and rec.serial is None and "no part" in rec.error
 
 
-def test_mark_recipe_locates_and_writes_one_job(recipe, tmp_path):
-    cloud = tmp_path / "part.ply"
-    x, y, a = 3.0, -2.0, 5.0
-    with connect(None, "step-block", 0, 2) as station:
-        station.world.parts = [make_workpiece("step-block", x=x, y=y, angle_deg=a)]
-        station.world.invalidate()
+def test_a_recipe_job_marks_every_placement_where_the_part_lies(recipe, tmp_path):
+    """plan_recipe (what mark --recipe and produce write): the placements moved by the pose,
+    one job, the serial from the recipe's counter."""
+    from dataclasses import replace
+
+    from insitu.cli.recipe import read
+    from insitu.geometry.pose import pose_matrix
+
+    x, y, a = 3.0, -2.0, 35.0
+    with connect(None, "step-block", 0, BINNING, pose=(x, y, a)) as station:
+        cloud = scan_live(station, 0.5).cloud
+        r = read(recipe)
+        r = replace(r, placements=r.placements + (Placement('qr:"{serial:05d}"', (0.0, 30.0),
+                                                            7.35),))
+        located = production.Located(pose_matrix(x, y, a), 1.0, 0.0)
+        done = production.plan_recipe(r, cloud, located, station.driver, tmp_path / "j.json")
+    job = read_job(tmp_path / "j.json")
+    assert job_variables(job).serial == 1 and [t.text for t in job_variables(job).texts] == [
+        "001", "00001"]
+    assert len(job.paths) == sum(len(o.plan.job.paths) for o in done.result)
+    for p, o in zip(r.placements, done.result):
+        rendered = render_placement(p.in_world(located.T_world_part), Variables(1))
+        plan = np.vstack(rendered.polylines(rendered.placed()))
+        got = np.vstack([q.points for q in o.plan.job.paths])[:, :2]
+        assert np.linalg.norm((got.min(0) + got.max(0)) / 2
+                              - (plan.min(0) + plan.max(0)) / 2) < 0.05
+
+
+def test_mark_recipe_refuses_a_part_it_does_not_find_and_takes_no_serial(recipe, tmp_path):
+    cloud = tmp_path / "arc.ply"
+    with connect(None, "arc", 0, BINNING) as station:
         write_ply(cloud, scan_live(station, 0.5).cloud)
     out = tmp_path / "job.json"
     res = CliRunner().invoke(app, ["mark", "--recipe", str(recipe), "--cloud", str(cloud),
@@ -181,24 +205,9 @@ def test_mark_recipe_locates_and_writes_one_job(recipe, tmp_path):
     assert res.exit_code == 1 and "drop --counter" in res.output
     res = CliRunner().invoke(app, ["mark", "--recipe", str(recipe), "--cloud", str(cloud),
                                    "-o", str(out)])
-    assert res.exit_code == 0, res.output
-    assert "part located" in res.output and "serial" in res.output
-    job = read_job(out)
-    serial = job_variables(job).serial
-    assert serial is not None and read_counter(recipe.parent / "serial.counter.json").next > serial
-    from insitu.cli.recipe import read
-    from insitu.formats.pointcloud import read_ply
-
-    r = read(recipe)
-    located = production.recipe_locator(r)(read_ply(cloud))
-    moved = r.placements[0].in_world(located.T_world_part)
-    rendered = render_placement(moved, Variables(serial))
-    plan = np.vstack(rendered.polylines(rendered.placed()))
-    pts = np.vstack([p.points for p in job.paths])[:, :2]
-    # the job marks the recipe's placement moved by the located pose (projection aside) …
-    assert np.linalg.norm((pts.min(0) + pts.max(0)) / 2 - (plan.min(0) + plan.max(0)) / 2) < 0.05
-    # … and the part was found where it lies (its accuracy: test_locate, the benchmark)
-    assert np.linalg.norm(np.subtract(located.pose()[:2], (x, y))) < 3.0
+    assert res.exit_code == 1 and isinstance(res.exception, SystemExit)
+    assert res.output.startswith("error: ") and res.output.count("\n") == 1
+    assert not out.exists() and not (tmp_path / "serial.counter.json").exists()
 
 
 def test_mark_without_recipe_still_needs_pattern_and_at(tmp_path):
