@@ -214,7 +214,7 @@ def main() -> None:
         from production_run import report      # beside this script
 
         report(argparse.Namespace(count=args.parts, binning=args.binning, seed=args.seed + 1,
-                                  fault_at=7, module=0.35))
+                                  fault_at=7, module=0.35, spacing=0.25))
     console.print(json.dumps({"binning": args.binning, "poses": args.poses}))
 
 

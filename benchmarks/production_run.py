@@ -17,7 +17,7 @@ at one part, the run resumed from its log.
    counter and the log agree), the faulted part without a serial.
 
 Run: .venv/bin/python benchmarks/production_run.py [--count 20] [--binning 2] [--seed 1]
-     [--fault-at 7] [--module 0.35]   (or benchmarks/production.py, which runs it last)
+     [--fault-at 7] [--module 0.35] [--spacing 0.25]   (or benchmarks/production.py, which runs it last)
 """
 
 from __future__ import annotations
@@ -84,7 +84,8 @@ def run(args, folder: Path, field: Path, height) -> tuple[list, dict, dict]:
     part = make_workpiece(PART)                 # the part's mesh in its own frame
     write_mesh(folder / "part.stl", np.array(part.vertices), np.array(part.triangles))
     write_recipe(recipe_path, Recipe(folder / "part.stl", "mesh", (p,),
-                                     scan=RecipeScan(margin_mm=4.0), serial_start=1,
+                                     scan=RecipeScan(margin_mm=4.0, spacing_mm=args.spacing),
+                                     serial_start=1,
                                      workpiece=PART))
     from insitu.cli.recipe import read
 
@@ -123,7 +124,7 @@ def run(args, folder: Path, field: Path, height) -> tuple[list, dict, dict]:
 
 def report(args) -> None:
     """Calibrate, run, resume and print both tables (``args``: count, binning, seed,
-    fault_at, module)."""
+    fault_at, module, spacing)."""
     with tempfile.TemporaryDirectory() as tmp:
         folder = Path(tmp)
         t0 = time.perf_counter()
@@ -135,7 +136,8 @@ def report(args) -> None:
         issued = [i.serial for i in read_counter(counter).issued] if counter.exists() else []
     last = {r.part: r for r in records}
     tab = Table(title=f"produce: {args.count} parts of the {PART}, random poses (seed "
-                      f"{args.seed}), binning {args.binning}, QR {args.module} mm modules; "
+                      f"{args.seed}), binning {args.binning}, lines {args.spacing} mm apart, "
+                      f"QR {args.module} mm modules; "
                       f"camera fault at part {args.fault_at}, resumed")
     for c in ("part", "serial", "outcome", "pose truth (x, y, °)", "pose error mm / °",
               "on part vs recipe mm (truth)", "read back", "grade", "offset read mm",
@@ -193,6 +195,7 @@ def main() -> None:
     ap.add_argument("--seed", type=int, default=1)
     ap.add_argument("--fault-at", type=int, default=7)
     ap.add_argument("--module", type=float, default=0.35)
+    ap.add_argument("--spacing", type=float, default=0.25, help="scan line spacing, mm")
     report(ap.parse_args())
 
 
