@@ -83,7 +83,8 @@ def new(
     margin: Annotated[float, typer.Option(callback=bounded("length_mm"),
                                           help="Margin around the part, mm.")] = 5.0,
     spacing: Annotated[float, typer.Option(callback=bounded("spacing_mm"),
-                                           help="Scan line spacing, mm.")] = 0.5,
+                                           help="Scan line spacing, mm (locating pins a "
+                                                "part by the edges the lines cross).")] = 0.25,
     power: Annotated[float, typer.Option(callback=bounded("power_pct"),
                                          help="Laser power, % of full.")] = 30.0,
     frequency: Annotated[float, typer.Option(callback=bounded("frequency_khz"),

@@ -7,7 +7,7 @@
                      ...}],                        # the project file's placements, part frame
      "laser": {"power_pct": 30, "frequency_khz": 20, "mark_speed_mm_s": 500,
                "jump_speed_mm_s": 3000},
-     "scan": {"region": null, "margin_mm": 5, "spacing_mm": 0.5, "exposure_ms": 10,
+     "scan": {"region": null, "margin_mm": 5, "spacing_mm": 0.25, "exposure_ms": 10,
               "speed_mm_s": 2000},                  # region: world (x0, x1, y0, y1) mm
      "locate": {"prefer_angle_deg": null},         # which of a symmetric part's turns
      "serial": {"counter": "serial.counter.json", "start": 1, "fields": {}}}
@@ -63,7 +63,7 @@ class _Laser(_Strict):
 class _Scan(_Strict):
     region: Region | None = None
     margin_mm: Length = 5.0
-    spacing_mm: Spacing = 0.5
+    spacing_mm: Spacing = 0.25
     exposure_ms: Exposure = 10.0
     speed_mm_s: Speed = 2000.0
 
@@ -99,7 +99,7 @@ class RecipeScan:
 
     region: tuple[float, float, float, float] | None = None
     margin_mm: float = 5.0
-    spacing_mm: float = 0.5
+    spacing_mm: float = 0.25
     exposure_ms: float = 10.0
     speed_mm_s: float = 2000.0
 
