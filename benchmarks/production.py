@@ -3,7 +3,8 @@ random poses located against their meshes, and patterns marked where they belong
 
 1. Locate: the step block, the arc and the insert at N random poses each (x, y within
    ±25 mm, any turn about z), scanned with Method 2 (height calibration recorded and fitted on
-   the same rig), located against the part's own mesh (`locate_part`, as `insitu locate`).
+   the same rig; lines 0.5 mm apart, 0.25 mm on the 16 mm insert: at 0.5 mm its edges do not
+   pin the pose down to 0.03 mm and it is refused), located against the part's own mesh (`locate_part`, as `insitu locate`).
    The arc (2-fold) and the insert (3-fold) are symmetric: each is located without a
    symmetry breaker (it must be refused, never wrong) and with `prefer_angle` — a window
    ±50° wide around a rough orientation (the true turn ± up to 30°, as an operator loading
@@ -13,10 +14,10 @@ random poses located against their meshes, and patterns marked where they belong
    the locating's own.
 2. Time to locate a scan of about 200 k points (binning 1) on one core.
 3. Mark: a 3 mm square placed in the part's frame (`--part-pose`) on the step block's top
-   step and the arc's crest at a few poses, marked with the flawless field correction (the
-   field calibration's own error is benchmarks/mark_end_to_end.py's); the burnt square's
-   centre (the simulator's truth) mapped into the part's true frame against where it was
-   asked.
+   step and the arc's crest at a few poses, marked with the FIELD.json an operator would
+   have (2 mm circles marked on the plate, imaged, RBF fit — so the marks share the camera's
+   calibration offset with the scan, as on a real station); the burnt square's centre (the
+   simulator's truth) mapped into the part's true frame against where it was asked.
 
 4. Produce: benchmarks/production_run.py — --parts parts at random poses through `produce`,
    a camera fault at part 7 and the run resumed: log, serials, marks on the part, read-back.
@@ -43,8 +44,9 @@ from insitu.measure.locate import LocateRefused, locate_part
 from insitu.measure.part_reference import reference_from_mesh
 from insitu.rig.files import load_json_model, save_json_model, HeightCalibration
 from insitu.services import calibrate_height, scan_live
-from insitu.services.mark import part_placement, plan_mark
-from insitu.services.record import record_height_calibration
+from insitu.services.mark import plan_mark
+from insitu.services.field import calibrate_field
+from insitu.services.record import record_height_calibration, record_marked_field_calibration
 from insitu.services.station import simulated
 from insitu.sim.devices import SimController
 from insitu.sim.rig import default_rig
@@ -53,6 +55,7 @@ from insitu.sim.world import SimWorld, sim_world
 
 console = Console(width=150)
 PARTS = {"step-block": 1, "arc": 2, "insert": 3}          # name: fold of its symmetry
+SPACING = {"step-block": 0.5, "arc": 0.5, "insert": 0.25}  # scan line spacing, mm
 SQUARE = ('<svg xmlns="http://www.w3.org/2000/svg" width="3mm" height="3mm" '
           'viewBox="0 0 3 3"><rect x="0" y="0" width="3" height="3" fill="none" '
           'stroke="black" stroke-width="0.01"/></svg>')
@@ -68,12 +71,14 @@ def height_cal(cache: Path, rig, seed: int) -> HeightCalibration:
 
 
 def scan(cache: Path, name: str, pose, rig, seed: int, cal, tag: str) -> PointCloud:
-    """The cloud of ``name`` at ``pose`` (cached)."""
-    path = cache / f"{tag}.ply"
+    """The cloud of ``name`` at ``pose`` (cached as ``tag``), lines ``SPACING[name]``
+    apart."""
+    spacing = SPACING.get(name, 0.5)
+    path = cache / (f"{tag}.ply" if spacing == 0.5 else f"{tag}-sp{spacing:g}.ply")
     if not path.exists():
         world = sim_world(name, seed=seed, rig=rig, pose=pose)
         with simulated(world) as station:
-            write_ply(path, scan_live(station, height_cal=cal).cloud)
+            write_ply(path, scan_live(station, spacing, height_cal=cal).cloud)
     return read_ply(path)
 
 
@@ -157,24 +162,38 @@ def timing(args, rig1, cal1, cache: Path) -> None:
 
 def marking(args, rig, cal, cache: Path) -> None:
     (cache / "square.svg").write_text(SQUARE)
-    tab = Table(title="a 3 mm square marked in the part's frame (--part-pose), flawless field "
-                      "correction: the burnt square's centre in the part's true frame")
+    tab = Table(title="a 3 mm square marked in the part's frame (--part-pose) with the fitted "
+                      "FIELD.json: the burnt square's centre in the part's true frame")
     for col in ("part", "pose (x, y, °)", "asked (part frame)", "burnt − asked, mm"):
         tab.add_column(col)
-    driver = GalvoDriver.from_config(rig.operator.head, rig.ideal_correction())
+    if not (cache / "field" / "sequence.json").exists():
+        record_marked_field_calibration(simulated(SimWorld(rig, seed=args.seed)),
+                                        cache / "field")
+    field = calibrate_field(cache / "field", "rbf")
+    driver = GalvoDriver.from_config(rig.operator.head, field.correct)
     rng = np.random.default_rng(7 + args.seed)
     for name, at in MARK_AT.items():
         wp = make_workpiece(name)
         ref = reference_from_mesh(wp.vertices, wp.triangles, name)
-        for i in range(args.marks):
+        done = 0
+        for i in range(3 * args.marks):
+            if done == args.marks:
+                break
             pose = random_pose(rng)
             cloud = scan(cache, name, pose, rig, args.seed, cal,
-                         f"mark-{name}-{i}-b{args.binning}-s{args.seed}")
+                         "mark-{}-b{}-s{}-at{:.3f}_{:.3f}_{:.3f}".format(
+                             name, args.binning, args.seed, *pose))
             prefer = (pose[2] - 50, pose[2] + 50) if PARTS[name] > 1 else None
-            got = locate_part(ref, cloud.points, prefer_angle=prefer,
-                              lines=cloud.attributes.get("line"))
-            placement = part_placement(Placement(str(cache / "square.svg"), at, 3.0, 0.0),
-                                       got.T_world_part)
+            try:
+                got = locate_part(ref, cloud.points, prefer_angle=prefer,
+                                  lines=cloud.attributes.get("line"))
+            except LocateRefused as e:
+                tab.add_row(name, f"({pose[0]:.1f}, {pose[1]:.1f}, {pose[2]:.1f})",
+                            f"({at[0]:g}, {at[1]:g})", f"refused ({e.reason}): not marked")
+                continue
+            done += 1
+            placement = Placement(str(cache / "square.svg"), at, 3.0, 0.0).in_world(
+                got.T_world_part)
             plan = plan_mark(cloud, placement, driver)
             world = sim_world(name, seed=args.seed, rig=rig, pose=pose)
             run_job(plan.job, driver, SimController(world), None)

@@ -134,7 +134,7 @@ def mark(
         located = load_pose(part_pose)
         if len(located.inputs) > 1 and Path(located.inputs[1]).name != cloud.name:
             warn(f"{part_pose} was located on {located.inputs[1]}, not on {cloud}")
-        placement = svc.part_placement(placement, located.matrix)
+        placement = placement.in_world(located.matrix)
     laser = LaserParams(power_pct=power, frequency_khz=frequency, mark_speed_mm_s=speed,
                         jump_speed_mm_s=jump_speed)
     measured = read_ply(cloud)

@@ -28,6 +28,8 @@ STEEP = 2.0
 LOOK = 8
 """Points along the line looked at for the drop."""
 SEARCH_MM = 1.0
+MIN_FOUND = 0.7
+"""At the fitted pose this share of the edge samples must find the reference's edge."""
 CORNER_MM = 0.3
 MIN_COS = 0.2
 """Lines crossing an edge more obliquely than this (cosine to its normal) are not used."""
@@ -145,7 +147,8 @@ def align_edges(heights: HeightImage, e: np.ndarray, u: np.ndarray,
     """The correction that moves the edge samples ``e`` (K, 3), part frame, with outward
     directions ``u`` (K, 2), so that each lies the same distance b inside the reference's
     edge (least squares on the normal distances, Huber weights). None when fewer than 20
-    samples find an edge or the edges cannot hold the turn, both shifts and b."""
+    samples, or less than ``MIN_FOUND`` of them, find an edge (the scan's edges are not the
+    reference's there), or the edges cannot hold the turn, both shifts and b."""
     theta, t, b = 0.0, np.zeros(2), 0.0
     c = e[:, :2].mean(axis=0) if len(e) else np.zeros(2)
     used = 0
@@ -171,6 +174,8 @@ def align_edges(heights: HeightImage, e: np.ndarray, u: np.ndarray,
         theta, t, b = theta + x[0], t + x[1:3], b - x[3]
         if abs(x[0]) < 1e-7 and np.linalg.norm(x[1:]) < 1e-4:
             break
+    if used < MIN_FOUND * len(e):
+        return None
     R = np.array([[np.cos(theta), -np.sin(theta)], [np.sin(theta), np.cos(theta)]])
     spread = 1.4826 * np.median(np.abs(r - np.median(r)))
     cov = spread ** 2 * np.linalg.inv(A)

@@ -336,10 +336,14 @@ def _choose(sols: list[Solution], n: int, where: str, s: LocateSettings,
                             f"RMSE ≤ {s.max_rmse_mm:g} mm)")
     if best.sigma_mm is not None:
         spread = float(np.hypot(best.sigma_mm, np.radians(best.sigma_deg) * radius_mm))
+        if not np.isfinite(spread):
+            raise LocateRefused("poor-fit", f"the scan's edges do not match the reference's "
+                                f"at {best.describe()}: x, y and the turn are not pinned down")
         if not spread <= s.max_sigma_mm:
             raise LocateRefused(
-                "poor-fit", f"x, y and the turn are not pinned down: the scan lines cross too "
-                f"few of the part's edges ({best.edges} samples; 1σ {best.sigma_mm:.3f} mm and "
+                "poor-fit", f"x, y and the turn are not pinned down by the edges the scan lines "
+                f"cross ({best.edges} samples; 1σ {best.sigma_mm:.3f} mm and "
                 f"{best.sigma_deg:.3f}°, {spread:.3f} mm at the part's rim, at most "
-                f"{s.max_sigma_mm:g} mm) — its edges run along the lines: turn it or the scan")
+                f"{s.max_sigma_mm:g} mm): scan finer (binning, spacing), or turn the part or "
+                "the scan when its edges run along the lines")
     return best, second
