@@ -199,6 +199,13 @@ def test_inspect_reads_a_saved_frame_back(marked, tmp_path):
                                    "--at", "0.5", "-30", "--rotate", "25", "-o",
                                    str(tmp_path / "q.png")])
     assert res.exit_code == 1 and isinstance(res.exception, SystemExit)
+    save_image(tmp_path / "small.png", np.zeros((100, 120), np.uint8))   # not this camera's
+    res = CliRunner().invoke(app, ["inspect", str(tmp_path / "small.png"), "--cloud",
+                                   str(tmp_path / "c.ply"), "--pattern", 'qr:"SN 0042"',
+                                   "--at", "0.5", "-30", "-o", str(tmp_path / "r.png")])
+    assert res.exit_code == 1 and isinstance(res.exception, SystemExit)
+    assert "small.png: image is 120x100 pixels, the camera is 2448x2048" in res.output
+    assert not (tmp_path / "r.png").exists()
 
 
 @pytest.mark.parametrize("spec", ['qr:"SN 0042"', 'microqr:"SN42"', 'datamatrix:"SN 0042"',

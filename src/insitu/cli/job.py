@@ -120,7 +120,7 @@ def print_read_back(result) -> None:
     from insitu.services.inspect import table_rows
 
     table = Table(title="read back by the camera")
-    for head in ("mark", "planned", "decoded", "= plan", "offset u, v mm", "grade"):
+    for head in ("mark", "planned", "decoded", "= plan", "offset u, v mm", "seen", "grade"):
         table.add_column(head)
     for row in table_rows(result):
         table.add_row(*(Text(c) for c in row))

@@ -29,6 +29,7 @@ from insitu.vision.dpm_grade import Grades, grade_symbol
 PX_PER_MODULE = 8          # at least this many picture pixels per code module
 MARGIN_MODULES = 2         # picture margin beyond a code's quiet zone, modules
 MARGIN_MM = 1.0            # … beyond a drawing's bounds, mm
+IN_PLACE_MM = 0.5          # a drawing read back within this of its plan is "in place"
 
 
 @dataclass(frozen=True)
@@ -53,10 +54,11 @@ class MarkReading:
 
     @property
     def ok(self) -> bool:
-        """A code decoded to its planned text (a drawing: found where planned, within 0.5 mm)."""
+        """A code decoded to its planned text (a drawing: found within :data:`IN_PLACE_MM` of
+        its plan)."""
         if self.text is not None:
             return self.decoded == self.text
-        return self.offset_mm is not None and float(np.hypot(*self.offset_mm)) <= 0.5
+        return self.offset_mm is not None and float(np.hypot(*self.offset_mm)) <= IN_PLACE_MM
 
 
 def planned_paths(paths3d: list[np.ndarray], projection: Projection) -> list[np.ndarray]:

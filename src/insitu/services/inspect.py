@@ -89,13 +89,14 @@ def save_read_back(path: str | Path, result: ReadBack) -> Path:
 
 
 def table_rows(result: ReadBack) -> list[list[str]]:
-    """One row per mark: name, planned text, decoded, = plan?, offset u, v mm, grade."""
+    """One row per mark: name, planned text, decoded, = plan?, offset u, v mm, share of it
+    the camera sees, grade."""
     rows = []
     for r in result.readings:
         off = "not found" if r.offset_mm is None else "{:+.3f}, {:+.3f}".format(*r.offset_mm)
         rows.append([r.name, "-" if r.text is None else r.text,
                      "-" if r.text is None else ("NOT decoded" if r.decoded is None
                                                  else r.decoded),
-                     "yes" if r.ok else "NO", off,
+                     "yes" if r.ok else "NO", off, f"{r.seen:.0%}",
                      "-" if r.grades is None else r.grades.summary()])
     return rows
