@@ -19,6 +19,9 @@ random poses located against their meshes, and patterns marked where they belong
    calibration offset with the scan, as on a real station); the burnt square's centre (the
    simulator's truth) mapped into the part's true frame against where it was asked.
 
+4. Produce: benchmarks/production_run.py — --parts parts at random poses through `produce`,
+   a camera fault at part 7 and the run resumed: log, serials, marks on the part, read-back.
+
 Scans are cached in --cache (default /tmp/insitu-production-bench).
 Run: .venv/bin/python benchmarks/production.py [--poses 20] [--binning 2] [--seed 0]
 """
@@ -41,7 +44,7 @@ from insitu.measure.locate import LocateRefused, locate_part
 from insitu.measure.part_reference import reference_from_mesh
 from insitu.rig.files import load_json_model, save_json_model, HeightCalibration
 from insitu.services import calibrate_height, scan_live
-from insitu.services.mark import part_placement, plan_mark
+from insitu.services.mark import plan_mark
 from insitu.services.field import calibrate_field
 from insitu.services.record import record_height_calibration, record_marked_field_calibration
 from insitu.services.station import simulated
@@ -189,8 +192,8 @@ def marking(args, rig, cal, cache: Path) -> None:
                             f"({at[0]:g}, {at[1]:g})", f"refused ({e.reason}): not marked")
                 continue
             done += 1
-            placement = part_placement(Placement(str(cache / "square.svg"), at, 3.0, 0.0),
-                                       got.T_world_part)
+            placement = Placement(str(cache / "square.svg"), at, 3.0, 0.0).in_world(
+                got.T_world_part)
             plan = plan_mark(cloud, placement, driver)
             world = sim_world(name, seed=args.seed, rig=rig, pose=pose)
             run_job(plan.job, driver, SimController(world), None)
@@ -209,7 +212,9 @@ def main() -> None:
     ap.add_argument("--binning", type=int, default=2)
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--cache", type=Path, default=Path("/tmp/insitu-production-bench"))
-    ap.add_argument("--skip", default="", help="comma-separated: locate, timing, marking")
+    ap.add_argument("--parts", type=int, default=20, help="parts of the produce run")
+    ap.add_argument("--skip", default="",
+                    help="comma-separated: locate, timing, marking, produce")
     args = ap.parse_args()
     skip = set(args.skip.split(","))
     args.cache.mkdir(parents=True, exist_ok=True)
@@ -224,6 +229,11 @@ def main() -> None:
         rig1 = default_rig(seed=args.seed, binning=1)
         (args.cache / "b1").mkdir(exist_ok=True)
         timing(args, rig1, height_cal(args.cache / "b1", rig1, args.seed), args.cache)
+    if "produce" not in skip:
+        from production_run import report      # beside this script
+
+        report(argparse.Namespace(count=args.parts, binning=args.binning, seed=args.seed + 1,
+                                  fault_at=7, module=0.35, spacing=0.25))
     console.print(json.dumps({"binning": args.binning, "poses": args.poses}))
 
 

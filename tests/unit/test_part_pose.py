@@ -13,7 +13,6 @@ from insitu.errors import FormatError, SafetyError
 from insitu.formats.pointcloud import PointCloud, write_ply
 from insitu.formats.rig_record import describe, parse, same_rig
 from insitu.marking import Placement, read_job
-from insitu.services.mark import part_placement
 from insitu.services.station import connect
 from insitu.sim.workpieces import make_workpiece, part_matrix, random_pose
 from insitu.sim.world import sim_world
@@ -37,8 +36,7 @@ def _T(x, y, deg):
 
 def test_part_placement_moves_the_part_frame_to_the_world():
     T = _T(10.0, -5.0, 30.0)
-    p = part_placement(Placement("text:A", (2.0, 1.0), 5.0, rotate_deg=15.0,
-                                 hatch_angle_deg=5.0), T)
+    p = Placement("text:A", (2.0, 1.0), 5.0, rotate_deg=15.0, hatch_angle_deg=5.0).in_world(T)
     assert np.allclose(p.at_mm, (T @ [2.0, 1.0, 0.0, 1.0])[:2])
     assert p.rotate_deg == pytest.approx(45.0) and p.hatch_angle_deg == pytest.approx(35.0)
     assert p.width_mm == 5.0 and p.pattern == "text:A"

@@ -38,6 +38,13 @@ def fail(message: str) -> None:
     raise typer.Exit(1)
 
 
+def missing(message: str) -> None:
+    """A required option not given, found by the command (options required only without
+    another): one line, exit 2 as click's own usage errors."""
+    err_console.print(tagged("error:", "bold red", message), highlight=False, soft_wrap=True)
+    raise typer.Exit(2)
+
+
 def warn(message: str) -> None:
     """Print one warning line on stderr."""
     err_console.print(tagged("warning:", "yellow", message), highlight=False, soft_wrap=True)

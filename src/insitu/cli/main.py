@@ -19,6 +19,8 @@ from insitu.cli import job as job_cmd
 from insitu.cli import locate as locate_cmd
 from insitu.cli import mark as mark_cmd
 from insitu.cli import pattern as pattern_cmd
+from insitu.cli import produce as produce_cmd
+from insitu.cli import recipe as recipe_cmd
 from insitu.cli import record as record_cmd
 from insitu.cli import scan as scan_cmd
 from insitu.cli import serial as serial_cmd
@@ -73,6 +75,8 @@ app.add_typer(galvo_app, name="galvo")
 app.add_typer(job_cmd.app, name="job")
 app.add_typer(pattern_cmd.app, name="pattern")
 app.add_typer(serial_cmd.app, name="serial")
+app.add_typer(recipe_cmd.app, name="recipe")
+app.command("produce")(produce_cmd.produce)
 app.add_typer(sim_cmd.app, name="sim")
 
 

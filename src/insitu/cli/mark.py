@@ -9,8 +9,8 @@ import typer
 from rich.table import Table
 from rich.text import Text
 
-from insitu.cli.common import (bounded, check_output, console, fail, one_line_errors,
-                               progress_bar, warn)
+from insitu.cli.common import (bounded, check_output, console, fail, missing,
+                               one_line_errors, progress_bar, warn)
 from insitu.cli.job import (CutPath, Field, PartPose, Preview, Restart, Resume, Rig, Seed,
                             Workpiece, check_run_options, pen_text, run_on_station)
 from insitu.marking.modes import PROJECTIONS, projection_mode
@@ -22,11 +22,18 @@ from insitu.patterns.vector import BEAM_MM
 @one_line_errors
 def mark(
     cloud: Annotated[Path, typer.Option(help="Measured point cloud (.ply) of the part.")],
-    pattern: Annotated[str, typer.Option(help=f"A file or spec: {sources_help()}.")],
-    at: Annotated[tuple[float, float], typer.Option(metavar="X Y",
-        callback=bounded("position_mm"), help="Centre of the pattern X Y, mm, "
-                                              "world frame (the part's with --part-pose).")],
     out: Annotated[Path, typer.Option("-o", "--output", help="Mark job to write (.json).")],
+    pattern: Annotated[str | None, typer.Option(
+        help=f"A file or spec: {sources_help()}. Required without --recipe.")] = None,
+    at: Annotated[tuple[float, float] | None, typer.Option(metavar="X Y",
+        callback=bounded("position_mm"), help="Centre of the pattern X Y, mm, "
+                                              "world frame (the part's with --part-pose). "
+                                              "Required without --recipe.")] = None,
+    recipe: Annotated[Path | None, typer.Option(
+        help="A production recipe (insitu recipe new): locate its part in the cloud and "
+             "plan all its placements, moved where the part lies, as one job (with --run, "
+             "--rig, --field, --workpiece, --seed; its serial from the recipe's "
+             "counter).")] = None,
     width: Annotated[float | None, typer.Option(
         callback=bounded("length_mm"),
         help="Width of the pattern, mm (before --rotate; a code's without its quiet zone; "
@@ -114,6 +121,18 @@ def mark(
     from insitu.services.station import connect
 
     check_output(out, ".json")
+    if recipe is not None:
+        from insitu.cli.recipe import check_recipe_options, mark_recipe
+
+        check_recipe_options(**{"--pattern": pattern, "--at": at, "--width": width,
+                                "--hatch": hatch, "--var": fields, "--counter": counter,
+                                "--serial-start": serial_start is not None, "--resume": resume,
+                                "--restart": restart, "--cut-path": cut_path})
+        return mark_recipe(recipe, cloud, out, run, preview, inspect, rig, field, workpiece,
+                           seed)
+    if pattern is None or at is None:
+        missing("--pattern: missing; expected a word" if pattern is None
+                else "--at: missing; expected 2 numbers X Y")
     if project is not None:
         check_project_output(project)
     projection_mode(mode)
@@ -133,7 +152,7 @@ def mark(
         located = load_pose(part_pose)
         if len(located.inputs) > 1 and Path(located.inputs[1]).name != cloud.name:
             warn(f"{part_pose} was located on {located.inputs[1]}, not on {cloud}")
-        placement = svc.part_placement(placement, located.matrix)
+        placement = placement.in_world(located.matrix)
     given = {k: v for k, v in (("power_pct", power), ("frequency_khz", frequency),
                                ("mark_speed_mm_s", speed), ("jump_speed_mm_s", jump_speed))
              if v is not None}

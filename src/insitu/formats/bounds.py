@@ -125,6 +125,7 @@ BOUNDS: dict[str, Bound] = {
     "seed": Bound(0, 2**32 - 1, "", "numpy's seeds are 0 … 2³²-1"),
     "length_mm": Bound(0.001, 2000, "mm", "a width, hatch distance or beam: 1 µm … the field"),
     "count": Bound(1, 1000, "", "views or spots per side of a recording"),
+    "parts": Bound(1, 1000000, "", "parts of one production run: a shift marks thousands"),
     "board_corners": Bound(2, 200, "", "inner corners of a checkerboard along a side"),
     "move_mm": Bound(-1000, 1000, "mm", "a simulated knock of the camera"),
     # -- locating a part (POSE.json, insitu locate) --

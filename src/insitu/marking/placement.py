@@ -4,11 +4,12 @@ of the commands, the GUI and the project files."""
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 from insitu.errors import FormatError
+from insitu.geometry.pose import flat_pose
 from insitu.marking.modes import projection_mode
 from insitu.patterns import Pattern, hatch, load_pattern, order_paths
 from insitu.patterns.vector import BEAM_MM
@@ -36,6 +37,17 @@ class Placement:
     fill: str = "auto"
     beam_mm: float = BEAM_MM
     pen: str | None = None
+
+    def in_world(self, T_world_part: np.ndarray) -> Placement:
+        """This placement, given in a part's frame, moved where the part lies:
+        ``T_world_part`` (4, 4) maps part points (mm) into the world. The centre is mapped,
+        the rotation and the hatch direction turn by the pose's angle about +z (a part lies
+        flat on the table: its pose is x, y and a turn about z)."""
+        T = np.asarray(T_world_part, float)
+        x, y = (T[:2, :2] @ np.asarray(self.at_mm, float)) + T[:2, 3]
+        turn = flat_pose(T)[2]
+        return replace(self, at_mm=(float(x), float(y)), rotate_deg=self.rotate_deg + turn,
+                       hatch_angle_deg=self.hatch_angle_deg + turn)
 
     def placed(self) -> Pattern:
         """The pattern loaded and moved to its place, world mm (FormatError if it cannot be).

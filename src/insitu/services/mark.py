@@ -4,9 +4,8 @@ result."""
 
 from __future__ import annotations
 
-import math
 import threading
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -57,18 +56,6 @@ def check_codes(job: MarkJob, pattern: Pattern, projection: Projection,
     else:
         paths_xy = [p[:, :2] for p in paths3d]
     return (check_code(pattern, paths_xy, beam_mm)[0],)
-
-
-def part_placement(placement: Placement, T_world_part: np.ndarray) -> Placement:
-    """``placement`` given in the part's own frame — ``at_mm`` a point of the part,
-    ``rotate_deg`` and ``hatch_angle_deg`` from its x axis — moved into the world by
-    ``T_world_part`` (4 × 4, a turn about z and a shift, as POSE.json holds it)."""
-    T = np.asarray(T_world_part, dtype=float)
-    x, y = T[:2, :2] @ np.asarray(placement.at_mm, dtype=float) + T[:2, 3]
-    turn = math.degrees(math.atan2(T[1, 0], T[0, 0]))
-    return replace(placement, at_mm=(float(x), float(y)),
-                   rotate_deg=placement.rotate_deg + turn,
-                   hatch_angle_deg=placement.hatch_angle_deg + turn)
 
 
 def plan_mark(cloud: PointCloud | str | Path, placement: Placement, driver: GalvoDriver,
@@ -130,6 +117,15 @@ def plan_all(cloud: PointCloud, placements, driver: GalvoDriver,
         except InsituError as e:
             out.append(PlanOutcome(error=str(e)))
     return _quiet_zones_clear(out)
+
+
+def joined(outcomes: list[PlanOutcome]) -> MarkJob | None:
+    """One job marking every planned placement in order (None: none, or one refused)."""
+    if not outcomes or any(o.plan is None for o in outcomes):
+        return None
+    first = outcomes[0].plan.job
+    return first.model_copy(update={"paths": [path for o in outcomes
+                                              for path in o.plan.job.paths]})
 
 
 def _quiet_zones_clear(outcomes: list[PlanOutcome]) -> list[PlanOutcome]:

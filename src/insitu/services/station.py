@@ -89,6 +89,24 @@ class Station:
                               f"the station is {describe(self.record)}; nothing marked")
         return None
 
+    def part_feeder(self, workpiece: str, seed: int | None):
+        """On the simulated rig, ``present(part) -> T_world_part``: a fresh ``workpiece`` put
+        on the table for each part, at a random pose drawn from (``seed``, part) (None: where
+        the reference lay); None on a real rig (the operator puts the parts on)."""
+        if self.world is None:
+            return None
+        from insitu.geometry.pose import flat_pose
+        from insitu.sim.feeder import SimFeeder
+
+        feeder = SimFeeder(self.world, workpiece, seed)
+
+        def present(part: int):
+            T = feeder.present(part)          # clouds and jobs record where the part lies
+            rest = {k: v for k, v in (self.record or {}).items() if k != "pose"}
+            self.record = {**rest, **pose_record(flat_pose(T))}
+            return T
+        return present
+
     def default_region(self) -> tuple[float, float, float, float]:
         """Where to scan when no region is given: the simulated parts' footprint; a real rig
         does not know where its part is (ConfigError)."""

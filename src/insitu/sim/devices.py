@@ -52,11 +52,24 @@ class SimCamera:
         self.world = world
         self.width, self.height = world.rig.camera.width, world.rig.camera.height
         self.exposure_ms = NOMINAL_EXPOSURE_MS
+        self._frames_left: int | None = None
 
     def set_exposure(self, exposure_ms: float) -> None:
         self.exposure_ms = float(exposure_ms)
 
+    def fail_after(self, frames: int | None) -> None:
+        """Fault injection (tests, benchmarks): after ``frames`` more frames every grab
+        raises DeviceError, as a camera whose cable came loose (None: deliver again)."""
+        self._frames_left = frames
+
+    def _deliver(self) -> None:
+        if self._frames_left is not None:
+            if self._frames_left <= 0:
+                raise DeviceError("simulated camera: gave no frame (fault injected)")
+            self._frames_left -= 1
+
     def grab(self, timeout_s: float = 5.0) -> np.ndarray:
+        self._deliver()
         if self.world.board is not None:
             return self.world.board.frame(self.world.laser)
         r, laser = self.world.renderer(), self.world.laser
@@ -320,6 +333,7 @@ class SimInspectionCamera(SimCamera):
     def grab(self, timeout_s: float = 5.0) -> np.ndarray:
         if self.world.laser.kind != "off" or self.world.board is not None:
             return super().grab(timeout_s)
+        self._deliver()
         self._frames += 1
         scene = self.world.renderer().scene
         if self._view is None or self._view[0] is not scene:

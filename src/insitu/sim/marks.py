@@ -160,3 +160,16 @@ def find_marks(image: np.ndarray, camera: CameraModel, plane_z: float,
     t = (plane_z - origin[2]) / d[:, 2]
     xy = origin[:2] + t[:, None] * d[:, :2]
     return xy, c[vv, uu].astype(np.float64)
+
+
+def burnt_centre(burns: list[Burn], T_world_part: np.ndarray) -> np.ndarray | None:
+    """Centre (2,) mm of the bounding box of every burnt point, in the frame of the part
+    that ``T_world_part`` (4, 4) places — the simulator's truth of where a pattern was marked
+    on the part (None: nothing burnt)."""
+    pts = [b.points[np.isfinite(b.points).all(1)] for b in burns]
+    pts = [p for p in pts if len(p)]
+    if not pts:
+        return None
+    inv = np.linalg.inv(np.asarray(T_world_part, float))
+    part = np.vstack(pts) @ inv[:3, :3].T + inv[:3, 3]
+    return (part[:, :2].min(0) + part[:, :2].max(0)) / 2

@@ -93,15 +93,6 @@ def read_back(run: mark_svc.StationRun, station: Station, outcomes, cloud
     return dataclasses.replace(run, readback=result)
 
 
-def joined(outcomes) -> MarkJob | None:
-    """One job marking every planned placement in order (None: none, or one refused)."""
-    if not outcomes or any(o.plan is None for o in outcomes):
-        return None
-    first = outcomes[0].plan.job
-    return first.model_copy(update={"paths": [path for o in outcomes
-                                              for path in o.plan.job.paths]})
-
-
 def preview_serial(job_path: Path | None) -> int:
     """The serial a preview of variable data shows: the counter's next (1 without one)."""
     from insitu.services.serials import counter_next, default_counter
@@ -144,7 +135,7 @@ def mark_serial(items, cloud, laser, station: Station, job_path: Path | None,
                           f"set {counter.name} FIRST_SERIAL creates it")
 
     def job_of(outcomes) -> MarkJob:
-        job = joined(outcomes)
+        job = mark_svc.joined(outcomes)
         if job is None:
             raise InsituError(next(o.error for o in outcomes if o.plan is None))
         return job.model_copy(update={"laser": laser})

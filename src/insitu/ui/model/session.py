@@ -202,7 +202,7 @@ class Session:
     def job(self) -> MarkJob | None:
         """The opened job file's job, else one job marking every placement in order (each
         was checked by ``plan_mark``), or None while any is refused or not yet planned."""
-        from insitu.ui.model.operations import joined
+        from insitu.services.mark import joined
 
         if self.job_file is not None:
             return self.job_file.job

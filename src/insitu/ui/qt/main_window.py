@@ -33,6 +33,7 @@ from insitu.ui.qt.keys import route_undo
 from insitu.ui.qt.mark_panel import MarkPanel
 from insitu.ui.qt import open_files
 from insitu.ui.qt.place_panel import PlacePanel
+from insitu.ui.qt.production_panel import ProductionPanel, save_recipe_dialog
 from insitu.ui.qt.scan_panel import ScanPanel
 from insitu.ui.qt.scene_binding import SceneBinding
 from insitu.ui.qt.view3d import View3D
@@ -77,6 +78,7 @@ class MainWindow(QMainWindow):
         self.place_panel = PlacePanel(self)
         self.mark_panel = MarkPanel(self)
         self.calibrate_panel = CalibratePanel(self)
+        self.production_panel = ProductionPanel(self)
         self._docks()
         self._status_bar()
         self._actions()
@@ -110,8 +112,9 @@ class MainWindow(QMainWindow):
                       "place": dock("Place", self.place_panel, right),
                       "mark": dock("Mark", self.mark_panel, right),
                       "calibrate": dock("Calibrate", self.calibrate_panel, right),
+                      "production": dock("Production", self.production_panel, right),
                       "camera": dock("Camera", self.camera_dock, Qt.LeftDockWidgetArea)}
-        for name in ("place", "mark", "calibrate"):
+        for name in ("place", "mark", "calibrate", "production"):
             self.tabifyDockWidget(self.docks["scan"], self.docks[name])
         self.docks["scan"].raise_()
 
@@ -145,6 +148,7 @@ class MainWindow(QMainWindow):
         tb.addAction(self._action(f, "&Open…", self._open_dialog, QKeySequence.Open, "open"))
         tb.addAction(self._action(f, "&Save project", self.save, QKeySequence.Save, "save"))
         self._action(f, "Save project &as…", self._save_dialog, QKeySequence.SaveAs)
+        self._action(f, "Save as &recipe…", lambda: save_recipe_dialog(self))
         self.recent_menu = f.addMenu("Open &recent")
         self.export_action = self._action(f, "&Export job…", self._export_dialog)
         f.addSeparator()

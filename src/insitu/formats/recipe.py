@@ -1,0 +1,207 @@
+"""The production recipe: what to mark on every part of a run, in the part's own frame.
+
+    {"format": "insitu-recipe/1", "schema_version": 1, "saved": "...Z",
+     "reference": {"mesh": "part.stl"},            # or {"cloud": "first-scan.ply"}
+     "workpiece": "step-block",                    # the simulated rig's part (optional)
+     "placements": [{"pattern": "qr:\\"{serial:05d}\\"", "at_mm": [0, 20], "width_mm": 8,
+                     ...}],                        # the project file's placements, part frame
+     "laser": {"power_pct": 30, "frequency_khz": 20, "mark_speed_mm_s": 500,
+               "jump_speed_mm_s": 3000},
+     "scan": {"region": null, "margin_mm": 5, "spacing_mm": 0.25, "exposure_ms": 10,
+              "speed_mm_s": 2000},                  # region: world (x0, x1, y0, y1) mm
+     "locate": {"prefer_angle_deg": null},         # which of a symmetric part's turns
+     "serial": {"counter": "serial.counter.json", "start": 1, "fields": {}}}
+
+Paths are relative to the recipe's folder. The reference defines the part's frame: a mesh in
+it, or the cloud of a first scan (its world frame is then the part's). ``scan.region`` null:
+where the part lies, grown by ``margin_mm`` (the simulated rig knows where; a real rig needs
+the region). ``serial.start`` creates the counter when it does not exist yet.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Collection
+from dataclasses import asdict, dataclass, field
+from datetime import datetime, timezone
+from pathlib import Path
+from typing import Annotated, Any, Literal
+
+from pydantic import Field, ValidationError, model_validator
+
+from insitu.errors import FormatError
+from insitu.formats.atomic import atomic_write_text
+from insitu.formats.bounds import each_within, within
+from insitu.formats.counter import Serial
+from insitu.formats.mesh import MESH_SUFFIXES, is_mesh_file
+from insitu.formats.project import (_SPEC, Exposure, Length, Region, Spacing, Speed,
+                                    _abs, _Placement, _rel, _Strict)
+from insitu.formats.validation import dump_json, one_of, read_json, validation_message
+
+RECIPE_FORMAT = "insitu-recipe/1"
+SCHEMA_VERSION = 1
+COUNTER = "serial.counter.json"
+
+
+class _Reference(_Strict):
+    mesh: str | None = None
+    cloud: str | None = None
+
+    @model_validator(mode="after")
+    def _one(self):
+        if (self.mesh is None) == (self.cloud is None):
+            raise ValueError("expected exactly one of mesh, cloud")
+        return self
+
+
+class _Laser(_Strict):
+    power_pct: within("power_pct") = 30.0
+    frequency_khz: within("frequency_khz") = 20.0
+    mark_speed_mm_s: within("mark_speed_mm_s") = 500.0
+    jump_speed_mm_s: within("jump_speed_mm_s") = 3000.0
+
+
+class _Scan(_Strict):
+    region: Region | None = None
+    margin_mm: Length = 5.0
+    spacing_mm: Spacing = 0.25
+    exposure_ms: Exposure = 10.0
+    speed_mm_s: Speed = 2000.0
+
+
+class _Locate(_Strict):
+    prefer_angle_deg: Annotated[tuple[float, float], each_within("angle_deg")] | None = None
+
+
+class _Serial(_Strict):
+    counter: str = COUNTER
+    start: Serial | None = None
+    fields: dict[str, str] = {}
+
+
+class _Recipe(_Strict):
+    format: Literal["insitu-recipe/1"]
+    schema_version: int = Field(ge=1)
+    saved: str | None = None
+    reference: _Reference
+    workpiece: str | None = None
+    placements: list[_Placement] = Field(min_length=1)
+    laser: _Laser = _Laser()
+    scan: _Scan = _Scan()
+    locate: _Locate = _Locate()
+    serial: _Serial = _Serial()
+
+
+@dataclass(frozen=True)
+class RecipeScan:
+    """Where and how each part is scanned: ``region`` world (x0, x1, y0, y1) mm (None:
+    where the part lies, grown by ``margin_mm``), line ``spacing_mm``, camera
+    ``exposure_ms``, line sweep ``speed_mm_s``."""
+
+    region: tuple[float, float, float, float] | None = None
+    margin_mm: float = 5.0
+    spacing_mm: float = 0.25
+    exposure_ms: float = 10.0
+    speed_mm_s: float = 2000.0
+
+
+@dataclass(frozen=True)
+class Recipe:
+    """A recipe in memory, every path absolute. ``reference``: the mesh or cloud file
+    (``reference_kind`` "mesh" | "cloud") whose frame is the part's; ``placements``: the
+    caller's placement dataclasses, part frame; ``laser``: the job's laser parameters
+    (LaserParams fields); ``prefer_angle_deg``: (lo, hi) degrees, the turn about z to keep
+    of a symmetric part's (None: refuse an ambiguous one); ``counter``: the serial counter,
+    created with first serial ``serial_start`` when missing; ``fields``: values of the
+    texts' own fields; ``workpiece``: the simulated rig's part (None: its default)."""
+
+    reference: Path
+    reference_kind: str
+    placements: tuple[Any, ...]
+    laser: dict[str, float] = field(default_factory=lambda: _Laser().model_dump())
+    scan: RecipeScan = RecipeScan()
+    prefer_angle_deg: tuple[float, float] | None = None
+    counter: Path | None = None
+    serial_start: int | None = None
+    fields: dict[str, str] = field(default_factory=dict)
+    workpiece: str | None = None
+
+
+def reference_kind(path: str | Path) -> str:
+    """"mesh" (STL, OBJ, a PLY with faces) or "cloud" (a scan's .ply); FormatError for
+    another suffix."""
+    path = Path(path)
+    if path.suffix.lower() not in MESH_SUFFIXES:
+        raise FormatError(f"{path}: expected a mesh ({', '.join(MESH_SUFFIXES)}) or a scan's "
+                          "cloud (.ply)")
+    return "mesh" if is_mesh_file(path) else "cloud"
+
+
+def recipe_json(recipe: Recipe, path: Path) -> str:
+    """The text of the recipe file at ``path`` (paths relative to its folder)."""
+    folder = Path(path).parent
+    placements = []
+    for p in recipe.placements:
+        d = asdict(p)
+        d["pattern"] = p.pattern if _SPEC.match(p.pattern) else _rel(Path(p.pattern), folder)
+        placements.append(d)
+    s = recipe.scan
+    counter = recipe.counter if recipe.counter is not None else folder / COUNTER
+    data = _Recipe(
+        format=RECIPE_FORMAT, schema_version=SCHEMA_VERSION,
+        saved=datetime.now(timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ"),
+        reference={recipe.reference_kind: _rel(recipe.reference, folder)},
+        workpiece=recipe.workpiece, placements=placements, laser=_Laser(**recipe.laser),
+        scan=_Scan(region=s.region, margin_mm=s.margin_mm, spacing_mm=s.spacing_mm,
+                   exposure_ms=s.exposure_ms, speed_mm_s=s.speed_mm_s),
+        locate=_Locate(prefer_angle_deg=recipe.prefer_angle_deg),
+        serial=_Serial(counter=_rel(counter, folder), start=recipe.serial_start,
+                       fields=dict(recipe.fields)))
+    out = data.model_dump(mode="json")
+    out["reference"] = {k: v for k, v in out["reference"].items() if v is not None}
+    return dump_json(out) + "\n"
+
+
+def write_recipe(path: str | Path, recipe: Recipe) -> None:
+    """Write the recipe atomically."""
+    path = Path(path)
+    atomic_write_text(path, recipe_json(recipe, path))
+
+
+def read_recipe(path: str | Path, placement: Callable[..., Any],
+                modes: Collection[str]) -> Recipe:
+    """Read and validate a recipe; FormatError naming the file and the field. Placements are
+    made by ``placement(pattern, at_mm, width_mm, rotate_deg, mode, hatch_mm,
+    hatch_angle_deg, cross, fill, beam_mm)``; ``modes``: the projection modes they may name."""
+    path = Path(path)
+    raw = read_json(path)
+    if not isinstance(raw, dict) or raw.get("format") != RECIPE_FORMAT:
+        got = raw.get("format") if isinstance(raw, dict) else type(raw).__name__
+        raise FormatError(f"{path}: format: expected {RECIPE_FORMAT!r}, got {got!r} "
+                          "(not an insitu recipe)")
+    if isinstance(raw.get("schema_version"), int) and raw["schema_version"] > SCHEMA_VERSION:
+        raise FormatError(f"{path}: schema_version {raw['schema_version']}: this version of "
+                          f"insitu reads up to {SCHEMA_VERSION}")
+    try:
+        d = _Recipe.model_validate(raw)
+    except ValidationError as e:
+        raise FormatError(validation_message(path, e)) from None
+    folder = path.parent
+    placements = []
+    for i, p in enumerate(d.placements):
+        if p.mode not in modes:
+            raise FormatError(f"{path}: placements[{i}].mode: expected {one_of(modes)}, "
+                              f"got {p.mode!r}")
+        pattern = p.pattern if _SPEC.match(p.pattern) else str(
+            _abs(p.pattern, folder, f"placements[{i}].pattern", path))
+        placements.append(placement(pattern, tuple(p.at_mm), p.width_mm, p.rotate_deg, p.mode,
+                                    p.hatch_mm, p.hatch_angle_deg, p.cross, p.fill,
+                                    p.beam_mm))
+    kind = "mesh" if d.reference.mesh is not None else "cloud"
+    s = d.scan
+    return Recipe(
+        reference=_abs(getattr(d.reference, kind), folder, f"reference.{kind}", path),
+        reference_kind=kind, placements=tuple(placements), laser=d.laser.model_dump(),
+        scan=RecipeScan(s.region, s.margin_mm, s.spacing_mm, s.exposure_ms, s.speed_mm_s),
+        prefer_angle_deg=d.locate.prefer_angle_deg,
+        counter=_abs(d.serial.counter, folder, "serial.counter", path, must_exist=False),
+        serial_start=d.serial.start, fields=dict(d.serial.fields), workpiece=d.workpiece)

@@ -1,0 +1,354 @@
+"""Production: part after part, wait for the start, scan the region, locate the part, plan the
+recipe's placements where the part lies, mark them as one job, read the mark back and log one
+record (:mod:`insitu.formats.production_log`).
+
+Serials: the job of a part is planned with :func:`insitu.services.serials.plan_and_save`, so
+a part refused while locating or planning takes no serial, and a part whose marking faults or
+is aborted keeps the one it was issued (logged with it). ``resume`` finishes that part with
+its own job — its journal decides what is marked again (the paths not done, the cut path
+again whole) — and carries on with the next part number. A device fault or an abort ends the
+run (the laser off, the record written, the error raised); a refusal sets the part aside and
+the run goes on.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from datetime import datetime, timezone
+from pathlib import Path
+from typing import Any, Protocol
+
+import numpy as np
+
+from insitu.errors import DeviceError, FormatError, InsituError
+from insitu.formats.pointcloud import PointCloud, read_ply, write_ply
+from insitu.formats.production_log import PartRecord, append_record, read_log
+from insitu.formats.recipe import Recipe
+from insitu.geometry.pose import flat_pose, pose_matrix
+from insitu.marking import LaserParams, MarkJob, read_job
+from insitu.services import mark as mark_svc
+from insitu.services import serials
+from insitu.services.scan import Cancelled, scan_live
+from insitu.services.station import Station
+
+
+class StartSignal(Protocol):
+    """What starts a part: the operator's Enter, a stage or IO input of a real station.
+    ``wait`` returns when part ``part`` may start; it raises Cancelled once ``cancel`` is set
+    (or the operator declines)."""
+
+    def wait(self, part: int, cancel: threading.Event) -> None: ...
+
+
+class NoWait:
+    """Start every part at once (the simulated rig, tests: no hand on the keyboard)."""
+
+    def wait(self, part: int, cancel: threading.Event) -> None:
+        if cancel.is_set():
+            raise Cancelled(f"production stopped before part {part}")
+
+
+@dataclass(frozen=True)
+class Located:
+    """Where the part lies: ``T_world_part`` (4, 4) maps part mm into the world; the
+    registration's ``fitness`` (0 … 1) and inlier ``rmse_mm``."""
+
+    T_world_part: np.ndarray
+    fitness: float
+    rmse_mm: float
+
+    def pose(self) -> tuple[float, float, float]:
+        """(x mm, y mm, angle_deg about +z)."""
+        return flat_pose(self.T_world_part)
+
+
+@dataclass(frozen=True)
+class PartReading:
+    """What the camera read of the marked part, one value for the log: ``decoded`` texts
+    (" | " between codes; None: no code read), whether every mark is what was planned
+    (``ok``), the worst code's print ``grade`` (A … F) and the largest ``offset_mm`` of a
+    mark from its planned place."""
+
+    decoded: str | None = None
+    ok: bool | None = None
+    grade: str | None = None
+    offset_mm: float | None = None
+
+
+Locator = Callable[[PointCloud], Located]
+
+
+def recipe_locator(recipe: Recipe) -> Locator:
+    """``locate(cloud) -> Located`` against the recipe's reference (read once:
+    :func:`insitu.services.locate.load_reference`), keeping a symmetric part's turn within
+    the recipe's ``prefer_angle_deg``; it raises the registration's one-line refusal (part
+    not found, partly scanned, poor fit, ambiguous). ``locate.reference``: the reference."""
+    from insitu.services.locate import load_reference, locate_cloud
+
+    reference = load_reference(recipe.reference)
+
+    def locate(cloud: PointCloud) -> Located:
+        pose = locate_cloud(reference, cloud, prefer_angle=recipe.prefer_angle_deg)
+        return Located(pose.T_world_part, pose.best.fitness, pose.best.rmse_mm)
+    locate.reference = reference
+    return locate
+
+
+ReadBackFn = Callable[[Station, list, PointCloud, Path], PartReading]
+
+
+def read_part(station: Station, plans: list, cloud: PointCloud, picture: Path) -> PartReading:
+    """Read the part's marks back (:func:`insitu.services.inspect.read_back`: the camera's
+    frame rectified onto the measured surface, each code decoded and graded) and write the
+    read-back picture to ``picture`` (the raw frame beside it)."""
+    from insitu.services.inspect import read_back, save_read_back
+    from insitu.vision.dpm_grade import letter
+
+    got = read_back(station, plans, cloud)
+    save_read_back(picture, got)
+    texts = [r.decoded for r in got.readings if r.text is not None and r.decoded is not None]
+    grades = [r.grades.overall for r in got.readings if r.grades is not None]
+    offsets = [float(np.hypot(*r.offset_mm)) for r in got.readings if r.offset_mm is not None]
+    return PartReading(" | ".join(texts) if texts else None, got.ok,
+                       letter(min(grades)) if grades else None,
+                       max(offsets) if offsets else None)
+
+
+@dataclass
+class Production:
+    """A run: the ``recipe``, the ``station``, the ``log`` (JSON lines; the CSV beside it and
+    each part's job ``part-NNNN.job.json`` in its folder), parts numbered 1 … ``count``.
+    ``locate``: the part's pose from a scan; ``read_back``: what the camera reads of the mark
+    (None: the read-back is not made); ``present``: puts part k on the table and returns its
+    true pose (the simulated rig; None: the operator does); ``start``: the start signal;
+    ``height_cal``: the scans' height calibration (None: Method 1); ``on_record``: sees each
+    record as it is logged; ``on_stage``: (part, stage name) as each stage begins."""
+
+    recipe: Recipe
+    station: Station
+    log: Path
+    count: int
+    locate: Locator
+    read_back: ReadBackFn | None = None
+    present: Callable[[int], Any] | None = None
+    start: StartSignal = field(default_factory=NoWait)
+    cancel: threading.Event = field(default_factory=threading.Event)
+    height_cal: Any = None
+    on_record: Callable[[PartRecord], None] | None = None
+    on_stage: Callable[[int, str], None] | None = None
+
+    def job_path(self, part: int) -> Path:
+        return self.log.parent / f"part-{part:04d}.job.json"
+
+    def cloud_path(self, part: int) -> Path:
+        return self.log.parent / f"part-{part:04d}.cloud.ply"
+
+
+@dataclass
+class _Part:
+    """What is known of a part as it goes through the stages."""
+
+    number: int
+    times: dict[str, float] = field(default_factory=dict)
+    fields: dict[str, Any] = field(default_factory=dict)
+    serial: int | None = None
+    job: Path | None = None
+
+    def record(self, outcome: str, error: str | None = None, **more) -> PartRecord:
+        return PartRecord(part=self.number, serial=self.serial, outcome=outcome,
+                          job=None if self.job is None else self.job.name, error=error,
+                          time=datetime.now(timezone.utc).isoformat(timespec="seconds"),
+                          **{f"{k}_s": round(v, 3) for k, v in self.times.items()},
+                          **self.fields, **more)
+
+
+def scan_region(run: Production) -> tuple[float, float, float, float]:
+    """The recipe's region, or where the part lies (the station knows it on the simulated
+    rig) grown by the margin."""
+    s = run.recipe.scan
+    if s.region is not None:
+        return s.region
+    x0, x1, y0, y1 = run.station.default_region()
+    m = s.margin_mm
+    return x0 - m, x1 + m, y0 - m, y1 + m
+
+
+def resume_point(records: list[PartRecord]) -> tuple[int, PartRecord | None]:
+    """(the next part number, the interrupted part's last record or None) from a log."""
+    if not records:
+        return 1, None
+    last = records[-1]
+    if last.outcome in ("fault", "aborted"):
+        return last.part, last
+    return last.part + 1, None
+
+
+def produce(run: Production, resume: bool = False) -> list[PartRecord]:
+    """Run parts until ``run.count`` are through (``resume``: continue the log). Returns this
+    call's records. FormatError for a log that exists without ``resume`` or is not this run's;
+    a fault or an abort is raised after its record is logged (the laser off)."""
+    records = read_log(run.log)
+    if records and not resume:
+        raise FormatError(f"{run.log}: holds {len(records)} records of an earlier run: "
+                          "--resume to continue it, or another --log")
+    first, pending = resume_point(records)
+    out = []
+    for number in range(first, run.count + 1):
+        part = _Part(number)
+        try:
+            run.start.wait(number, run.cancel)
+            if run.present is not None:
+                run.present(number)
+            if pending is not None and pending.part == number and pending.serial is not None:
+                rec = _finish(run, part, pending)
+            else:
+                rec = _run_part(run, part)
+        except (InsituError, KeyboardInterrupt) as e:
+            rec = part.record(_outcome(e), _text(e), resumed=pending is not None
+                              and pending.part == number)
+            _log(run, rec, out)
+            raise
+        _log(run, rec, out)
+    return out
+
+
+def _log(run: Production, rec: PartRecord, out: list) -> None:
+    append_record(run.log, rec)
+    out.append(rec)
+    if run.on_record is not None:
+        run.on_record(rec)
+
+
+def _outcome(e: BaseException) -> str:
+    """"aborted" by the operator (a cancel, Ctrl-C), else "fault"."""
+    return "aborted" if isinstance(e, (Cancelled, KeyboardInterrupt)) else "fault"
+
+
+def _text(e: BaseException) -> str:
+    return str(e) or type(e).__name__
+
+
+def _stage(run: Production, part: _Part, name: str, work: Callable[[], Any]) -> Any:
+    if run.on_stage is not None:
+        run.on_stage(part.number, name)
+    t0 = time.perf_counter()
+    try:
+        return work()
+    finally:
+        part.times[name] = time.perf_counter() - t0
+
+
+def _run_part(run: Production, part: _Part) -> PartRecord:
+    r = run.recipe
+    scan = _stage(run, part, "scan", lambda: scan_live(
+        run.station, r.scan.spacing_mm, scan_region(run), run.height_cal,
+        exposure_ms=r.scan.exposure_ms, speed_mm_s=r.scan.speed_mm_s, cancel=run.cancel))
+    cloud = scan.cloud
+    write_ply(run.cloud_path(part.number), cloud)
+    try:
+        located = _stage(run, part, "locate", lambda: run.locate(cloud))
+        x, y, a = located.pose()
+        part.fields.update(x_mm=x, y_mm=y, angle_deg=a, fitness=round(located.fitness, 4),
+                           rmse_mm=round(located.rmse_mm, 4))
+        planned = _stage(run, part, "plan", lambda: plan_part(run, part, cloud, located))
+    except (Cancelled, DeviceError):
+        raise
+    except InsituError as e:                 # no serial was issued: the part is set aside
+        if part.serial is not None:
+            raise
+        return part.record("refused", _text(e))
+    _stage(run, part, "mark", lambda: _mark(run, planned.job, part.job))
+    return _read(run, part, planned.result, cloud)
+
+
+def _mark(run: Production, job: MarkJob, path: Path, **resume) -> None:
+    """Mark the part's job; Cancelled when the run was stopped between its paths."""
+    done = mark_svc.mark_on_station(run.station, job, path, cancel=run.cancel, **resume)
+    if done.result.state != "done":
+        raise Cancelled(f"marking {done.result.state} after {done.result.completed} of "
+                        f"{done.result.total} paths; the laser is off")
+
+
+def plan_part(run: Production, part: _Part, cloud: PointCloud,
+              located: Located) -> serials.Planned:
+    """The recipe's job for this part (its serial and job file noted as soon as written)."""
+    def save(p: Path, job: MarkJob):
+        part.job = p
+        part.serial = ((job.model_extra or {}).get("variable_data") or {}).get("serial")
+        return mark_svc.save_job(p, job)
+
+    return plan_recipe(run.recipe, cloud, located, run.station.driver,
+                       run.job_path(part.number), save)
+
+
+def _planner(recipe: Recipe, cloud: PointCloud, located: Located, driver):
+    """(placements in the world, ``plan(rendered placements) -> outcomes``, ``job_of``)."""
+    laser = LaserParams(**recipe.laser)
+    placements = [p.in_world(located.T_world_part) for p in recipe.placements]
+
+    def job_of(outcomes) -> MarkJob:
+        job = mark_svc.joined(outcomes)
+        if job is None:
+            i, o = next((i, o) for i, o in enumerate(outcomes) if o.plan is None)
+            raise InsituError(f"placement {i + 1}: {o.error}")
+        return job.model_copy(update={"laser": laser})
+
+    return placements, lambda ps: mark_svc.plan_all(cloud, ps, driver, laser), job_of
+
+
+def plan_recipe(recipe: Recipe, cloud: PointCloud, located: Located, driver,
+                job_path: Path, save: Callable[[Path, MarkJob], Any] = mark_svc.save_job
+                ) -> serials.Planned:
+    """Every placement of ``recipe`` moved where the part lies, planned on its ``cloud`` and
+    written to ``job_path`` as one job, with the serial the recipe's counter issues (created
+    with its first serial when missing); InsituError naming the first placement refused.
+    ``result``: each placement's :class:`~insitu.services.mark.PlanOutcome`."""
+    placements, plan, job_of = _planner(recipe, cloud, located, driver)
+    counter = (recipe.counter if recipe.counter is not None
+               else Path(job_path).parent / serials.COUNTER_NAME)
+    start = (recipe.serial_start if recipe.serial_start is not None and not counter.exists()
+             else None)
+    return serials.plan_and_save(job_path, placements, plan, job_of, counter=counter,
+                                 fields=recipe.fields, start=start, save=save)
+
+
+def _read(run: Production, part: _Part, outcomes, cloud: PointCloud,
+          resumed: bool = False) -> PartRecord:
+    if run.read_back is None:
+        return part.record("marked", resumed=resumed)
+    plans = [o.plan for o in outcomes]
+    got = _stage(run, part, "read", lambda: run.read_back(
+        run.station, plans, cloud, run.log.parent / f"part-{part.number:04d}.readback.png"))
+    return part.record("marked", decoded=got.decoded, decode_ok=got.ok, grade=got.grade,
+                       offset_mm=None if got.offset_mm is None else round(got.offset_mm, 4),
+                       resumed=resumed)
+
+
+def _finish(run: Production, part: _Part, last: PartRecord) -> PartRecord:
+    """The interrupted part, still on the table, with its own job and serial: the paths its
+    journal does not record as done (a cut path marked again whole), then the read-back of
+    the job planned again as it was (its recorded serial, on its cloud and pose)."""
+    if last.job is None or last.x_mm is None:
+        raise FormatError(f"{run.log}: part {last.part} holds serial {last.serial} but names no "
+                          "job and pose to finish")
+    path = run.log.parent / last.job
+    job = read_job(path)
+    part.serial, part.job = last.serial, path
+    part.fields.update({k: getattr(last, k) for k in ("x_mm", "y_mm", "angle_deg", "fitness",
+                                                      "rmse_mm")})
+    left = mark_svc.unfinished(job, path)
+    done = left is None and mark_svc.history(job, mark_svc.progress_path_for(path)) is not None
+    if not done:
+        _stage(run, part, "mark", lambda: _mark(
+            run, job, path, resume=left is not None,
+            cut_path="remark" if left is not None and left.cut is not None else None))
+    cloud = read_ply(run.cloud_path(part.number))
+    located = Located(pose_matrix(last.x_mm, last.y_mm, last.angle_deg), last.fitness or 0.0,
+                      last.rmse_mm or 0.0)
+    placements, plan, _ = _planner(run.recipe, cloud, located, run.station.driver)
+    return _read(run, part, serials.replan(path, placements, plan, run.recipe.fields), cloud,
+                 resumed=True)
+
