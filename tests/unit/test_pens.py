@@ -211,7 +211,7 @@ def test_time_left_weighs_the_paths_still_to_mark_by_their_passes():
     assert sec[2] > 2.5 * sec[1]
     # the first path took twice its estimate: the rest will too
     assert TimeLeft(sec).update(0, 0.0) == pytest.approx(sec.sum())
-    assert TimeLeft(sec).update(2, 0.0) == pytest.approx(sec[2])
+    assert TimeLeft(sec, start_done=2).update(2, 0.0) == pytest.approx(sec[2])  # resumed
 
 
 def test_board_checks_cover_delays_and_the_wobble(tmp_path):
