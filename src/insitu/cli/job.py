@@ -47,6 +47,17 @@ class Stopped(InsituError):
 
 
 @contextlib.contextmanager
+def on_signals(handler):
+    """``handler(signum, frame)`` for SIGTERM and SIGHUP inside the block; the old ones after."""
+    old = {sig: signal.signal(sig, handler) for sig in (signal.SIGTERM, signal.SIGHUP)}
+    try:
+        yield
+    finally:
+        for sig, h in old.items():
+            signal.signal(sig, h)
+
+
+@contextlib.contextmanager
 def stop_on_signals(what: str = "marking", hint: str = " (insitu job show JOB.json says how "
                                                        "far it got)"):
     """SIGTERM and SIGHUP end ``what`` as Ctrl-C does: :class:`Stopped` is raised where the
@@ -58,12 +69,8 @@ def stop_on_signals(what: str = "marking", hint: str = " (insitu job show JOB.js
         raise Stopped(f"{what} stopped by {signal.Signals(signum).name}; the laser is off"
                       + hint)
 
-    old = {sig: signal.signal(sig, stop) for sig in (signal.SIGTERM, signal.SIGHUP)}
-    try:
+    with on_signals(stop):
         yield
-    finally:
-        for sig, handler in old.items():
-            signal.signal(sig, handler)
 
 
 def check_run_options(resume: bool, restart: bool, cut_path: str | None) -> None:

@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import contextlib
-import signal
 import sys
 import threading
 from pathlib import Path
@@ -13,7 +11,7 @@ import typer
 from rich.text import Text
 
 from insitu.cli.common import bounded, check_output, console, fail, one_line_errors, progress_bar
-from insitu.cli.job import Field, Rig, Seed
+from insitu.cli.job import Field, Rig, Seed, on_signals
 from insitu.errors import InsituError
 from insitu.formats.project import SIM_BINNING
 from insitu.services.scan import Cancelled
@@ -30,19 +28,10 @@ class EnterKey:
             raise Cancelled(f"production stopped by the operator before part {part}")
 
 
-@contextlib.contextmanager
 def cancel_on_signals(cancel: threading.Event):
     """SIGTERM and SIGHUP set ``cancel``: the marking stops at once (laser off), the part is
     logged as aborted, and the run ends."""
-    def stop(signum, _frame):
-        cancel.set()
-
-    old = {sig: signal.signal(sig, stop) for sig in (signal.SIGTERM, signal.SIGHUP)}
-    try:
-        yield
-    finally:
-        for sig, handler in old.items():
-            signal.signal(sig, handler)
+    return on_signals(lambda _signum, _frame: cancel.set())
 
 
 def part_line(rec) -> Text:

@@ -171,7 +171,7 @@ def read_recipe(path: str | Path, placement: Callable[..., Any],
                 modes: Collection[str]) -> Recipe:
     """Read and validate a recipe; FormatError naming the file and the field. Placements are
     made by ``placement(pattern, at_mm, width_mm, rotate_deg, mode, hatch_mm,
-    hatch_angle_deg, cross, fill, beam_mm)``; ``modes``: the projection modes they may name."""
+    hatch_angle_deg, cross, fill, beam_mm, pen)``; ``modes``: the projection modes they may name."""
     path = Path(path)
     raw = read_json(path)
     if not isinstance(raw, dict) or raw.get("format") != RECIPE_FORMAT:
@@ -195,7 +195,7 @@ def read_recipe(path: str | Path, placement: Callable[..., Any],
             _abs(p.pattern, folder, f"placements[{i}].pattern", path))
         placements.append(placement(pattern, tuple(p.at_mm), p.width_mm, p.rotate_deg, p.mode,
                                     p.hatch_mm, p.hatch_angle_deg, p.cross, p.fill,
-                                    p.beam_mm))
+                                    p.beam_mm, p.pen))
     kind = "mesh" if d.reference.mesh is not None else "cloud"
     s = d.scan
     return Recipe(
