@@ -234,6 +234,17 @@ def load_pens(path: str | Path) -> PenTable:
     return pen_table(raw["pens"], raw.get("default_pen"), path, "default_pen")
 
 
+def check_header(path: Path, raw, fmt: str, what: str, schema_version: int) -> None:
+    """FormatError unless ``raw`` (a file's JSON) is a dict of ``format`` ``fmt`` and a
+    ``schema_version`` this insitu reads."""
+    if not isinstance(raw, dict) or raw.get("format") != fmt:
+        got = raw.get("format") if isinstance(raw, dict) else type(raw).__name__
+        raise FormatError(f"{path}: format: expected {fmt!r}, got {got!r} (not {what})")
+    if isinstance(raw.get("schema_version"), int) and raw["schema_version"] > schema_version:
+        raise FormatError(f"{path}: schema_version {raw['schema_version']}: this version of "
+                          f"insitu reads up to {schema_version}")
+
+
 def read_project(path: str | Path, placement: Callable[..., Any],
                  modes: Collection[str]) -> Project:
     """Read and validate a project file; FormatError naming the file and the field. Each
@@ -242,13 +253,7 @@ def read_project(path: str | Path, placement: Callable[..., Any],
     modes it may name."""
     path = Path(path)
     raw = read_json(path)
-    if not isinstance(raw, dict) or raw.get("format") != PROJECT_FORMAT:
-        got = raw.get("format") if isinstance(raw, dict) else type(raw).__name__
-        raise FormatError(f"{path}: format: expected {PROJECT_FORMAT!r}, got {got!r} "
-                          "(not an insitu project file)")
-    if isinstance(raw.get("schema_version"), int) and raw["schema_version"] > SCHEMA_VERSION:
-        raise FormatError(f"{path}: schema_version {raw['schema_version']}: this version of "
-                          f"insitu reads up to {SCHEMA_VERSION}")
+    check_header(path, raw, PROJECT_FORMAT, "an insitu project file", SCHEMA_VERSION)
     try:
         d = _Project.model_validate(raw)
     except ValidationError as e:

@@ -34,6 +34,7 @@ from insitu.formats.bounds import each_within, within
 from insitu.formats.counter import Serial
 from insitu.formats.mesh import MESH_SUFFIXES, is_mesh_file
 from insitu.formats.project import (_SPEC, Exposure, Length, Region, Spacing, Speed,
+                                    check_header,
                                     _abs, _Placement, _rel, _Strict)
 from insitu.formats.validation import dump_json, one_of, read_json, validation_message
 
@@ -174,13 +175,7 @@ def read_recipe(path: str | Path, placement: Callable[..., Any],
     hatch_angle_deg, cross, fill, beam_mm, pen)``; ``modes``: the projection modes they may name."""
     path = Path(path)
     raw = read_json(path)
-    if not isinstance(raw, dict) or raw.get("format") != RECIPE_FORMAT:
-        got = raw.get("format") if isinstance(raw, dict) else type(raw).__name__
-        raise FormatError(f"{path}: format: expected {RECIPE_FORMAT!r}, got {got!r} "
-                          "(not an insitu recipe)")
-    if isinstance(raw.get("schema_version"), int) and raw["schema_version"] > SCHEMA_VERSION:
-        raise FormatError(f"{path}: schema_version {raw['schema_version']}: this version of "
-                          f"insitu reads up to {SCHEMA_VERSION}")
+    check_header(path, raw, RECIPE_FORMAT, "an insitu recipe", SCHEMA_VERSION)
     try:
         d = _Recipe.model_validate(raw)
     except ValidationError as e:
