@@ -226,6 +226,16 @@ def _plan(out: Path, placement, plan_mark, resume: bool, fields, counter, start)
     return done.result, done.record
 
 
+def record_rows(table: Table, rec) -> None:
+    """The rows of a job's variable data (``rec``: its record, None: none): the texts
+    rendered and the serial issued."""
+    if rec is not None:
+        for t in rec.texts:
+            table.add_row("renders", t.text)
+        if rec.serial is not None:
+            table.add_row("serial", f"{rec.serial} (issued from {rec.counter})")
+
+
 def _summary(out: Path, placement, plan, field: Path | None, rec=None,
              part_pose: Path | None = None, located=None) -> None:
     pts = plan.projection.points
@@ -247,11 +257,7 @@ def _summary(out: Path, placement, plan, field: Path | None, rec=None,
     for note in plan.pattern.notes:
         table.add_row(Text("warning", "yellow") if note.startswith("warning:") else "loaded",
                       note.removeprefix("warning: "))
-    if rec is not None:
-        for t in rec.texts:
-            table.add_row("renders", t.text)
-        if rec.serial is not None:
-            table.add_row("serial", f"{rec.serial} (issued from {rec.counter})")
+    record_rows(table, rec)
     table.add_row("marks", f"{len(plan.job.paths):,} paths, {len(pts):,} points ({fill})")
     over = plan.job.paths[0].laser
     if over is not None and over.pen:

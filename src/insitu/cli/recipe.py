@@ -185,6 +185,7 @@ def mark_recipe(recipe_path: Path, cloud: Path, out: Path, run: bool, preview: b
     it, and with ``run`` mark it."""
     from insitu.cli.common import progress_bar, warn
     from insitu.cli.job import run_on_station
+    from insitu.cli.mark import record_rows
     from insitu.formats.pointcloud import read_ply
     from insitu.services import production
     from insitu.services.station import connect
@@ -213,12 +214,7 @@ def mark_recipe(recipe_path: Path, cloud: Path, out: Path, run: bool, preview: b
             w = p.in_world(located.T_world_part)
             table.add_row(f"placement {i}", f"{p.pattern} at ({w.at_mm[0]:.3f}, "
                                             f"{w.at_mm[1]:.3f}) mm, {w.rotate_deg:.2f}°")
-        rec = planned.record
-        if rec is not None:
-            for t in rec.texts:
-                table.add_row("renders", t.text)
-            if rec.serial is not None:
-                table.add_row("serial", f"{rec.serial} (issued from {rec.counter})")
+        record_rows(table, planned.record)
         table.add_row("marks", f"{len(planned.job.paths):,} paths")
         console.print(table)
         if run:
