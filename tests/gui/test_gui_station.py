@@ -383,13 +383,17 @@ def test_a_click_on_the_calibration_picture_opens_it_full_size(qtbot, window, tm
     qtbot.mouseClick(page.ui.pictureLabel, Qt.LeftButton)
     win = page.picture_window
     assert win is not None and win.isVisible()
-    full = win.view.item.pixmap()
+    full = win.view.image
     png = (tmp_path / "h.png")
     import cv2
     h, w = cv2.imread(str(png)).shape[:2]
     assert (full.width(), full.height()) == (w, h) and full.width() > shown.width()
-    z0 = win.view.zoom()
+    win.view.to_widget(np.zeros((1, 2)))              # the fitted scale, at the window's size
+    z0 = win.view.scale
+    assert win.view.fitted and z0 < 1.0
     QTest.keyClick(win.view, Qt.Key_Plus)
-    assert win.view.zoom() == pytest.approx(z0 * 1.25)
+    assert win.view.scale == pytest.approx(z0 * 1.25) and not win.view.fitted
     QTest.keyClick(win.view, Qt.Key_1)
-    assert win.view.zoom() == pytest.approx(1.0)
+    assert win.view.scale == pytest.approx(1.0)
+    QTest.keyClick(win.view, Qt.Key_0)
+    assert win.view.fitted

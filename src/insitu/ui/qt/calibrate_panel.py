@@ -11,7 +11,7 @@ from PySide6.QtWidgets import (QFileDialog, QTableWidgetItem, QTabWidget, QVBoxL
                                QWidget)
 
 from insitu.ui.model import operations as ops
-from insitu.ui.qt.camera_image import to_qimage
+from insitu.ui.qt.image_view import to_qimage
 from insitu.ui.qt.forms import load_form
 from insitu.ui.qt.image_window import Clicks, ImageWindow
 

@@ -7,19 +7,19 @@ from __future__ import annotations
 from PySide6.QtCore import Qt
 from PySide6.QtWidgets import QHBoxLayout, QPushButton, QVBoxLayout, QWidget
 
-from insitu.ui.qt.camera_image import CameraImage
+from insitu.ui.qt.image_view import ImageView
 
 
 class CameraWindow(QWidget):
-    """A top-level window showing what ``source`` (the dock's CameraImage) shows."""
+    """A top-level window showing what ``source`` (the dock's ImageView) shows."""
 
-    def __init__(self, source: CameraImage, parent=None):
+    def __init__(self, source: ImageView, parent=None):
         super().__init__(parent, Qt.Window)
         self.setObjectName("cameraWindow")
         self.setWindowTitle("insitu — camera")
         self.resize(1100, 900)
         self.source = source
-        self.image = CameraImage(self)
+        self.image = ImageView(self)
         self.image.setObjectName("cameraWindowImage")
         self.fit_button = QPushButton("Fit")
         self.one_button = QPushButton("1:1")
@@ -46,7 +46,8 @@ class CameraDock(QWidget):
 
     def __init__(self, parent=None):
         super().__init__(parent)
-        self.image = CameraImage(self)
+        self.image = ImageView(self)
+        self.image.setObjectName("cameraImage")
         self.image.setMinimumSize(320, 240)
         self.window_: CameraWindow | None = None
         self.enlarge_button = QPushButton("Enlarge")

@@ -1,12 +1,14 @@
-"""The camera's picture: the latest camera image with the extracted line centres drawn over it
-(a live scan), or the inspection image of a marked part. Fitted to the widget until the
-operator zooms (wheel, about the cursor) or pans (drag); :meth:`CameraImage.one_to_one`
-and :meth:`CameraImage.fit` reset it. Double-click asks for the enlarged window."""
+"""One zoomable picture widget for every image the station shows: the camera's latest frame
+with the extracted line centres over it (a live scan), the inspection image of a marked part,
+a calibration report. Fitted to the widget until the operator zooms (wheel or + / −, about
+the cursor) or pans (drag); 0 or :meth:`ImageView.fit` fits it again, 1 or
+:meth:`ImageView.one_to_one` shows it pixel for pixel. Double-click asks for an enlarged
+window."""
 
 from __future__ import annotations
 
 import numpy as np
-from PySide6.QtCore import QPointF, QRectF, Qt, Signal
+from PySide6.QtCore import QEvent, QPointF, QRectF, Qt, Signal
 from PySide6.QtGui import QColor, QImage, QPainter, QPen
 from PySide6.QtWidgets import QWidget
 
@@ -29,7 +31,7 @@ def to_qimage(image: np.ndarray) -> QImage:
                   QImage.Format_RGB888).copy()
 
 
-class CameraImage(QWidget):
+class ImageView(QWidget):
     """Shows ``image`` and ``centres`` (M, 2) px (u, v) as red dots. The view maps image
     pixel centre (u, v) to widget ``offset + scale · (u + ½, v + ½)``; ``fitted``: the scale
     follows the widget's size."""
@@ -39,8 +41,8 @@ class CameraImage(QWidget):
 
     def __init__(self, parent=None):
         super().__init__(parent)
-        self.setObjectName("cameraImage")
         self.setMinimumSize(240, 180)
+        self.setFocusPolicy(Qt.FocusPolicy.ClickFocus)
         self.image: QImage | None = None
         self.centres = np.zeros((0, 2))
         self.caption = "no image"
@@ -110,6 +112,29 @@ class CameraImage(QWidget):
             self.zoom_at(ZOOM_STEP ** (e.angleDelta().y() / 120.0),
                          (e.position().x(), e.position().y()))
         e.accept()
+
+    def _key_action(self, e):
+        centre = np.array([self.width(), self.height()]) / 2
+        return {Qt.Key.Key_Plus: lambda: self.zoom_at(ZOOM_STEP, centre),
+                Qt.Key.Key_Equal: lambda: self.zoom_at(ZOOM_STEP, centre),
+                Qt.Key.Key_Minus: lambda: self.zoom_at(1 / ZOOM_STEP, centre),
+                Qt.Key.Key_0: self.fit, Qt.Key.Key_1: self.one_to_one}.get(Qt.Key(e.key()))
+
+    def event(self, e) -> bool:
+        """The zoom keys are this view's while it has focus (not the main window's view
+        keys 1–4)."""
+        if (e.type() == QEvent.Type.ShortcutOverride and self.image is not None
+                and self._key_action(e) is not None):
+            e.accept()
+            return True
+        return super().event(e)
+
+    def keyPressEvent(self, e) -> None:
+        action = self._key_action(e) if self.image is not None else None
+        if action is None:
+            super().keyPressEvent(e)
+        else:
+            action()
 
     def mousePressEvent(self, e) -> None:
         self._fit_now()
