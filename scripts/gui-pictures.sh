@@ -2,8 +2,8 @@
 # The README's pictures of the station's window, rendered under Xvfb: docs/gui.png (the
 # orthographic top view with camera colours) and docs/gui-iso.png (the iso view by height).
 # The step block is recorded at binning 2 (0.25 mm line spacing, a minute or two) and a QR
-# code placed on its 10 mm step; the ambient gray comes from the simulated camera's
-# laser-off frame (screenshot --ambient-from-rig).
+# code placed on its 10 mm step; the camera colours come from the recording's laser-off frame
+# (ambient.png).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 BIN=${BIN:-.venv/bin}
@@ -14,4 +14,4 @@ trap 'rm -rf "$REC"' EXIT
 QT_QPA_PLATFORM=xcb xvfb-run -a -s "-screen 0 1280x1024x24" "$BIN/python" -m insitu.ui.qt.screenshot \
     docs/gui.png --replay "$REC/scan" --height-cal tests/data/height-cal-b2.json --binning 2 \
     --pattern 'qr:"SN 0042"' --at 0 10 --width 8 --view top --camera-colours \
-    --ambient-from-rig --extra iso:height:docs/gui-iso.png
+    --extra iso:height:docs/gui-iso.png

@@ -32,7 +32,7 @@ def rendered(tmp_path_factory):
     cmd = [sys.executable, "-m", "insitu.ui.qt.screenshot", str(tmp / "gui.png"),
            "--replay", str(DATA / "scan-step-block-b4"), "--height-cal",
            str(DATA / "height-cal-b4"), "--pattern", 'text:"insitu"', "--at", "0", "20",
-           "--width", "16", "--view", "iso", "--ambient-from-rig",
+           "--width", "16", "--view", "iso",
            "--extra", f"top:camera:{tmp / 'gui-top.png'}", "--view-png", str(tmp / "view.png")]
     env = dict(os.environ, QT_QPA_PLATFORM="xcb")
     r = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=300)

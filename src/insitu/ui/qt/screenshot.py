@@ -9,9 +9,7 @@ camera (centre, distance, angles, field of view, orthographic), the image size, 
 scale's z range, the colour bar's range, the grid step, the GL renderer, the cloud's points
 and the projected pattern's points (N, 3) mm — what a test needs to check the picture.
 ``--extra VIEW:COLOURS:PATH`` saves more pictures of the same window (COLOURS: height or
-camera), the k-th one's view as ``V-k.png`` and ``V-k.json`` too. ``--ambient-from-rig``: a cloud without its ambient gray (attribute ``ambient``)
-takes it from one laser-off frame of the connected (simulated) camera, sampled where each
-point projects — what a scan that records the ambient frame stores.
+camera), the k-th one's view as ``V-k.png`` and ``V-k.json`` too.
 """
 
 from __future__ import annotations
@@ -20,16 +18,13 @@ import argparse
 import json
 import sys
 import time
-from dataclasses import replace
 from pathlib import Path
 
-import numpy as np
 from PySide6.QtCore import QEventLoop, QSettings
 from PySide6.QtGui import QImage, QPainter, QSurfaceFormat
 from PySide6.QtWidgets import QApplication
 
 from insitu.formats.project import RigChoice
-from insitu.ui.model.scene_data import AMBIENT
 from insitu.ui.qt.app import surface_format
 from insitu.ui.qt.forms import stylesheet
 from insitu.ui.qt.main_window import MainWindow
@@ -46,21 +41,8 @@ def wait_until(app: QApplication, condition, timeout_s: float = 30.0, what: str 
         time.sleep(0.005)
 
 
-def ambient_from_rig(window: MainWindow) -> np.ndarray:
-    """(N,) float32 0…1: the connected camera's laser-off frame, bilinearly sampled where the
-    session cloud's points project (the rig's camera model)."""
-    from scipy.ndimage import map_coordinates
-
-    frame = np.asarray(window.station.devices.camera.grab(), np.float32)
-    frame /= 65535.0 if frame.max() > 255 else 255.0
-    uv = window.station.rig.camera.project(window.session.cloud.points)
-    gray = map_coordinates(frame, [uv[:, 1], uv[:, 0]], order=1, mode="nearest")
-    return np.clip(gray, 0, 1).astype(np.float32)
-
-
 def build(app: QApplication, replay: Path, height_cal: Path | None, pattern: str | None,
-          at: tuple[float, float], width: float, settings_file: Path, binning: int = 4,
-          add_ambient: bool = False) -> MainWindow:
+          at: tuple[float, float], width: float, settings_file: Path, binning: int = 4) -> MainWindow:
     """The window connected to the simulated rig (image size of the recording), the scan
     replayed and the pattern placed and checked."""
     window = MainWindow(QSettings(str(settings_file), QSettings.IniFormat))
@@ -77,10 +59,6 @@ def build(app: QApplication, replay: Path, height_cal: Path | None, pattern: str
     window.scan_panel.start()
     wait_until(app, lambda: window.session.cloud is not None, 120, "the scan")
     s = window.session
-    if add_ambient and AMBIENT not in s.cloud.attributes:
-        s.set_cloud(replace(s.cloud, attributes={**s.cloud.attributes,
-                                                 AMBIENT: ambient_from_rig(window)}),
-                    s.cloud_path)
     if pattern:
         window.place_panel.add_pattern(pattern)
         s.update_selected(at_mm=at, width_mm=width)
@@ -145,7 +123,6 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--width", type=float, default=10.0)
     ap.add_argument("--view", default="top", choices=["top", "front", "side", "iso"])
     ap.add_argument("--camera-colours", action="store_true")
-    ap.add_argument("--ambient-from-rig", action="store_true")
     ap.add_argument("--extra", action="append", default=[], metavar="VIEW:COLOURS:PATH")
     ap.add_argument("--view-png", type=Path)
     args = ap.parse_args(argv)
@@ -154,7 +131,7 @@ def main(argv: list[str] | None = None) -> int:
     app.setStyleSheet(stylesheet())
     settings = args.out.with_suffix(".settings.ini")
     window = build(app, args.replay, args.height_cal, args.pattern, tuple(args.at), args.width,
-                   settings, args.binning, args.ambient_from_rig)
+                   settings, args.binning)
     settings.unlink(missing_ok=True)
     show(app, window, args.view, args.camera_colours)
     shots = [(args.view, args.camera_colours, args.out)] + \
