@@ -206,6 +206,32 @@ def test_inspect_reads_a_saved_frame_back(marked, tmp_path):
     assert not (tmp_path / "r.png").exists()
 
 
+def test_inspect_reads_a_mark_with_fields_back_as_its_job_rendered_it(marked, tmp_path):
+    """A pattern with {serial}: the text comes from the job it was marked with (serial 42 is
+    what the frame shows, 43 is not); without --job it is one line naming the option."""
+    station, cloud, plan, _, frame = marked
+    write_ply(tmp_path / "c.ply", cloud)
+    save_image(tmp_path / "f.png", frame())
+    spec = 'qr:"SN {serial:04d}";module=0.4'
+    place = ["--pattern", spec, "--at", "0.5", "-30", "--rotate", "25"]
+    for serial, code in ((42, 0), (43, 1)):
+        job = tmp_path / f"job{serial}.json"
+        res = CliRunner().invoke(app, ["mark", "--cloud", str(tmp_path / "c.ply"), *place,
+                                       "-o", str(job), "--counter",
+                                       str(tmp_path / f"{serial}.counter.json"),
+                                       "--serial-start", str(serial)])
+        assert res.exit_code == 0, res.output
+        res = CliRunner().invoke(app, ["inspect", str(tmp_path / "f.png"), "--cloud",
+                                       str(tmp_path / "c.ply"), *place, "--job", str(job),
+                                       "-o", str(tmp_path / f"p{serial}.png")])
+        assert res.exit_code == code, res.output
+        assert f"SN {serial:04d}" in res.output
+    res = CliRunner().invoke(app, ["inspect", str(tmp_path / "f.png"), "--cloud",
+                                   str(tmp_path / "c.ply"), *place, "-o", str(tmp_path / "x.png")])
+    assert res.exit_code == 1 and "has fields: name the job it was marked with (--job" \
+        in res.output and not (tmp_path / "x.png").exists()
+
+
 @pytest.mark.parametrize("spec", ['qr:"SN 0042"', 'microqr:"SN42"', 'datamatrix:"SN 0042"',
                                   'code128:"SN 0042"'])
 def test_a_perfect_mark_grades_a_and_a_blurred_faint_one_lower(spec):

@@ -36,6 +36,9 @@ def inspect(
         callback=bounded("length_mm"), help="Hatch spacing as marked, mm.")] = None,
     beam: Annotated[float, typer.Option(
         callback=bounded("length_mm"), help="Beam width, mm.")] = BEAM_MM,
+    job: Annotated[Path | None, typer.Option(
+        metavar="JOB.json", help="The job as marked: a pattern with fields ({serial}, {date}, "
+        "--var …) is read back as that job rendered it (its variable_data).")] = None,
     rig: Rig = None, field: Field = None, workpiece: Workpiece = "step-block", seed: Seed = 0,
 ) -> None:
     """Read a mark back from IMAGE (the station's camera, as calibrated): the pattern is
@@ -43,16 +46,27 @@ def inspect(
     cloud's surface around it, a code decoded and graded. Writes the picture of the mark with
     the plan over it and prints what was decoded, the offset from the plan and the grade;
     exit 1 when a code does not read as planned."""
+    from insitu.errors import FormatError
     from insitu.formats.images import read_image
     from insitu.formats.pointcloud import read_ply
-    from insitu.marking import Placement
+    from insitu.marking import Placement, read_job
+    from insitu.patterns.fields import is_template
     from insitu.services.inspect import read_back
     from insitu.services.mark import plan_mark, save_image
+    from insitu.services.serials import job_variables, render_placement
     from insitu.services.station import connect
 
     check_output(out, ".png")
     projection_mode(mode)
     placement = Placement(pattern, at, width, rotate, mode, hatch, beam_mm=beam)
+    if is_template(pattern):
+        if job is None:
+            raise FormatError(f"--pattern {pattern!r} has fields: name the job it was marked "
+                              "with (--job JOB.json), whose texts say what was marked")
+        values = job_variables(read_job(job), job)
+        if values is None:
+            raise FormatError(f"{job}: no variable_data: not the job of a pattern with fields")
+        placement = render_placement(placement, values.variables())
     measured = read_ply(cloud)
     with connect(rig, workpiece, seed, field=field) as station:
         cam = station.rig.camera
