@@ -189,13 +189,33 @@ def _module_grade(mod: np.ndarray) -> np.ndarray:
     return np.select([mod >= t for t in _MOD], [4, 3, 2, 1], 0)
 
 
+def grade_uec(uec: float) -> int:
+    """Unused error correction 0…1 graded 4…0 (A ≥ 0.62, B ≥ 0.50, C ≥ 0.37, D ≥ 0.25)."""
+    return _at_least(uec, _UEC)
+
+
 def _uec_grade(module_grades: np.ndarray, budget: float) -> int:
     """max over levels L of min(L, grade of 1 − share of modules below L / budget)."""
     best = 0
     for level in (4, 3, 2, 1):
         uec = 1.0 - float(np.mean(module_grades < level)) / budget
-        best = max(best, min(level, _at_least(uec, _UEC)))
+        best = max(best, min(level, grade_uec(uec)))
     return best
+
+
+def _local_shift(mods: np.ndarray, residual: np.ndarray, jj: np.ndarray, ii: np.ndarray,
+                 pitch: float) -> np.ndarray:
+    """(rows, cols, 2) px: the tiles' departures from the affine grid (T, 2) at their module
+    positions (T, 2) carried smoothly to every module (thin-plate spline, smoothed), so a
+    symbol on a curved part or under lens distortion is sampled on its modules; (0, 0) where
+    the departures are within a tenth of a module or too few tiles tell them."""
+    if len(mods) < 6 or np.max(np.linalg.norm(residual, axis=1)) < 0.1 * pitch:
+        return np.zeros((*jj.shape, 2))
+    from scipy.interpolate import RBFInterpolator
+
+    field = RBFInterpolator(mods, residual, kernel="thin_plate_spline", degree=1,
+                            smoothing=float(len(mods)))
+    return field(np.column_stack([jj.ravel(), ii.ravel()])).reshape(*jj.shape, 2)
 
 
 def grade_symbol(picture: np.ndarray, matrix: np.ndarray, centre00: np.ndarray,
@@ -225,6 +245,7 @@ def grade_symbol(picture: np.ndarray, matrix: np.ndarray, centre00: np.ndarray,
         an = abs(pu - pv) / ((pu + pv) / 2)
         gn = float(np.max(np.linalg.norm(found[good] - fitted, axis=1))) / pitch
         centres = np.stack([jj, ii, np.ones_like(jj)], -1) @ coef
+        centres += _local_shift(mods[good], found[good] - fitted, jj, ii, pitch)
     else:
         an, gn, centres = 1.0, 1.0, nominal
     k = max(1, int(round(0.5 * pitch)))
