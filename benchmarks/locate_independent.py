@@ -1,0 +1,98 @@
+"""Locate on a recording our code did not draw (``shared/recordings/step-block-independent``:
+another renderer, 16 of the 61 scan lines over the step block, mirror images of the line in
+the step faces in 5 frames): the scan replayed with Method 2 from its own recorded plate, then
+``insitu locate`` against the step block's mesh (what ``insitu sim export-part step-block``
+writes). truth.json is read only to score.
+
+Rows: the whole recording; the ICP's pose alone (the edge step off: what locate would give
+without refusing); the recording cut to the block's half y < 0 (a partial scan). Also how many
+points of the ghost frames' lines lie off the true surface (a ghost that reached the cloud).
+
+Run: .venv/bin/python benchmarks/locate_independent.py [RECORDINGS_DIR]
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+from rich.console import Console
+from rich.table import Table
+
+from insitu.formats.pointcloud import PointCloud
+from insitu.formats.sequence import Sequence
+from insitu.measure.locate import LocateRefused, locate_part
+from insitu.measure.part_reference import reference_from_mesh
+from insitu.services import calibrate_height, scan_replay
+from insitu.services.locate import locate_cloud
+from insitu.sim.workpieces import make_workpiece
+
+DEFAULT = Path(__file__).resolve().parents[2] / "shared" / "recordings"
+
+
+def measure(root: Path) -> tuple[PointCloud, dict, list[float]]:
+    """The replayed cloud, the truth, the x of the ghost frames' lines."""
+    scan = root / "step-block-independent"
+    truth = json.loads((scan / "truth.json").read_text())
+    cloud = scan_replay(scan, calibrate_height(root / "height-calibration-coarse-independent"))
+    ghosts = {f["file"] for f in truth["frames"] if f.get("ghost")}
+    xs = [f.line.start[0] for f in Sequence.open(scan).frames if f.file in ghosts]
+    return cloud.cloud, truth, xs
+
+
+def outcome(fn) -> tuple[str, object]:
+    try:
+        return "located", fn()
+    except LocateRefused as e:
+        return f"refused ({e.reason})", str(e)
+
+
+def main() -> None:
+    root = Path(sys.argv[1]) if len(sys.argv) > 1 else DEFAULT
+    cloud, truth, ghost_x = measure(root)
+    p = truth["workpiece"]["params"]
+    true_part = make_workpiece("step-block", length=p["y_size"], width=p["x_size"],
+                               heights=p["heights"], x=p["center"][0], y=p["center"][1])
+    mesh = make_workpiece("step-block")
+    ref = reference_from_mesh(mesh.vertices, mesh.triangles, "step-block")
+    pts = cloud.points
+    z = true_part.height(pts[:, 0], pts[:, 1])
+    off = np.abs(pts[:, 2] - np.nan_to_num(z, nan=0.0)) > 0.5
+    near_wall = np.zeros(len(pts), bool)
+    for dy in (-1.0, 1.0):
+        zn = true_part.height(pts[:, 0], pts[:, 1] + dy)
+        near_wall |= np.abs(np.nan_to_num(zn) - np.nan_to_num(z)) > 0.3
+    on_ghost = np.isin(np.round(pts[:, 0], 1), np.round(ghost_x, 1))
+    console = Console(width=160)
+    console.print(f"{len(pts):,} points, {len(np.unique(cloud.attributes['line']))} lines; "
+                  f"mesh {mesh.bounds()} vs truth {true_part.bounds()}; ghost lines at x = "
+                  f"{', '.join(f'{x:g}' for x in ghost_x)}: {int((off & on_ghost & ~near_wall).sum())} "
+                  f"of their points > 0.5 mm off the true surface away from walls (all lines: "
+                  f"{int((off & ~near_wall).sum())})")
+    t = Table(title="locate on the independent step-block recording (truth: x 0, y 0, 0°)")
+    for col in ("case", "outcome", "x mm", "y mm", "turn °", "error mm", "fitness",
+                "coverage", "why"):
+        t.add_column(col)
+    half = pts[:, 1] < 0
+    cases = (
+        ("whole recording", lambda: locate_cloud(ref, cloud)),
+        ("ICP only (no edge step)", lambda: locate_part(ref, pts)),
+        ("half the block (y < 0)", lambda: locate_part(ref, pts[half],
+                                                        lines=cloud.attributes["line"][half])),
+    )
+    for name, fn in cases:
+        what, res = outcome(fn)
+        if what == "located":
+            b = res.best
+            t.add_row(name, what, f"{b.x_mm:+.3f}", f"{b.y_mm:+.3f}", f"{b.angle_deg:+.3f}",
+                      f"{np.hypot(b.x_mm - p['center'][0], b.y_mm - p['center'][1]):.3f}",
+                      f"{b.fitness:.1%}", f"{b.coverage:.1%}", "")
+        else:
+            t.add_row(name, what, "", "", "", "", "", "", res)
+    console.print(t)
+
+
+if __name__ == "__main__":
+    main()
