@@ -35,6 +35,8 @@ def test_the_sparse_independent_scan_is_refused_never_located_wrong(scanned):
     with pytest.raises(LocateRefused) as e:
         locate_cloud(ref, cloud)
     assert e.value.reason == "poor-fit" and "not pinned down" in str(e.value)
+    # the step edges the lines cross all face ±y: the refusal names x as the free direction
+    assert "all face ±y: nothing holds the part along x" in str(e.value)
     # without the edge step, two poses 1.1 mm apart along x fit alike: x is not measured
     with pytest.raises(LocateRefused) as e:
         locate_part(ref, cloud.points)

@@ -182,3 +182,21 @@ def align_edges(heights: HeightImage, e: np.ndarray, u: np.ndarray,
     return EdgeFit(float(theta), c - R @ c + t, float(b), used,
                    float(np.sqrt(np.linalg.eigvalsh(cov[1:3, 1:3]).max())),
                    float(np.degrees(np.sqrt(cov[0, 0]))))
+
+
+HOLD = 0.02
+"""Below this share of the edges' normals (squared) along a direction, nothing holds it."""
+
+
+def unheld(heights: HeightImage, e: np.ndarray, u: np.ndarray
+           ) -> tuple[int, np.ndarray | None]:
+    """Why :func:`align_edges` may find no fit at this pose: the edge samples ``e`` (K, 3),
+    part frame, directions ``u`` (K, 2), that find the reference's edge, and the unit
+    direction (2,) part frame along which their edges' normals give no hold (the least
+    eigenvector of Σ n nᵀ / K, its eigenvalue below :data:`HOLD`; None: both held)."""
+    s, n = edge_distance(heights, e, u)
+    ok = np.isfinite(s) & (np.einsum("ij,ij->i", n, u) > MIN_COS)
+    if not ok.any():
+        return 0, None
+    w, v = np.linalg.eigh(n[ok].T @ n[ok] / ok.sum())
+    return int(ok.sum()), (v[:, 0] if w[0] < HOLD else None)

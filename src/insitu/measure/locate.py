@@ -28,7 +28,7 @@ from scipy.spatial import cKDTree
 
 from insitu.errors import MeasurementError
 from insitu.measure.flat_icp import Fit, Pose4, apply, icp_flat, inverse, matrix, rot_z, score
-from insitu.measure.edge_align import align_edges, edge_samples
+from insitu.measure.edge_align import align_edges, edge_samples, unheld
 from insitu.measure.part_reference import (PartReference, above_table, coarse_features,
                                            find_table, thin)
 
@@ -71,7 +71,7 @@ class Solution:
     (degrees, −180 … 180); ``fitness``, ``coverage`` and ``rmse_mm`` as in the module's
     docstring; ``score`` = fitness × coverage; ``edges``: the edge samples that fixed x, y
     and the turn (0: not refined, the ICP's), ``sigma_mm`` and ``sigma_deg`` their 1σ
-    (None: not refined; inf: the edges could not fix them)."""
+    (None: not refined; inf: the edges could not fix them, ``unheld`` then says why)."""
 
     x_mm: float
     y_mm: float
@@ -83,6 +83,7 @@ class Solution:
     edges: int = 0
     sigma_mm: float | None = None
     sigma_deg: float | None = None
+    unheld: str = ""
 
     @property
     def score(self) -> float:
@@ -259,19 +260,40 @@ def _aligned(ref: PartReference, pts: np.ndarray, lines: np.ndarray | None,
             continue
         a, t = _pose_of(sol)
         step = align_edges(ref.heights, apply((a, t), e), u @ rot_z(a)[:2, :2].T)
-        edges = (0, np.inf, np.inf)
-        if step is not None:
+        edges, why = (0, np.inf, np.inf), ""
+        if step is None:
+            why = _why_unheld(ref, apply((a, t), e), u @ rot_z(a)[:2, :2].T, len(e), a)
+        else:
             a = a + step.angle_rad
             t = rot_z(step.angle_rad) @ t + np.append(step.shift_mm, 0.0)
             edges = (step.samples, step.sigma_mm, step.sigma_deg)
         fit = score((a, t), fine, ref.points, ref.normals, ref.tree, s.inlier_mm)
         out.append(replace(_solution(fit, ref, scan_tree, s.cover_mm), edges=edges[0],
-                           sigma_mm=edges[1], sigma_deg=edges[2]))
+                           sigma_mm=edges[1], sigma_deg=edges[2], unheld=why))
     kept: list[Solution] = []                 # two starts may have met on the same edges
     for sol in sorted(out, key=lambda o: -o.score):
         if all(_distinct(_pose_of(sol), _pose_of(k)) for k in kept):
             kept.append(sol)
     return kept
+
+
+def _why_unheld(ref: PartReference, e: np.ndarray, u: np.ndarray, total: int,
+                angle_rad: float) -> str:
+    """Why the edges give no fit at a pose: too few of the scan's ``total`` edge samples
+    (``e``, ``u`` in the part's frame) find the reference's edges, or those found all face
+    one way and leave a direction free (named in the world frame; ``angle_rad``: the world →
+    part turn)."""
+    found, free = unheld(ref.heights, e, u)
+    if free is None:
+        return (f"{found} of the scan's {total} edge samples find the reference's edges "
+                "(at least 20 and 70% needed)")
+    d = rot_z(-angle_rad)[:2, :2] @ free                # part frame → world
+    near = np.cos(np.radians(20))
+    name, faces = (("x", "±y") if abs(d[0]) > near else ("y", "±x") if abs(d[1]) > near
+                   else (f"({d[0]:+.2f}, {d[1]:+.2f})", f"({-d[1]:+.2f}, {d[0]:+.2f})"))
+    return (f"the {found} edges the scan lines cross all face {faces}: nothing holds the "
+            f"part along {name}; turn the part or the scan so that lines cross edges that "
+            f"face {name if name[0] == '(' else '±' + name}")
 
 
 def _pose_of(sol: Solution) -> Pose4:
@@ -337,8 +359,8 @@ def _choose(sols: list[Solution], n: int, where: str, s: LocateSettings,
     if best.sigma_mm is not None:
         spread = float(np.hypot(best.sigma_mm, np.radians(best.sigma_deg) * radius_mm))
         if not np.isfinite(spread):
-            raise LocateRefused("poor-fit", f"the scan's edges do not match the reference's "
-                                f"at {best.describe()}: x, y and the turn are not pinned down")
+            raise LocateRefused("poor-fit", f"x, y and the turn are not pinned down at "
+                                f"{best.describe()}: {best.unheld}")
         if not spread <= s.max_sigma_mm:
             raise LocateRefused(
                 "poor-fit", f"x, y and the turn are not pinned down by the edges the scan lines "
