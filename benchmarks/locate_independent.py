@@ -4,9 +4,11 @@ the step faces in 5 frames): the scan replayed with Method 2 from its own record
 ``insitu locate`` against the step block's mesh (what ``insitu sim export-part step-block``
 writes). truth.json is read only to score.
 
-Rows: the whole recording; the ICP's pose alone (the edge step off: what locate would give
-without refusing); the recording cut to the block's half y < 0 (a partial scan). Also how many
-points of the ghost frames' lines lie off the true surface (a ghost that reached the cloud).
+Rows: the whole recording; the ICP's pose alone (the edge step off); the recording cut to the
+block's half y < 0 (a partial scan). A pose refused as not pinned down is scored all the same
+(x, y, turn against the truth: what would have been marked on). Also how many points of the
+ghost frames' lines lie off the true surface (a ghost that reached the cloud) and how far the
+edge samples scatter about each step edge (what the edge step works from).
 
 Run: .venv/bin/python benchmarks/locate_independent.py [RECORDINGS_DIR]
 """
@@ -23,8 +25,9 @@ from rich.table import Table
 
 from insitu.formats.pointcloud import PointCloud
 from insitu.formats.sequence import Sequence
+from insitu.measure.edge_align import edge_samples
 from insitu.measure.locate import LocateRefused, locate_part
-from insitu.measure.part_reference import reference_from_mesh
+from insitu.measure.part_reference import above_table, find_table, reference_from_mesh
 from insitu.services import calibrate_height, scan_replay
 from insitu.services.locate import locate_cloud
 from insitu.sim.workpieces import make_workpiece
@@ -42,11 +45,30 @@ def measure(root: Path) -> tuple[PointCloud, dict, list[float]]:
     return cloud.cloud, truth, xs
 
 
-def outcome(fn) -> tuple[str, object]:
+def outcome(fn) -> tuple[str, object, object]:
+    """("located" or "refused (reason)", the pose's best solution or the refused one (None:
+    none), the refusal's message)."""
     try:
-        return "located", fn()
+        return "located", fn().best, ""
     except LocateRefused as e:
-        return f"refused ({e.reason})", str(e)
+        return f"refused ({e.reason})", e.best, str(e)
+
+
+def edge_scatter(cloud: PointCloud) -> tuple[int, list[tuple[float, float]]]:
+    """The scan's edge samples and, per step edge of the block (samples within 1.5 mm of
+    y = −40, −20, 0, 20, 40), the rms and largest |residual| about a line fitted to them,
+    mm: how well the lines measure an edge on these frames."""
+    pts, lines = cloud.points, cloud.attributes["line"]
+    up = above_table(pts, find_table(pts, 0.5), 0.5)
+    e, _ = edge_samples(pts, lines, ~up)
+    out = []
+    for y in (-40, -20, 0, 20, 40):
+        sel = np.abs(e[:, 1] - y) < 1.5
+        if sel.sum() >= 3:
+            A = np.column_stack([e[sel, 0], np.ones(sel.sum())])
+            r = e[sel, 1] - A @ np.linalg.lstsq(A, e[sel, 1], rcond=None)[0]
+            out.append((float(np.sqrt(np.mean(r**2))), float(np.abs(r).max())))
+    return len(e), out
 
 
 def main() -> None:
@@ -71,9 +93,14 @@ def main() -> None:
                   f"{', '.join(f'{x:g}' for x in ghost_x)}: {int((off & on_ghost & ~near_wall).sum())} "
                   f"of their points > 0.5 mm off the true surface away from walls (all lines: "
                   f"{int((off & ~near_wall).sum())})")
-    t = Table(title="locate on the independent step-block recording (truth: x 0, y 0, 0°)")
-    for col in ("case", "outcome", "x mm", "y mm", "turn °", "error mm", "fitness",
-                "coverage", "why"):
+    n, scatter = edge_scatter(cloud)
+    console.print(f"{n} edge samples; about each step edge's fitted line rms "
+                  + ", ".join(f"{r:.3f}" for r, _ in scatter) + " mm, largest "
+                  + ", ".join(f"{m:.3f}" for _, m in scatter) + " mm")
+    t = Table(title="locate on the independent step-block recording (truth: x 0, y 0, 0°); "
+                    "refused poses shown as refused, for scoring")
+    for col in ("case", "outcome", "x mm", "y mm", "turn °", "edges", "1σ turn °",
+                "fitness", "coverage", "why"):
         t.add_column(col)
     half = pts[:, 1] < 0
     cases = (
@@ -83,14 +110,14 @@ def main() -> None:
                                                         lines=cloud.attributes["line"][half])),
     )
     for name, fn in cases:
-        what, res = outcome(fn)
-        if what == "located":
-            b = res.best
-            t.add_row(name, what, f"{b.x_mm:+.3f}", f"{b.y_mm:+.3f}", f"{b.angle_deg:+.3f}",
-                      f"{np.hypot(b.x_mm - p['center'][0], b.y_mm - p['center'][1]):.3f}",
-                      f"{b.fitness:.1%}", f"{b.coverage:.1%}", "")
+        what, b, why = outcome(fn)
+        if b is None:
+            t.add_row(name, what, "", "", "", "", "", "", "", why)
         else:
-            t.add_row(name, what, "", "", "", "", "", "", res)
+            t.add_row(name, what, f"{b.x_mm - p['center'][0]:+.3f}",
+                      f"{b.y_mm - p['center'][1]:+.3f}", f"{b.angle_deg:+.3f}", str(b.edges),
+                      "" if b.sigma_deg is None else f"{b.sigma_deg:.3f}",
+                      f"{b.fitness:.1%}", f"{b.coverage:.1%}", why)
     console.print(t)
 
 

@@ -38,11 +38,13 @@ MAX_FINE_POINTS = 40_000
 
 class LocateRefused(MeasurementError):
     """The part's pose is not given: ``reason`` is "no-part", "poor-fit", "partial",
-    "ambiguous" or "not-preferred"; the message names the numbers."""
+    "ambiguous" or "not-preferred"; the message names the numbers; ``best``: the pose that
+    was refused as not pinned down (None otherwise), for scoring."""
 
-    def __init__(self, reason: str, message: str):
+    def __init__(self, reason: str, message: str, best: Solution | None = None):
         super().__init__(message)
         self.reason = reason
+        self.best = best
 
 
 @dataclass(frozen=True)
@@ -259,14 +261,19 @@ def _aligned(ref: PartReference, pts: np.ndarray, lines: np.ndarray | None,
             out.append(sol)
             continue
         a, t = _pose_of(sol)
-        step = align_edges(ref.heights, apply((a, t), e), u @ rot_z(a)[:2, :2].T)
+        ep, up = apply((a, t), e), u @ rot_z(a)[:2, :2].T
+        step = align_edges(ref.heights, ep, up)
         edges, why = (0, np.inf, np.inf), ""
         if step is None:
-            why = _why_unheld(ref, apply((a, t), e), u @ rot_z(a)[:2, :2].T, len(e), a)
+            why, free = _why_unheld(ref, ep, up, len(e), a)
+            step = None if free is None else align_edges(ref.heights, ep, up, free=free)
+            if step is not None:              # the turn and the shift across held: refined
+                edges = (step.samples, np.inf, step.sigma_deg)
         else:
+            edges = (step.samples, step.sigma_mm, step.sigma_deg)
+        if step is not None:
             a = a + step.angle_rad
             t = rot_z(step.angle_rad) @ t + np.append(step.shift_mm, 0.0)
-            edges = (step.samples, step.sigma_mm, step.sigma_deg)
         fit = score((a, t), fine, ref.points, ref.normals, ref.tree, s.inlier_mm)
         out.append(replace(_solution(fit, ref, scan_tree, s.cover_mm), edges=edges[0],
                            sigma_mm=edges[1], sigma_deg=edges[2], unheld=why))
@@ -278,22 +285,22 @@ def _aligned(ref: PartReference, pts: np.ndarray, lines: np.ndarray | None,
 
 
 def _why_unheld(ref: PartReference, e: np.ndarray, u: np.ndarray, total: int,
-                angle_rad: float) -> str:
-    """Why the edges give no fit at a pose: too few of the scan's ``total`` edge samples
-    (``e``, ``u`` in the part's frame) find the reference's edges, or those found all face
-    one way and leave a direction free (named in the world frame; ``angle_rad``: the world →
-    part turn)."""
+                angle_rad: float) -> tuple[str, np.ndarray | None]:
+    """Why the edges give no fit at a pose, and the direction (2,) part frame they leave
+    free (None: none): too few of the scan's ``total`` edge samples (``e``, ``u`` in the
+    part's frame) find the reference's edges, or those found all face one way (the free
+    direction named in the world frame; ``angle_rad``: the world → part turn)."""
     found, free = unheld(ref.heights, e, u)
     if free is None:
         return (f"{found} of the scan's {total} edge samples find the reference's edges "
-                "(at least 20 and 70% needed)")
+                "(at least 20 and 70% needed)"), None
     d = rot_z(-angle_rad)[:2, :2] @ free                # part frame → world
     near = np.cos(np.radians(20))
     name, faces = (("x", "±y") if abs(d[0]) > near else ("y", "±x") if abs(d[1]) > near
                    else (f"({d[0]:+.2f}, {d[1]:+.2f})", f"({-d[1]:+.2f}, {d[0]:+.2f})"))
     return (f"the {found} edges the scan lines cross all face {faces}: nothing holds the "
             f"part along {name}; turn the part or the scan so that lines cross edges that "
-            f"face {name if name[0] == '(' else '±' + name}")
+            f"face {name if name[0] == '(' else '±' + name}"), free
 
 
 def _pose_of(sol: Solution) -> Pose4:
@@ -360,12 +367,12 @@ def _choose(sols: list[Solution], n: int, where: str, s: LocateSettings,
         spread = float(np.hypot(best.sigma_mm, np.radians(best.sigma_deg) * radius_mm))
         if not np.isfinite(spread):
             raise LocateRefused("poor-fit", f"x, y and the turn are not pinned down at "
-                                f"{best.describe()}: {best.unheld}")
+                                f"{best.describe()}: {best.unheld}", best)
         if not spread <= s.max_sigma_mm:
             raise LocateRefused(
                 "poor-fit", f"x, y and the turn are not pinned down by the edges the scan lines "
                 f"cross ({best.edges} samples; 1σ {best.sigma_mm:.3f} mm and "
                 f"{best.sigma_deg:.3f}°, {spread:.3f} mm at the part's rim, at most "
                 f"{s.max_sigma_mm:g} mm): scan finer (binning, spacing), or turn the part or "
-                "the scan when its edges run along the lines")
+                "the scan when its edges run along the lines", best)
     return best, second
