@@ -82,3 +82,21 @@ def test_inspect_reads_a_photo_without_a_plan(tmp_path):
     res = CliRunner().invoke(app, ["inspect", str(blank), "--at", "1", "2"])
     assert res.exit_code == 1 and isinstance(res.exception, SystemExit)
     assert "needs --cloud, --pattern, -o too" in " ".join(res.output.split())
+
+
+def test_only_a_small_picture_is_enlarged(monkeypatch):
+    import cv2
+
+    from insitu.vision import code_decode
+
+    sizes = []
+    real = cv2.resize
+    monkeypatch.setattr(code_decode.cv2, "resize",
+                        lambda img, *a, **k: sizes.append(img.shape) or real(img, *a, **k))
+    rng = np.random.default_rng(0)
+    assert code_decode.read_codes(rng.integers(0, 255, (120, 90), np.uint8)) == ([], 1.0)
+    assert sizes == [(120, 90)]
+    sizes.clear()
+    wide = rng.integers(0, 255, (40, code_decode.ENLARGE_MAX_PX + 1), np.uint8)
+    assert code_decode.read_codes(wide) == ([], 1.0)
+    assert sizes == []

@@ -4,7 +4,7 @@ zxing's local and global thresholds, then binarised (Otsu) with the marks thinne
 a third of a module — a laser or peened mark grows beyond its modules, leaving the light ones
 small — and, for a symbol of few pixels a module, all of this again on the picture enlarged
 twice (bicubic) after a local contrast equalisation (CLAHE), which lifts a faint mark on a
-shaded or curved part. Dark marks on light ground or light on dark (``try_invert``).
+shaded or curved part (pictures up to :data:`ENLARGE_MAX_PX` a side). Dark marks on light ground or light on dark (``try_invert``).
 """
 
 from __future__ import annotations
@@ -15,6 +15,7 @@ import cv2
 import numpy as np
 
 MATRIX_FORMATS = ("QRCode", "MicroQRCode", "DataMatrix")   # zxing-cpp's names, 2-D matrix codes
+ENLARGE_MAX_PX = 2048      # pictures larger than this (either side) are not enlarged
 
 
 def _grey_u8(picture: np.ndarray) -> np.ndarray:
@@ -36,7 +37,7 @@ def _attempts(picture: np.ndarray, module_px: float) -> Iterator[tuple[np.ndarra
     if raw.dtype == np.uint8:
         yield (cv2.cvtColor(raw, cv2.COLOR_BGR2GRAY) if raw.ndim == 3 else raw), "LocalAverage"
     img = _grey_u8(picture)
-    for scale in (1, 2):
+    for scale in (1, 2) if max(img.shape) <= ENLARGE_MAX_PX else (1,):
         if scale == 2:
             img = cv2.createCLAHE(clipLimit=2.0, tileGridSize=(8, 8)).apply(img)
             img = cv2.resize(img, None, fx=2, fy=2, interpolation=cv2.INTER_CUBIC)
@@ -54,7 +55,9 @@ def read_codes(picture: np.ndarray, formats: str | tuple[str, ...] = MATRIX_FORM
     """The codes zxing-cpp reads in ``picture`` ((H, W) grey of any depth, NaN: not seen, or
     (H, W, 3) BGR) of ``formats`` (zxing-cpp's format names) at the first rung of the ladder
     that reads any, and that rung's scale (1 or 2: positions are in its pixels). ``module_px``:
-    a module's size in pixels, as far as known; ``enlarge``: also try the enlarged rung.
+    a module's size in pixels, as far as known; ``enlarge``: also try the enlarged rung (never
+    for a picture larger than :data:`ENLARGE_MAX_PX`: its modules are not few pixels, and
+    four times its pixels would cost seconds and memory).
     ([], 1.0) when nothing is read."""
     import zxingcpp
 
