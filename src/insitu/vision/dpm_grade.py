@@ -13,7 +13,11 @@ What is measured, and how it differs from the standards' exact methods:
 * **Cell contrast** CC = (ML − MD) / ML, ML, MD the mean light and dark module reflectances
   (29158 §7.3, the picture's grey values: scale-free, no calibrated reflectance).
 * **Cell modulation** and **reflectance margin**: each module's MOD = 2 |R − GT| / |ML − MD|
-  (GT = (ML + MD) / 2) graded A ≥ 0.50, B ≥ 0.40, C ≥ 0.30, D ≥ 0.20; the margin grades a
+  (GT = (ML + MD) / 2; here ML and MD where the module lies, the light and dark modules'
+  values smoothed over :data:`SHADING_MODULES`, so a shadow or glare across the mark moves
+  the threshold with it — ISO's verifier lights evenly, a side camera or a photo does not;
+  a marking fault that fades over more modules than that reads as light, and shows in CC)
+  graded A ≥ 0.50, B ≥ 0.40, C ≥ 0.30, D ≥ 0.20; the margin grades a
   module on the wrong side of GT (against the plan) F. The standards grade codewords and
   weigh them against the unused error correction; here the share of modules below each level
   is weighed against a symbology's module budget (:data:`MODULE_BUDGET`, an estimate from
@@ -218,6 +222,27 @@ def _local_shift(mods: np.ndarray, residual: np.ndarray, jj: np.ndarray, ii: np.
     return field(np.column_stack([jj.ravel(), ii.ravel()])).reshape(*jj.shape, 2)
 
 
+SHADING_MODULES = 4.0                  # the light's shading is smoothed over this many modules
+
+
+def _levels(R: np.ndarray, matrix: np.ndarray, visible: np.ndarray,
+            overall: tuple[float, float]) -> tuple[np.ndarray, np.ndarray]:
+    """The light and dark modules' reflectance where each module lies (rows, cols): their
+    seen values smoothed over :data:`SHADING_MODULES` (Gaussian σ, normalised), the symbol's
+    means ``overall`` (ML, MD) where none is near. A side camera under room light, a photo
+    with a shadow or glare across the mark: the threshold and the modulation follow the
+    light, so a code half in shadow is not graded F for it; a defect of a few modules
+    stays (it moves its own level by a fraction of its size)."""
+    from scipy.ndimage import gaussian_filter
+
+    out = []
+    for cls, mean in ((~matrix & visible, overall[0]), (matrix & visible, overall[1])):
+        w = gaussian_filter(cls.astype(float), SHADING_MODULES, mode="constant")
+        v = gaussian_filter(np.where(cls, R, 0.0), SHADING_MODULES, mode="constant")
+        out.append(np.where(w > 1e-3, v / np.maximum(w, 1e-3), mean))
+    return out[0], out[1]
+
+
 def grade_symbol(picture: np.ndarray, matrix: np.ndarray, centre00: np.ndarray,
                  col_step: np.ndarray, row_step: np.ndarray, symbology: str,
                  decoded: bool) -> Grades:
@@ -260,8 +285,10 @@ def grade_symbol(picture: np.ndarray, matrix: np.ndarray, centre00: np.ndarray,
     inverted = MD > ML
     span = abs(ML - MD)
     cc = span / max(ML, MD, 1e-9)
-    gt = (ML + MD) / 2
-    mod = np.where(visible, 2 * np.abs(R - gt) / max(span, 1e-9), 0.0)
+    light, dark_level = _levels(R, matrix, visible, (ML, MD))
+    gt = (light + dark_level) / 2
+    mod = np.where(visible, 2 * np.abs(R - gt) / np.maximum(np.abs(light - dark_level),
+                                                             1e-9), 0.0)
     mgrade = _module_grade(mod)
     dark = (R < gt) != inverted
     wrong = (dark != matrix) | ~visible
