@@ -18,7 +18,7 @@ MATRIX_FORMATS = ("QRCode", "MicroQRCode", "DataMatrix")   # zxing-cpp's names, 
 ENLARGE_MAX_PX = 2048      # pictures larger than this (either side) are not enlarged
 
 
-def _grey_u8(picture: np.ndarray) -> np.ndarray:
+def stretch_u8(picture: np.ndarray) -> np.ndarray:
     """(H, W) uint8 stretched between the 1st and 99th percentiles of the seen (finite)
     pixels; unseen ones the median. Colour (H, W, 3) BGR is turned grey first."""
     p = np.asarray(picture)
@@ -36,7 +36,7 @@ def _attempts(picture: np.ndarray, module_px: float) -> Iterator[tuple[np.ndarra
     raw = np.asarray(picture)
     if raw.dtype == np.uint8:
         yield (cv2.cvtColor(raw, cv2.COLOR_BGR2GRAY) if raw.ndim == 3 else raw), "LocalAverage"
-    img = _grey_u8(picture)
+    img = stretch_u8(picture)
     for scale in (1, 2) if max(img.shape) <= ENLARGE_MAX_PX else (1,):
         if scale == 2:
             img = cv2.createCLAHE(clipLimit=2.0, tileGridSize=(8, 8)).apply(img)

@@ -19,7 +19,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from insitu.vision.code_decode import MATRIX_FORMATS, read_codes
+from insitu.vision.code_decode import MATRIX_FORMATS, read_codes, stretch_u8
 from insitu.vision.dpm_grade import Grades, grade_symbol, grade_uec, measure_grid
 
 PX_PER_MODULE = 8
@@ -62,6 +62,23 @@ def _corners(code, scale: float) -> np.ndarray:
     return np.array([[q.x, q.y] for q in pts], np.float64) / scale
 
 
+def _outer(rows: int, cols: int) -> np.ndarray:
+    """(4, 2) float32: the symbol's outer corners in the rectified picture, px."""
+    s, q = PX_PER_MODULE, QUIET_MODULES
+    return np.array([[q, q], [q + cols, q], [q + cols, q + rows], [q, q + rows]],
+                    np.float32) * s - 0.5
+
+
+CENTRE00 = np.full(2, (QUIET_MODULES + 0.5) * PX_PER_MODULE - 0.5)
+"""Module (0, 0)'s centre in the rectified picture, px."""
+
+
+def _grade(picture: np.ndarray, matrix: np.ndarray, symbology: str) -> Grades:
+    step = float(PX_PER_MODULE)
+    return grade_symbol(picture, matrix, CENTRE00, np.array([step, 0.0]),
+                        np.array([0.0, step]), symbology, True)
+
+
 def rectify_symbol(grey: np.ndarray, corners: np.ndarray, rows: int, cols: int
                    ) -> np.ndarray:
     """The symbol whose outer corners (4, 2) px (top-left, top-right, bottom-right,
@@ -69,16 +86,13 @@ def rectify_symbol(grey: np.ndarray, corners: np.ndarray, rows: int, cols: int
     :data:`PX_PER_MODULE` px (q = :data:`QUIET_MODULES`), float32, NaN outside the photo.
     Module (0, 0)'s centre is at ((q + ½) s − ½, (q + ½) s − ½) px, s = PX_PER_MODULE."""
     s, q = PX_PER_MODULE, QUIET_MODULES
-    dst = np.array([[q, q], [q + cols, q], [q + cols, q + rows], [q, q + rows]],
-                   np.float32) * s - 0.5
-    H = cv2.getPerspectiveTransform(corners.astype(np.float32), dst)
+    H = cv2.getPerspectiveTransform(corners.astype(np.float32), _outer(rows, cols))
     size = ((cols + 2 * q) * s, (rows + 2 * q) * s)
     return cv2.warpPerspective(grey.astype(np.float32), H, size, flags=cv2.INTER_LINEAR,
                                borderMode=cv2.BORDER_CONSTANT, borderValue=np.nan)
 
 
-def _refined(grey: np.ndarray, corners: np.ndarray, matrix: np.ndarray,
-             centre00: np.ndarray) -> np.ndarray:
+def _refined(grey: np.ndarray, corners: np.ndarray, matrix: np.ndarray) -> np.ndarray:
     """The symbol's corners (4, 2) px moved to where its modules are: zxing-cpp gives them to
     the whole pixel, a fifth of a module on a small symbol, which sways the grades with the
     photo's turn. The symbol rectified by ``corners``, its tiles found
@@ -86,10 +100,10 @@ def _refined(grey: np.ndarray, corners: np.ndarray, matrix: np.ndarray,
     outer corners carried back into the photo. ``corners`` unchanged when fewer than three
     tiles are found."""
     rows, cols = matrix.shape
-    s, q = PX_PER_MODULE, QUIET_MODULES
+    s = PX_PER_MODULE
     picture = rectify_symbol(grey, corners, rows, cols)
     filled = np.where(np.isfinite(picture), picture, np.nanmedian(picture)).astype(np.float32)
-    mods, found, score = measure_grid(filled, matrix, centre00, np.array([s, 0.0]),
+    mods, found, score = measure_grid(filled, matrix, CENTRE00, np.array([s, 0.0]),
                                       np.array([0.0, s]))
     good = score > 0.3
     if good.sum() < 3:
@@ -98,9 +112,7 @@ def _refined(grey: np.ndarray, corners: np.ndarray, matrix: np.ndarray,
     coef, *_ = np.linalg.lstsq(A, found[good], rcond=None)
     outer = np.array([[-0.5, -0.5, 1], [cols - 0.5, -0.5, 1], [cols - 0.5, rows - 0.5, 1],
                       [-0.5, rows - 0.5, 1]]) @ coef                 # rectified px
-    dst = np.array([[q, q], [q + cols, q], [q + cols, q + rows], [q, q + rows]],
-                   np.float32) * s - 0.5
-    H = cv2.getPerspectiveTransform(corners.astype(np.float32), dst)
+    H = cv2.getPerspectiveTransform(corners.astype(np.float32), _outer(rows, cols))
     return cv2.perspectiveTransform(outer[None].astype(np.float64), np.linalg.inv(H))[0]
 
 
@@ -115,14 +127,12 @@ def _reread(picture: np.ndarray, code, matrix: np.ndarray, inverted: bool):
 
     rows, cols = matrix.shape
     s, q = PX_PER_MODULE, QUIET_MODULES
-    seen = np.isfinite(picture)
-    lo, hi = np.percentile(picture[seen], [1, 99])
-    img = np.clip((np.where(seen, picture, 0) - lo) / max(hi - lo, 1e-6) * 255, 0, 255)
-    ground = np.ones(img.shape, bool)
-    ground[q * s:(q + rows) * s, q * s:(q + cols) * s] = False
-    img[ground | ~seen] = 0 if inverted else 255
-    found = [b for b in zxingcpp.read_barcodes(img.astype(np.uint8), formats=code.format)
-             if b.valid]
+    img = stretch_u8(picture)
+    ground = ~np.isfinite(picture)
+    ground[:q * s] = ground[(q + rows) * s:] = True
+    ground[:, :q * s] = ground[:, (q + cols) * s:] = True
+    img[ground] = 0 if inverted else 255
+    found = [b for b in zxingcpp.read_barcodes(img, formats=code.format) if b.valid]
     if not found or found[0].text != code.text:
         return None
     again = np.asarray(found[0].to_image(add_quiet_zones=False)) < 128
@@ -149,18 +159,14 @@ def read_photo(image: np.ndarray) -> tuple[PhotoCode, ...]:
         sides = np.linalg.norm(corners - np.roll(corners, -1, axis=0), axis=1)
         module_px = float(np.mean([sides[0] / cols, sides[1] / rows, sides[2] / cols,
                                    sides[3] / rows]))
-        centre00 = np.full(2, (QUIET_MODULES + 0.5) * PX_PER_MODULE - 0.5)
-        corners = _refined(grey, corners, matrix, centre00)
+        corners = _refined(grey, corners, matrix)
         picture = rectify_symbol(grey, corners, rows, cols)
         symbology = SYMBOLOGY[code.format.name]
-        step = float(PX_PER_MODULE)
-        grades = grade_symbol(picture, matrix, centre00, np.array([step, 0.0]),
-                              np.array([0.0, step]), symbology, True)
+        grades = _grade(picture, matrix, symbology)
         again = _reread(picture, code, matrix, grades.inverted)
         if again is not None:
             code, matrix = again, np.asarray(again.to_image(add_quiet_zones=False)) < 128
-            grades = grade_symbol(picture, matrix, centre00, np.array([step, 0.0]),
-                                  np.array([0.0, step]), symbology, True)
+            grades = _grade(picture, matrix, symbology)
         uec = code.extra.get("UEC") if isinstance(code.extra, dict) else None
         out.append(PhotoCode(code.text, symbology, corners, matrix, module_px,
                              None if uec is None else float(uec), grades, picture))
@@ -170,11 +176,7 @@ def read_photo(image: np.ndarray) -> tuple[PhotoCode, ...]:
 def photo_picture(codes: tuple[PhotoCode, ...]) -> np.ndarray:
     """(H, W) uint8: the rectified symbols side by side, each stretched to its own 1st…99th
     percentile (unseen: black)."""
-    tiles = []
-    for c in codes:
-        p = c.picture
-        lo, hi = np.nanpercentile(p, [1, 99])
-        tiles.append(np.nan_to_num(np.clip((p - lo) / max(hi - lo, 1e-6) * 255, 0, 255)))
+    tiles = [np.where(np.isfinite(c.picture), stretch_u8(c.picture), 0) for c in codes]
     h = max(t.shape[0] for t in tiles)
     return np.hstack([np.pad(t, ((0, h - t.shape[0]), (0, PX_PER_MODULE)))
                       for t in tiles]).astype(np.uint8)
