@@ -9,8 +9,8 @@ from typing import Annotated
 import typer
 
 from insitu.cli.common import bounded, check_output, console, one_line_errors
-from insitu.errors import ConfigError
 from insitu.cli.job import Field, Rig, Seed, Workpiece, print_read_back
+from insitu.errors import ConfigError
 from insitu.marking.modes import PROJECTIONS, projection_mode
 from insitu.patterns.load import sources_help
 from insitu.patterns.vector import BEAM_MM

@@ -292,8 +292,10 @@ def _why_unheld(ref: PartReference, e: np.ndarray, u: np.ndarray, total: int,
     direction named in the world frame; ``angle_rad``: the world → part turn)."""
     found, free = unheld(ref.heights, e, u)
     if free is None:
-        return (f"{found} of the scan's {total} edge samples find the reference's edges "
-                "(at least 20 and 70% needed)"), None
+        enough = found >= 20 and found >= 0.7 * total
+        return (f"{found} of the scan's {total} edge samples find the reference's edges"
+                + (", but they settle into no one fit" if enough
+                   else " (at least 20 and 70% needed)")), None
     d = rot_z(-angle_rad)[:2, :2] @ free                # part frame → world
     near = np.cos(np.radians(20))
     name, faces = (("x", "±y") if abs(d[0]) > near else ("y", "±x") if abs(d[1]) > near
