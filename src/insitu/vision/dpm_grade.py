@@ -13,10 +13,10 @@ What is measured, and how it differs from the standards' exact methods:
 * **Cell contrast** CC = (ML − MD) / ML, ML, MD the mean light and dark module reflectances
   (29158 §7.3, the picture's grey values: scale-free, no calibrated reflectance).
 * **Cell modulation** and **reflectance margin**: each module's MOD = 2 |R − GT| / |ML − MD|
-  (GT = (ML + MD) / 2; here ML and MD where the module lies, the light and dark modules'
-  values smoothed over :data:`SHADING_MODULES`, so a shadow or glare across the mark moves
-  the threshold with it — ISO's verifier lights evenly, a side camera or a photo does not;
-  a marking fault that fades over more modules than that reads as light, and shows in CC)
+  (GT = (ML + MD) / 2 where the module lies: the light and dark modules' values smoothed
+  over :data:`SHADING_MODULES`, so a shadow or glare across the mark moves the threshold
+  with it — ISO's verifier lights evenly, a side camera or a photo does not; the span
+  |ML − MD| stays the symbol's, so the contrast a shadow takes still lowers the modulation)
   graded A ≥ 0.50, B ≥ 0.40, C ≥ 0.30, D ≥ 0.20; the margin grades a
   module on the wrong side of GT (against the plan) F. The standards grade codewords and
   weigh them against the unused error correction; here the share of modules below each level
@@ -230,9 +230,9 @@ def _levels(R: np.ndarray, matrix: np.ndarray, visible: np.ndarray,
     """The light and dark modules' reflectance where each module lies (rows, cols): their
     seen values smoothed over :data:`SHADING_MODULES` (Gaussian σ, normalised), the symbol's
     means ``overall`` (ML, MD) where none is near. A side camera under room light, a photo
-    with a shadow or glare across the mark: the threshold and the modulation follow the
-    light, so a code half in shadow is not graded F for it; a defect of a few modules
-    stays (it moves its own level by a fraction of its size)."""
+    with a shadow or glare across the mark: the threshold follows the light, so the modules
+    of a code half in shadow are not counted on the wrong side of it; a defect of a few
+    modules stays (it moves its own level by a fraction of its size)."""
     from scipy.ndimage import gaussian_filter
 
     out = []
@@ -287,8 +287,7 @@ def grade_symbol(picture: np.ndarray, matrix: np.ndarray, centre00: np.ndarray,
     cc = span / max(ML, MD, 1e-9)
     light, dark_level = _levels(R, matrix, visible, (ML, MD))
     gt = (light + dark_level) / 2
-    mod = np.where(visible, 2 * np.abs(R - gt) / np.maximum(np.abs(light - dark_level),
-                                                             1e-9), 0.0)
+    mod = np.where(visible, 2 * np.abs(R - gt) / max(span, 1e-9), 0.0)
     mgrade = _module_grade(mod)
     dark = (R < gt) != inverted
     wrong = (dark != matrix) | ~visible
