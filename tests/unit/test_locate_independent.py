@@ -43,10 +43,12 @@ def test_the_sparse_independent_scan_is_refused_never_located_wrong(scanned):
     best = e.value.best
     assert best is not None and best.edges >= 50
     assert abs(best.y_mm) < 0.1 and abs(best.angle_deg) < 3 * best.sigma_deg < 1.0
-    # without the edge step, two poses 1.1 mm apart along x fit alike: x is not measured
+    # without the edge step, two poses 1.1 mm apart along x fit alike: x is not measured —
+    # refused as such, not as a symmetric part
     with pytest.raises(LocateRefused) as e:
         locate_part(ref, cloud.points)
-    assert e.value.reason == "ambiguous"
+    assert e.value.reason == "poor-fit"
+    assert "mm apart along x: nothing holds the part along x" in str(e.value)
 
 
 @pytest.mark.slow

@@ -296,13 +296,31 @@ def _why_unheld(ref: PartReference, e: np.ndarray, u: np.ndarray, total: int,
         return (f"{found} of the scan's {total} edge samples find the reference's edges"
                 + (", but they settle into no one fit" if enough
                    else " (at least 20 and 70% needed)")), None
-    d = rot_z(-angle_rad)[:2, :2] @ free                # part frame → world
-    near = np.cos(np.radians(20))
-    name, faces = (("x", "±y") if abs(d[0]) > near else ("y", "±x") if abs(d[1]) > near
-                   else (f"({d[0]:+.2f}, {d[1]:+.2f})", f"({-d[1]:+.2f}, {d[0]:+.2f})"))
+    name, faces = _direction(rot_z(-angle_rad)[:2, :2] @ free)     # part frame → world
     return (f"the {found} edges the scan lines cross all face {faces}: nothing holds the "
             f"part along {name}; turn the part or the scan so that lines cross edges that "
             f"face {name if name[0] == '(' else '±' + name}"), free
+
+
+def _direction(d: np.ndarray) -> tuple[str, str]:
+    """A world direction (2,) named ("x", "y" or its components) and the edges across it
+    ("±y", "±x", …)."""
+    near = np.cos(np.radians(20))
+    return (("x", "±y") if abs(d[0]) > near else ("y", "±x") if abs(d[1]) > near
+            else (f"({d[0]:+.2f}, {d[1]:+.2f})", f"({-d[1]:+.2f}, {d[0]:+.2f})"))
+
+
+def _slid(a: Solution, b: Solution) -> str | None:
+    """How two poses that fit alike differ by a shift alone (turned less than 2° apart):
+    the direction nothing holds, or None when they are turned apart (a symmetric part)."""
+    if abs((a.angle_deg - b.angle_deg + 180.0) % 360.0 - 180.0) >= 2.0:
+        return None
+    d = np.array([b.x_mm - a.x_mm, b.y_mm - a.y_mm])
+    name, _ = _direction(d / max(float(np.linalg.norm(d)), 1e-12))
+    return (f"{a.describe()} and {b.describe()} fit nearly equally, "
+            f"{float(np.linalg.norm(d)):.2f} mm apart along {name}: nothing holds the part "
+            f"along {name}" + ("" if a.sigma_mm is not None else
+                               " (the cloud records no scan lines: no edge step)"))
 
 
 def _pose_of(sol: Solution) -> Pose4:
@@ -355,6 +373,8 @@ def _choose(sols: list[Solution], n: int, where: str, s: LocateSettings,
                                 f"{prefer[0]:g} … {prefer[1]:g}°: found "
                                 + "; ".join(o.describe() for o in near))
         near = pick
+    if len(near) > 1 and (slid := _slid(near[0], near[1])) is not None:
+        raise LocateRefused("poor-fit", f"x, y and the turn are not pinned down: {slid}")
     if len(near) > 1:
         raise LocateRefused("ambiguous", f"ambiguous: {near[0].describe()} and "
                             f"{near[1].describe()} fit nearly equally (a symmetric part?): "
