@@ -13,10 +13,10 @@ What is measured, and how it differs from the standards' exact methods:
 * **Cell contrast** CC = (ML − MD) / ML, ML, MD the mean light and dark module reflectances
   (29158 §7.3, the picture's grey values: scale-free, no calibrated reflectance).
 * **Cell modulation** and **reflectance margin**: each module's MOD = 2 |R − GT| / |ML − MD|
-  (GT = (ML + MD) / 2 where the module lies: the light and dark modules' values smoothed
-  over :data:`SHADING_MODULES`, so a shadow or glare across the mark moves the threshold
-  with it — ISO's verifier lights evenly, a side camera or a photo does not; the span
-  |ML − MD| stays the symbol's, so the contrast a shadow takes still lowers the modulation)
+  (GT = (ML + MD) / 2 times the light where the module lies, :func:`_light`: a shadow or
+  glare across the mark moves the threshold with it — ISO's verifier lights evenly, a side
+  camera or a photo does not — a print fault does not; the span |ML − MD| stays the
+  symbol's, so the contrast a shadow takes still lowers the modulation)
   graded A ≥ 0.50, B ≥ 0.40, C ≥ 0.30, D ≥ 0.20; the margin grades a
   module on the wrong side of GT (against the plan) F. The standards grade codewords and
   weigh them against the unused error correction; here the share of modules below each level
@@ -225,22 +225,23 @@ def _local_shift(mods: np.ndarray, residual: np.ndarray, jj: np.ndarray, ii: np.
 SHADING_MODULES = 4.0                  # the light's shading is smoothed over this many modules
 
 
-def _levels(R: np.ndarray, matrix: np.ndarray, visible: np.ndarray,
-            overall: tuple[float, float]) -> tuple[np.ndarray, np.ndarray]:
-    """The light and dark modules' reflectance where each module lies (rows, cols): their
-    seen values smoothed over :data:`SHADING_MODULES` (Gaussian σ, normalised), the symbol's
-    means ``overall`` (ML, MD) where none is near. A side camera under room light, a photo
-    with a shadow or glare across the mark: the threshold follows the light, so the modules
-    of a code half in shadow are not counted on the wrong side of it; a defect of a few
-    modules stays (it moves its own level by a fraction of its size)."""
+def _light(R: np.ndarray, matrix: np.ndarray, visible: np.ndarray, ML: float, MD: float
+           ) -> np.ndarray:
+    """(rows, cols): the light falling where each module lies, relative to the symbol's
+    mean — the change the light and the dark modules' values (each smoothed over
+    :data:`SHADING_MODULES`, Gaussian σ, normalised) share: both darker in a shadow, both
+    lighter in glare, the smaller relative change of the two; 1 where they disagree. A print
+    fault moves one of them only (growth darkens the small light modules, a weak burn lightens
+    the dark ones) and is not taken for light."""
     from scipy.ndimage import gaussian_filter
 
-    out = []
-    for cls, mean in ((~matrix & visible, overall[0]), (matrix & visible, overall[1])):
+    rel = []
+    for cls, mean in ((~matrix & visible, ML), (matrix & visible, MD)):
         w = gaussian_filter(cls.astype(float), SHADING_MODULES, mode="constant")
         v = gaussian_filter(np.where(cls, R, 0.0), SHADING_MODULES, mode="constant")
-        out.append(np.where(w > 1e-3, v / np.maximum(w, 1e-3), mean))
-    return out[0], out[1]
+        rel.append(np.where(w > 1e-3, v / np.maximum(w, 1e-3) / max(mean, 1e-9) - 1, 0.0))
+    rl, rd = rel
+    return 1 + np.where(rl * rd > 0, np.sign(rl) * np.minimum(np.abs(rl), np.abs(rd)), 0.0)
 
 
 def grade_symbol(picture: np.ndarray, matrix: np.ndarray, centre00: np.ndarray,
@@ -285,8 +286,7 @@ def grade_symbol(picture: np.ndarray, matrix: np.ndarray, centre00: np.ndarray,
     inverted = MD > ML
     span = abs(ML - MD)
     cc = span / max(ML, MD, 1e-9)
-    light, dark_level = _levels(R, matrix, visible, (ML, MD))
-    gt = (light + dark_level) / 2
+    gt = (ML + MD) / 2 * _light(R, matrix, visible, ML, MD)
     mod = np.where(visible, 2 * np.abs(R - gt) / max(span, 1e-9), 0.0)
     mgrade = _module_grade(mod)
     dark = (R < gt) != inverted
