@@ -104,3 +104,25 @@ def test_only_a_small_picture_is_enlarged(monkeypatch):
     wide = rng.integers(0, 255, (40, code_decode.ENLARGE_MAX_PX + 1), np.uint8)
     assert code_decode.read_codes(wide) == ([], 1.0)
     assert sizes == []
+
+
+def test_a_bent_symbol_is_sampled_on_its_modules():
+    """A Data Matrix bent by a wave of 0.6 module across it (a code on a curved part, lens
+    distortion): the modules are sampled where the tiles found them, not on the affine grid
+    (D without); its grid nonuniformity still says it is bent."""
+    import cv2
+
+    from insitu.patterns.codes import zxing_matrix
+    from insitu.vision.dpm_grade import grade_symbol
+
+    m = zxing_matrix("datamatrix", "SN 0042 BENT ON A CYLINDER")
+    s, q = 8, 2
+    flat = np.kron(np.pad(~m, q, constant_values=True).astype(np.float32) * 160 + 40,
+                   np.ones((s, s), np.float32))
+    yy, xx = np.mgrid[0:flat.shape[0], 0:flat.shape[1]].astype(np.float32)
+    wave = 0.6 * s * np.sin(np.pi * (xx / (flat.shape[1] / 2) - 1))
+    bent = cv2.remap(flat, xx, yy + wave, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+    g = grade_symbol(bent, m, np.full(2, (q + 0.5) * s - 0.5), np.array([s, 0.0]),
+                     np.array([0.0, s]), "datamatrix", True)
+    assert g.overall >= 3 and g.reflectance_margin == 4, g.summary()
+    assert g.grid_nonuniformity > 0.1

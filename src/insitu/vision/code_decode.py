@@ -4,7 +4,8 @@ zxing's local and global thresholds, then binarised (Otsu) with the marks thinne
 a third of a module — a laser or peened mark grows beyond its modules, leaving the light ones
 small — and, for a symbol of few pixels a module, all of this again on the picture enlarged
 twice (bicubic) after a local contrast equalisation (CLAHE), which lifts a faint mark on a
-shaded or curved part (pictures up to :data:`ENLARGE_MAX_PX` a side). Dark marks on light ground or light on dark (``try_invert``).
+shaded or curved part (pictures up to :data:`ENLARGE_MAX_PX` a side). Dark marks on light
+ground or light on dark (``try_invert``).
 """
 
 from __future__ import annotations
