@@ -1,4 +1,5 @@
-"""``insitu inspect``: read a marked pattern back from a camera image, without marking."""
+"""``insitu inspect``: read a marked pattern back from a camera image, without marking — or
+read and grade every code in a photograph that comes without a plan."""
 
 from __future__ import annotations
 
@@ -9,6 +10,7 @@ import typer
 
 from insitu.cli.common import bounded, check_output, console, one_line_errors
 from insitu.cli.job import Field, Rig, Seed, Workpiece, print_read_back
+from insitu.errors import ConfigError, FormatError
 from insitu.marking.modes import PROJECTIONS, projection_mode
 from insitu.patterns.load import sources_help
 from insitu.patterns.vector import BEAM_MM
@@ -17,15 +19,18 @@ from insitu.patterns.vector import BEAM_MM
 @one_line_errors
 def inspect(
     image: Annotated[Path, typer.Argument(metavar="IMAGE.png", help="The side camera's frame "
-                                          "of the marked part (the laser off).")],
-    cloud: Annotated[Path, typer.Option(help="Measured point cloud (.ply) the pattern was "
-                                             "placed on.")],
-    pattern: Annotated[str, typer.Option(help=f"As marked: a file or spec: {sources_help()}.")],
-    at: Annotated[tuple[float, float], typer.Option(metavar="X Y",
+                                          "of the marked part (the laser off), or without "
+                                          "--cloud, --pattern and --at any photograph "
+                                          "(PNG, JPEG, WebP, …).")],
+    cloud: Annotated[Path | None, typer.Option(help="Measured point cloud (.ply) the pattern "
+                                                    "was placed on.")] = None,
+    pattern: Annotated[str | None, typer.Option(
+        help=f"As marked: a file or spec: {sources_help()}.")] = None,
+    at: Annotated[tuple[float, float] | None, typer.Option(metavar="X Y",
         callback=bounded("position_mm"), help="Centre of the pattern X Y, mm, world frame, "
-                                              "as marked.")],
-    out: Annotated[Path, typer.Option("-o", "--output", help="Read-back picture to write "
-                                                             "(.png).")],
+                                              "as marked.")] = None,
+    out: Annotated[Path | None, typer.Option("-o", "--output", help="Read-back picture to "
+                                             "write (.png; needed with a plan).")] = None,
     width: Annotated[float | None, typer.Option(
         callback=bounded("length_mm"), help="Width as marked, mm (insitu mark --width).")] = None,
     rotate: Annotated[float, typer.Option(
@@ -45,8 +50,11 @@ def inspect(
     planned again as `insitu mark` placed it (same options), the image rectified onto the
     cloud's surface around it, a code decoded and graded. Writes the picture of the mark with
     the plan over it and prints what was decoded, the offset from the plan and the grade;
-    exit 1 when a code does not read as planned."""
-    from insitu.errors import FormatError
+    exit 1 when a code does not read as planned.
+
+    Without --cloud, --pattern and --at, IMAGE is any photograph of marked codes: every QR,
+    Micro QR and Data Matrix code in it is decoded and graded (rectified by its corners; -o
+    writes the rectified codes); exit 1 when none reads."""
     from insitu.formats.images import read_image
     from insitu.formats.pointcloud import read_ply
     from insitu.marking import Placement, read_job
@@ -56,6 +64,14 @@ def inspect(
     from insitu.services.serials import job_variables, render_placement
     from insitu.services.station import connect
 
+    plan_options = {"--cloud": cloud, "--pattern": pattern, "--at": at}
+    if all(v is None for v in plan_options.values()):
+        _inspect_photo(image, out)
+        return
+    missing = [k for k, v in {**plan_options, "-o": out}.items() if v is None]
+    if missing:
+        raise ConfigError(f"inspect with a plan needs {', '.join(missing)} too (or none of "
+                         "--cloud, --pattern, --at to read IMAGE as a photograph)")
     check_output(out, ".png")
     projection_mode(mode)
     placement = Placement(pattern, at, width, rotate, mode, hatch, beam_mm=beam)
@@ -78,3 +94,32 @@ def inspect(
     console.print(f"wrote {out}", highlight=False)
     if not result.ok:
         raise typer.Exit(1)
+
+
+def _inspect_photo(image: Path, out: Path | None) -> None:
+    """Decode and grade every 2-D code in the photograph ``image``; print one row each."""
+    from rich.table import Table
+    from rich.text import Text
+
+    from insitu.formats.images import read_image
+    from insitu.services.mark import save_image
+    from insitu.vision.code_photo import photo_picture, read_photo
+    from insitu.vision.dpm_grade import letter
+
+    if out is not None:
+        check_output(out, ".png")
+    codes = read_photo(read_image(image))
+    if not codes:
+        console.print(f"{image}: no QR, Micro QR or Data Matrix code read", highlight=False)
+        raise typer.Exit(1)
+    table = Table(title=f"codes in {image}")
+    for head in ("code", "decoded", "module px", "UEC", "grade", "parameters"):
+        table.add_column(head)
+    for c in codes:
+        uec = "-" if c.uec is None else f"{c.uec:.2f} {letter(c.uec_grade)}"
+        table.add_row(Text(c.symbology), Text(c.text), f"{c.module_px:.1f}", uec,
+                      letter(c.overall), Text(c.grades.summary()))
+    console.print(table)
+    if out is not None:
+        save_image(out, photo_picture(codes))
+        console.print(f"wrote {out}", highlight=False)

@@ -24,6 +24,7 @@ from insitu.marking.surface import Surface
 from insitu.marking.verify import render, unrolled
 from insitu.patterns.codes import SYMBOLOGIES
 from insitu.patterns.model import Pattern
+from insitu.vision.code_decode import read_codes
 from insitu.vision.dpm_grade import Grades, grade_symbol
 
 PX_PER_MODULE = 8          # at least this many picture pixels per code module
@@ -109,35 +110,12 @@ def find_offset(picture: np.ndarray, plan: np.ndarray, max_px: int, sigma_px: fl
 
 
 def decode_picture(picture: np.ndarray, symbology: str, module_px: float = 8.0) -> str | None:
-    """The text zxing-cpp reads in ``picture`` (NaN: the median), dark or light marks; None:
-    nothing read. Tried as it is (local and global thresholds), then binarised (Otsu) with
-    the marks thinned by 1 px up to a third of a module (``module_px`` px): a laser mark
-    grows beyond its modules, leaving the light ones small."""
-    import zxingcpp
-
-    seen = np.isfinite(picture)
-    if not seen.any():
-        return None
-    lo, hi = np.percentile(picture[seen], [1, 99])
-    p = np.where(seen, picture, np.median(picture[seen]))
-    img = np.clip((p - lo) / max(hi - lo, 1e-6) * 255, 0, 255).astype(np.uint8)
-    fmt = getattr(zxingcpp.BarcodeFormat, SYMBOLOGIES[symbology][0])
-
-    def attempts():
-        yield img, zxingcpp.Binarizer.LocalAverage
-        yield img, zxingcpp.Binarizer.GlobalHistogram
-        _, bw = cv2.threshold(img, 0, 255, cv2.THRESH_BINARY + cv2.THRESH_OTSU)
-        for k in range(1, max(2, int(module_px / 3)) + 1):
-            kernel = np.ones((2 * k + 1, 2 * k + 1), np.uint8)
-            yield cv2.dilate(bw, kernel), zxingcpp.Binarizer.BoolCast    # dark marks
-            yield cv2.erode(bw, kernel), zxingcpp.Binarizer.BoolCast     # light marks
-    for attempt, binarizer in attempts():
-        found = zxingcpp.read_barcodes(attempt, formats=fmt, try_rotate=True,
-                                       try_downscale=True, try_invert=True,
-                                       binarizer=binarizer)
-        if found:
-            return found[0].text
-    return None
+    """The text zxing-cpp reads in ``picture`` (NaN: not seen) for ``symbology``, dark or
+    light marks, through the ladder of :func:`insitu.vision.code_decode.read_codes` (not
+    enlarged: a rectified picture has :data:`PX_PER_MODULE` px a module); None: nothing
+    read."""
+    found, _ = read_codes(picture, SYMBOLOGIES[symbology][0], module_px, enlarge=False)
+    return found[0].text if found else None
 
 
 def read_mark(image: np.ndarray, camera: CameraModel, surf: Surface, pattern: Pattern,

@@ -143,12 +143,16 @@ class EdgeFit:
 
 
 def align_edges(heights: HeightImage, e: np.ndarray, u: np.ndarray,
-                iterations: int = 10) -> EdgeFit | None:
+                iterations: int = 10, free: np.ndarray | None = None) -> EdgeFit | None:
     """The correction that moves the edge samples ``e`` (K, 3), part frame, with outward
     directions ``u`` (K, 2), so that each lies the same distance b inside the reference's
     edge (least squares on the normal distances, Huber weights). None when fewer than 20
     samples, or less than ``MIN_FOUND`` of them, find an edge (the scan's edges are not the
-    reference's there), or the edges cannot hold the turn, both shifts and b."""
+    reference's there), or the edges cannot hold the turn, both shifts and b. ``free``: a
+    unit direction (2,), part frame, the shift is not fitted along (edges that all face one
+    way, :func:`unheld`): the turn and the shift across it only; ``sigma_mm`` is then the
+    latter's."""
+    across = None if free is None else np.array([-free[1], free[0]])
     theta, t, b = 0.0, np.zeros(2), 0.0
     c = e[:, :2].mean(axis=0) if len(e) else np.zeros(2)
     used = 0
@@ -165,13 +169,15 @@ def align_edges(heights: HeightImage, e: np.ndarray, u: np.ndarray,
         n, nu = n[ok], nu[ok]
         r = (s[ok] - b) * nu                      # the normal distance left to the edge
         d = pe[ok, :2] - c - t
-        J = np.column_stack([-n[:, 0] * d[:, 1] + n[:, 1] * d[:, 0], n, -nu])
+        shift = n if across is None else (n @ across)[:, None]
+        J = np.column_stack([-n[:, 0] * d[:, 1] + n[:, 1] * d[:, 0], shift, -nu])
         w = np.minimum(1.0, HUBER_MM / np.maximum(np.abs(r - np.median(r)), 1e-12))
         A = J.T @ (J * w[:, None])
         if np.linalg.cond(A) > 1e6:
             return None
         x = np.linalg.solve(A, J.T @ (w * r))
-        theta, t, b = theta + x[0], t + x[1:3], b - x[3]
+        step = x[1:3] if across is None else x[1] * across
+        theta, t, b = theta + x[0], t + step, b - x[-1]
         if abs(x[0]) < 1e-7 and np.linalg.norm(x[1:]) < 1e-4:
             break
     if used < MIN_FOUND * len(e):
@@ -179,6 +185,25 @@ def align_edges(heights: HeightImage, e: np.ndarray, u: np.ndarray,
     R = np.array([[np.cos(theta), -np.sin(theta)], [np.sin(theta), np.cos(theta)]])
     spread = 1.4826 * np.median(np.abs(r - np.median(r)))
     cov = spread ** 2 * np.linalg.inv(A)
+    shift_cov = cov[1:3, 1:3] if across is None else cov[1:2, 1:2]
     return EdgeFit(float(theta), c - R @ c + t, float(b), used,
-                   float(np.sqrt(np.linalg.eigvalsh(cov[1:3, 1:3]).max())),
+                   float(np.sqrt(np.linalg.eigvalsh(shift_cov).max())),
                    float(np.degrees(np.sqrt(cov[0, 0]))))
+
+
+HOLD = 0.02
+"""Below this share of the edges' normals (squared) along a direction, nothing holds it."""
+
+
+def unheld(heights: HeightImage, e: np.ndarray, u: np.ndarray
+           ) -> tuple[int, np.ndarray | None]:
+    """Why :func:`align_edges` may find no fit at this pose: the edge samples ``e`` (K, 3),
+    part frame, directions ``u`` (K, 2), that find the reference's edge, and the unit
+    direction (2,) part frame along which their edges' normals give no hold (the least
+    eigenvector of Σ n nᵀ / K, its eigenvalue below :data:`HOLD`; None: both held)."""
+    s, n = edge_distance(heights, e, u)
+    ok = np.isfinite(s) & (np.einsum("ij,ij->i", n, u) > MIN_COS)
+    if not ok.any():
+        return 0, None
+    w, v = np.linalg.eigh(n[ok].T @ n[ok] / ok.sum())
+    return int(ok.sum()), (v[:, 0] if w[0] < HOLD else None)

@@ -28,7 +28,7 @@ from scipy.spatial import cKDTree
 
 from insitu.errors import MeasurementError
 from insitu.measure.flat_icp import Fit, Pose4, apply, icp_flat, inverse, matrix, rot_z, score
-from insitu.measure.edge_align import align_edges, edge_samples
+from insitu.measure.edge_align import align_edges, edge_samples, unheld
 from insitu.measure.part_reference import (PartReference, above_table, coarse_features,
                                            find_table, thin)
 
@@ -38,11 +38,13 @@ MAX_FINE_POINTS = 40_000
 
 class LocateRefused(MeasurementError):
     """The part's pose is not given: ``reason`` is "no-part", "poor-fit", "partial",
-    "ambiguous" or "not-preferred"; the message names the numbers."""
+    "ambiguous" or "not-preferred"; the message names the numbers; ``best``: the pose that
+    was refused as not pinned down (None otherwise), for scoring."""
 
-    def __init__(self, reason: str, message: str):
+    def __init__(self, reason: str, message: str, best: Solution | None = None):
         super().__init__(message)
         self.reason = reason
+        self.best = best
 
 
 @dataclass(frozen=True)
@@ -71,7 +73,7 @@ class Solution:
     (degrees, −180 … 180); ``fitness``, ``coverage`` and ``rmse_mm`` as in the module's
     docstring; ``score`` = fitness × coverage; ``edges``: the edge samples that fixed x, y
     and the turn (0: not refined, the ICP's), ``sigma_mm`` and ``sigma_deg`` their 1σ
-    (None: not refined; inf: the edges could not fix them)."""
+    (None: not refined; inf: the edges could not fix them, ``unheld`` then says why)."""
 
     x_mm: float
     y_mm: float
@@ -83,6 +85,7 @@ class Solution:
     edges: int = 0
     sigma_mm: float | None = None
     sigma_deg: float | None = None
+    unheld: str = ""
 
     @property
     def score(self) -> float:
@@ -258,20 +261,66 @@ def _aligned(ref: PartReference, pts: np.ndarray, lines: np.ndarray | None,
             out.append(sol)
             continue
         a, t = _pose_of(sol)
-        step = align_edges(ref.heights, apply((a, t), e), u @ rot_z(a)[:2, :2].T)
-        edges = (0, np.inf, np.inf)
+        ep, up = apply((a, t), e), u @ rot_z(a)[:2, :2].T
+        step = align_edges(ref.heights, ep, up)
+        edges, why = (0, np.inf, np.inf), ""
+        if step is None:
+            why, free = _why_unheld(ref, ep, up, len(e), a)
+            step = None if free is None else align_edges(ref.heights, ep, up, free=free)
+            if step is not None:              # the turn and the shift across held: refined
+                edges = (step.samples, np.inf, step.sigma_deg)
+        else:
+            edges = (step.samples, step.sigma_mm, step.sigma_deg)
         if step is not None:
             a = a + step.angle_rad
             t = rot_z(step.angle_rad) @ t + np.append(step.shift_mm, 0.0)
-            edges = (step.samples, step.sigma_mm, step.sigma_deg)
         fit = score((a, t), fine, ref.points, ref.normals, ref.tree, s.inlier_mm)
         out.append(replace(_solution(fit, ref, scan_tree, s.cover_mm), edges=edges[0],
-                           sigma_mm=edges[1], sigma_deg=edges[2]))
+                           sigma_mm=edges[1], sigma_deg=edges[2], unheld=why))
     kept: list[Solution] = []                 # two starts may have met on the same edges
     for sol in sorted(out, key=lambda o: -o.score):
         if all(_distinct(_pose_of(sol), _pose_of(k)) for k in kept):
             kept.append(sol)
     return kept
+
+
+def _why_unheld(ref: PartReference, e: np.ndarray, u: np.ndarray, total: int,
+                angle_rad: float) -> tuple[str, np.ndarray | None]:
+    """Why the edges give no fit at a pose, and the direction (2,) part frame they leave
+    free (None: none): too few of the scan's ``total`` edge samples (``e``, ``u`` in the
+    part's frame) find the reference's edges, or those found all face one way (the free
+    direction named in the world frame; ``angle_rad``: the world → part turn)."""
+    found, free = unheld(ref.heights, e, u)
+    if free is None:
+        enough = found >= 20 and found >= 0.7 * total
+        return (f"{found} of the scan's {total} edge samples find the reference's edges"
+                + (", but they settle into no one fit" if enough
+                   else " (at least 20 and 70% needed)")), None
+    name, faces = _direction(rot_z(-angle_rad)[:2, :2] @ free)     # part frame → world
+    return (f"the {found} edges the scan lines cross all face {faces}: nothing holds the "
+            f"part along {name}; turn the part or the scan so that lines cross edges that "
+            f"face {name if name[0] == '(' else '±' + name}"), free
+
+
+def _direction(d: np.ndarray) -> tuple[str, str]:
+    """A world direction (2,) named ("x", "y" or its components) and the edges across it
+    ("±y", "±x", …)."""
+    near = np.cos(np.radians(20))
+    return (("x", "±y") if abs(d[0]) > near else ("y", "±x") if abs(d[1]) > near
+            else (f"({d[0]:+.2f}, {d[1]:+.2f})", f"({-d[1]:+.2f}, {d[0]:+.2f})"))
+
+
+def _slid(a: Solution, b: Solution) -> str | None:
+    """How two poses that fit alike differ by a shift alone (turned less than 2° apart):
+    the direction nothing holds, or None when they are turned apart (a symmetric part)."""
+    if abs((a.angle_deg - b.angle_deg + 180.0) % 360.0 - 180.0) >= 2.0:
+        return None
+    d = np.array([b.x_mm - a.x_mm, b.y_mm - a.y_mm])
+    name, _ = _direction(d / max(float(np.linalg.norm(d)), 1e-12))
+    return (f"{a.describe()} and {b.describe()} fit nearly equally, "
+            f"{float(np.linalg.norm(d)):.2f} mm apart along {name}: nothing holds the part "
+            f"along {name}" + ("" if a.sigma_mm is not None else
+                               " (the cloud records no scan lines: no edge step)"))
 
 
 def _pose_of(sol: Solution) -> Pose4:
@@ -324,6 +373,8 @@ def _choose(sols: list[Solution], n: int, where: str, s: LocateSettings,
                                 f"{prefer[0]:g} … {prefer[1]:g}°: found "
                                 + "; ".join(o.describe() for o in near))
         near = pick
+    if len(near) > 1 and (slid := _slid(near[0], near[1])) is not None:
+        raise LocateRefused("poor-fit", f"x, y and the turn are not pinned down: {slid}")
     if len(near) > 1:
         raise LocateRefused("ambiguous", f"ambiguous: {near[0].describe()} and "
                             f"{near[1].describe()} fit nearly equally (a symmetric part?): "
@@ -337,13 +388,13 @@ def _choose(sols: list[Solution], n: int, where: str, s: LocateSettings,
     if best.sigma_mm is not None:
         spread = float(np.hypot(best.sigma_mm, np.radians(best.sigma_deg) * radius_mm))
         if not np.isfinite(spread):
-            raise LocateRefused("poor-fit", f"the scan's edges do not match the reference's "
-                                f"at {best.describe()}: x, y and the turn are not pinned down")
+            raise LocateRefused("poor-fit", f"x, y and the turn are not pinned down at "
+                                f"{best.describe()}: {best.unheld}", best)
         if not spread <= s.max_sigma_mm:
             raise LocateRefused(
                 "poor-fit", f"x, y and the turn are not pinned down by the edges the scan lines "
                 f"cross ({best.edges} samples; 1σ {best.sigma_mm:.3f} mm and "
                 f"{best.sigma_deg:.3f}°, {spread:.3f} mm at the part's rim, at most "
                 f"{s.max_sigma_mm:g} mm): scan finer (binning, spacing), or turn the part or "
-                "the scan when its edges run along the lines")
+                "the scan when its edges run along the lines", best)
     return best, second

@@ -13,7 +13,11 @@ What is measured, and how it differs from the standards' exact methods:
 * **Cell contrast** CC = (ML − MD) / ML, ML, MD the mean light and dark module reflectances
   (29158 §7.3, the picture's grey values: scale-free, no calibrated reflectance).
 * **Cell modulation** and **reflectance margin**: each module's MOD = 2 |R − GT| / |ML − MD|
-  (GT = (ML + MD) / 2) graded A ≥ 0.50, B ≥ 0.40, C ≥ 0.30, D ≥ 0.20; the margin grades a
+  (GT = (ML + MD) / 2 times the light where the module lies, :func:`_light`: a shadow or
+  glare across the mark moves the threshold with it — ISO's verifier lights evenly, a side
+  camera or a photo does not — a print fault does not; the span |ML − MD| stays the
+  symbol's, so the contrast a shadow takes still lowers the modulation)
+  graded A ≥ 0.50, B ≥ 0.40, C ≥ 0.30, D ≥ 0.20; the margin grades a
   module on the wrong side of GT (against the plan) F. The standards grade codewords and
   weigh them against the unused error correction; here the share of modules below each level
   is weighed against a symbology's module budget (:data:`MODULE_BUDGET`, an estimate from
@@ -189,13 +193,55 @@ def _module_grade(mod: np.ndarray) -> np.ndarray:
     return np.select([mod >= t for t in _MOD], [4, 3, 2, 1], 0)
 
 
+def grade_uec(uec: float) -> int:
+    """Unused error correction 0…1 graded 4…0 (A ≥ 0.62, B ≥ 0.50, C ≥ 0.37, D ≥ 0.25)."""
+    return _at_least(uec, _UEC)
+
+
 def _uec_grade(module_grades: np.ndarray, budget: float) -> int:
     """max over levels L of min(L, grade of 1 − share of modules below L / budget)."""
     best = 0
     for level in (4, 3, 2, 1):
         uec = 1.0 - float(np.mean(module_grades < level)) / budget
-        best = max(best, min(level, _at_least(uec, _UEC)))
+        best = max(best, min(level, grade_uec(uec)))
     return best
+
+
+def _local_shift(mods: np.ndarray, residual: np.ndarray, jj: np.ndarray, ii: np.ndarray,
+                 pitch: float) -> np.ndarray:
+    """(rows, cols, 2) px: the tiles' departures from the affine grid (T, 2) at their module
+    positions (T, 2) carried smoothly to every module (thin-plate spline, smoothed), so a
+    symbol on a curved part or under lens distortion is sampled on its modules; (0, 0) where
+    the departures are within a tenth of a module or too few tiles tell them."""
+    if len(mods) < 6 or np.max(np.linalg.norm(residual, axis=1)) < 0.1 * pitch:
+        return np.zeros((*jj.shape, 2))
+    from scipy.interpolate import RBFInterpolator
+
+    field = RBFInterpolator(mods, residual, kernel="thin_plate_spline", degree=1,
+                            smoothing=float(len(mods)))
+    return field(np.column_stack([jj.ravel(), ii.ravel()])).reshape(*jj.shape, 2)
+
+
+SHADING_MODULES = 4.0                  # the light's shading is smoothed over this many modules
+
+
+def _light(R: np.ndarray, matrix: np.ndarray, visible: np.ndarray, ML: float, MD: float
+           ) -> np.ndarray:
+    """(rows, cols): the light falling where each module lies, relative to the symbol's
+    mean — the change the light and the dark modules' values (each smoothed over
+    :data:`SHADING_MODULES`, Gaussian σ, normalised) share: both darker in a shadow, both
+    lighter in glare, the smaller relative change of the two; 1 where they disagree. A print
+    fault moves one of them only (growth darkens the small light modules, a weak burn lightens
+    the dark ones) and is not taken for light."""
+    from scipy.ndimage import gaussian_filter
+
+    rel = []
+    for cls, mean in ((~matrix & visible, ML), (matrix & visible, MD)):
+        w = gaussian_filter(cls.astype(float), SHADING_MODULES, mode="constant")
+        v = gaussian_filter(np.where(cls, R, 0.0), SHADING_MODULES, mode="constant")
+        rel.append(np.where(w > 1e-3, v / np.maximum(w, 1e-3) / max(mean, 1e-9) - 1, 0.0))
+    rl, rd = rel
+    return 1 + np.where(rl * rd > 0, np.sign(rl) * np.minimum(np.abs(rl), np.abs(rd)), 0.0)
 
 
 def grade_symbol(picture: np.ndarray, matrix: np.ndarray, centre00: np.ndarray,
@@ -225,6 +271,7 @@ def grade_symbol(picture: np.ndarray, matrix: np.ndarray, centre00: np.ndarray,
         an = abs(pu - pv) / ((pu + pv) / 2)
         gn = float(np.max(np.linalg.norm(found[good] - fitted, axis=1))) / pitch
         centres = np.stack([jj, ii, np.ones_like(jj)], -1) @ coef
+        centres += _local_shift(mods[good], found[good] - fitted, jj, ii, pitch)
     else:
         an, gn, centres = 1.0, 1.0, nominal
     k = max(1, int(round(0.5 * pitch)))
@@ -239,7 +286,7 @@ def grade_symbol(picture: np.ndarray, matrix: np.ndarray, centre00: np.ndarray,
     inverted = MD > ML
     span = abs(ML - MD)
     cc = span / max(ML, MD, 1e-9)
-    gt = (ML + MD) / 2
+    gt = (ML + MD) / 2 * _light(R, matrix, visible, ML, MD)
     mod = np.where(visible, 2 * np.abs(R - gt) / max(span, 1e-9), 0.0)
     mgrade = _module_grade(mod)
     dark = (R < gt) != inverted
