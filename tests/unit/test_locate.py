@@ -236,7 +236,8 @@ def test_edges_that_are_not_the_references_are_refused(refs):
 
     truth = (12.0, -7.0, 33.0)
     pts, lines = synthetic_scan("step-block", truth)
-    e, u = edge_samples(pts, lines, pts[:, 2] < 0.5)
+    found = edge_samples(pts, lines, pts[:, 2] < 0.5)
+    e, u = found.points, found.dirs
     pose = inverse((np.radians(truth[2]), np.array([truth[0], truth[1], 0.0])))
     ep, up = apply(pose, e), u @ rot_z(pose[0])[:2, :2].T
     assert align_edges(refs["step-block"].heights, ep, up).samples > 0.9 * len(e)
