@@ -49,7 +49,7 @@ from insitu.services import calibrate_height, scan_live
 from insitu.services.mark import plan_mark
 from insitu.services.field import calibrate_field
 from insitu.services.record import record_height_calibration, record_marked_field_calibration
-from insitu.services.height import height_model
+from insitu.services.height import scan_camera
 from insitu.services.station import simulated
 from insitu.sim.devices import SimController
 from insitu.sim.rig import default_rig
@@ -130,7 +130,7 @@ def locate_table(args, rig, cal, cache: Path) -> None:
                 "rig frame: |xy| max / mean, mm", "rig frame: turn max / mean, °",
                 "rig frame − truth", "time median, s"):
         tab.add_column(col)
-    camera = height_model(cal)[0]         # the camera the scans are measured through
+    camera = scan_camera(rig.operator.camera, cal)
     for k, (name, fold) in enumerate(PARTS.items()):
         wp = make_workpiece(name)
         ref = reference_from_mesh(wp.vertices, wp.triangles, name)
@@ -190,7 +190,7 @@ def timing(args, rig1, cal1, cache: Path) -> None:
     t = time.perf_counter()
     ref = reference_from_mesh(wp.vertices, wp.triangles, "step-block")
     t_ref = time.perf_counter() - t
-    runs, camera = [], height_model(cal1)[0]
+    runs, camera = [], scan_camera(rig1.operator.camera, cal1)
     for _ in range(3):
         t = time.perf_counter()
         got = locate_part(ref, cloud.points, lines=cloud.attributes.get("line"),
@@ -230,7 +230,7 @@ def marking(args, rig, cal, cache: Path) -> None:
             try:
                 got = locate_part(ref, cloud.points, prefer_angle=prefer,
                                   lines=cloud.attributes.get("line"),
-                                  camera=height_model(cal)[0])
+                                  camera=scan_camera(rig.operator.camera, cal))
             except LocateRefused as e:
                 tab.add_row(name, f"({pose[0]:.1f}, {pose[1]:.1f}, {pose[2]:.1f})",
                             f"({at[0]:g}, {at[1]:g})", f"refused ({e.reason}): not marked")

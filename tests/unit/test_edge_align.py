@@ -86,3 +86,19 @@ def test_the_gap_is_read_in_pixels_through_the_camera():
         per_col = np.linalg.norm(pts[17, :2] - pts[16, :2])
         assert found.step_mm[0] == pytest.approx(per_col, rel=1e-6)
         assert np.isnan(edge_samples(pts, lines, table).gap_px).all()
+
+
+def test_the_scan_camera_is_the_height_calibrations():
+    """Method 2 scans are measured through the height calibration's camera, Method 1 scans
+    through the rig's."""
+    from insitu.formats.camera_spec import CameraSpec
+    from insitu.rig.files import HeightCalibration
+    from insitu.services.height import scan_camera
+    from insitu.sim.rig import default_rig
+
+    rig = default_rig(binning=8)
+    cal = HeightCalibration.model_construct(camera=CameraSpec.model_validate(
+        rig.camera.to_dict()))
+    assert scan_camera(rig.operator.camera, None) is rig.operator.camera
+    got = scan_camera(rig.operator.camera, cal)
+    assert np.allclose(got.K, rig.camera.K) and np.allclose(got.R, rig.camera.R)

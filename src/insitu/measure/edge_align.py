@@ -11,14 +11,14 @@ u, from e to the reference's edge (found on the reference's height image seen fr
 How far inside depends on how the line ends in the camera's image, which the sample's pixel
 tells when the camera is known: the line's next detected pixel after the top's last one
 lies ``gap`` pixels on (1: the lower line begins in the very next column, and the edge lies
-at the last top pixel; 2, 3: half-way or so; more: a shadow or the wall lies between, and
-the top ends where its light falls below half). So the inset is the sample's step along its
-line (mm per pixel) times a factor per gap class, each fitted. Fitted together with the turn
-and shift this removes the edges' different insets from the turn; the class factors lean on
-the shift, though (the classes follow the edges' directions), so x, y are then fitted with
-the turn kept and one inset for all (least squares, Huber weights; a sample far beyond the
-others — a line cut short where its light is taken by the lower line in the same pixel
-column — weighs nothing). Only the upper side of a drop is used: the lower side lies
+at the last top pixel; 2: about half-way; 3 or more: dark columns, a shadow or the wall
+between, and the top ends where its light falls below half, about a pixel on). So the
+inset is the sample's step along its line (mm per pixel) times a factor per gap class, each
+fitted with the turn and shift; a sample far beyond the others (a line cut short where the
+lower line takes the same pixel columns) weighs nothing. The class factors lean on the
+shift (the classes follow the edges' directions), so x, y are then fitted with the turn
+kept and one inset for all (least squares, Huber weights, the cut samples kept out).
+Only the upper side of a drop is used: the lower side lies
 in the shadow of the wall or hidden behind its top.
 """
 
@@ -49,8 +49,8 @@ CUT_MM = 0.15
 SHIFT_HUBER_MM = 0.05
 """The shift's Huber scale; no sample is cut there (a cut could hold a shift that drops
 a whole edge)."""
-GAP_CLASSES = 4
-"""Gap classes 1, 2, 3 and ≥ 4 pixels (and one for samples without a camera)."""
+GAP_CLASSES = 3
+"""Gap classes 1, 2 and ≥ 3 pixels (and one for samples without a camera)."""
 
 
 @dataclass(frozen=True)
