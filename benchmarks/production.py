@@ -3,8 +3,10 @@ random poses located against their meshes, and patterns marked where they belong
 
 1. Locate: the step block, the arc and the insert at N random poses each (x, y within
    ±25 mm, any turn about z), scanned with Method 2 (height calibration recorded and fitted on
-   the same rig; lines 0.5 mm apart, 0.25 mm on the 16 mm insert: at 0.5 mm its edges do not
-   pin the pose down to 0.03 mm and it is refused), located against the part's own mesh (`locate_part`, as `insitu locate`).
+   the same rig; lines 0.25 mm apart, as a recipe scans by default: at 0.5 mm the insert's
+   edges do not pin its pose down to 0.03 mm and the arc's turn is off by up to 0.1°),
+   located against the part's own mesh (`locate_part`, as `insitu locate`, with the camera
+   the scan was measured through).
    The arc (2-fold) and the insert (3-fold) are symmetric: each is located without a
    symmetry breaker (it must be refused, never wrong) and with `prefer_angle` — a window
    ±50° wide around a rough orientation (the true turn ± up to 30°, as an operator loading
@@ -14,7 +16,7 @@ random poses located against their meshes, and patterns marked where they belong
    the locating's own. And against the *rig-frame truth*, the pose an error-free locate gives
    on this rig (:func:`rig_frame_truth`): the locating's own error, what issue 13's
    0.05 mm / 0.05° is about.
-2. Time to locate a scan of about 200 k points (binning 1) on one core.
+2. Time to locate a scan of about 200 k points (binning 1, lines 0.5 mm apart) on one core.
 3. Mark: a 3 mm square placed in the part's frame (`--part-pose`) on the step block's top
    step and the arc's crest at a few poses, marked with the FIELD.json an operator would
    have (2 mm circles marked on the plate, imaged, RBF fit — so the marks share the camera's
@@ -58,7 +60,7 @@ from insitu.sim.world import SimWorld, sim_world
 
 console = Console(width=210)
 PARTS = {"step-block": 1, "arc": 2, "insert": 3}          # name: fold of its symmetry
-SPACING = {"step-block": 0.5, "arc": 0.5, "insert": 0.25}  # scan line spacing, mm
+SPACING = {"step-block": 0.25, "arc": 0.25, "insert": 0.25}  # scan line spacing, mm
 SQUARE = ('<svg xmlns="http://www.w3.org/2000/svg" width="3mm" height="3mm" '
           'viewBox="0 0 3 3"><rect x="0" y="0" width="3" height="3" fill="none" '
           'stroke="black" stroke-width="0.01"/></svg>')
@@ -73,10 +75,11 @@ def height_cal(cache: Path, rig, seed: int) -> HeightCalibration:
     return load_json_model(path, HeightCalibration)
 
 
-def scan(cache: Path, name: str, pose, rig, seed: int, cal, tag: str) -> PointCloud:
-    """The cloud of ``name`` at ``pose`` (cached as ``tag``), lines ``SPACING[name]``
-    apart."""
-    spacing = SPACING.get(name, 0.5)
+def scan(cache: Path, name: str, pose, rig, seed: int, cal, tag: str,
+         spacing: float | None = None) -> PointCloud:
+    """The cloud of ``name`` at ``pose`` (cached as ``tag``), lines ``spacing`` apart
+    (None: ``SPACING[name]``)."""
+    spacing = spacing or SPACING.get(name, 0.5)
     path = cache / (f"{tag}.ply" if spacing == 0.5 else f"{tag}-sp{spacing:g}.ply")
     if not path.exists():
         world = sim_world(name, seed=seed, rig=rig, pose=pose)
@@ -185,7 +188,8 @@ def timing(args, rig1, cal1, cache: Path) -> None:
     """Locate a binning-1 scan of the step block (about 200 k points) on one core."""
     os.sched_setaffinity(0, {sorted(os.sched_getaffinity(0))[0]})
     pose = (14.0, -9.0, 37.0)
-    cloud = scan(cache, "step-block", pose, rig1, args.seed, cal1, f"timing-b1-s{args.seed}")
+    cloud = scan(cache, "step-block", pose, rig1, args.seed, cal1, f"timing-b1-s{args.seed}",
+                 0.5)
     wp = make_workpiece("step-block")
     t = time.perf_counter()
     ref = reference_from_mesh(wp.vertices, wp.triangles, "step-block")
