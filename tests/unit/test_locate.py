@@ -3,6 +3,7 @@ simulated scan; refusals (no part, only part of it, a symmetric part without a b
 wrong part) that never give a pose; POSE.json and ``insitu locate``."""
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -18,6 +19,7 @@ from insitu.sim.scene import Scene
 from insitu.sim.workpieces import make_workpiece
 
 runner = CliRunner()
+DATA = Path(__file__).resolve().parents[1] / "data"
 
 
 def _run(*args):
@@ -183,6 +185,13 @@ def test_locate_command_writes_pose_json(tmp_path, refs):
     assert np.hypot(d["x_mm"] - truth[0], d["y_mm"] - truth[1]) < 0.02
     pose = load_pose(tmp_path / "p.json")
     assert np.allclose(pose.matrix[:2, 3], [d["x_mm"], d["y_mm"]])
+    # with the height calibration's camera (here not the one this scan was made through:
+    # the gaps it reads are nonsense, and the fit still holds)
+    res = _run("locate", tmp_path / "sb.stl", tmp_path / "scan.ply", "-o", tmp_path / "c.json",
+               "--height-cal", DATA / "height-cal-b2.json")
+    assert res.exit_code == 0, res.output
+    d = json.loads((tmp_path / "c.json").read_text())
+    assert np.hypot(d["x_mm"] - truth[0], d["y_mm"] - truth[1]) < 0.02
     # refused: one line, exit 1, nothing written
     res = _run("locate", tmp_path / "sb.stl", tmp_path / "scan.ply", "-o",
                tmp_path / "q.json", "--prefer-angle", 100, 120)
@@ -236,7 +245,8 @@ def test_edges_that_are_not_the_references_are_refused(refs):
 
     truth = (12.0, -7.0, 33.0)
     pts, lines = synthetic_scan("step-block", truth)
-    e, u = edge_samples(pts, lines, pts[:, 2] < 0.5)
+    found = edge_samples(pts, lines, pts[:, 2] < 0.5)
+    e, u = found.points, found.dirs
     pose = inverse((np.radians(truth[2]), np.array([truth[0], truth[1], 0.0])))
     ep, up = apply(pose, e), u @ rot_z(pose[0])[:2, :2].T
     assert align_edges(refs["step-block"].heights, ep, up).samples > 0.9 * len(e)

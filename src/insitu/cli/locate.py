@@ -37,6 +37,10 @@ def locate(
     table_z: Annotated[float | None, typer.Option(
         callback=bounded("position_mm"), help="Height of the table, mm (default: found in "
                                               "the scan).")] = None,
+    height_cal: Annotated[Path | None, typer.Option(
+        "--height-cal", help="The height calibration CLOUD was scanned with: its camera "
+                             "tells how each scan line ends in the image, for a more "
+                             "precise turn (default: unknown).")] = None,
 ) -> None:
     """Find the part of REFERENCE in CLOUD: the table taken away, a global registration
     (FPFH features + RANSAC, and a search over turns about z), point-to-plane ICP kept flat
@@ -44,14 +48,18 @@ def locate(
     POSE.json (T_world_part maps the part's frame to the world). Refused, nothing written,
     when the part is not found, fits poorly, is only partly in the scan, or when a symmetric
     part fits nearly equally well turned (say which with --prefer-angle)."""
+    from insitu.services.common import camera_model
+    from insitu.services.height import load_height_calibration
     from insitu.services.locate import locate as svc
 
     check_output(out, ".json")
+    camera = (camera_model(load_height_calibration(height_cal).camera)
+              if height_cal is not None else None)
     settings = LocateSettings(min_fitness=min_fitness, min_coverage=min_coverage,
                               max_rmse_mm=max_rmse, table_z_mm=table_z)
     with progress_bar("locating") as progress:
         progress(0, 1)
-        pose = svc(reference, cloud, out, settings, prefer_angle)
+        pose = svc(reference, cloud, out, settings, prefer_angle, camera)
     b, s = pose.best, pose.second
     table = Table(title=f"part pose → {out}", show_header=False)
     table.add_row("position, mm", f"x {b.x_mm:.3f}, y {b.y_mm:.3f}, z {b.z_mm:.3f}")

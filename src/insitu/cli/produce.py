@@ -89,6 +89,7 @@ def produce(
     from insitu.cli.scan import _rig_height_calibration
     from insitu.formats.production_log import read_log
     from insitu.services import production
+    from insitu.services.height import scan_camera
     from insitu.services.station import connect
 
     r = read(recipe)
@@ -110,7 +111,8 @@ def produce(
                 console.print(part_line(rec), highlight=False, soft_wrap=True)
                 progress(rec.part, count)
 
-            run = production.Production(r, station, log, count, production.recipe_locator(r),
+            locate = production.recipe_locator(r, scan_camera(station.rig.camera, cal))
+            run = production.Production(r, station, log, count, locate,
                                         production.read_part, present, start, cancel,
                                         cal, on_record)
             before = len(read_log(log))

@@ -4,12 +4,21 @@ measures them.
 A scan line samples the surface densely along itself (a pixel apart) but the lines lie
 0.5 mm apart: point-to-plane ICP gets no hold in x, y from flat tops, and an edge is only
 known where a line crosses it. There it is known well: the last point of a top before the
-surface drops (to the table, a lower step or a hole, or down a wall) lies within one sample
-spacing inside the edge (and a line loses a little more where its light is cut by the edge).
-Each such *edge sample* e with its outward line direction u gives the distance s, along u,
-from e to the reference's edge (found on the reference's height image seen from above); the
-fit turns and shifts the part until every s is the same b, fitted along (least squares, Huber
-weights). Only the upper side of a drop is used: the lower side lies
+surface drops (to the table, a lower step or a hole, or down a wall) lies a little inside the
+edge. Each such *edge sample* e with its outward line direction u gives the distance s, along
+u, from e to the reference's edge (found on the reference's height image seen from above).
+
+How far inside depends on how the line ends in the camera's image, which the sample's pixel
+tells when the camera is known: the line's next detected pixel after the top's last one
+lies ``gap`` pixels on (1: the lower line begins in the very next column, and the edge lies
+at the last top pixel; 2: about half-way; 3 or more: dark columns, a shadow or the wall
+between, and the top ends where its light falls below half, about a pixel on). So the
+inset is the sample's step along its line (mm per pixel) times a factor per gap class, each
+fitted with the turn and shift; a sample far beyond the others (a line cut short where the
+lower line takes the same pixel columns) weighs nothing. The class factors lean on the
+shift (the classes follow the edges' directions), so x, y are then fitted with the turn
+kept and one inset for all (least squares, Huber weights, the cut samples kept out).
+Only the upper side of a drop is used: the lower side lies
 in the shadow of the wall or hidden behind its top.
 """
 
@@ -19,6 +28,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from insitu.geometry.camera import CameraModel
 from insitu.measure.height_image import HeightImage, sample
 
 DROP_MM = 0.5
@@ -33,22 +43,45 @@ MIN_FOUND = 0.7
 CORNER_MM = 0.3
 MIN_COS = 0.2
 """Lines crossing an edge more obliquely than this (cosine to its normal) are not used."""
-HUBER_MM = 0.05
+HUBER_MM = 0.03
+CUT_MM = 0.15
+"""A sample this much beyond the others' median inset: its line was cut short (no weight)."""
+SHIFT_HUBER_MM = 0.05
+"""The shift's Huber scale; no sample is cut there (a cut could hold a shift that drops
+a whole edge)."""
+GAP_CLASSES = 3
+"""Gap classes 1, 2 and ≥ 3 pixels (and one for samples without a camera)."""
 
 
-def edge_samples(points: np.ndarray, lines: np.ndarray,
-                 table: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """The scan's edge samples: (points (K, 3), outward unit directions along their lines
-    (K, 2)) from ``points`` (N, 3) world frame, their ``lines`` (N,) index and whether each
-    is the table (N,) bool. A point ends a top when the point before it on its line lies
-    within ``FLAT_MM`` of its height, the next one lower by more than that or down a slope
-    steeper than ``STEEP`` (a wall), and the line falls ``DROP_MM`` below it: at the next
-    point, however far (past a shadow), or within ``REACH_MM`` (down a wall). A top cut
-    short by something higher in the way is no edge: the reference shows no drop there, and
-    :func:`edge_distance` finds none."""
+@dataclass(frozen=True)
+class EdgeSamples:
+    """The scan's edge samples: ``points`` (K, 3) world frame, ``dirs`` (K, 2) outward unit
+    directions along their lines, ``step_mm`` (K,) the spacing of their line's samples just
+    inside (mm per pixel), ``gap_px`` (K,) how many pixels on the line's next detected point
+    lies in the camera's image (NaN: no camera given)."""
+
+    points: np.ndarray
+    dirs: np.ndarray
+    step_mm: np.ndarray
+    gap_px: np.ndarray
+
+    def __len__(self) -> int:
+        return len(self.points)
+
+
+def edge_samples(points: np.ndarray, lines: np.ndarray, table: np.ndarray,
+                 camera: CameraModel | None = None) -> EdgeSamples:
+    """The edge samples of ``points`` (N, 3) world frame, their ``lines`` (N,) index and
+    whether each is the table (N,) bool; ``camera``: the camera the points were measured
+    through (their pixels are its projections), for the gap. A point ends a top when the
+    point before it on its line lies within ``FLAT_MM`` of its height, the next one lower by
+    more than that or down a slope steeper than ``STEEP`` (a wall), and the line falls
+    ``DROP_MM`` below it: at the next point, however far (past a shadow), or within
+    ``REACH_MM`` (down a wall). A top cut short by something higher in the way is no edge:
+    the reference shows no drop there, and :func:`edge_distance` finds none."""
     order = np.lexsort((_along(points, lines), lines))
     p, ln, top = points[order], lines[order], ~table[order]
-    out_p, out_u = [], []
+    out = []
     for q, l2, t2 in ((p, ln, top), (p[::-1], ln[::-1], top[::-1])):   # both ways along
         n = len(q)
         i = np.arange(1, max(n - 1, 1))
@@ -64,9 +97,19 @@ def edge_samples(points: np.ndarray, lines: np.ndarray,
             fall = np.maximum(fall, np.where(near, q[i, 2] - q[j, 2], 0.0))
         k = i[ok & (fall > DROP_MM)]
         d = q[k + 1, :2] - q[k - 1, :2]
-        out_p.append(q[k])
-        out_u.append(d / np.maximum(np.linalg.norm(d, axis=1, keepdims=True), 1e-12))
-    return np.vstack(out_p), np.vstack(out_u)
+        out.append((q[k], d / np.maximum(np.linalg.norm(d, axis=1, keepdims=True), 1e-12),
+                    q[k - 1], q[k + 1]))
+    e, u, before, after = (np.vstack([o[j] for o in out]) for j in range(4))
+    step = np.linalg.norm(e[:, :2] - before[:, :2], axis=1)
+    gap = np.full(len(e), np.nan)
+    if camera is not None and len(e):
+        pe, pb, pa = (camera.project(x) for x in (e, before, after))
+        d = pe - pb                         # the pixel axis the line is sampled along
+        ax = np.argmax(np.abs(d), axis=1)
+        r = np.arange(len(e))
+        gap = (pa[r, ax] - pe[r, ax]) * np.sign(d[r, ax])
+        step = step / np.maximum(np.abs(d[r, ax]), 1e-9)      # mm per pixel
+    return EdgeSamples(e, u, step, gap)
 
 
 def _along(points: np.ndarray, lines: np.ndarray) -> np.ndarray:
@@ -129,10 +172,10 @@ def edge_distance(heights: HeightImage, e: np.ndarray,
 @dataclass(frozen=True)
 class EdgeFit:
     """A corrected point is ``Rz(angle_rad) @ p + shift_mm`` (x, y only); ``b_mm``: how far
-    inside its edge each top's last point lies along its line (half a sample spacing and
-    what the scan loses at an edge); ``samples`` used; ``sigma_mm``, ``sigma_deg``: 1σ of
-    the shift (its worst direction) and of the turn, from the residuals' spread — large
-    when the edges the lines cross do not pin the part down (edges along the lines)."""
+    inside its edge a top's last point lies along its line (on average: what sampling and
+    the line's end lose); ``samples`` used; ``sigma_mm``, ``sigma_deg``: 1σ of the shift
+    (its worst direction) and of the turn, from the residuals' spread — large when the
+    edges the lines cross do not pin the part down (edges along the lines)."""
 
     angle_rad: float
     shift_mm: np.ndarray
@@ -143,52 +186,102 @@ class EdgeFit:
 
 
 def align_edges(heights: HeightImage, e: np.ndarray, u: np.ndarray,
-                iterations: int = 10, free: np.ndarray | None = None) -> EdgeFit | None:
+                step_mm: np.ndarray | None = None, gap_px: np.ndarray | None = None,
+                iterations: int = 20, free: np.ndarray | None = None) -> EdgeFit | None:
     """The correction that moves the edge samples ``e`` (K, 3), part frame, with outward
-    directions ``u`` (K, 2), so that each lies the same distance b inside the reference's
-    edge (least squares on the normal distances, Huber weights). None when fewer than 20
-    samples, or less than ``MIN_FOUND`` of them, find an edge (the scan's edges are not the
-    reference's there), or the edges cannot hold the turn, both shifts and b. ``free``: a
-    unit direction (2,), part frame, the shift is not fitted along (edges that all face one
-    way, :func:`unheld`): the turn and the shift across it only; ``sigma_mm`` is then the
-    latter's."""
+    directions ``u`` (K, 2), onto the reference's edges: first the turn, with each sample
+    inside its edge by ``step_mm`` (K,) (1 when None) times a factor of its ``gap_px``
+    class (:class:`EdgeSamples`; one class when None or NaN), then the shift with the turn
+    kept and one inset b for all. None when fewer than 20 samples, or less than
+    ``MIN_FOUND`` of them, find an edge (the scan's edges are not the reference's there), or
+    the edges cannot hold the turn, the shift and the insets. ``free``: a unit direction (2,),
+    part frame, the shift is not fitted along (edges that all face one way, :func:`unheld`):
+    the turn and the shift across it only; ``sigma_mm`` is then the latter's."""
+    if len(e) < 20:
+        return None
     across = None if free is None else np.array([-free[1], free[0]])
-    theta, t, b = 0.0, np.zeros(2), 0.0
-    c = e[:, :2].mean(axis=0) if len(e) else np.zeros(2)
-    used = 0
-    for _ in range(iterations):
-        R = np.array([[np.cos(theta), -np.sin(theta)], [np.sin(theta), np.cos(theta)]])
-        pe = np.column_stack([(e[:, :2] - c) @ R.T + c + t, e[:, 2]])
-        ue = u @ R.T
-        s, n = edge_distance(heights, pe, ue)
-        nu = np.einsum("ij,ij->i", n, ue)
-        ok = np.isfinite(s) & (nu > MIN_COS)
-        used = int(ok.sum())
-        if used < 20:
+    shift_cols = (lambda n: n) if across is None else (lambda n: (n @ across)[:, None])
+    shift_of = (lambda x: x) if across is None else (lambda x: x[0] * across)
+    k = 2 if across is None else 1              # the shift's unknowns
+    step = np.ones(len(e)) if step_mm is None else np.asarray(step_mm, float)
+    gap = np.full(len(e), np.nan) if gap_px is None else np.asarray(gap_px, float)
+    cls = np.where(np.isfinite(gap), np.clip(np.round(np.nan_to_num(gap)), 1, GAP_CLASSES) - 1,
+                   GAP_CLASSES).astype(int)
+    c = e[:, :2].mean(axis=0)
+    theta, t, beta = 0.0, np.zeros(2), np.zeros(GAP_CLASSES + 1)
+    for _ in range(iterations):                   # the turn, an inset per gap class
+        s, n, nu, d, ok = _residuals(heights, e, u, c, theta, t)
+        if ok.sum() < 20:
             return None
-        n, nu = n[ok], nu[ok]
-        r = (s[ok] - b) * nu                      # the normal distance left to the edge
-        d = pe[ok, :2] - c - t
-        shift = n if across is None else (n @ across)[:, None]
-        J = np.column_stack([-n[:, 0] * d[:, 1] + n[:, 1] * d[:, 0], shift, -nu])
-        w = np.minimum(1.0, HUBER_MM / np.maximum(np.abs(r - np.median(r)), 1e-12))
-        A = J.T @ (J * w[:, None])
-        if np.linalg.cond(A) > 1e6:
+        r = (s - step[ok] * beta[cls[ok]]) * nu
+        w = _weights(r)
+        present = np.flatnonzero(np.bincount(cls[ok], weights=w, minlength=len(beta)) >= 10)
+        B = -(nu * step[ok])[:, None] * (cls[ok][:, None] == present[None, :])
+        J = np.column_stack([-n[:, 0] * d[:, 1] + n[:, 1] * d[:, 0], shift_cols(n), B])
+        x, A = _solve(J, w, r)
+        if x is None:
             return None
-        x = np.linalg.solve(A, J.T @ (w * r))
-        step = x[1:3] if across is None else x[1] * across
-        theta, t, b = theta + x[0], t + step, b - x[-1]
+        theta, t = theta + x[0], t + shift_of(x[1:1 + k])
+        beta[present] -= x[1 + k:]
+        cut = np.flatnonzero(ok)[w == 0]
         if abs(x[0]) < 1e-7 and np.linalg.norm(x[1:]) < 1e-4:
             break
-    if used < MIN_FOUND * len(e):
+    sigma_deg = float(np.degrees(_spread(r) * np.sqrt(np.linalg.inv(A)[0, 0])))
+    b = float(np.median(s))
+    for _ in range(iterations):                   # the shift with the turn kept, one inset
+        s, n, nu, d, ok = _residuals(heights, e, u, c, theta, t)
+        if ok.sum() < 20:
+            return None
+        r = (s - b) * nu
+        w = _weights(r, SHIFT_HUBER_MM, np.inf) * ~np.isin(np.flatnonzero(ok), cut)
+        x, A = _solve(np.column_stack([shift_cols(n), -nu]), w, r)
+        if x is None:
+            return None
+        t, b = t + shift_of(x[:k]), b - x[k]
+        if np.linalg.norm(x) < 1e-4:
+            break
+    if ok.sum() < MIN_FOUND * len(e):
         return None
+    cov = _spread(r) ** 2 * np.linalg.inv(A)
     R = np.array([[np.cos(theta), -np.sin(theta)], [np.sin(theta), np.cos(theta)]])
-    spread = 1.4826 * np.median(np.abs(r - np.median(r)))
-    cov = spread ** 2 * np.linalg.inv(A)
-    shift_cov = cov[1:3, 1:3] if across is None else cov[1:2, 1:2]
-    return EdgeFit(float(theta), c - R @ c + t, float(b), used,
-                   float(np.sqrt(np.linalg.eigvalsh(shift_cov).max())),
-                   float(np.degrees(np.sqrt(cov[0, 0]))))
+    return EdgeFit(float(theta), c - R @ c + t, b, int(ok.sum()),
+                   float(np.sqrt(np.linalg.eigvalsh(cov[:k, :k]).max())), sigma_deg)
+
+
+def _residuals(heights: HeightImage, e: np.ndarray, u: np.ndarray, c: np.ndarray,
+               theta: float, t: np.ndarray):
+    """At the correction (theta about ``c``, then t): the samples' distances s to the
+    reference's edge, its normals n, their cosines nu to the line, the lever arms d (only
+    where the edge is found and crossed steeply enough), and that mask (K,)."""
+    R = np.array([[np.cos(theta), -np.sin(theta)], [np.sin(theta), np.cos(theta)]])
+    pe = np.column_stack([(e[:, :2] - c) @ R.T + c + t, e[:, 2]])
+    ue = u @ R.T
+    s, n = edge_distance(heights, pe, ue)
+    nu = np.einsum("ij,ij->i", n, ue)
+    ok = np.isfinite(s) & (nu > MIN_COS)
+    return s[ok], n[ok], nu[ok], pe[ok, :2] - c - t, ok
+
+
+def _weights(r: np.ndarray, huber_mm: float = HUBER_MM, cut_mm: float = CUT_MM) -> np.ndarray:
+    """Huber weights about the median; none for a line cut short (``cut_mm`` beyond)."""
+    dev = r - np.median(r)
+    return np.where(dev > cut_mm, 0.0, np.minimum(1.0, huber_mm / np.maximum(np.abs(dev),
+                                                                           1e-12)))
+
+
+def _solve(J: np.ndarray, w: np.ndarray, r: np.ndarray):
+    """(step, normal matrix) of weighted least squares; (None, None) when the columns
+    (scaled to unit norm) are nearly dependent: the edges do not hold the unknowns."""
+    A = J.T @ (J * w[:, None])
+    scale = np.sqrt(np.maximum(np.diag(A), 1e-30))
+    if np.linalg.cond(A / np.outer(scale, scale)) > 1e4:
+        return None, None
+    return np.linalg.solve(A, J.T @ (w * r)), A
+
+
+def _spread(r: np.ndarray) -> float:
+    """Robust 1σ of residuals r (MAD)."""
+    return float(1.4826 * np.median(np.abs(r - np.median(r))))
 
 
 HOLD = 0.02

@@ -27,6 +27,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from insitu.errors import MeasurementError
+from insitu.geometry.camera import CameraModel
 from insitu.measure.flat_icp import Fit, Pose4, apply, icp_flat, inverse, matrix, rot_z, score
 from insitu.measure.edge_align import align_edges, edge_samples, unheld
 from insitu.measure.part_reference import (PartReference, above_table, coarse_features,
@@ -136,11 +137,14 @@ class PartPose:
 def locate_part(reference: PartReference, points: np.ndarray,
                 settings: LocateSettings = LocateSettings(),
                 prefer_angle: tuple[float, float] | None = None,
-                lines: np.ndarray | None = None) -> PartPose:
+                lines: np.ndarray | None = None,
+                camera: CameraModel | None = None) -> PartPose:
     """The pose of ``reference``'s part in a scan ``points`` (N, 3) float64, mm, world
     frame (table included or not); ``lines`` (N,) int: each point's scan line (the cloud's
     ``line`` attribute), for the edge step — without it x, y and the turn are the ICP's,
-    a few tenths of a mm off on flat parts. ``prefer_angle`` (lo, hi) degrees: of solutions that fit
+    a few tenths of a mm off on flat parts; ``camera``: the camera the scan was measured
+    through (the height calibration's), so the edge step knows how each line ends in the
+    image (:mod:`insitu.measure.edge_align`) — without it the turn is less precise. ``prefer_angle`` (lo, hi) degrees: of solutions that fit
     nearly equally well (a symmetric part), take the one turned within lo … hi (wrapping
     around 360°). Raises :class:`LocateRefused` (a MeasurementError) naming why when the
     part is not found, fits poorly, is only partly in the scan or is ambiguous."""
@@ -159,7 +163,7 @@ def locate_part(reference: PartReference, points: np.ndarray,
     fits = _global(reference, part, s, z0)
     sols = _refine(reference, fine, fits, s)
     sols = _aligned(reference, pts, None if lines is None else np.asarray(lines), ~up, fine,
-                    sols, s)
+                    sols, s, camera)
     rim = float(np.linalg.norm(reference.top[:, :2] - reference.top_centroid, axis=1).max())
     pose = _choose(sols, len(part), where, s, prefer_angle, rim)
     return PartPose(pose[0], pose[1], table, len(part), time.perf_counter() - t0)
@@ -247,26 +251,27 @@ def _refine(ref: PartReference, fine: np.ndarray, fits: list[Fit],
 
 def _aligned(ref: PartReference, pts: np.ndarray, lines: np.ndarray | None,
              table: np.ndarray, fine: np.ndarray, sols: list[Solution],
-             s: LocateSettings) -> list[Solution]:
+             s: LocateSettings, camera: CameraModel | None) -> list[Solution]:
     """The solutions within reach of the best (those that may be chosen) with x, y and the
     turn refined on the edges the scan lines cross (:mod:`insitu.measure.edge_align`), z
     kept; unchanged without line indices or too few edge samples."""
     if not sols or lines is None:
         return sols
     scan_tree = cKDTree(fine)
-    e, u = edge_samples(pts, lines, table)
+    found = edge_samples(pts, lines, table, camera)
     out = []
     for sol in sols:
         if sol.score < sols[0].score - 2 * s.ambiguity:
             out.append(sol)
             continue
         a, t = _pose_of(sol)
-        ep, up = apply((a, t), e), u @ rot_z(a)[:2, :2].T
-        step = align_edges(ref.heights, ep, up)
+        ep, up = apply((a, t), found.points), found.dirs @ rot_z(a)[:2, :2].T
+        step = align_edges(ref.heights, ep, up, found.step_mm, found.gap_px)
         edges, why = (0, np.inf, np.inf), ""
         if step is None:
-            why, free = _why_unheld(ref, ep, up, len(e), a)
-            step = None if free is None else align_edges(ref.heights, ep, up, free=free)
+            why, free = _why_unheld(ref, ep, up, len(ep), a)
+            step = None if free is None else align_edges(ref.heights, ep, up, found.step_mm,
+                                                         found.gap_px, free=free)
             if step is not None:              # the turn and the shift across held: refined
                 edges = (step.samples, np.inf, step.sigma_deg)
         else:

@@ -131,6 +131,12 @@ def height_model(cal: HeightCalibration, which: str | None = None
     return camera_model(cal.camera), kind.model.from_dict(spec.model_dump())
 
 
+def scan_camera(camera: CameraModel, cal: HeightCalibration | None) -> CameraModel:
+    """The camera a scan's points were measured through: the height calibration's (Method
+    2), else the rig's ``camera`` (Method 1)."""
+    return camera_model(cal.camera) if cal is not None else camera
+
+
 def check_same_camera(cal: HeightCalibration, width: int, height: int, where: str) -> None:
     if (cal.camera.width, cal.camera.height) != (width, height):
         raise MeasurementError(

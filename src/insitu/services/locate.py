@@ -8,6 +8,7 @@ from pathlib import Path
 
 from insitu.formats.mesh import is_mesh_file, read_mesh
 from insitu.formats.pointcloud import PointCloud, read_ply
+from insitu.geometry.camera import CameraModel
 from insitu.measure.locate import LocateSettings, PartPose, locate_part
 from insitu.measure.part_reference import (PartReference, reference_from_cloud,
                                            reference_from_mesh)
@@ -30,20 +31,25 @@ def load_reference(path: str | Path, settings: LocateSettings = LocateSettings()
 
 def locate_cloud(reference: PartReference, cloud: PointCloud,
                  settings: LocateSettings = LocateSettings(),
-                 prefer_angle: tuple[float, float] | None = None) -> PartPose:
+                 prefer_angle: tuple[float, float] | None = None,
+                 camera: CameraModel | None = None) -> PartPose:
     """:func:`~insitu.measure.locate.locate_part` of a measured cloud (its scan lines used
-    for the edges when it records them). LocateRefused (a MeasurementError) names why when
-    no pose is given."""
+    for the edges when it records them; ``camera``: the one it was measured through, see
+    :func:`insitu.services.height.scan_camera`). LocateRefused (a MeasurementError) names
+    why when no pose is given."""
     return locate_part(reference, cloud.points, settings, prefer_angle,
-                       lines=cloud.attributes.get("line"))
+                       lines=cloud.attributes.get("line"), camera=camera)
 
 
 def locate(reference: str | Path, cloud: str | Path, out: str | Path,
            settings: LocateSettings = LocateSettings(),
-           prefer_angle: tuple[float, float] | None = None) -> PartPose:
-    """Locate the part of ``reference`` in the cloud file ``cloud`` and write POSE.json
-    ``out`` atomically (nothing is written when it is refused)."""
+           prefer_angle: tuple[float, float] | None = None,
+           camera: CameraModel | None = None) -> PartPose:
+    """Locate the part of ``reference`` in the cloud file ``cloud`` (measured through
+    ``camera``, None: unknown) and write POSE.json ``out`` atomically (nothing is written
+    when it is refused)."""
     measured = read_ply(cloud)
-    pose = locate_cloud(load_reference(reference, settings), measured, settings, prefer_angle)
+    pose = locate_cloud(load_reference(reference, settings), measured, settings, prefer_angle,
+                        camera)
     save_pose(out, pose, [str(reference), str(cloud)], prefer_angle, measured.rig)
     return pose

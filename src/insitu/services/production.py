@@ -27,6 +27,7 @@ from insitu.errors import DeviceError, FormatError, InsituError
 from insitu.formats.pointcloud import PointCloud, read_ply, write_ply
 from insitu.formats.production_log import PartRecord, append_record, read_log
 from insitu.formats.recipe import Recipe
+from insitu.geometry.camera import CameraModel
 from insitu.geometry.pose import flat_pose, pose_matrix
 from insitu.marking import LaserParams, MarkJob, read_job
 from insitu.services import mark as mark_svc
@@ -81,17 +82,19 @@ class PartReading:
 Locator = Callable[[PointCloud], Located]
 
 
-def recipe_locator(recipe: Recipe) -> Locator:
+def recipe_locator(recipe: Recipe, camera: CameraModel | None = None) -> Locator:
     """``locate(cloud) -> Located`` against the recipe's reference (read once:
     :func:`insitu.services.locate.load_reference`), keeping a symmetric part's turn within
-    the recipe's ``prefer_angle_deg``; it raises the registration's one-line refusal (part
+    the recipe's ``prefer_angle_deg``; ``camera``: the one the scans are measured through
+    (:func:`insitu.services.height.scan_camera`; None: unknown, a less precise turn); it raises the registration's one-line refusal (part
     not found, partly scanned, poor fit, ambiguous). ``locate.reference``: the reference."""
     from insitu.services.locate import load_reference, locate_cloud
 
     reference = load_reference(recipe.reference)
 
     def locate(cloud: PointCloud) -> Located:
-        pose = locate_cloud(reference, cloud, prefer_angle=recipe.prefer_angle_deg)
+        pose = locate_cloud(reference, cloud, prefer_angle=recipe.prefer_angle_deg,
+                            camera=camera)
         return Located(pose.T_world_part, pose.best.fitness, pose.best.rmse_mm)
     locate.reference = reference
     return locate

@@ -124,6 +124,7 @@ class ProductionPanel(QWidget):
     def start(self) -> None:
         """Run the recipe on the connected station, off the GUI thread."""
         from insitu.services import production
+        from insitu.services.height import scan_camera
 
         station, r = self.window_.station, self.recipe
         if r is None or station is None:
@@ -138,11 +139,12 @@ class ProductionPanel(QWidget):
         bridge = self._bridge
 
         def work(progress, cancel, on_frame):
-            locate = production.recipe_locator(r)
+            cal = self.window_.session.height_cal
+            locate = production.recipe_locator(r, scan_camera(station.rig.camera, cal))
             self._reference = locate.reference
             run = production.Production(
                 r, station, log, count, locate, production.read_part, present,
-                cancel=cancel, height_cal=self.window_.session.height_cal,
+                cancel=cancel, height_cal=cal,
                 on_record=bridge.record.emit, on_stage=bridge.stage.emit)
             return production.produce(run, resume)
 
