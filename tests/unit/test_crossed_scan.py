@@ -246,8 +246,8 @@ def test_new_recipes_scan_crossed_and_old_ones_do_not(tmp_path):
         assert scan["cross"] is cross and scan["cross_spacing_mm"] == 0.5
         assert read(out).scan.cross is cross
     res = CliRunner().invoke(app, ["recipe", "show", str(tmp_path / "rTrue.json")])
-    assert "then a crossed pass 0.5 mm apart" in " ".join(re.sub("[│┃─┌┐└┘├┤┬┴┼]", " ",
-                                                                 res.output).split())
+    flat = " ".join(re.sub("[│┃─┌┐└┘├┤┬┴┼]", " ", res.output).split())
+    assert "then a crossed pass 0.5 mm apart" in flat
     raw = json.loads((tmp_path / "rTrue.json").read_text())
     del raw["scan"]["cross"], raw["scan"]["cross_spacing_mm"]
     (tmp_path / "old.json").write_text(json.dumps(raw))

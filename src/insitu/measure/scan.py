@@ -25,9 +25,9 @@ class ScanReconstructor:
     height_model: None for Method 1 (light plane, Li et al. §2.1; any line direction), else
     Method 2 with that height calibration (Li et al. §2.2, or ours) for lines along y, and
     ``cross_model`` (None: none) for the crossed lines at its angle to x. settings: the
-    centre extraction (with a height model: the one it was calibrated with). z_range_mm: heights the surface can have
-    (the focus range); the line is only searched where its light plane can put it (ghosts
-    and reflections elsewhere are ignored). None: the whole column.
+    centre extraction (with a height model: the one it was calibrated with). z_range_mm:
+    heights the surface can have (the focus range); the line is only searched where its light
+    plane can put it (ghosts and reflections elsewhere are ignored). None: the whole column.
     :meth:`set_ambient` before the frames gives every point the room-light grey value of the
     pixel it was measured at (attribute ``ambient``).
     """

@@ -216,7 +216,8 @@ def record_camera_calibration(station: Station, out: Path, next_view: NextView, 
 
 
 def record(station: Station, kind: str, out: Path, *, spacing: float = 0.5, region=None,
-           cross: bool | None = None, grid: int = 21, heights: Seq[float] = (0.0,), marked: bool = False,
+           cross: bool | None = None, grid: int = 21, heights: Seq[float] = (0.0,),
+           marked: bool = False,
            next_view: NextView | None = None, views: int = 15, truth: dict | None = None,
            alignment: bool = True, progress: Progress | None = None) -> Path:
     """A sequence of ``kind`` (one of :data:`KINDS`) with the options that kind takes:

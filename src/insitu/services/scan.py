@@ -20,9 +20,9 @@ from insitu.formats.sequence import Sequence
 from insitu.geometry.camera import CameraModel
 from insitu.measure.plan import check_region, scan_lines
 from insitu.measure.scan import ScanReconstructor
+from insitu.measure.turned_sheet import CROSS_ANGLE_DEG
 from insitu.rig.files import HeightCalibration
 from insitu.services.common import Progress, camera_model
-from insitu.measure.turned_sheet import CROSS_ANGLE_DEG
 from insitu.services.height import (centre_settings, check_same_camera, crossed_model,
                                     height_model)
 from insitu.services.room_light import station_room_light
