@@ -258,3 +258,13 @@ def test_new_recipes_scan_crossed_and_old_ones_do_not(tmp_path):
     assert res.exit_code == 1 and "record the height calibration with crossed lines" in res.output
     assert len(res.output.strip().splitlines()) == 1
     assert not (tmp_path / "rTrue.production.jsonl").exists()
+
+
+def test_crossed_lines_leave_the_calibration_along_y_as_it_was(crossed_cal, tmp_path):
+    """The crossed lines are recorded after the lines along y: the same station records the
+    lines along y exactly as without them, so the model along y is the same."""
+    with connect(None, "step-block", 0, 4) as station:
+        record_height_calibration(station, tmp_path / "h", HEIGHTS, OFFSETS, cross=False)
+    plain = calibrate_height(tmp_path / "h")
+    assert plain.sheet_cross is None
+    assert plain.sheet.coefficients_mm == crossed_cal.sheet.coefficients_mm

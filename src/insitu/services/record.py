@@ -89,25 +89,27 @@ def record_height_calibration(station: Station, out: Path,
                               exposure_ms: float | None = None, cross: bool = True,
                               progress: Progress | None = None) -> Path:
     """The flat plate on the stage at each height, a line along y at each offset (Li et al.
-    §2.2); with ``cross`` also the crossed lines (:func:`crossed_calibration_lines`)."""
+    §2.2); with ``cross`` then the crossed lines (:func:`crossed_calibration_lines`) at each
+    height again, so the first pass is recorded exactly as without them."""
     stage = _on_plate(station)
     cam, head = station.devices.camera, station.devices.head
     exposure = _exposure(cam, exposure_ms)
-    lines = [(np.array([x, line_y[0]]), np.array([x, line_y[1]])) for x in offsets]
+    passes = [[(np.array([x, line_y[0]]), np.array([x, line_y[1]])) for x in offsets]]
     if cross:
-        lines += crossed_calibration_lines(offsets, line_y)
-    total, done = len(heights) * len(lines), 0
+        passes.append(crossed_calibration_lines(offsets, line_y))
+    total, done = len(heights) * sum(map(len, passes)), 0
     with _writer(station, out, "height-calibration", truth=station.truth()) as w:
         try:
-            for z in heights:
-                stage.move_z(z)
-                for a, b in lines:
-                    head.show_line(a, b)
-                    w.add(cam.grab(), line={"start": a.tolist(), "end": b.tolist()},
-                          plate_z_mm=float(z), exposure_ms=exposure)
-                    done += 1
-                    if progress:
-                        progress(done, total)
+            for lines in passes:
+                for z in heights:
+                    stage.move_z(z)
+                    for a, b in lines:
+                        head.show_line(a, b)
+                        w.add(cam.grab(), line={"start": a.tolist(), "end": b.tolist()},
+                              plate_z_mm=float(z), exposure_ms=exposure)
+                        done += 1
+                        if progress:
+                            progress(done, total)
         finally:
             head.off()
     return out
