@@ -28,6 +28,7 @@ random poses located against their meshes, and patterns marked where they belong
 
 Scans are cached in --cache (default /tmp/insitu-production-bench).
 Run: .venv/bin/python benchmarks/production.py [--poses 20] [--binning 2] [--seed 0]
+     [--cross 0.5] [--names step-block,arc,insert] [--skip locate,timing,marking,produce]
 """
 
 from __future__ import annotations
@@ -67,24 +68,29 @@ SQUARE = ('<svg xmlns="http://www.w3.org/2000/svg" width="3mm" height="3mm" '
 MARK_AT = {"step-block": (0.0, 30.0), "arc": (0.0, 5.0)}   # part frame, mm
 
 
-def height_cal(cache: Path, rig, seed: int) -> HeightCalibration:
-    path = cache / "height.json"
+def height_cal(cache: Path, rig, seed: int, cross: bool = False) -> HeightCalibration:
+    """Recorded and fitted once per cache (``cross``: with the crossed lines)."""
+    x = "-x" if cross else ""
+    path = cache / f"height{x}.json"
     if not path.exists():
-        record_height_calibration(simulated(SimWorld(rig, seed=seed)), cache / "hcal")
-        save_json_model(path, calibrate_height(cache / "hcal"))
+        record_height_calibration(simulated(SimWorld(rig, seed=seed)), cache / f"hcal{x}",
+                                  cross=cross)
+        save_json_model(path, calibrate_height(cache / f"hcal{x}"))
     return load_json_model(path, HeightCalibration)
 
 
 def scan(cache: Path, name: str, pose, rig, seed: int, cal, tag: str,
-         spacing: float | None = None) -> PointCloud:
+         spacing: float | None = None, cross: float | None = None) -> PointCloud:
     """The cloud of ``name`` at ``pose`` (cached as ``tag``), lines ``spacing`` apart
-    (None: ``SPACING[name]``)."""
+    (None: ``SPACING[name]``; ``cross``: then a crossed pass, its lines this far apart, mm)."""
     spacing = spacing or SPACING.get(name, 0.5)
-    path = cache / (f"{tag}.ply" if spacing == 0.5 else f"{tag}-sp{spacing:g}.ply")
+    path = cache / ((tag if spacing == 0.5 else f"{tag}-sp{spacing:g}")
+                    + (f"-x{cross:g}" if cross else "") + ".ply")
     if not path.exists():
         world = sim_world(name, seed=seed, rig=rig, pose=pose)
         with simulated(world) as station:
-            write_ply(path, scan_live(station, spacing, height_cal=cal).cloud)
+            write_ply(path, scan_live(station, spacing, height_cal=cal, cross=bool(cross),
+                                      cross_spacing=cross).cloud)
     return read_ply(path)
 
 
@@ -135,6 +141,8 @@ def locate_table(args, rig, cal, cache: Path) -> None:
         tab.add_column(col)
     camera = scan_camera(rig.operator.camera, cal)
     for k, (name, fold) in enumerate(PARTS.items()):
+        if name not in args.names.split(","):
+            continue
         wp = make_workpiece(name)
         ref = reference_from_mesh(wp.vertices, wp.triangles, name)
         rng = np.random.default_rng(1000 * args.seed + k)
@@ -147,7 +155,7 @@ def locate_table(args, rig, cal, cache: Path) -> None:
             errs, turns, rig_errs, rig_turns, times, refused, wrong = [], [], [], [], [], [], 0
             for i, pose in enumerate(poses):
                 cloud = scan(cache, name, pose, rig, args.seed, cal,
-                             f"{name}-{i}-b{args.binning}-s{args.seed}")
+                             f"{name}-{i}-b{args.binning}-s{args.seed}", cross=args.cross)
                 prefer = ((pose[2] + rough[i] - 50, pose[2] + rough[i] + 50) if breaker
                           else None)
                 t = time.perf_counter()
@@ -229,7 +237,7 @@ def marking(args, rig, cal, cache: Path) -> None:
             pose = random_pose(rng)
             cloud = scan(cache, name, pose, rig, args.seed, cal,
                          "mark-{}-b{}-s{}-at{:.3f}_{:.3f}_{:.3f}".format(
-                             name, args.binning, args.seed, *pose))
+                             name, args.binning, args.seed, *pose), cross=args.cross)
             prefer = (pose[2] - 50, pose[2] + 50) if PARTS[name] > 1 else None
             try:
                 got = locate_part(ref, cloud.points, prefer_angle=prefer,
@@ -263,12 +271,17 @@ def main() -> None:
     ap.add_argument("--parts", type=int, default=20, help="parts of the produce run")
     ap.add_argument("--skip", default="",
                     help="comma-separated: locate, timing, marking, produce")
+    ap.add_argument("--names", default=",".join(PARTS), help="comma-separated parts to locate")
+    ap.add_argument("--cross", type=float, default=None, metavar="MM",
+                    help="scan crossed: a second pass at 45° to x, its lines MM apart "
+                         "(the height calibration recorded with crossed lines; the timing "
+                         "scan stays along y)")
     args = ap.parse_args()
     skip = set(args.skip.split(","))
     args.cache.mkdir(parents=True, exist_ok=True)
     rig = default_rig(seed=args.seed, binning=args.binning)
     (args.cache / f"b{args.binning}").mkdir(exist_ok=True)
-    cal = height_cal(args.cache / f"b{args.binning}", rig, args.seed)
+    cal = height_cal(args.cache / f"b{args.binning}", rig, args.seed, bool(args.cross))
     if "locate" not in skip:
         locate_table(args, rig, cal, args.cache)
     if "marking" not in skip:
@@ -281,7 +294,8 @@ def main() -> None:
         from production_run import report      # beside this script
 
         report(argparse.Namespace(count=args.parts, binning=args.binning, seed=args.seed + 1,
-                                  fault_at=7, module=0.35, spacing=0.25))
+                                  fault_at=7, module=0.35, spacing=0.25,
+                                  cross=args.cross))
     console.print(json.dumps({"binning": args.binning, "poses": args.poses}))
 
 

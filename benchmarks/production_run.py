@@ -17,7 +17,8 @@ at one part, the run resumed from its log.
    counter and the log agree), the faulted part without a serial.
 
 Run: .venv/bin/python benchmarks/production_run.py [--count 20] [--binning 2] [--seed 1]
-     [--fault-at 7] [--module 0.35] [--spacing 0.25]   (or benchmarks/production.py, which runs it last)
+     [--fault-at 7] [--module 0.35] [--spacing 0.25] [--cross 0.5]
+     (or benchmarks/production.py, which runs it last)
 """
 
 from __future__ import annotations
@@ -56,13 +57,15 @@ PART = "step-block"
 AT = (0.0, -30.0)           # on the 3 mm step, part frame
 
 
-def calibrations(folder: Path, seed: int, binning: int):
-    """(field correction file, height calibration) fitted from simulated recordings."""
+def calibrations(folder: Path, seed: int, binning: int, cross: bool = False):
+    """(field correction file, height calibration) fitted from simulated recordings
+    (``cross``: the height calibration with crossed lines)."""
     rig = sim_world(PART, seed=seed, binning=binning).rig
     record_marked_field_calibration(simulated(SimWorld(rig, seed=seed)), folder / "field")
     field = folder / "field.json"
     save_field_correction(field, calibrate_field(folder / "field", "rbf"))
-    record_height_calibration(simulated(SimWorld(rig, seed=seed)), folder / "hcal")
+    record_height_calibration(simulated(SimWorld(rig, seed=seed)), folder / "hcal",
+                              cross=cross)
     return field, calibrate_height(folder / "hcal")
 
 
@@ -85,7 +88,9 @@ def run(args, folder: Path, field: Path, height) -> tuple[list, dict, dict]:
     part = make_workpiece(PART)                 # the part's mesh in its own frame
     write_mesh(folder / "part.stl", np.array(part.vertices), np.array(part.triangles))
     write_recipe(recipe_path, Recipe(folder / "part.stl", "mesh", (p,),
-                                     scan=RecipeScan(margin_mm=4.0, spacing_mm=args.spacing),
+                                     scan=RecipeScan(margin_mm=4.0, spacing_mm=args.spacing,
+                                                     cross=bool(args.cross),
+                                                     cross_spacing_mm=args.cross),
                                      serial_start=1,
                                      workpiece=PART))
     from insitu.cli.recipe import read
@@ -125,11 +130,11 @@ def run(args, folder: Path, field: Path, height) -> tuple[list, dict, dict]:
 
 def report(args) -> None:
     """Calibrate, run, resume and print both tables (``args``: count, binning, seed,
-    fault_at, module, spacing)."""
+    fault_at, module, spacing, cross: the crossed pass's spacing or None)."""
     with tempfile.TemporaryDirectory() as tmp:
         folder = Path(tmp)
         t0 = time.perf_counter()
-        field, height = calibrations(folder, args.seed, args.binning)
+        field, height = calibrations(folder, args.seed, args.binning, bool(args.cross))
         t_cal = time.perf_counter() - t0
         records, truths, offsets = run(args, folder, field, height)
         t_run = time.perf_counter() - t0 - t_cal
@@ -137,7 +142,8 @@ def report(args) -> None:
         issued = [i.serial for i in read_counter(counter).issued] if counter.exists() else []
     last = {r.part: r for r in records}
     tab = Table(title=f"produce: {args.count} parts of the {PART}, random poses (seed "
-                      f"{args.seed}), binning {args.binning}, lines {args.spacing} mm apart, "
+                      f"{args.seed}), binning {args.binning}, lines {args.spacing} mm apart"
+                      + (f" and crossed {args.cross} mm apart" if args.cross else "") + ", "
                       f"QR {args.module} mm modules; "
                       f"camera fault at part {args.fault_at}, resumed")
     for c in ("part", "serial", "outcome", "pose truth (x, y, °)", "pose error mm / °",
@@ -197,6 +203,8 @@ def main() -> None:
     ap.add_argument("--fault-at", type=int, default=7)
     ap.add_argument("--module", type=float, default=0.35)
     ap.add_argument("--spacing", type=float, default=0.25, help="scan line spacing, mm")
+    ap.add_argument("--cross", type=float, default=None, metavar="MM",
+                    help="scan crossed: a second pass at 45° to x, its lines MM apart")
     report(ap.parse_args())
 
 

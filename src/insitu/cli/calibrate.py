@@ -21,7 +21,8 @@ def height_cmd(
     out: Annotated[Path, typer.Option("-o", "--output", help="Height calibration file (.json); "
                                       "the residual grid is drawn beside it (.png).")],
 ) -> None:
-    """Fit the height calibration (Li et al. §2.2, and ours, the default) and write it with its
+    """Fit the height calibration (Li et al. §2.2, and ours, the default; ours also for the
+    crossed lines when the recording has them, for scans with --cross) and write it with its
     residuals, per plate height and line offset, and their picture."""
     from insitu.services.height import calibrate_height_and_report
 

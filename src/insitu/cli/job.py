@@ -40,6 +40,18 @@ PartPose = Annotated[tuple[float, float, float], typer.Option(
     callback=bounded_each("position_mm", "position_mm", "angle_deg"),
     help="Simulated rig: where the part lies — its origin at X Y, mm, turned ANGLE_DEG "
          "about +z (a cloud measured at another pose is another placement).")]
+CrossScan = Annotated[bool, typer.Option(
+    help="Scan a second, crossed pass over the same region (lines at 45° to x), so edges "
+         "that run along the first pass's lines are measured too; with a height calibration "
+         "it must have been recorded with crossed lines.")]
+CrossSpacing = Annotated[float | None, typer.Option(
+    callback=bounded("spacing_mm"),
+    help="With --cross: the crossed lines' spacing, mm (default: --spacing; the crossed "
+         "pass only has to cross the edges, so it may be coarser).")]
+RecordCross = Annotated[bool | None, typer.Option(
+    "--cross/--no-cross",
+    help="Scan: a second, crossed pass (lines at 45° to x; default off). Height calibration: "
+         "also the crossed lines a crossed scan needs (default on).")]
 
 
 class Stopped(InsituError):

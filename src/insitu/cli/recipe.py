@@ -85,6 +85,14 @@ def new(
     spacing: Annotated[float, typer.Option(callback=bounded("spacing_mm"),
                                            help="Scan line spacing, mm (locating pins a "
                                                 "part by the edges the lines cross).")] = 0.25,
+    cross: Annotated[bool, typer.Option(
+        help="Scan each part twice over: lines along y, then a crossed pass at 45° to x, so "
+             "every edge is crossed whatever the part's turn (Method 2 needs a height "
+             "calibration recorded with crossed lines).")] = True,
+    cross_spacing: Annotated[float, typer.Option(
+        callback=bounded("spacing_mm"),
+        help="The crossed pass's line spacing, mm (it only has to cross the edges the "
+             "first pass runs along, so it may be coarser).")] = 0.5,
     power: Annotated[float, typer.Option(callback=bounded("power_pct"),
                                          help="Laser power, % of full.")] = 30.0,
     frequency: Annotated[float, typer.Option(callback=bounded("frequency_khz"),
@@ -116,7 +124,8 @@ def new(
         placements=(_placement(pattern, at, width, rotate, mode, hatch, hatch_angle, beam),),
         laser={"power_pct": power, "frequency_khz": frequency, "mark_speed_mm_s": speed,
                "jump_speed_mm_s": 3000.0},
-        scan=RecipeScan(region, margin, spacing), prefer_angle_deg=prefer_angle,
+        scan=RecipeScan(region, margin, spacing, cross=cross, cross_spacing_mm=cross_spacing),
+        prefer_angle_deg=prefer_angle,
         counter=None if counter is None else counter.absolute(), serial_start=serial_start,
         fields=parse_fields(fields or []), workpiece=workpiece)
     write_recipe(out, recipe)
@@ -156,7 +165,9 @@ def show(recipe_path: RecipeArg) -> None:
     s = r.scan
     region = ("where the part lies + {:g} mm".format(s.margin_mm) if s.region is None
               else "{:g} … {:g} × {:g} … {:g} mm".format(*s.region))
-    table.add_row("scan", f"{region}, lines {s.spacing_mm:g} mm apart")
+    table.add_row("scan", f"{region}, lines {s.spacing_mm:g} mm apart" + (
+        f", then a crossed pass {s.cross_spacing_mm or s.spacing_mm:g} mm apart" if s.cross
+        else ""))
     las = r.laser
     table.add_row("laser", f"{las['power_pct']:g} %, {las['frequency_khz']:g} kHz, mark "
                            f"{las['mark_speed_mm_s']:g} mm/s")

@@ -11,7 +11,7 @@ import typer
 
 from insitu.cli.common import (bounded, check_output, console, fail, one_line_errors,
                                parse_heights, progress_bar)
-from insitu.cli.job import stop_on_signals
+from insitu.cli.job import RecordCross, stop_on_signals
 from insitu.services import record as svc
 
 
@@ -24,6 +24,7 @@ def record(
     rig: Annotated[Path, typer.Option(help="Rig file of the station.")],
     spacing: Annotated[float, typer.Option(
         callback=bounded("spacing_mm"), help="Scan: line spacing, mm.")] = 0.5,
+    cross: RecordCross = None,
     region: Annotated[tuple[float, float, float, float] | None, typer.Option(metavar="X0 X1 Y0 Y1", 
         callback=bounded("position_mm"),
         help="Scan: region X0 X1 Y0 Y1, mm (required on a real rig).")] = None,
@@ -52,9 +53,9 @@ def record(
     check_output(out)
     with (connect(rig) as station, stop_on_signals(f"recording {kind}", ""),
           progress_bar(f"recording {kind}") as progress):
-        svc.record(station, kind, out, spacing=spacing, region=region, grid=grid,
-                   heights=plate_z, marked=marked, next_view=_view_asker(views), views=views,
-                   progress=progress)
+        svc.record(station, kind, out, spacing=spacing, region=region, cross=cross,
+                   grid=grid, heights=plate_z, marked=marked, next_view=_view_asker(views),
+                   views=views, progress=progress)
     console.print(f"wrote {out}", highlight=False)
 
 

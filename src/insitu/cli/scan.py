@@ -9,7 +9,7 @@ import typer
 from rich.table import Table
 
 from insitu.cli.common import bounded, check_output, console, fail, one_line_errors, progress_bar
-from insitu.cli.job import PartPose
+from insitu.cli.job import CrossScan, CrossSpacing, PartPose
 from insitu.formats.project import SIM_BINNING
 from insitu.formats.validation import one_of
 from insitu.measure.height_models import HEIGHT_MODELS
@@ -34,6 +34,8 @@ def scan(
     pose: PartPose = (0.0, 0.0, 0.0),
     spacing: Annotated[float, typer.Option(
         callback=bounded("spacing_mm"), help="Line spacing, mm.")] = 0.5,
+    cross: CrossScan = False,
+    cross_spacing: CrossSpacing = None,
     region: Annotated[tuple[float, float, float, float] | None,
                       typer.Option(metavar="X0 X1 Y0 Y1", callback=bounded("position_mm"),
                                    help="Region X0 X1 Y0 Y1, mm (default on the simulated rig: "
@@ -47,7 +49,8 @@ def scan(
     preview: Annotated[Path | None, typer.Option(help="Also write a picture of the cloud (.png): the top view by height, and "
                                       "in the camera's room-light grey when the scan has it.")] = None,
 ) -> None:
-    """Scan a part (or replay a recorded scan) and write its point cloud."""
+    """Scan a part (or replay a recorded scan: its own lines, crossed or not) and write its
+    point cloud."""
     from insitu import services
     from insitu.services.station import connect
 
@@ -71,7 +74,8 @@ def scan(
         else:
             with connect(rig, workpiece, seed, binning, pose=pose) as station:
                 result = _live(station, out, spacing=spacing, region=region, height_cal=cal,
-                               model=height_model, progress=progress, speed_mm_s=line_speed)
+                               model=height_model, progress=progress, speed_mm_s=line_speed,
+                               cross=cross, cross_spacing=cross_spacing)
     services.save_cloud(result, out)
     if preview is not None:
         from insitu.measure.preview import save_cloud_picture

@@ -9,7 +9,7 @@ import typer
 
 from insitu.cli.common import (bounded, check_output, console, fail, one_line_errors,
                                parse_heights, progress_bar)
-from insitu.cli.job import PartPose
+from insitu.cli.job import PartPose, RecordCross
 from insitu.formats.project import SIM_BINNING
 from insitu.services import record
 from insitu.sim.workpieces import WORKPIECES
@@ -29,6 +29,7 @@ def record_cmd(
     pose: PartPose = (0.0, 0.0, 0.0),
     spacing: Annotated[float, typer.Option(
         callback=bounded("spacing_mm"), help="Scan line spacing, mm.")] = 0.5,
+    cross: RecordCross = None,
     region: Annotated[tuple[float, float, float, float] | None,
                       typer.Option(metavar="X0 X1 Y0 Y1", callback=bounded("position_mm"),
                                    help="Scan region X0 X1 Y0 Y1, mm (default: the part).")] = None,
@@ -92,8 +93,8 @@ def record_cmd(
     board = (BoardViews(world, views, lines=axis_lines() if alignment else None)
              if kind == "camera-calibration" else None)
     with progress_bar(f"recording {kind}") as progress, simulated(world) as station:
-        record.record(station, kind, out, spacing=spacing, region=region, grid=grid,
-                      heights=plate_z, marked=marked, next_view=board, views=views,
+        record.record(station, kind, out, spacing=spacing, region=region, cross=cross,
+                      grid=grid, heights=plate_z, marked=marked, next_view=board, views=views,
                       truth=board.truth if board else None, alignment=alignment,
                       progress=progress)
     console.print(f"wrote {out}")

@@ -110,6 +110,8 @@ BOUNDS: dict[str, Bound] = {
                             "the sheets are within a few mm of the nominal planes"),
     "scale_mm": Bound(1e-3, 1e4, "mm", "the polynomial's normalisation lengths"),
     "pixel_px": Bound(-1e6, 1e6, "px", "a pixel coordinate or a fitted image quantity"),
+    "line_angle_deg": Bound(0, 180, "°", "a line's direction from +x; a half turn is the "
+                            "same line"),
     # -- field correction --
     "rbf_sigma_mm": Bound(1e-3, 1e4, "mm", "the RBF spread is a fraction of the field"),
     "mse_goal_mm2": Bound(0, 100, "mm²", "the RBF fit's goal: errors are well below 10 mm"),

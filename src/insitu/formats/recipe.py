@@ -8,14 +8,18 @@
      "laser": {"power_pct": 30, "frequency_khz": 20, "mark_speed_mm_s": 500,
                "jump_speed_mm_s": 3000},
      "scan": {"region": null, "margin_mm": 5, "spacing_mm": 0.25, "exposure_ms": 10,
-              "speed_mm_s": 2000},                  # region: world (x0, x1, y0, y1) mm
+              "speed_mm_s": 2000,                   # region: world (x0, x1, y0, y1) mm
+              "cross": true, "cross_spacing_mm": 0.5},  # a crossed pass (absent: none)
      "locate": {"prefer_angle_deg": null},         # which of a symmetric part's turns
      "serial": {"counter": "serial.counter.json", "start": 1, "fields": {}}}
 
 Paths are relative to the recipe's folder. The reference defines the part's frame: a mesh in
 it, or the cloud of a first scan (its world frame is then the part's). ``scan.region`` null:
 where the part lies, grown by ``margin_mm`` (the simulated rig knows where; a real rig needs
-the region). ``serial.start`` creates the counter when it does not exist yet.
+the region). ``scan.cross``: a second, crossed pass (lines at 45° to x, ``cross_spacing_mm``
+apart, null: ``spacing_mm``), so every edge of the part is crossed by some line whatever its
+turn; absent (older recipes): along y only; ``insitu recipe new`` turns it on. ``serial.start``
+creates the counter when it does not exist yet.
 """
 
 from __future__ import annotations
@@ -67,6 +71,8 @@ class _Scan(_Strict):
     spacing_mm: Spacing = 0.25
     exposure_ms: Exposure = 10.0
     speed_mm_s: Speed = 2000.0
+    cross: bool = False
+    cross_spacing_mm: Spacing | None = None
 
 
 class _Locate(_Strict):
@@ -96,13 +102,17 @@ class _Recipe(_Strict):
 class RecipeScan:
     """Where and how each part is scanned: ``region`` world (x0, x1, y0, y1) mm (None:
     where the part lies, grown by ``margin_mm``), line ``spacing_mm``, camera
-    ``exposure_ms``, line sweep ``speed_mm_s``."""
+    ``exposure_ms``, line sweep ``speed_mm_s``; ``cross``: a second, crossed pass
+    ``cross_spacing_mm`` apart (None: ``spacing_mm``); off unless asked, as in files without
+    it (``insitu recipe new`` asks for it by default)."""
 
     region: tuple[float, float, float, float] | None = None
     margin_mm: float = 5.0
     spacing_mm: float = 0.25
     exposure_ms: float = 10.0
     speed_mm_s: float = 2000.0
+    cross: bool = False
+    cross_spacing_mm: float | None = None
 
 
 @dataclass(frozen=True)
@@ -153,7 +163,8 @@ def recipe_json(recipe: Recipe, path: Path) -> str:
         reference={recipe.reference_kind: _rel(recipe.reference, folder)},
         workpiece=recipe.workpiece, placements=placements, laser=_Laser(**recipe.laser),
         scan=_Scan(region=s.region, margin_mm=s.margin_mm, spacing_mm=s.spacing_mm,
-                   exposure_ms=s.exposure_ms, speed_mm_s=s.speed_mm_s),
+                   exposure_ms=s.exposure_ms, speed_mm_s=s.speed_mm_s, cross=s.cross,
+                   cross_spacing_mm=s.cross_spacing_mm),
         locate=_Locate(prefer_angle_deg=recipe.prefer_angle_deg),
         serial=_Serial(counter=_rel(counter, folder), start=recipe.serial_start,
                        fields=dict(recipe.fields)))
@@ -196,7 +207,8 @@ def read_recipe(path: str | Path, placement: Callable[..., Any],
     return Recipe(
         reference=_abs(getattr(d.reference, kind), folder, f"reference.{kind}", path),
         reference_kind=kind, placements=tuple(placements), laser=d.laser.model_dump(),
-        scan=RecipeScan(s.region, s.margin_mm, s.spacing_mm, s.exposure_ms, s.speed_mm_s),
+        scan=RecipeScan(s.region, s.margin_mm, s.spacing_mm, s.exposure_ms, s.speed_mm_s,
+                        s.cross, s.cross_spacing_mm),
         prefer_angle_deg=d.locate.prefer_angle_deg,
         counter=_abs(d.serial.counter, folder, "serial.counter", path, must_exist=False),
         serial_start=d.serial.start, fields=dict(d.serial.fields), workpiece=d.workpiece)

@@ -13,6 +13,7 @@ from insitu.measure.consistency import cross_line_inliers
 from insitu.measure.height_models import HeightModel
 from insitu.measure.heightcal import check_bracket
 from insitu.measure.plane import expected_band, line_runs_along_rows, reconstruct_line
+from insitu.measure.turned_sheet import TurnedSheetModel, line_angle, same_direction, turned_offset
 from insitu.vision.extract import CentreSettings, extract_centres
 
 
@@ -21,11 +22,12 @@ class ScanReconstructor:
 
     camera: the calibrated camera (for a height model: the one it was fitted through).
     pivot_height_mm, telecentric: the scan head's nominal geometry (formats.md ``scan_head``).
-    height_model: None for Method 1 (light plane, Li et al. §2.1), else Method 2 with that
-    height calibration (Li et al. §2.2, or ours). settings: the centre extraction (with a
-    height model: the one it was calibrated with). z_range_mm: heights the surface can have
-    (the focus range); the line is only searched where its light plane can put it (ghosts
-    and reflections elsewhere are ignored). None: the whole column.
+    height_model: None for Method 1 (light plane, Li et al. §2.1; any line direction), else
+    Method 2 with that height calibration (Li et al. §2.2, or ours) for lines along y, and
+    ``cross_model`` (None: none) for the crossed lines at its angle to x. settings: the
+    centre extraction (with a height model: the one it was calibrated with). z_range_mm:
+    heights the surface can have (the focus range); the line is only searched where its light
+    plane can put it (ghosts and reflections elsewhere are ignored). None: the whole column.
     :meth:`set_ambient` before the frames gives every point the room-light grey value of the
     pixel it was measured at (attribute ``ambient``).
     """
@@ -33,9 +35,12 @@ class ScanReconstructor:
     def __init__(self, camera: CameraModel, pivot_height_mm: float, telecentric: bool = False,
                  height_model: HeightModel | None = None,
                  settings: CentreSettings = CentreSettings(),
-                 z_range_mm: tuple[float, float] | None = None, min_points: int = 5):
+                 z_range_mm: tuple[float, float] | None = None, min_points: int = 5,
+                 cross_model: TurnedSheetModel | None = None):
         self.camera, self.H, self.telecentric = camera, pivot_height_mm, telecentric
         self.model, self.settings, self.z_range = height_model, settings, z_range_mm
+        self.cross_model = cross_model
+        self._angles: dict[int, float] = {}     # frame index → its line's angle to x
         self.min_points = min_points
         self._chunks: list[tuple[np.ndarray, ...]] = []
         self.frames = 0
@@ -79,14 +84,12 @@ class ScanReconstructor:
         if self.model is None:
             pts = reconstruct_line(self.camera, centres.uv, start, end, self.H, self.telecentric)
         else:
-            if abs(start[0] - end[0]) > 1e-9:
-                raise MeasurementError(f"frame {index}: the height calibration needs lines "
-                                       f"along y (constant x), got {list(start)} → {list(end)}")
-            pts = self.model.points(self.camera, float(start[0]), centres.u, centres.v)
+            pts = self._height_points(index, start, end, centres.u, centres.v)
         ok = np.isfinite(pts).all(axis=1)
         if ok.sum() < self.min_points:
             return 0
         self.frames_with_line += 1
+        self._angles[index] = line_angle(start, end)
         self.last_points = pts[ok]
         chunk = (pts[ok], centres.peak[ok], np.full(ok.sum(), index, np.int32),
                  np.clip(centres.contrast[ok] / 255.0, 0, 1))
@@ -94,6 +97,19 @@ class ScanReconstructor:
             chunk += (grey_at(self._ambient, centres.uv[ok]),)
         self._chunks.append(chunk)
         return int(ok.sum())
+
+    def _height_points(self, index: int, start, end, u: np.ndarray, v: np.ndarray
+                       ) -> np.ndarray:
+        """Method 2: the along-y model for lines along y, the crossed one at its angle."""
+        if abs(start[0] - end[0]) <= 1e-9:
+            return self.model.points(self.camera, float(start[0]), u, v)
+        c = self.cross_model
+        if c is not None and same_direction(start, end, c.angle_deg):
+            return c.points(self.camera, turned_offset(start, end, c.angle_deg), u, v)
+        raise MeasurementError(
+            f"frame {index}: the height calibration has lines along y"
+            + (f" and at {c.angle_deg:g}° to x" if c is not None else " only")
+            + f", got {list(start)} → {list(end)} ({line_angle(start, end):g}° to x)")
 
     def cloud(self, outlier_radius_mm: float = 1.5, outlier_neighbours: int = 8,
               cross_check: bool = True) -> PointCloud:
@@ -112,12 +128,23 @@ class ScanReconstructor:
         pts, attrs = pts[keep], {k: a[keep] for k, a in attrs.items()}
         self.outliers_removed = int(len(keep) - keep.sum()) if isinstance(keep, np.ndarray) else 0
         if cross_check:
-            confirmed = cross_line_inliers(pts, attrs["line"])
+            confirmed = self._confirmed(pts, attrs["line"])
             pts, attrs = pts[confirmed], {k: a[confirmed] for k, a in attrs.items()}
             self.unconfirmed_removed = int(len(confirmed) - confirmed.sum())
         if self.model is not None:
             check_bracket(self.model, pts[:, 2], "scan")
         return PointCloud(pts, attrs)
+
+    def _confirmed(self, pts: np.ndarray, line: np.ndarray) -> np.ndarray:
+        """(N,) bool: :func:`cross_line_inliers` within each pass (lines of one direction;
+        a crossed pass's lines are no neighbours of the other pass's)."""
+        keys = np.array(sorted(self._angles))
+        angle = np.array([self._angles[k] for k in keys])[np.searchsorted(keys, line)]
+        keep = np.ones(len(pts), bool)
+        for a in np.unique(angle):
+            sel = angle == a
+            keep[sel] = cross_line_inliers(pts[sel], line[sel])
+        return keep
 
 
 def density_inliers(points: np.ndarray, radius_mm: float, neighbours: int) -> np.ndarray:

@@ -140,6 +140,13 @@ class SheetModelSpec(BaseModel):
         return v
 
 
+class TurnedSheetSpec(SheetModelSpec):
+    """Our height model of the crossed lines, at ``line_angle_deg`` to x, fitted in the world
+    turned so that they run along y (insitu.measure.turned_sheet.TurnedSheetModel)."""
+
+    line_angle_deg: within("line_angle_deg")
+
+
 class PaperModelSpec(BaseModel):
     """Li et al.'s model (insitu.measure.heightcal.PaperHeightModel)."""
 
@@ -194,9 +201,10 @@ class ResidualGridSpec(BaseModel):
 class HeightCalibration(CalibrationEnvelope):
     """Height calibration (Li et al. §2.2 and ours) with the camera it was fitted through and
     the centre extraction it was made with (a scan must use the same). ``model``: the default
-    one; each model under its name. ``model`` and ``centres.method`` are checked against their
-    tables by :func:`insitu.services.height.load_height_calibration` (the tables live above
-    this layer)."""
+    one; each model under its name; ``sheet_cross``: the crossed lines' (None: the recording
+    had lines along y only, so it cannot scan crossed). ``model`` and ``centres.method`` are
+    checked against their tables by :func:`insitu.services.height.load_height_calibration`
+    (the tables live above this layer)."""
 
     kind: Literal["height-calibration"] = "height-calibration"
     camera: CameraSpec
@@ -204,6 +212,7 @@ class HeightCalibration(CalibrationEnvelope):
     model: str = "sheet"                # a key of insitu.measure.height_models.HEIGHT_MODELS
     sheet: SheetModelSpec
     paper: PaperModelSpec | None = None
+    sheet_cross: TurnedSheetSpec | None = None   # lines at an angle to x: a crossed scan
     residual_grid: ResidualGridSpec | None = None
 
 

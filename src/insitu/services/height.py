@@ -13,7 +13,9 @@ from insitu.geometry.camera import CameraModel
 from insitu.measure.height_models import HEIGHT_MODELS, HeightModel
 from insitu.measure.heightcal import (LineObservation, PaperHeightModel, SheetHeightModel,
                                       cross_validate_sheet, height_residuals, residual_grid)
-from insitu.measure.plane import expected_band
+from insitu.measure.plane import expected_band, line_runs_along_rows
+from insitu.measure.turned_sheet import (TurnedSheetModel, line_angle, same_direction,
+                                         turned_camera, turned_offset)
 from insitu.rig.files import HeightCalibration, ResidualGridSpec, load_json_model
 from insitu.services.common import Progress, camera_model, save_with_picture
 from insitu.vision.centres import CENTRE_METHODS
@@ -21,28 +23,40 @@ from insitu.vision.extract import CentreSettings, extract_centres
 
 
 def observations(seq: Sequence, settings: CentreSettings = CentreSettings(),
-                 progress: Progress | None = None) -> list[LineObservation]:
+                 progress: Progress | None = None
+                 ) -> tuple[list[LineObservation], list[LineObservation], float | None]:
     """Line centres of every frame of a height-calibration sequence, one frame at a time,
-    each searched where its light plane meets the plate (± 3 mm)."""
+    each searched where its light plane meets the plate (± 3 mm): (the frames of lines along
+    y, each at its x; the crossed frames, each at its offset in the turned frame
+    (:mod:`insitu.measure.turned_sheet`); the crossed lines' angle to x, None without)."""
     if seq.kind != "height-calibration":
         raise CalibrationError(f"{seq.folder}: a '{seq.kind}' sequence, not a height calibration")
     camera, H = camera_model(seq.camera), seq.scan_head.pivot_height_mm
-    obs = []
+    along_y, crossed, angle = [], [], None
     for i, frame, image in seq:
-        (x0, _), (x1, _) = frame.line.start, frame.line.end
-        if abs(x0 - x1) > 1e-9:
-            raise CalibrationError(f"{seq.folder}: frames[{i}].line: the height calibration needs "
-                                   f"lines along y (constant x), got x {x0:g} → {x1:g}")
-        band = expected_band(camera, frame.line.start, frame.line.end, H,
-                             (frame.plate_z_mm - 3.0, frame.plate_z_mm + 3.0))
-        c = extract_centres(image, settings, band)
+        a, b = frame.line.start, frame.line.end
+        if abs(a[0] - b[0]) > 1e-9:
+            angle = line_angle(a, b) if angle is None else angle
+            if not same_direction(a, b, angle):
+                raise CalibrationError(
+                    f"{seq.folder}: frames[{i}].line: expected lines along y or crossed lines "
+                    f"at {angle:g}° to x (as the earlier frames), got {line_angle(a, b):g}°")
+        rows = line_runs_along_rows(camera, a, b)
+        band = expected_band(camera, a, b, H, (frame.plate_z_mm - 3.0, frame.plate_z_mm + 3.0),
+                             along_rows=rows)
+        c = extract_centres(image, settings, band, rows)
         if len(c) < 20:
             raise CalibrationError(f"{seq.folder}: {frame.file}: no laser line found "
-                                   f"(offset {x0:g} mm, plate at {frame.plate_z_mm:g} mm)")
-        obs.append(LineObservation(float(x0), float(frame.plate_z_mm), c.u, c.v))
+                                   f"(line {list(a)} → {list(b)} mm, plate at "
+                                   f"{frame.plate_z_mm:g} mm)")
+        if abs(a[0] - b[0]) > 1e-9:
+            crossed.append(LineObservation(turned_offset(a, b, angle), float(frame.plate_z_mm),
+                                           c.u, c.v))
+        else:
+            along_y.append(LineObservation(float(a[0]), float(frame.plate_z_mm), c.u, c.v))
         if progress:
             progress(i + 1, len(seq))
-    return obs
+    return along_y, crossed, angle
 
 
 def calibrate_height(folder: str | Path, settings: CentreSettings = CentreSettings(),
@@ -51,7 +65,7 @@ def calibrate_height(folder: str | Path, settings: CentreSettings = CentreSettin
     seq = Sequence.open(folder)
     camera = camera_model(seq.camera)
     H = seq.scan_head.pivot_height_mm
-    obs = observations(seq, settings, progress)
+    obs, crossed, angle = observations(seq, settings, progress)
     sheet = SheetHeightModel.fit(obs, camera, H)
     residuals = {f"sheet_{k}": v for k, v in height_residuals(sheet, camera, obs).items()}
     residuals.update({f"sheet_{k}": v for k, v in cross_validate_sheet(obs, camera, H).items()})
@@ -59,17 +73,27 @@ def calibrate_height(folder: str | Path, settings: CentreSettings = CentreSettin
     if any(o.x_mm == 0.0 and o.z_mm == 0.0 for o in obs):
         paper = PaperHeightModel.fit(obs)
         residuals.update({f"paper_{k}": v for k, v in height_residuals(paper, camera, obs).items()})
+    cross = None
+    if crossed:
+        cross = TurnedSheetModel.fit(crossed, camera, H, angle)
+        tcam = turned_camera(camera, angle)
+        residuals.update({f"sheet_cross_{k}": v for k, v in
+                          height_residuals(cross.sheet, tcam, crossed).items()})
+        residuals.update({f"sheet_cross_{k}": v for k, v in
+                          cross_validate_sheet(crossed, tcam, H).items()})
     heights, offsets, rms = residual_grid(sheet, camera, obs)
     grid = ResidualGridSpec(heights_mm=heights.tolist(), offsets_mm=offsets.tolist(),
                             rms_mm=[[float(v) if np.isfinite(v) else None for v in row]
                                     for row in rms])
     return HeightCalibration(
         camera=seq.camera, centres=settings.to_dict(), model="sheet", sheet=sheet.to_dict(),
-        paper=paper.to_dict() if paper else None, inputs=[str(Path(folder))],
+        paper=paper.to_dict() if paper else None,
+        sheet_cross=cross.to_dict() if cross else None, inputs=[str(Path(folder))],
         residuals=residuals, residual_grid=grid,
         notes=f"{len(obs)} frames: plate at {heights[0]:g} … {heights[-1]:g} mm "
               f"({len(heights)} heights), lines at {offsets[0]:g} … {offsets[-1]:g} mm "
-              f"({len(offsets)} offsets)")
+              f"({len(offsets)} offsets)"
+              + (f"; {len(crossed)} frames of crossed lines at {angle:g}° to x" if cross else ""))
 
 
 def height_report_png(cal: HeightCalibration, path: str | Path) -> None:
@@ -135,6 +159,19 @@ def scan_camera(camera: CameraModel, cal: HeightCalibration | None) -> CameraMod
     """The camera a scan's points were measured through: the height calibration's (Method
     2), else the rig's ``camera`` (Method 1)."""
     return camera_model(cal.camera) if cal is not None else camera
+
+
+def crossed_model(cal: HeightCalibration) -> TurnedSheetModel:
+    """The calibration's model of the crossed lines; MeasurementError naming its file (or the
+    folder it was fitted from) when its recording had lines along y only."""
+    if cal.sheet_cross is None:
+        where = cal.path or (cal.inputs[0] if cal.inputs else "the height calibration")
+        raise MeasurementError(
+            f"{where}: this height calibration has no crossed lines (sheet_cross), so it "
+            "cannot scan crossed: record the height calibration with crossed lines (the "
+            "default of 'insitu record height-calibration') and calibrate again, or scan "
+            "without --cross")
+    return TurnedSheetModel.from_dict(cal.sheet_cross.model_dump())
 
 
 def check_same_camera(cal: HeightCalibration, width: int, height: int, where: str) -> None:

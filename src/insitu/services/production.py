@@ -32,6 +32,7 @@ from insitu.geometry.pose import flat_pose, pose_matrix
 from insitu.marking import LaserParams, MarkJob, read_job
 from insitu.services import mark as mark_svc
 from insitu.services import serials
+from insitu.services.height import crossed_model
 from insitu.services.scan import Cancelled, scan_live
 from insitu.services.station import Station
 
@@ -192,7 +193,11 @@ def resume_point(records: list[PartRecord]) -> tuple[int, PartRecord | None]:
 def produce(run: Production, resume: bool = False) -> list[PartRecord]:
     """Run parts until ``run.count`` are through (``resume``: continue the log). Returns this
     call's records. FormatError for a log that exists without ``resume`` or is not this run's;
-    a fault or an abort is raised after its record is logged (the laser off)."""
+    a fault or an abort is raised after its record is logged (the laser off).
+    MeasurementError before the first part when the recipe scans crossed and the height
+    calibration has no crossed lines."""
+    if run.recipe.scan.cross and run.height_cal is not None:
+        crossed_model(run.height_cal)        # one line before the first part when it has none
     records = read_log(run.log)
     if records and not resume:
         raise FormatError(f"{run.log}: holds {len(records)} records of an earlier run: "
@@ -248,7 +253,8 @@ def _run_part(run: Production, part: _Part) -> PartRecord:
     r = run.recipe
     scan = _stage(run, part, "scan", lambda: scan_live(
         run.station, r.scan.spacing_mm, scan_region(run), run.height_cal,
-        exposure_ms=r.scan.exposure_ms, speed_mm_s=r.scan.speed_mm_s, cancel=run.cancel))
+        exposure_ms=r.scan.exposure_ms, speed_mm_s=r.scan.speed_mm_s, cancel=run.cancel,
+        cross=r.scan.cross, cross_spacing=r.scan.cross_spacing_mm))
     cloud = scan.cloud
     write_ply(run.cloud_path(part.number), cloud)
     try:

@@ -13,9 +13,11 @@ import numpy as np
 from insitu.errors import ConfigError, DeviceError
 from insitu.formats.sequence import SequenceWriter
 from insitu.geometry.beams import axis_lines
-from insitu.measure.plan import check_region, scan_lines
+from insitu.measure.plan import check_region
+from insitu.measure.turned_sheet import CROSS_ANGLE_DEG, turned_lines, turned_offset
 from insitu.services.common import Progress
 from insitu.services.room_light import station_room_light
+from insitu.services.scan import plan_lines
 from insitu.services.station import Station
 
 KINDS = ("scan", "height-calibration", "field-calibration", "camera-calibration")
@@ -52,13 +54,15 @@ def _on_plate(station: Station):
 
 
 def record_scan(station: Station, out: Path, spacing: float = 0.5, region=None,
-                exposure_ms: float | None = None, progress: Progress | None = None) -> Path:
+                exposure_ms: float | None = None, cross: bool = False,
+                progress: Progress | None = None) -> Path:
     """A scan over ``region`` (x0, x1, y0, y1) mm (default: the station's), a line every
-    ``spacing`` mm, after a frame with the laser off under the room light (auto-exposed,
-    ``ambient.png``; left out when the camera gives none)."""
+    ``spacing`` mm (``cross``: then a crossed pass, as :func:`~insitu.services.scan.scan_live`
+    draws it without a height calibration), after a frame with the laser off under the room
+    light (auto-exposed, ``ambient.png``; left out when the camera gives none)."""
     region = tuple(region) if region is not None else station.default_region()
     check_region(region, station.rig.head.field_size_mm)
-    lines = scan_lines(region, spacing)
+    lines = plan_lines(region, spacing, cross)
     cam, head = station.devices.camera, station.devices.head
     exposure = _exposure(cam, exposure_ms)
     with _writer(station, out, "scan", truth=station.truth(region=list(region))) as w:
@@ -82,28 +86,48 @@ def record_scan(station: Station, out: Path, spacing: float = 0.5, region=None,
 def record_height_calibration(station: Station, out: Path,
                               heights: Seq[float] = PAPER_HEIGHTS_MM,
                               offsets: Seq[float] = PAPER_OFFSETS_MM, line_y=(-50.0, 50.0),
-                              exposure_ms: float | None = None,
+                              exposure_ms: float | None = None, cross: bool = True,
                               progress: Progress | None = None) -> Path:
-    """The flat plate on the stage at each height, a line at each offset (Li et al. §2.2)."""
+    """The flat plate on the stage at each height, a line along y at each offset (Li et al.
+    §2.2); with ``cross`` then the crossed lines (:func:`crossed_calibration_lines`) at each
+    height again, so the first pass is recorded exactly as without them."""
     stage = _on_plate(station)
     cam, head = station.devices.camera, station.devices.head
     exposure = _exposure(cam, exposure_ms)
-    total, done = len(heights) * len(offsets), 0
+    passes = [[(np.array([x, line_y[0]]), np.array([x, line_y[1]])) for x in offsets]]
+    if cross:
+        passes.append(crossed_calibration_lines(offsets, line_y))
+    total, done = len(heights) * sum(map(len, passes)), 0
     with _writer(station, out, "height-calibration", truth=station.truth()) as w:
         try:
-            for z in heights:
-                stage.move_z(z)
-                for x in offsets:
-                    a, b = np.array([x, line_y[0]]), np.array([x, line_y[1]])
-                    head.show_line(a, b)
-                    w.add(cam.grab(), line={"start": a.tolist(), "end": b.tolist()},
-                          plate_z_mm=float(z), exposure_ms=exposure)
-                    done += 1
-                    if progress:
-                        progress(done, total)
+            for lines in passes:
+                for z in heights:
+                    stage.move_z(z)
+                    for a, b in lines:
+                        head.show_line(a, b)
+                        w.add(cam.grab(), line={"start": a.tolist(), "end": b.tolist()},
+                              plate_z_mm=float(z), exposure_ms=exposure)
+                        done += 1
+                        if progress:
+                            progress(done, total)
         finally:
             head.off()
     return out
+
+
+def crossed_calibration_lines(offsets: Seq[float], line_y=(-50.0, 50.0),
+                              angle_deg: float = CROSS_ANGLE_DEG
+                              ) -> list[tuple[np.ndarray, np.ndarray]]:
+    """The crossed lines of a height calibration, (start, end) mm: at ``angle_deg`` to x, as
+    far apart as the ``offsets`` of the lines along y and as long, across the whole rectangle
+    those lines cover (offsets × ``line_y``), so a crossed scan over it stays calibrated."""
+    x = np.unique(np.asarray(offsets, float))
+    step = float(np.median(np.diff(x))) if len(x) > 1 else 5.0
+    across = max(abs(turned_offset(c, c, angle_deg))
+                 for c in ((x[0], line_y[0]), (x[-1], line_y[0]), (x[0], line_y[1]),
+                           (x[-1], line_y[1])))
+    n = int(np.floor(across / step + 1e-9))
+    return turned_lines(step * np.arange(-n, n + 1), line_y, angle_deg)
 
 
 def record_field_calibration(station: Station, out: Path, n: int = 21, half_mm: float = 90.0,
@@ -194,7 +218,8 @@ def record_camera_calibration(station: Station, out: Path, next_view: NextView, 
 
 
 def record(station: Station, kind: str, out: Path, *, spacing: float = 0.5, region=None,
-           grid: int = 21, heights: Seq[float] = (0.0,), marked: bool = False,
+           cross: bool | None = None, grid: int = 21, heights: Seq[float] = (0.0,),
+           marked: bool = False,
            next_view: NextView | None = None, views: int = 15, truth: dict | None = None,
            alignment: bool = True, progress: Progress | None = None) -> Path:
     """A sequence of ``kind`` (one of :data:`KINDS`) with the options that kind takes:
@@ -202,11 +227,13 @@ def record(station: Station, kind: str, out: Path, *, spacing: float = 0.5, regi
     (``grid`` spots per side at ``heights``, or ``marked`` circles), the camera calibration
     (``views`` brought by ``next_view``, then with ``alignment`` the board flat on the plate
     and the head's axis lines on it, which give the camera's pose in the scan-head frame;
-    ``truth``: added to the station's)."""
+    ``truth``: added to the station's). ``cross``: a scan's crossed pass (default off), the
+    height calibration's crossed lines (default on)."""
     if kind == "scan":
-        return record_scan(station, out, spacing, region, progress=progress)
+        return record_scan(station, out, spacing, region, cross=bool(cross), progress=progress)
     if kind == "height-calibration":
-        return record_height_calibration(station, out, progress=progress)
+        return record_height_calibration(station, out, cross=cross is not False,
+                                          progress=progress)
     if kind == "field-calibration" and marked:
         return record_marked_field_calibration(station, out, n=grid, progress=progress)
     if kind == "field-calibration":

@@ -20,9 +20,11 @@ from insitu.formats.sequence import Sequence
 from insitu.geometry.camera import CameraModel
 from insitu.measure.plan import check_region, scan_lines
 from insitu.measure.scan import ScanReconstructor
+from insitu.measure.turned_sheet import CROSS_ANGLE_DEG
 from insitu.rig.files import HeightCalibration
 from insitu.services.common import Progress, camera_model
-from insitu.services.height import centre_settings, check_same_camera, height_model
+from insitu.services.height import (centre_settings, check_same_camera, crossed_model,
+                                    height_model)
 from insitu.services.room_light import station_room_light
 from insitu.services.station import Station
 
@@ -107,16 +109,37 @@ def _finish(rec: ScanReconstructor, t0: float, rig: RigRecord | None = None,
 
 def reconstructor(camera: CameraModel, pivot_height_mm: float, telecentric: bool,
                   z_range_mm: tuple[float, float], height_cal: HeightCalibration | None,
-                  model: str | None, where: str) -> ScanReconstructor:
+                  model: str | None, where: str, cross: bool = False) -> ScanReconstructor:
     """Method 1 without a height calibration, else Method 2 with it (``model``: "sheet",
-    "paper" or None for the calibration's default). The line is searched where the focus
-    range ``z_range_mm`` can put it."""
+    "paper" or None for the calibration's default; with ``cross`` also its crossed lines'
+    model, MeasurementError when it has none). The line is searched where the focus range
+    ``z_range_mm`` can put it."""
     if height_cal is None:
         return ScanReconstructor(camera, pivot_height_mm, telecentric, z_range_mm=z_range_mm)
     check_same_camera(height_cal, camera.width, camera.height, where)
     cal_camera, hmodel = height_model(height_cal, model)
     return ScanReconstructor(cal_camera, pivot_height_mm, telecentric, hmodel,
-                             centre_settings(height_cal), z_range_mm)
+                             centre_settings(height_cal), z_range_mm,
+                             cross_model=crossed_model(height_cal) if cross else None)
+
+
+def cross_angle(height_cal: HeightCalibration | None) -> float:
+    """The crossed pass's line angle to x, degrees: the height calibration's crossed lines',
+    else (Method 1, or a calibration without them) :data:`CROSS_ANGLE_DEG`."""
+    spec = height_cal.sheet_cross if height_cal is not None else None
+    return spec.line_angle_deg if spec is not None else CROSS_ANGLE_DEG
+
+
+def plan_lines(region, spacing: float, cross: bool = False,
+               height_cal: HeightCalibration | None = None,
+               cross_spacing: float | None = None) -> list:
+    """The lines of a scan over ``region``: along y ``spacing`` mm apart, then with ``cross``
+    a second, crossed pass over the same region (:func:`cross_angle`), ``cross_spacing`` mm
+    apart (None: ``spacing``)."""
+    lines = scan_lines(region, spacing)
+    if not cross:
+        return lines
+    return lines + scan_lines(region, cross_spacing or spacing, cross_angle(height_cal))
 
 
 def scan_replay(folder: str | Path, height_cal: HeightCalibration | None = None,
@@ -132,11 +155,11 @@ def scan_replay(folder: str | Path, height_cal: HeightCalibration | None = None,
     if seq.kind != "scan":
         raise MeasurementError(f"{seq.folder}: a '{seq.kind}' sequence, not a scan")
     head = seq.scan_head
-    rec = reconstructor(camera_model(seq.camera), head.pivot_height_mm,
-                        head.lens == "telecentric", tuple(head.z_range_mm), height_cal, model,
-                        str(seq.folder))
     lines = [(np.asarray(f.line.start, float), np.asarray(f.line.end, float))
              for f in seq.frames]
+    rec = reconstructor(camera_model(seq.camera), head.pivot_height_mm,
+                        head.lens == "telecentric", tuple(head.z_range_mm), height_cal, model,
+                        str(seq.folder), cross=any(abs(a[0] - b[0]) > 1e-9 for a, b in lines))
     return _scan(ReplayCamera(seq), RecordedHead(), lines, rec, t0, "frames", progress, cancel,
                  on_frame, room_light=seq.read_ambient)
 
@@ -145,9 +168,12 @@ def scan_live(station: Station, spacing: float = 0.5, region=None,
               height_cal: HeightCalibration | None = None, model: str | None = None,
               progress: Progress | None = None, cancel: threading.Event | None = None,
               on_frame: FrameCallback | None = None, exposure_ms: float | None = None,
-              speed_mm_s: float | None = None) -> ScanResult:
+              speed_mm_s: float | None = None, cross: bool = False,
+              cross_spacing: float | None = None) -> ScanResult:
     """Drive the station: step the line over ``region`` (x0, x1, y0, y1) mm (default: the
-    station's, which a real rig does not have) and reconstruct each frame as it arrives
+    station's, which a real rig does not have), with ``cross`` a second pass of crossed
+    lines over it ``cross_spacing`` mm apart (:func:`plan_lines`), and reconstruct each
+    frame as it arrives
     (``on_frame`` sees each; ``exposure_ms``: the camera's, default its own; ``speed_mm_s``:
     the head's line sweep speed, default its own). First a frame with the laser off under
     the room light, auto-exposed (:func:`~insitu.services.room_light.station_room_light`),
@@ -157,9 +183,9 @@ def scan_live(station: Station, spacing: float = 0.5, region=None,
     region = tuple(region) if region is not None else station.default_region()
     rig = station.rig
     check_region(region, rig.head.field_size_mm)
-    lines = scan_lines(region, spacing)
+    lines = plan_lines(region, spacing, cross, height_cal, cross_spacing)
     rec = reconstructor(rig.camera, rig.head.pivot_height_mm, rig.head.lens == "telecentric",
-                        rig.head.z_range_mm, height_cal, model, "live scan")
+                        rig.head.z_range_mm, height_cal, model, "live scan", cross)
     camera, head = station.devices.camera, station.devices.head
     if exposure_ms is not None:
         camera.set_exposure(exposure_ms)
