@@ -191,7 +191,7 @@ def test_a_part_square_to_the_lines_is_located_with_a_crossed_scan(crossed_cal):
         locate_cloud(ref, clouds[False], coarse)
     cloud = clouds[True]
     table = cloud.points[:, 2] < 0.5
-    _, u = edge_samples(cloud.points, cloud.attributes["line"], table)
+    u = edge_samples(cloud.points, cloud.attributes["line"], table).dirs
     angles = np.degrees(np.arctan2(u[:, 1], u[:, 0])) % 180
     assert (abs(angles - 90) < 5).sum() > 20 and (abs(angles - 45) < 5).sum() > 20
     best = locate_cloud(ref, cloud, coarse).best
