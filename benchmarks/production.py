@@ -16,7 +16,7 @@ random poses located against their meshes, and patterns marked where they belong
    the locating's own. And against the *rig-frame truth*, the pose an error-free locate gives
    on this rig (:func:`rig_frame_truth`): the locating's own error, what issue 13's
    0.05 mm / 0.05° is about.
-2. Time to locate a scan of about 200 k points (binning 1, lines 0.5 mm apart) on one core.
+2. Time to locate a scan of about 200 k points (binning 1, lines 0.35 mm apart) on one core.
 3. Mark: a 3 mm square placed in the part's frame (`--part-pose`) on the step block's top
    step and the arc's crest at a few poses, marked with the FIELD.json an operator would
    have (2 mm circles marked on the plate, imaged, RBF fit — so the marks share the camera's
@@ -28,7 +28,8 @@ random poses located against their meshes, and patterns marked where they belong
 
 Scans are cached in --cache (default /tmp/insitu-production-bench).
 Run: .venv/bin/python benchmarks/production.py [--poses 20] [--binning 2] [--seed 0]
-     [--cross 0.5] [--names step-block,arc,insert] [--skip locate,timing,marking,produce]
+     [--spacing 0.25] [--cross 0.5] [--names step-block,arc,insert]
+     [--skip locate,timing,marking,produce]
 """
 
 from __future__ import annotations
@@ -61,11 +62,11 @@ from insitu.sim.world import SimWorld, sim_world
 
 console = Console(width=210)
 PARTS = {"step-block": 1, "arc": 2, "insert": 3}          # name: fold of its symmetry
-SPACING = {"step-block": 0.25, "arc": 0.25, "insert": 0.25}  # scan line spacing, mm
 SQUARE = ('<svg xmlns="http://www.w3.org/2000/svg" width="3mm" height="3mm" '
           'viewBox="0 0 3 3"><rect x="0" y="0" width="3" height="3" fill="none" '
           'stroke="black" stroke-width="0.01"/></svg>')
 MARK_AT = {"step-block": (0.0, 30.0), "arc": (0.0, 5.0)}   # part frame, mm
+TIMING_SPACING = 0.35     # mm: the binning-1 step-block scan is then about 200 k points
 
 
 def height_cal(cache: Path, rig, seed: int, cross: bool = False) -> HeightCalibration:
@@ -80,10 +81,9 @@ def height_cal(cache: Path, rig, seed: int, cross: bool = False) -> HeightCalibr
 
 
 def scan(cache: Path, name: str, pose, rig, seed: int, cal, tag: str,
-         spacing: float | None = None, cross: float | None = None) -> PointCloud:
+         spacing: float, cross: float | None = None) -> PointCloud:
     """The cloud of ``name`` at ``pose`` (cached as ``tag``), lines ``spacing`` apart
-    (None: ``SPACING[name]``; ``cross``: then a crossed pass, its lines this far apart, mm)."""
-    spacing = spacing or SPACING.get(name, 0.5)
+    (``cross``: then a crossed pass, its lines this far apart, mm)."""
     path = cache / ((tag if spacing == 0.5 else f"{tag}-sp{spacing:g}")
                     + (f"-x{cross:g}" if cross else "") + ".ply")
     if not path.exists():
@@ -155,7 +155,8 @@ def locate_table(args, rig, cal, cache: Path) -> None:
             errs, turns, rig_errs, rig_turns, times, refused, wrong = [], [], [], [], [], [], 0
             for i, pose in enumerate(poses):
                 cloud = scan(cache, name, pose, rig, args.seed, cal,
-                             f"{name}-{i}-b{args.binning}-s{args.seed}", cross=args.cross)
+                             f"{name}-{i}-b{args.binning}-s{args.seed}", args.spacing,
+                             args.cross)
                 prefer = ((pose[2] + rough[i] - 50, pose[2] + rough[i] + 50) if breaker
                           else None)
                 t = time.perf_counter()
@@ -197,7 +198,7 @@ def timing(args, rig1, cal1, cache: Path) -> None:
     os.sched_setaffinity(0, {sorted(os.sched_getaffinity(0))[0]})
     pose = (14.0, -9.0, 37.0)
     cloud = scan(cache, "step-block", pose, rig1, args.seed, cal1, f"timing-b1-s{args.seed}",
-                 0.5)
+                 TIMING_SPACING)
     wp = make_workpiece("step-block")
     t = time.perf_counter()
     ref = reference_from_mesh(wp.vertices, wp.triangles, "step-block")
@@ -237,7 +238,7 @@ def marking(args, rig, cal, cache: Path) -> None:
             pose = random_pose(rng)
             cloud = scan(cache, name, pose, rig, args.seed, cal,
                          "mark-{}-b{}-s{}-at{:.3f}_{:.3f}_{:.3f}".format(
-                             name, args.binning, args.seed, *pose), cross=args.cross)
+                             name, args.binning, args.seed, *pose), args.spacing, args.cross)
             prefer = (pose[2] - 50, pose[2] + 50) if PARTS[name] > 1 else None
             try:
                 got = locate_part(ref, cloud.points, prefer_angle=prefer,
@@ -271,6 +272,8 @@ def main() -> None:
     ap.add_argument("--parts", type=int, default=20, help="parts of the produce run")
     ap.add_argument("--skip", default="",
                     help="comma-separated: locate, timing, marking, produce")
+    ap.add_argument("--spacing", type=float, default=0.25,
+                    help="scan line spacing, mm (0.25: as a recipe scans)")
     ap.add_argument("--names", default=",".join(PARTS), help="comma-separated parts to locate")
     ap.add_argument("--cross", type=float, default=None, metavar="MM",
                     help="scan crossed: a second pass at 45° to x, its lines MM apart "
