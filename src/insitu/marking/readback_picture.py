@@ -11,6 +11,7 @@ import cv2
 import numpy as np
 
 from insitu.marking.readback import MarkReading
+from insitu.vision.code_decode import stretch_u8
 from insitu.vision.dpm_grade import letter
 
 PANEL_PX = 520             # the picture's longer side on the panel, px
@@ -30,9 +31,8 @@ def _grey(picture: np.ndarray) -> np.ndarray:
     """float picture (NaN unseen) → BGR uint8 stretched over its 1 … 99 % values, unseen
     pixels hatched."""
     seen = np.isfinite(picture)
-    lo, hi = np.percentile(picture[seen], [1, 99]) if seen.any() else (0.0, 1.0)
-    g = np.clip((np.where(seen, picture, lo) - lo) / max(hi - lo, 1e-6) * 255, 0, 255)
-    img = cv2.cvtColor(g.astype(np.uint8), cv2.COLOR_GRAY2BGR)
+    g = stretch_u8(picture) if seen.any() else np.zeros(picture.shape, np.uint8)
+    img = cv2.cvtColor(g, cv2.COLOR_GRAY2BGR)
     rr, cc = np.indices(picture.shape)
     img[~seen & ((rr + cc) % 6 < 3)] = _UNSEEN
     img[~seen & ((rr + cc) % 6 >= 3)] = (235, 225, 215)

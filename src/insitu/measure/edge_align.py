@@ -29,6 +29,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from insitu.geometry.camera import CameraModel
+from insitu.measure.flat_icp import rot_z
 from insitu.measure.height_image import HeightImage, sample
 
 DROP_MM = 0.5
@@ -38,6 +39,8 @@ STEEP = 2.0
 LOOK = 8
 """Points along the line looked at for the drop."""
 SEARCH_MM = 1.0
+MIN_SAMPLES = 20
+"""Fewer edge samples finding the reference's edge hold no fit."""
 MIN_FOUND = 0.7
 """At the fitted pose this share of the edge samples must find the reference's edge."""
 CORNER_MM = 0.3
@@ -197,7 +200,7 @@ def align_edges(heights: HeightImage, e: np.ndarray, u: np.ndarray,
     the edges cannot hold the turn, the shift and the insets. ``free``: a unit direction (2,),
     part frame, the shift is not fitted along (edges that all face one way, :func:`unheld`):
     the turn and the shift across it only; ``sigma_mm`` is then the latter's."""
-    if len(e) < 20:
+    if len(e) < MIN_SAMPLES:
         return None
     across = None if free is None else np.array([-free[1], free[0]])
     shift_cols = (lambda n: n) if across is None else (lambda n: (n @ across)[:, None])
@@ -211,7 +214,7 @@ def align_edges(heights: HeightImage, e: np.ndarray, u: np.ndarray,
     theta, t, beta = 0.0, np.zeros(2), np.zeros(GAP_CLASSES + 1)
     for _ in range(iterations):                   # the turn, an inset per gap class
         s, n, nu, d, ok = _residuals(heights, e, u, c, theta, t)
-        if ok.sum() < 20:
+        if ok.sum() < MIN_SAMPLES:
             return None
         r = (s - step[ok] * beta[cls[ok]]) * nu
         w = _weights(r)
@@ -230,7 +233,7 @@ def align_edges(heights: HeightImage, e: np.ndarray, u: np.ndarray,
     b = float(np.median(s))
     for _ in range(iterations):                   # the shift with the turn kept, one inset
         s, n, nu, d, ok = _residuals(heights, e, u, c, theta, t)
-        if ok.sum() < 20:
+        if ok.sum() < MIN_SAMPLES:
             return None
         r = (s - b) * nu
         w = _weights(r, SHIFT_HUBER_MM, np.inf) * ~np.isin(np.flatnonzero(ok), cut)
@@ -243,7 +246,7 @@ def align_edges(heights: HeightImage, e: np.ndarray, u: np.ndarray,
     if ok.sum() < MIN_FOUND * len(e):
         return None
     cov = _spread(r) ** 2 * np.linalg.inv(A)
-    R = np.array([[np.cos(theta), -np.sin(theta)], [np.sin(theta), np.cos(theta)]])
+    R = rot_z(theta)[:2, :2]
     return EdgeFit(float(theta), c - R @ c + t, b, int(ok.sum()),
                    float(np.sqrt(np.linalg.eigvalsh(cov[:k, :k]).max())), sigma_deg)
 
@@ -253,7 +256,7 @@ def _residuals(heights: HeightImage, e: np.ndarray, u: np.ndarray, c: np.ndarray
     """At the correction (theta about ``c``, then t): the samples' distances s to the
     reference's edge, its normals n, their cosines nu to the line, the lever arms d (only
     where the edge is found and crossed steeply enough), and that mask (K,)."""
-    R = np.array([[np.cos(theta), -np.sin(theta)], [np.sin(theta), np.cos(theta)]])
+    R = rot_z(theta)[:2, :2]
     pe = np.column_stack([(e[:, :2] - c) @ R.T + c + t, e[:, 2]])
     ue = u @ R.T
     s, n = edge_distance(heights, pe, ue)
@@ -300,3 +303,29 @@ def unheld(heights: HeightImage, e: np.ndarray, u: np.ndarray
         return 0, None
     w, v = np.linalg.eigh(n[ok].T @ n[ok] / ok.sum())
     return int(ok.sum()), (v[:, 0] if w[0] < HOLD else None)
+
+
+def unheld_reason(heights: HeightImage, e: np.ndarray, u: np.ndarray, total: int,
+                  angle_rad: float) -> tuple[str, np.ndarray | None]:
+    """Why the edges give no fit at a pose, and the direction (2,) part frame they leave
+    free (None: none): too few of the scan's ``total`` edge samples (``e``, ``u`` in the
+    part's frame) find the reference's edges, or those found all face one way (the free
+    direction named in the world frame; ``angle_rad``: the world → part turn)."""
+    found, free = unheld(heights, e, u)
+    if free is None:
+        enough = found >= MIN_SAMPLES and found >= MIN_FOUND * total
+        return (f"{found} of the scan's {total} edge samples find the reference's edges"
+                + (", but they settle into no one fit" if enough
+                   else f" (at least {MIN_SAMPLES} and {MIN_FOUND:.0%} needed)")), None
+    name, faces = direction_name(rot_z(-angle_rad)[:2, :2] @ free)   # part frame → world
+    return (f"the {found} edges the scan lines cross all face {faces}: nothing holds the "
+            f"part along {name}; turn the part or the scan so that lines cross edges that "
+            f"face {name if name[0] == '(' else '±' + name}"), free
+
+
+def direction_name(d: np.ndarray) -> tuple[str, str]:
+    """A world direction (2,) named ("x", "y" or its components) and the edges across it
+    ("±y", "±x", …)."""
+    near = np.cos(np.radians(20))
+    return (("x", "±y") if abs(d[0]) > near else ("y", "±x") if abs(d[1]) > near
+            else (f"({d[0]:+.2f}, {d[1]:+.2f})", f"({-d[1]:+.2f}, {d[0]:+.2f})"))

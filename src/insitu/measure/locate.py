@@ -29,7 +29,8 @@ from scipy.spatial import cKDTree
 from insitu.errors import MeasurementError
 from insitu.geometry.camera import CameraModel
 from insitu.measure.flat_icp import Fit, Pose4, apply, icp_flat, inverse, matrix, rot_z, score
-from insitu.measure.edge_align import align_edges, edge_samples, unheld
+from insitu.measure.edge_align import (align_edges, direction_name, edge_samples,
+                                       unheld_reason)
 from insitu.measure.part_reference import (PartReference, above_table, coarse_features,
                                            find_table, thin)
 
@@ -269,7 +270,7 @@ def _aligned(ref: PartReference, pts: np.ndarray, lines: np.ndarray | None,
         step = align_edges(ref.heights, ep, up, found.step_mm, found.gap_px)
         edges, why = (0, np.inf, np.inf), ""
         if step is None:
-            why, free = _why_unheld(ref, ep, up, len(ep), a)
+            why, free = unheld_reason(ref.heights, ep, up, len(ep), a)
             step = None if free is None else align_edges(ref.heights, ep, up, found.step_mm,
                                                          found.gap_px, free=free)
             if step is not None:              # the turn and the shift across held: refined
@@ -289,39 +290,13 @@ def _aligned(ref: PartReference, pts: np.ndarray, lines: np.ndarray | None,
     return kept
 
 
-def _why_unheld(ref: PartReference, e: np.ndarray, u: np.ndarray, total: int,
-                angle_rad: float) -> tuple[str, np.ndarray | None]:
-    """Why the edges give no fit at a pose, and the direction (2,) part frame they leave
-    free (None: none): too few of the scan's ``total`` edge samples (``e``, ``u`` in the
-    part's frame) find the reference's edges, or those found all face one way (the free
-    direction named in the world frame; ``angle_rad``: the world → part turn)."""
-    found, free = unheld(ref.heights, e, u)
-    if free is None:
-        enough = found >= 20 and found >= 0.7 * total
-        return (f"{found} of the scan's {total} edge samples find the reference's edges"
-                + (", but they settle into no one fit" if enough
-                   else " (at least 20 and 70% needed)")), None
-    name, faces = _direction(rot_z(-angle_rad)[:2, :2] @ free)     # part frame → world
-    return (f"the {found} edges the scan lines cross all face {faces}: nothing holds the "
-            f"part along {name}; turn the part or the scan so that lines cross edges that "
-            f"face {name if name[0] == '(' else '±' + name}"), free
-
-
-def _direction(d: np.ndarray) -> tuple[str, str]:
-    """A world direction (2,) named ("x", "y" or its components) and the edges across it
-    ("±y", "±x", …)."""
-    near = np.cos(np.radians(20))
-    return (("x", "±y") if abs(d[0]) > near else ("y", "±x") if abs(d[1]) > near
-            else (f"({d[0]:+.2f}, {d[1]:+.2f})", f"({-d[1]:+.2f}, {d[0]:+.2f})"))
-
-
 def _slid(a: Solution, b: Solution) -> str | None:
     """How two poses that fit alike differ by a shift alone (turned less than 2° apart):
     the direction nothing holds, or None when they are turned apart (a symmetric part)."""
     if abs((a.angle_deg - b.angle_deg + 180.0) % 360.0 - 180.0) >= 2.0:
         return None
     d = np.array([b.x_mm - a.x_mm, b.y_mm - a.y_mm])
-    name, _ = _direction(d / max(float(np.linalg.norm(d)), 1e-12))
+    name, _ = direction_name(d / max(float(np.linalg.norm(d)), 1e-12))
     return (f"{a.describe()} and {b.describe()} fit nearly equally, "
             f"{float(np.linalg.norm(d)):.2f} mm apart along {name}: nothing holds the part "
             f"along {name}" + ("" if a.sigma_mm is not None else

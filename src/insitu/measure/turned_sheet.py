@@ -20,6 +20,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from insitu.geometry.camera import CameraModel
+from insitu.measure.flat_icp import rot_z
 from insitu.measure.heightcal import LineObservation, SheetHeightModel
 
 CROSS_ANGLE_DEG = 45.0
@@ -41,9 +42,7 @@ def same_direction(start, end, angle_deg: float, tol_deg: float = 1e-4) -> bool:
 
 def _turn(angle_deg: float) -> np.ndarray:
     """(3, 3) Rz(90° − angle): turns lines at ``angle_deg`` to x onto the y axis."""
-    b = np.radians(90.0 - angle_deg)
-    c, s = np.cos(b), np.sin(b)
-    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+    return rot_z(np.radians(90.0 - angle_deg))
 
 
 def turned_camera(camera: CameraModel, angle_deg: float) -> CameraModel:
