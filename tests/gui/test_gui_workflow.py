@@ -40,6 +40,7 @@ def window(qtbot, tmp_path, height_cal_file):
                     timeout=WAIT_MS)
     yield w
     w.runner.wait_all()
+    qtbot.waitUntil(lambda: not w.runner.tasks, timeout=WAIT_MS)   # their ended signals in
     w.saved.mark_clean()                # closing asks nothing: the test's session is dropped
     w.close()
     w.deleteLater()

@@ -317,3 +317,43 @@ def test_a_column_that_stays_ambiguous_gives_no_point():
         res = fn(img)
         assert len(res) < 0.05 * W, name
         assert len(fn(img, band=(v0 - 10, v0 + 10))) > 0.97 * W, name     # the band decides
+
+
+def _step_frame(rng, lower_from, lower_amp, lower_dv=-26.0):
+    """A top's line over columns 250–399 (bright, ``centre_curve``), then a lower line from
+    column ``lower_from`` on, ``lower_dv`` rows away and ``lower_amp`` bright — as a line
+    drops off a step and the lower one begins a few columns before the top's ends."""
+    v0 = centre_curve()
+    u = np.arange(W)
+    top = profile(v0, 1.5, np.where((u >= 250) & (u < 400), 170.0, 0.0))
+    lower = profile(v0 + lower_dv, 1.5, np.where(u >= lower_from, lower_amp, 0.0))
+    return sensor((ambient((H, W), rng) + top + lower) * speckle((H, W), rng, 0.2), rng), v0
+
+
+def test_a_line_ending_at_a_step_keeps_its_last_columns():
+    """The lower line (dimmer, and longer than the top's) begins 6 columns before the top
+    ends: those columns keep the top's brighter line — the longer chain would cut the top's
+    end 6 px short; every point lies on one of the two lines."""
+    img, v0 = _step_frame(np.random.default_rng(11), 394, 90.0)
+    for name, fn in METHODS.items():
+        res = fn(img)
+        on_top = np.abs(errors(res, v0, margin=0)) < 3
+        assert res.u[on_top].max() >= 398, name
+        assert (on_top | (np.abs(errors(res, v0 - 26, margin=0)) < 3)).all(), name
+
+
+def test_a_ghosts_short_tail_beyond_a_line_does_not_win():
+    """A ghost 26 rows off runs under the line's last 12 columns, brighter, and on past its
+    end for 4 columns of its own before the next line begins: too few to be a line — the
+    overlap keeps the line's chain or gives no point, never the ghost's."""
+    rng = np.random.default_rng(12)
+    v0 = centre_curve()
+    u = np.arange(W)
+    line = profile(v0, 1.5, np.where(u < 400, 120.0, 0.0))
+    ghost = profile(v0 + 26, 1.5, np.where((u >= 388) & (u < 404), 200.0, 0.0))
+    nxt = profile(v0 - 40, 1.5, np.where(u >= 404, 150.0, 0.0))
+    img = sensor((ambient((H, W), rng) + line + ghost + nxt) * speckle((H, W), rng, 0.2), rng)
+    for name, fn in METHODS.items():
+        res = fn(img)
+        ghostly = np.abs(errors(res, v0 + 26, margin=0)) < 3
+        assert not ghostly[(res.u >= 388) & (res.u < 400)].any(), name

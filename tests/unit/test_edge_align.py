@@ -1,12 +1,12 @@
-"""The edge step of locating (:mod:`insitu.measure.edge_align`): the inset of each edge
-sample by its gap class, so edges whose lines end differently in the image do not turn the
-part; lines cut short weigh nothing in the turn; the pixel gap read through the camera."""
+"""The edge step of locating (:mod:`insitu.measure.edge_align`): one inset across the edges,
+whatever angle the lines cross them at; samples beyond their edge measured so (negative);
+lines cut short weigh nothing; each line's points taken in the order of their pixels."""
 
 import numpy as np
 import pytest
 
 from insitu.geometry.camera import CameraModel
-from insitu.measure.edge_align import align_edges, edge_samples
+from insitu.measure.edge_align import align_edges, edge_distance, edge_samples
 from insitu.measure.flat_icp import apply, inverse, rot_z
 from insitu.measure.part_reference import reference_from_mesh
 from insitu.sim.workpieces import make_workpiece
@@ -18,74 +18,88 @@ TRUTH = (12.0, -7.0, 33.0)
 
 @pytest.fixture(scope="module")
 def block():
-    """(reference heights, edge samples in the part frame (points, dirs), their steps)."""
+    """(reference heights, edge samples in the part frame: points, dirs; each sample's
+    edge normal and cosine to its line)."""
     w = make_workpiece("step-block")
     ref = reference_from_mesh(w.vertices, w.triangles, "step-block")
     pts, lines = synthetic_scan("step-block", TRUTH, noise=0.002)
     found = edge_samples(pts, lines, pts[:, 2] < 0.5)
     pose = inverse((np.radians(TRUTH[2]), np.array([TRUTH[0], TRUTH[1], 0.0])))
-    return ref.heights, apply(pose, found.points), found.dirs @ rot_z(pose[0])[:2, :2].T, \
-        found.step_mm
+    e, u = apply(pose, found.points), found.dirs @ rot_z(pose[0])[:2, :2].T
+    s, n = edge_distance(ref.heights, e, u)
+    keep = np.isfinite(s)
+    nu = np.einsum("ij,ij->i", n[keep], u[keep])
+    return ref.heights, e[keep], u[keep], nu
 
 
-def _turn_deg(fit):
-    return abs(np.degrees(fit.angle_rad))
-
-
-def test_insets_that_differ_by_gap_class_do_not_turn_the_part(block):
-    """Samples in two opposite quadrants of the part lie 2 steps further inside their edges
-    (their lines ended with a wider gap in the image): one inset for all turns the part;
-    an inset per gap class keeps the turn within 0.01°."""
-    heights, e, u, step = block
-    c = np.median(e[:, :2], axis=0)
-    far = (e[:, 0] - c[0]) * (e[:, 1] - c[1]) > 0
+@pytest.mark.parametrize("inset", [0.04, -0.04])
+def test_one_inset_across_the_edges_leaves_the_pose(block, inset):
+    """Every sample moved further inside (or beyond) its edge by 0.04 mm across it — 0.04 /
+    cos along its line, which crosses the long sides at 33° and the steps at 57°: the pose
+    moves by less than 0.002 mm and 0.002°, the inset by the 0.04 mm (an inset along the
+    lines would move the part towards the steps)."""
+    heights, e, u, nu = block
+    assert nu.min() < 0.6 < nu.max()                 # both kinds of crossing are there
     moved = e.copy()
-    moved[far, :2] -= 2 * step[far, None] * u[far]
-    gap = np.where(far, 4.0, 1.0)
-    one = align_edges(heights, moved, u, step)
-    by_class = align_edges(heights, moved, u, step, gap)
-    assert _turn_deg(one) > 0.05, _turn_deg(one)
-    assert _turn_deg(by_class) < 0.01, _turn_deg(by_class)
-    assert by_class.samples > 0.9 * len(e)
+    moved[:, :2] -= (inset / nu)[:, None] * u
+    before, fit = align_edges(heights, e, u), align_edges(heights, moved, u)
+    assert abs(np.degrees(fit.angle_rad - before.angle_rad)) < 0.002
+    assert np.linalg.norm(fit.shift_mm - before.shift_mm) < 0.002, fit.shift_mm
+    assert fit.b_mm - before.b_mm == pytest.approx(inset, abs=0.002)
+    assert fit.samples > 0.95 * len(e)
+
+
+def test_a_sample_beyond_its_edge_measures_negative():
+    """The distance to the edge along the line is signed: 0.05 mm short of a step's edge
+    is +0.05, 0.05 mm beyond it −0.05 (a line's end blurred past it), not cut to 0."""
+    w = make_workpiece("step-block")
+    ref = reference_from_mesh(w.vertices, w.triangles, "step-block")
+    x_edge = 10.0                                    # the block's side, x = width / 2
+    e = np.array([[x_edge - 0.05, 35.0, 15.0], [x_edge + 0.05, 35.0, 15.0]])
+    s, _ = edge_distance(ref.heights, e, np.array([[1.0, 0.0], [1.0, 0.0]]))
+    assert s == pytest.approx([0.05, -0.05], abs=0.01)
 
 
 def test_lines_cut_short_weigh_nothing(block):
-    """Every sample up to 0.15 mm inside its edge (sampling), and a fifth of them, all on
-    one side, 0.5 mm further in (their lines lost their end to the lower line in the same
-    pixel columns): those weigh nothing, in the turn nor in the shift (with Huber weights
-    alone the shift is 0.05 mm off)."""
-    heights, e, u, step = block
+    """Every sample up to 0.15 mm inside its edge along its line (sampling), and a fifth of
+    them, all on one side, 0.5 mm further in (their lines lost their end to the lower line
+    in the same pixel columns): those weigh nothing — the pose is the one without them
+    within 0.006° and 0.006 mm (Huber weights alone: 0.05 mm off)."""
+    heights, e, u, _ = block
     rng = np.random.default_rng(3)
     moved = e.copy()
     moved[:, :2] -= rng.uniform(0, 0.15, len(e))[:, None] * u
     far = np.flatnonzero(e[:, 0] > np.percentile(e[:, 0], 70))
     cut = rng.choice(far, len(e) // 5, replace=False)
+    kept = np.setdiff1d(np.arange(len(e)), cut)
+    clean = align_edges(heights, moved[kept], u[kept])
     moved[cut, :2] -= 0.5 * u[cut]
-    fit = align_edges(heights, moved, u, step, np.full(len(e), 2.0))
-    assert _turn_deg(fit) < 0.005, _turn_deg(fit)
-    assert np.linalg.norm(fit.shift_mm) < 0.02, fit.shift_mm
+    fit = align_edges(heights, moved, u)
+    assert abs(np.degrees(fit.angle_rad - clean.angle_rad)) < 0.006
+    assert np.linalg.norm(fit.shift_mm - clean.shift_mm) < 0.006, fit.shift_mm
 
 
-def test_the_gap_is_read_in_pixels_through_the_camera():
-    """A line sampled one pixel column apart, falling off a top: the gap is the number of
-    columns on to the next detected point, the step the top's mm per column (also where a
-    column before the last was lost); NaN without a camera."""
+def test_a_lines_points_are_taken_in_the_order_of_their_pixels():
+    """A line seen from the side: a top (z = 5) in the columns from 320 on, the floor
+    before them. In x, y the floor's points run on under the top's (as the lower line
+    beside an oblique edge begins before the top ends; exaggerated here): in x, y order the
+    line flickers between the two and gives no clean sample; in the pixels' order it gives
+    one, at the top's first column."""
     cam = CameraModel.look_at(640, 480, np.array([[800.0, 0, 320], [0, 800.0, 240], [0, 0, 1]]),
-                              np.zeros(5), [0.0, 0.0, 200.0], [0.0, 0.0, 0.0], [0.0, 1.0, 0.0])
-    u = np.arange(300, 340, dtype=float)        # column 318 lost; 320 … 322 dark
-    u = np.concatenate([u[:18], u[19:20], u[23:]])
-    for cols in (u, 640.0 - u):                 # the top on the left, then on the right
-        origin, d = cam.rays(np.column_stack([cols, np.full(len(u), 240.0)]))
-        z = np.where(u < 320, 5.0, 0.0)
-        pts = origin + d * ((z - origin[2]) / d[:, 2])[:, None]
-        table = z < 0.5
-        lines = np.zeros(len(pts), int)
-        found = edge_samples(pts, lines, table, cam)
-        assert len(found) == 1
-        assert found.gap_px[0] == pytest.approx(4.0, abs=0.05)
-        per_col = np.linalg.norm(pts[17, :2] - pts[16, :2])
-        assert found.step_mm[0] == pytest.approx(per_col, rel=1e-6)
-        assert np.isnan(edge_samples(pts, lines, table).gap_px).all()
+                              np.zeros(5), [0.0, -150.0, 150.0], [0.0, 0.0, 0.0],
+                              [0.0, 1.0, 0.0])
+    cols = np.arange(300.0, 340.0)
+    origin, d = cam.rays(np.column_stack([cols, np.full(len(cols), 240.0)]))
+    z = np.where(cols >= 320, 5.0, 0.0)
+    pts = origin + d * ((z - origin[2]) / d[:, 2])[:, None]
+    top, floor = pts[z > 0], pts[z == 0]
+    assert floor[:, 1].max() > top[:, 1].min() + 1.0          # interleaved in y
+    lines, table = np.zeros(len(pts), int), z == 0
+    found = edge_samples(pts, lines, table, cam)
+    assert len(found) == 1
+    assert np.allclose(found.points[0], pts[cols == 320][0])
+    assert len(edge_samples(pts, lines, table)) != 1 or not np.allclose(
+        edge_samples(pts, lines, table).points[0], pts[cols == 320][0])
 
 
 def test_the_scan_camera_is_the_height_calibrations():

@@ -26,14 +26,15 @@ def _run(*args):
     return runner.invoke(app, [str(a) for a in args])
 
 
-def synthetic_scan(name, pose, region=None, noise=0.01, seed=1):
-    """A top-down scan of ``name`` at ``pose`` on the table: lines along y every 0.5 mm,
-    points 0.1 mm apart along them, Gaussian noise; (points (N, 3), line index (N,))."""
+def synthetic_scan(name, pose, region=None, noise=0.01, seed=1, spacing=0.5):
+    """A top-down scan of ``name`` at ``pose`` on the table: lines along y ``spacing`` mm
+    apart, points 0.1 mm apart along them, Gaussian noise; (points (N, 3), line index
+    (N,))."""
     part = make_workpiece(name, x=pose[0], y=pose[1], angle_deg=pose[2])
     scene = Scene([make_workpiece("table"), part])
     lo, hi = part.bounds()
     x0, x1, y0, y1 = region or (lo[0] - 3, hi[0] + 3, lo[1] - 6, hi[1] + 6)
-    xs, ys = np.arange(x0, x1, 0.5), np.arange(y0, y1, 0.1)
+    xs, ys = np.arange(x0, x1, spacing), np.arange(y0, y1, 0.1)
     X, Y = np.meshgrid(xs, ys, indexing="ij")
     rays = np.column_stack([X.ravel(), Y.ravel(), np.full(X.size, 50.0)])
     hits = scene.cast(rays, np.tile([0.0, 0.0, -1.0], (len(rays), 1)))
@@ -129,7 +130,7 @@ def test_the_wrong_part_is_not_found(refs):
 @pytest.mark.parametrize("name, fold", [("arc", 2), ("insert", 3)])
 def test_a_symmetric_part_is_refused_without_a_breaker(refs, name, fold):
     truth = (-6.0, 9.0, 47.0)
-    pts, lines = synthetic_scan(name, truth)
+    pts, lines = synthetic_scan(name, truth, spacing=0.25)     # as a recipe scans a small part
     with pytest.raises(LocateRefused, match="ambiguous: .* and .* fit nearly equally") as e:
         locate_part(refs[name], pts, lines=lines)
     assert e.value.reason == "ambiguous"

@@ -8,18 +8,18 @@ surface drops (to the table, a lower step or a hole, or down a wall) lies a litt
 edge. Each such *edge sample* e with its outward line direction u gives the distance s, along
 u, from e to the reference's edge (found on the reference's height image seen from above).
 
-How far inside depends on how the line ends in the camera's image, which the sample's pixel
-tells when the camera is known: the line's next detected pixel after the top's last one
-lies ``gap`` pixels on (1: the lower line begins in the very next column, and the edge lies
-at the last top pixel; 2: about half-way; 3 or more: dark columns, a shadow or the wall
-between, and the top ends where its light falls below half, about a pixel on). So the
-inset is the sample's step along its line (mm per pixel) times a factor per gap class, each
-fitted with the turn and shift; a sample far beyond the others (a line cut short where the
-lower line takes the same pixel columns) weighs nothing. The class factors lean on the
-shift (the classes follow the edges' directions), so x, y are then fitted with the turn
-kept and one inset for all (least squares, Huber weights, the cut samples kept out).
-Only the upper side of a drop is used: the lower side lies
-in the shadow of the wall or hidden behind its top.
+Along each line the points are taken in the order of their pixels (the camera known): the
+lower line beside an oblique edge lies shifted across the line, where the light plane meets
+the floor, and in x, y begins before the top ends. How far inside its edge a top's last
+point lies is then about the same for every edge, across the edge: the line's light is
+clipped by the edge over its width before its centre leaves the top, and the centre's last
+pixel lies within a pixel of the edge. (An inset along the line per class of how the line
+ends in the image, fitted before, did not hold: the sides of a triangular insert, crossed at
+different angles, differed by 0.1 mm along their lines, the same across them.) So one inset
+across the edges is fitted with the turn and the shift (least squares, Huber weights; a
+sample far beyond the others, its line cut short, weighs nothing), then x, y with the turn
+kept. Only the upper side of a drop is used: the lower side lies in the shadow of the wall
+or hidden behind its top.
 """
 
 from __future__ import annotations
@@ -38,6 +38,13 @@ REACH_MM = 0.6
 STEEP = 2.0
 LOOK = 8
 """Points along the line looked at for the drop."""
+HOLD_PTS = 3
+"""Steps along the line before a drop that must each stay within ``FLAT_MM`` (the top holds):
+a line grazing an edge it runs along, flickering between the top and the floor, gives no
+samples."""
+ON_PIXELS = 0.9
+"""Share of a scan's points that must project onto whole pixels (along their line) for the
+camera to order them: it is the camera they were measured through."""
 SEARCH_MM = 1.0
 MIN_SAMPLES = 20
 """Fewer edge samples finding the reference's edge hold no fit."""
@@ -52,21 +59,15 @@ CUT_MM = 0.15
 SHIFT_HUBER_MM = 0.05
 """The shift's Huber scale; no sample is cut there (a cut could hold a shift that drops
 a whole edge)."""
-GAP_CLASSES = 3
-"""Gap classes 1, 2 and ≥ 3 pixels (and one for samples without a camera)."""
 
 
 @dataclass(frozen=True)
 class EdgeSamples:
     """The scan's edge samples: ``points`` (K, 3) world frame, ``dirs`` (K, 2) outward unit
-    directions along their lines, ``step_mm`` (K,) the spacing of their line's samples just
-    inside (mm per pixel), ``gap_px`` (K,) how many pixels on the line's next detected point
-    lies in the camera's image (NaN: no camera given)."""
+    directions along their lines."""
 
     points: np.ndarray
     dirs: np.ndarray
-    step_mm: np.ndarray
-    gap_px: np.ndarray
 
     def __len__(self) -> int:
         return len(self.points)
@@ -76,20 +77,25 @@ def edge_samples(points: np.ndarray, lines: np.ndarray, table: np.ndarray,
                  camera: CameraModel | None = None) -> EdgeSamples:
     """The edge samples of ``points`` (N, 3) world frame, their ``lines`` (N,) index and
     whether each is the table (N,) bool; ``camera``: the camera the points were measured
-    through (their pixels are its projections), for the gap. A point ends a top when the
-    point before it on its line lies within ``FLAT_MM`` of its height, the next one lower by
-    more than that or down a slope steeper than ``STEEP`` (a wall), and the line falls
+    through (their pixels are its projections), for the order along each line
+    (:func:`_along`). A point ends a top when the ``HOLD_PTS`` steps before it on its line
+    each stay within ``FLAT_MM``, the next point is lower by more than that or down a slope
+    steeper than ``STEEP`` (a wall), the one after it lower too, and the line falls
     ``DROP_MM`` below it: at the next point, however far (past a shadow), or within
     ``REACH_MM`` (down a wall). A top cut short by something higher in the way is no edge:
     the reference shows no drop there, and :func:`edge_distance` finds none."""
-    order = np.lexsort((_along(points, lines), lines))
+    order = np.lexsort((_along(points, lines, camera), lines))
     p, ln, top = points[order], lines[order], ~table[order]
     out = []
     for q, l2, t2 in ((p, ln, top), (p[::-1], ln[::-1], top[::-1])):   # both ways along
         n = len(q)
         i = np.arange(1, max(n - 1, 1))
         ok = (l2[i - 1] == l2[i]) & (l2[i + 1] == l2[i]) & t2[i] & t2[i - 1]
-        ok &= np.abs(q[i, 2] - q[i - 1, 2]) < FLAT_MM
+        for k in range(HOLD_PTS):           # the top holds before the drop …
+            j = np.maximum(i - k, 1)
+            ok &= (l2[j - 1] == l2[i]) & (np.abs(q[j, 2] - q[j - 1, 2]) < FLAT_MM)
+        j = np.minimum(i + 2, n - 1)          # … and the line stays down after it
+        ok &= (l2[j] == l2[i]) & (q[i, 2] - q[j, 2] > FLAT_MM)
         dz = q[i, 2] - q[i + 1, 2]
         ok &= (dz > FLAT_MM) | (dz > np.maximum(STEEP * np.linalg.norm(q[i + 1, :2] - q[i, :2],
                                                                        axis=1), 0.03))
@@ -100,31 +106,33 @@ def edge_samples(points: np.ndarray, lines: np.ndarray, table: np.ndarray,
             fall = np.maximum(fall, np.where(near, q[i, 2] - q[j, 2], 0.0))
         k = i[ok & (fall > DROP_MM)]
         d = q[k + 1, :2] - q[k - 1, :2]
-        out.append((q[k], d / np.maximum(np.linalg.norm(d, axis=1, keepdims=True), 1e-12),
-                    q[k - 1], q[k + 1]))
-    e, u, before, after = (np.vstack([o[j] for o in out]) for j in range(4))
-    step = np.linalg.norm(e[:, :2] - before[:, :2], axis=1)
-    gap = np.full(len(e), np.nan)
-    if camera is not None and len(e):
-        pe, pb, pa = (camera.project(x) for x in (e, before, after))
-        d = pe - pb                         # the pixel axis the line is sampled along
-        ax = np.argmax(np.abs(d), axis=1)
-        r = np.arange(len(e))
-        gap = (pa[r, ax] - pe[r, ax]) * np.sign(d[r, ax])
-        step = step / np.maximum(np.abs(d[r, ax]), 1e-9)      # mm per pixel
-    return EdgeSamples(e, u, step, gap)
+        out.append((q[k], d / np.maximum(np.linalg.norm(d, axis=1, keepdims=True), 1e-12)))
+    return EdgeSamples(*(np.vstack([o[j] for o in out]) for j in range(2)))
 
 
-def _along(points: np.ndarray, lines: np.ndarray) -> np.ndarray:
-    """Each point's position along its line's main direction, mm."""
+def _along(points: np.ndarray, lines: np.ndarray,
+           camera: CameraModel | None = None) -> np.ndarray:
+    """Each point's position along its line: the pixel coordinate (u or v, whichever the
+    line runs along in the image) when the scan was measured through ``camera`` — the order
+    the centres were found in, one per whole pixel; else along the line's main direction in
+    x, y, mm. Beside an oblique edge the lower line lies shifted across the line (the light
+    plane leans) and begins, in x, y, before the top ends: only the pixels' order keeps the
+    two apart. A camera the points do not fall on whole pixels of (under ``ON_PIXELS`` of
+    them: another rig's, or a cloud from elsewhere) gives no order."""
     out = np.zeros(len(points))
-    for i in np.unique(lines):
-        sel = lines == i
-        xy = points[sel, :2]
-        d = xy - xy.mean(axis=0)
+    groups = [np.flatnonzero(lines == i) for i in np.unique(lines)]
+    if camera is not None and len(points):
+        uv = camera.project(points)
+        for g in groups:
+            q = uv[g]
+            out[g] = q[:, int(np.ptp(q[:, 1]) > np.ptp(q[:, 0]))]
+        if np.mean(np.abs(out - np.round(out)) < 0.05) >= ON_PIXELS:
+            return out
+    for g in groups:
+        d = points[g, :2] - points[g, :2].mean(axis=0)
         axis = np.linalg.svd(d[:: max(1, len(d) // 200)], full_matrices=False)[2][0] \
             if len(d) > 1 else np.array([0.0, 1.0])
-        out[sel] = d @ axis
+        out[g] = d @ axis
     return out
 
 
@@ -132,9 +140,10 @@ def edge_distance(heights: HeightImage, e: np.ndarray,
                   u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(distance s (K,) mm, the edge's outward unit normal there (K, 2)): s along ``u``
     (K, 2) from each edge sample ``e`` (K, 3) (part frame) to where the reference's height
-    first falls below halfway between the sample's height and the reference's height
-    ``SEARCH_MM`` beyond; NaN where it does not within ±``SEARCH_MM``, or where the edge
-    turns within ``CORNER_MM`` (a corner holds no direction)."""
+    falls below halfway between the sample's height and the reference's height ``SEARCH_MM``
+    beyond, nearest the sample (negative: the sample lies beyond the edge); NaN where it does
+    not within ±``SEARCH_MM``, or where the edge turns within ``CORNER_MM`` (a corner holds
+    no direction)."""
     s = np.arange(-SEARCH_MM, SEARCH_MM + 1e-9, 0.02)
     xy = e[:, None, :2] + s[None, :, None] * u[:, None, :]
     cols = (xy[..., 0] - heights.x0_mm) / heights.px_mm
@@ -142,11 +151,16 @@ def edge_distance(heights: HeightImage, e: np.ndarray,
     h = sample([heights.z], cols.ravel(), rows.ravel())[0].reshape(xy.shape[:2])
     level = (e[:, 2] + h[:, -1]) / 2
     below = h < level[:, None]
-    # the first crossing at or after the sample's own height
-    start = np.argmin(np.abs(s))
-    below[:, :start] = False
-    j = np.argmax(below, axis=1)
-    found = below[np.arange(len(e)), j] & (j > 0) & (h[:, -1] < e[:, 2] - DROP_MM / 2)
+    # the crossing nearest the sample: on from it when it lies on the top, back from it
+    # when it lies already beyond the edge (a line's end blurred a little past it)
+    start = int(np.argmin(np.abs(s)))
+    cross = below[:, 1:] & ~below[:, :-1]          # between j − 1 and j, j = 1 … len(s) − 1
+    jj = np.arange(1, len(s))
+    after, before = cross & (jj > start), cross & (jj <= start)
+    j = np.where(below[:, start],
+                 np.where(before.any(1), len(s) - 1 - np.argmax(before[:, ::-1], axis=1), 0),
+                 np.where(after.any(1), np.argmax(after, axis=1) + 1, 0))
+    found = (j > 0) & (h[:, -1] < e[:, 2] - DROP_MM / 2)
     j = np.maximum(j, 1)
     h0, h1 = h[np.arange(len(e)), j - 1], h[np.arange(len(e)), j]
     f = np.clip((h0 - level) / np.where(h0 - h1 != 0, h0 - h1, 1.0), 0.0, 1.0)
@@ -175,10 +189,10 @@ def edge_distance(heights: HeightImage, e: np.ndarray,
 @dataclass(frozen=True)
 class EdgeFit:
     """A corrected point is ``Rz(angle_rad) @ p + shift_mm`` (x, y only); ``b_mm``: how far
-    inside its edge a top's last point lies along its line (on average: what sampling and
-    the line's end lose); ``samples`` used; ``sigma_mm``, ``sigma_deg``: 1σ of the shift
-    (its worst direction) and of the turn, from the residuals' spread — large when the
-    edges the lines cross do not pin the part down (edges along the lines)."""
+    inside its edge a top's last point lies, across the edge (on average: what the line's
+    end loses); ``samples`` used; ``sigma_mm``, ``sigma_deg``: 1σ of the shift (its worst
+    direction) and of the turn, from the residuals' spread — large when the edges the lines
+    cross do not pin the part down (edges along the lines)."""
 
     angle_rad: float
     shift_mm: np.ndarray
@@ -188,67 +202,77 @@ class EdgeFit:
     sigma_deg: float
 
 
-def align_edges(heights: HeightImage, e: np.ndarray, u: np.ndarray,
-                step_mm: np.ndarray | None = None, gap_px: np.ndarray | None = None,
-                iterations: int = 20, free: np.ndarray | None = None) -> EdgeFit | None:
+def align_edges(heights: HeightImage, e: np.ndarray, u: np.ndarray, iterations: int = 20,
+                free: np.ndarray | None = None) -> EdgeFit | None:
     """The correction that moves the edge samples ``e`` (K, 3), part frame, with outward
-    directions ``u`` (K, 2), onto the reference's edges: first the turn, with each sample
-    inside its edge by ``step_mm`` (K,) (1 when None) times a factor of its ``gap_px``
-    class (:class:`EdgeSamples`; one class when None or NaN), then the shift with the turn
-    kept and one inset b for all. None when fewer than 20 samples, or less than
-    ``MIN_FOUND`` of them, find an edge (the scan's edges are not the reference's there), or
-    the edges cannot hold the turn, the shift and the insets. ``free``: a unit direction (2,),
-    part frame, the shift is not fitted along (edges that all face one way, :func:`unheld`):
-    the turn and the shift across it only; ``sigma_mm`` is then the latter's."""
+    directions ``u`` (K, 2), onto the reference's edges, each inside by one inset b across
+    its edge: first the turn, the shift and b (Huber weights; a sample far beyond the
+    others, its line cut short, weighs nothing), then the shift and b with the turn kept
+    (wider Huber weights, the cut samples kept out). None when fewer than 20 samples, or
+    less than ``MIN_FOUND`` of them, lie by an edge (the scan's edges are not the
+    reference's there), or the edges cannot hold the turn and the shift. ``free``: a unit
+    direction (2,), part frame, the shift is not fitted along (edges that all face one way,
+    :func:`unheld`): the turn and the shift across it only; ``sigma_mm`` is then the
+    latter's."""
     if len(e) < MIN_SAMPLES:
         return None
     across = None if free is None else np.array([-free[1], free[0]])
-    shift_cols = (lambda n: n) if across is None else (lambda n: (n @ across)[:, None])
-    shift_of = (lambda x: x) if across is None else (lambda x: x[0] * across)
-    k = 2 if across is None else 1              # the shift's unknowns
-    step = np.ones(len(e)) if step_mm is None else np.asarray(step_mm, float)
-    gap = np.full(len(e), np.nan) if gap_px is None else np.asarray(gap_px, float)
-    cls = np.where(np.isfinite(gap), np.clip(np.round(np.nan_to_num(gap)), 1, GAP_CLASSES) - 1,
-                   GAP_CLASSES).astype(int)
     c = e[:, :2].mean(axis=0)
-    theta, t, beta = 0.0, np.zeros(2), np.zeros(GAP_CLASSES + 1)
-    for _ in range(iterations):                   # the turn, an inset per gap class
-        s, n, nu, d, ok = _residuals(heights, e, u, c, theta, t)
-        if ok.sum() < MIN_SAMPLES:
-            return None
-        r = (s - step[ok] * beta[cls[ok]]) * nu
-        w = _weights(r)
-        present = np.flatnonzero(np.bincount(cls[ok], weights=w, minlength=len(beta)) >= 10)
-        B = -(nu * step[ok])[:, None] * (cls[ok][:, None] == present[None, :])
-        J = np.column_stack([-n[:, 0] * d[:, 1] + n[:, 1] * d[:, 0], shift_cols(n), B])
-        x, A = _solve(J, w, r)
-        if x is None:
-            return None
-        theta, t = theta + x[0], t + shift_of(x[1:1 + k])
-        beta[present] -= x[1 + k:]
-        cut = np.flatnonzero(ok)[w == 0]
-        if abs(x[0]) < 1e-7 and np.linalg.norm(x[1:]) < 1e-4:
-            break
-    sigma_deg = float(np.degrees(_spread(r) * np.sqrt(np.linalg.inv(A)[0, 0])))
-    b = float(np.median(s))
-    for _ in range(iterations):                   # the shift with the turn kept, one inset
-        s, n, nu, d, ok = _residuals(heights, e, u, c, theta, t)
-        if ok.sum() < MIN_SAMPLES:
-            return None
-        r = (s - b) * nu
-        w = _weights(r, SHIFT_HUBER_MM, np.inf) * ~np.isin(np.flatnonzero(ok), cut)
-        x, A = _solve(np.column_stack([shift_cols(n), -nu]), w, r)
-        if x is None:
-            return None
-        t, b = t + shift_of(x[:k]), b - x[k]
-        if np.linalg.norm(x) < 1e-4:
-            break
-    if ok.sum() < MIN_FOUND * len(e):
+    first = _fit(heights, e, u, c, (0.0, np.zeros(2), 0.0), across, True, iterations)
+    if first is None:
         return None
+    (theta, t, b), _, A, r, cut = first
+    sigma_deg = float(np.degrees(_spread(r) * np.sqrt(np.linalg.inv(A)[0, 0])))
+    second = _fit(heights, e, u, c, (theta, t, b), across, False, iterations, cut)
+    if second is None:
+        return None
+    (theta, t, b), found, A, r, _ = second
+    if _near_edges(heights, e, u, c, theta, t) < MIN_FOUND * len(e):
+        return None
+    k = 2 if across is None else 1
     cov = _spread(r) ** 2 * np.linalg.inv(A)
     R = rot_z(theta)[:2, :2]
-    return EdgeFit(float(theta), c - R @ c + t, b, int(ok.sum()),
+    return EdgeFit(float(theta), c - R @ c + t, b, found,
                    float(np.sqrt(np.linalg.eigvalsh(cov[:k, :k]).max())), sigma_deg)
+
+
+def _fit(heights: HeightImage, e: np.ndarray, u: np.ndarray, c: np.ndarray, start: tuple,
+         across: np.ndarray | None, turn: bool, iterations: int, cut: np.ndarray | None = None):
+    """Gauss–Newton on the residuals s·ν − b from ``start`` (theta, t, b): the turn (when
+    ``turn``), the shift (only along ``across`` when given) and b. ``cut``: sample indices
+    kept out; None: Huber weights that cut from the second step on (stage one), else the
+    wider ones that do not.
+    ((theta, t, b), samples found, normal matrix, residuals, the samples cut), or None."""
+    theta, t, b = start
+    k = 2 if across is None else 1
+    for it in range(iterations):
+        s, n, nu, d, ok = _residuals(heights, e, u, c, theta, t)
+        if ok.sum() < MIN_SAMPLES:
+            return None
+        r = s * nu - b
+        if cut is None:                   # none cut before the first step: the start is rough
+            w = _weights(r, cut_mm=CUT_MM if it else np.inf)
+        else:
+            w = _weights(r, SHIFT_HUBER_MM, np.inf) * ~np.isin(np.flatnonzero(ok), cut)
+        cols = [n if across is None else (n @ across)[:, None], -np.ones((len(r), 1))]
+        if turn:
+            cols.insert(0, (-n[:, 0] * d[:, 1] + n[:, 1] * d[:, 0])[:, None])
+        x, A = _solve(np.column_stack(cols), w, r)
+        if x is None:
+            return None
+        dtheta, x = (x[0], x[1:]) if turn else (0.0, x)
+        theta, t, b = theta + dtheta, t + (x[:k] if across is None else x[0] * across), b - x[k]
+        if abs(dtheta) < 1e-7 and np.linalg.norm(x) < 1e-4:
+            break
+    return (theta, t, b), int(ok.sum()), A, r, (np.flatnonzero(ok)[w == 0] if cut is None
+                                                  else cut)
+
+
+def _moved(e: np.ndarray, u: np.ndarray, c: np.ndarray, theta: float, t: np.ndarray):
+    """The samples ``e`` (K, 3) and directions ``u`` (K, 2) turned by theta about ``c``, then
+    shifted by t."""
+    R = rot_z(theta)[:2, :2]
+    return np.column_stack([(e[:, :2] - c) @ R.T + c + t, e[:, 2]]), u @ R.T
 
 
 def _residuals(heights: HeightImage, e: np.ndarray, u: np.ndarray, c: np.ndarray,
@@ -256,13 +280,24 @@ def _residuals(heights: HeightImage, e: np.ndarray, u: np.ndarray, c: np.ndarray
     """At the correction (theta about ``c``, then t): the samples' distances s to the
     reference's edge, its normals n, their cosines nu to the line, the lever arms d (only
     where the edge is found and crossed steeply enough), and that mask (K,)."""
-    R = rot_z(theta)[:2, :2]
-    pe = np.column_stack([(e[:, :2] - c) @ R.T + c + t, e[:, 2]])
-    ue = u @ R.T
+    pe, ue = _moved(e, u, c, theta, t)
     s, n = edge_distance(heights, pe, ue)
     nu = np.einsum("ij,ij->i", n, ue)
     ok = np.isfinite(s) & (nu > MIN_COS)
     return s[ok], n[ok], nu[ok], pe[ok, :2] - c - t, ok
+
+
+def _near_edges(heights: HeightImage, e: np.ndarray, u: np.ndarray, c: np.ndarray,
+                theta: float, t: np.ndarray) -> int:
+    """How many samples lie by one of the reference's edges at the correction: found along
+    their line or across it (a line that runs off an edge at a grazing angle ends far from
+    it along the line, but beside it)."""
+    pe, ue = _moved(e, u, c, theta, t)
+    across = np.column_stack([-ue[:, 1], ue[:, 0]])
+    near = np.zeros(len(e), bool)
+    for d in (ue, across, -across):
+        near |= np.isfinite(edge_distance(heights, pe, d)[0])
+    return int(near.sum())
 
 
 def _weights(r: np.ndarray, huber_mm: float = HUBER_MM, cut_mm: float = CUT_MM) -> np.ndarray:

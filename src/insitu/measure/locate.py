@@ -144,8 +144,10 @@ def locate_part(reference: PartReference, points: np.ndarray,
     frame (table included or not); ``lines`` (N,) int: each point's scan line (the cloud's
     ``line`` attribute), for the edge step — without it x, y and the turn are the ICP's,
     a few tenths of a mm off on flat parts; ``camera``: the camera the scan was measured
-    through (the height calibration's), so the edge step knows how each line ends in the
-    image (:mod:`insitu.measure.edge_align`) — without it the turn is less precise. ``prefer_angle`` (lo, hi) degrees: of solutions that fit
+    through (the height calibration's), so the edge step takes each line's points in the
+    order of their pixels (:mod:`insitu.measure.edge_align`) — without it, in the order
+    along the line in x, y, and edges crossed obliquely are found short. ``prefer_angle``
+    (lo, hi) degrees: of solutions that fit
     nearly equally well (a symmetric part), take the one turned within lo … hi (wrapping
     around 360°). Raises :class:`LocateRefused` (a MeasurementError) naming why when the
     part is not found, fits poorly, is only partly in the scan or is ambiguous."""
@@ -267,12 +269,11 @@ def _aligned(ref: PartReference, pts: np.ndarray, lines: np.ndarray | None,
             continue
         a, t = _pose_of(sol)
         ep, up = apply((a, t), found.points), found.dirs @ rot_z(a)[:2, :2].T
-        step = align_edges(ref.heights, ep, up, found.step_mm, found.gap_px)
+        step = align_edges(ref.heights, ep, up)
         edges, why = (0, np.inf, np.inf), ""
         if step is None:
             why, free = unheld_reason(ref.heights, ep, up, len(ep), a)
-            step = None if free is None else align_edges(ref.heights, ep, up, found.step_mm,
-                                                         found.gap_px, free=free)
+            step = None if free is None else align_edges(ref.heights, ep, up, free=free)
             if step is not None:              # the turn and the shift across held: refined
                 edges = (step.samples, np.inf, step.sigma_deg)
         else:

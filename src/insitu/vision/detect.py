@@ -12,7 +12,11 @@ peaks. Common keyword arguments of the methods:
   (rows ≤ 4 px apart per column; support = summed contrast), and only when that chain has at
   least ``decisive`` times the other's support (1.25: well beyond the few per cent by which
   speckle moves the support of a chain of a few dozen columns): a column that stays ambiguous
-  gives no point rather than a guess. Points kept this way are ``ambiguous``.
+  gives no point rather than a guess. Where one chain's own columns (no second peak there)
+  all lie before the column and the other's all after it, at least ``OWN_COLUMNS`` each — a
+  line ending at a step and the lower line beginning, overlapping for a few columns — both
+  are real: the brighter peak is kept (the longer chain would cut every top's end there).
+  Points kept this way are ``ambiguous``.
 * saturation: gray value counted as saturated (None: the dtype's maximum).
 """
 
@@ -26,6 +30,8 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
 FWHM_PER_SIGMA = 2.0 * np.sqrt(2.0 * np.log(2.0))
+OWN_COLUMNS = 8
+"""Columns of its own (no second peak there) that make a chain a line, not a ghost's tail."""
 
 
 @dataclass(frozen=True)
@@ -133,7 +139,8 @@ def _continuity(v1, v2, ok1, ok2, weight1, weight2, max_jump):
     belong to (0 where a candidate is not valid).
 
     Chains link candidates of columns 1 or 2 apart whose rows differ ≤ max_jump px per column;
-    a chain's support is the summed contrast of its members.
+    a chain's support is the summed contrast of its members. Also the chain labels (W,) of
+    the first and second candidates.
     """
     W = len(v1)
     V, OK, Wt = np.r_[v1, v2].astype(np.float64), np.r_[ok1, ok2], np.r_[weight1, weight2]
@@ -149,7 +156,26 @@ def _continuity(v1, v2, ok1, ok2, weight1, weight2, max_jump):
     graph = coo_matrix((np.ones(len(src)), (src, dst)), shape=(2 * W, 2 * W))
     n, lab = connected_components(graph, directed=False)
     support = np.bincount(lab[OK], weights=Wt[OK], minlength=n)
-    return np.where(ok1, support[lab[:W]], 0.0), np.where(ok2, support[lab[W:]], 0.0)
+    return (np.where(ok1, support[lab[:W]], 0.0), np.where(ok2, support[lab[W:]], 0.0),
+            lab[:W], lab[W:])
+
+
+def _junction(lab1, lab2, own1, own2) -> np.ndarray:
+    """(W,) bool: columns where one candidate's chain has at least ``OWN_COLUMNS`` columns of
+    its own (``own1``, ``own2``: where only the first or the second candidate is valid), all
+    before the column, and the other's as many, all after it — one line ends and the next
+    begins there, as at a step. A ghost has few columns of its own, or lies within the real
+    line's span, which then has own columns on both sides."""
+    W = len(lab1)
+    cols = np.arange(W)
+    lo, hi, n = np.full(2 * W, W), np.full(2 * W, -1), np.zeros(2 * W, int)
+    for lab, own in ((lab1, own1), (lab2, own2)):
+        np.minimum.at(lo, lab[own], cols[own])
+        np.maximum.at(hi, lab[own], cols[own])
+        np.add.at(n, lab[own], 1)
+    a, b = lab1, lab2
+    line = (n[a] >= OWN_COLUMNS) & (n[b] >= OWN_COLUMNS)
+    return line & (((hi[a] < cols) & (lo[b] > cols)) | ((hi[b] < cols) & (lo[a] > cols)))
 
 
 def detect(image, median=3, band=None, window=12, min_peak=40.0, min_contrast=20.0,
@@ -191,9 +217,10 @@ def detect(image, median=3, band=None, window=12, min_peak=40.0, min_contrast=20
         row2, gmax2, bg2, contrast2, ok2 = candidate(np.argmax(search, axis=1))
         ambiguous = ok & ok2
         if ambiguous.any():
-            s1, s2 = _continuity(row, row2, ok, ok2, contrast, contrast2, max_jump)
-            second = ambiguous & (s2 > s1)
-            ok &= ~ambiguous | (np.maximum(s1, s2) >= decisive * np.minimum(s1, s2))
+            s1, s2, lab1, lab2 = _continuity(row, row2, ok, ok2, contrast, contrast2, max_jump)
+            both = ambiguous & _junction(lab1, lab2, ok & ~ok2, ok2 & ~ok)
+            second = ambiguous & (s2 > s1) & ~both
+            ok &= ~ambiguous | both | (np.maximum(s1, s2) >= decisive * np.minimum(s1, s2))
             pairs = ((row, row2), (gmax, gmax2), (bg, bg2), (contrast, contrast2))
             row, gmax, bg, contrast = (np.where(second, b, a) for a, b in pairs)
     cols = np.flatnonzero(ok)

@@ -41,7 +41,7 @@ class CentreSettings:
     subtract: bool = False
     smooth_half_window: int = 7
     jump_px: float = 1.0
-    end_fraction: float = 0.5
+    end_fraction: float = 0.0
     smooth_grains: float = 7.0
     background: bool = True
 
@@ -110,14 +110,17 @@ def wander_correlation_px(c: LineCentres, jump_px: float = 1.0, min_run: int = 8
 
 
 def smooth_centres(c: LineCentres, half_window: int = 7, jump_px: float = 1.0,
-                   end_fraction: float = 0.5, drop_short: int = 3) -> LineCentres:
+                   end_fraction: float = 0.0, drop_short: int = 3) -> LineCentres:
     """Local quadratic fit of v against the column over 2·half_window + 1 columns, along each
     stretch of the line that no discontinuity cuts.
 
     Pieces: columns that follow each other with v not jumping by more than ``jump_px``. At each
-    end of a piece, columns whose peak is below ``end_fraction`` of its median peak are the
-    blurred tail of the line beyond an edge and are dropped, so a piece ends where the light
-    does; pieces shorter than ``drop_short`` columns are dropped as isolated (spurious)
+    end of a piece, columns whose peak is below ``end_fraction`` of its median peak are
+    dropped (0, the default: none; height calibrations made before it dropped them at 0.5 as
+    the blurred tail beyond an edge). Speckle dims a line's last columns as often as blur
+    does, and a line clipped by an oblique edge fades over several columns still on the top:
+    the dropped ends jumped inwards by 0 to 7 px, the edges a part is located by with them.
+    Pieces shorter than ``drop_short`` columns are dropped as isolated (spurious)
     detections. Stretches: the pieces left, joined across gaps of at most ``half_window``
     columns where v runs on (within ``jump_px`` plus the line's typical slope times the gap):
     a dark speckle blotch, or a spike dropped, does not cut the line; a step or an occlusion
