@@ -83,7 +83,7 @@ def edge_scatter(cloud: PointCloud) -> tuple[int, list[tuple[float, float]]]:
     mm: how well the lines measure an edge on these frames."""
     pts, lines = cloud.points, cloud.attributes["line"]
     up = above_table(pts, find_table(pts, 0.5), 0.5)
-    e, _ = edge_samples(pts, lines, ~up)
+    e = edge_samples(pts, lines, ~up).points
     out = []
     for y in (-40, -20, 0, 20, 40):
         sel = np.abs(e[:, 1] - y) < 1.5
