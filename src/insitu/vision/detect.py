@@ -218,9 +218,9 @@ def detect(image, median=3, band=None, window=12, min_peak=40.0, min_contrast=20
         ambiguous = ok & ok2
         if ambiguous.any():
             s1, s2, lab1, lab2 = _continuity(row, row2, ok, ok2, contrast, contrast2, max_jump)
-            both = ambiguous & _junction(lab1, lab2, ok & ~ok2, ok2 & ~ok)
-            second = ambiguous & (s2 > s1) & ~both
-            ok &= ~ambiguous | both | (np.maximum(s1, s2) >= decisive * np.minimum(s1, s2))
+            step = ambiguous & _junction(lab1, lab2, ok & ~ok2, ok2 & ~ok)   # the brighter
+            second = ambiguous & (s2 > s1) & ~step
+            ok &= ~ambiguous | step | (np.maximum(s1, s2) >= decisive * np.minimum(s1, s2))
             pairs = ((row, row2), (gmax, gmax2), (bg, bg2), (contrast, contrast2))
             row, gmax, bg, contrast = (np.where(second, b, a) for a, b in pairs)
     cols = np.flatnonzero(ok)
