@@ -125,13 +125,12 @@ def _along(points: np.ndarray, lines: np.ndarray,
     if camera is not None and len(points):
         # ordered through the pinhole (distortion keeps the order along a line; a tenth of
         # the time), checked on whole pixels through the full model on a sample
-        cam = points @ camera.R.T + camera.t
+        cam = camera.to_camera(points)
         uv = cam[:, :2] / cam[:, 2:] * np.diag(camera.K)[:2] + camera.K[:2, 2]
         axis = np.zeros(len(points), int)
         for g in groups:
-            q = uv[g]
-            axis[g] = int(np.ptp(q[:, 1]) > np.ptp(q[:, 0]))
-            out[g] = q[:, axis[g[0]]]
+            a = int(np.ptp(uv[g, 1]) > np.ptp(uv[g, 0]))
+            axis[g], out[g] = a, uv[g, a]
         some = np.linspace(0, len(points) - 1, min(len(points), 2000)).astype(int)
         px = camera.project(points[some])[np.arange(len(some)), axis[some]]
         if np.mean(np.abs(px - np.round(px)) < 0.05) >= ON_PIXELS:
