@@ -64,3 +64,21 @@ def test_a_step_across_a_gap_stays_sharp():
     out = smooth_centres(centres(u, v), half_window=15)
     e = out.v - true_v(out.u) - np.where(out.u >= 300, 4.0, 0.0)
     assert len(out) == len(u) and np.abs(e).max() < 0.15
+
+
+def test_a_steep_line_is_kept_whole_and_its_steps_cut():
+    """A crossed pass's line climbs 0.85 px a column: speckle's wobble (0.2 px) on top of
+    that is no jump — the old rule (|Δv| > 1 px) cut it into pieces too short to keep and
+    lost a fifth of its centres, its last columns on a top among them. A step of 1.2 px
+    against the slope (Δv = −0.35 px) is one."""
+    rng = np.random.default_rng(4)
+    u = np.arange(200, dtype=np.float64)
+    v = 500.0 + 0.85 * u + rng.normal(0, 0.2, len(u))
+    out = smooth_centres(centres(u, v), half_window=7)
+    assert len(out) == len(u)
+    assert np.abs(out.v - (500.0 + 0.85 * u)).max() < 0.3
+    stepped = np.where(u < 100, v, v - 1.2)
+    out = smooth_centres(centres(u, stepped), half_window=7)
+    near = (u >= 97) & (u <= 102)                # the step stays sharp, not smoothed over
+    expect = 500.0 + 0.85 * u - np.where(u < 100, 0.0, 1.2)
+    assert np.abs(out.v[near] - expect[near]).max() < 0.3

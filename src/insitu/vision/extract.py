@@ -17,7 +17,7 @@ from dataclasses import asdict, dataclass, replace
 
 import cv2
 import numpy as np
-from scipy.ndimage import correlate1d
+from scipy.ndimage import correlate1d, median_filter
 from scipy.signal import savgol_filter
 
 from insitu.errors import ConfigError
@@ -80,10 +80,24 @@ def extract_centres(image: np.ndarray, settings: CentreSettings = CentreSettings
 
 
 def runs(u: np.ndarray, v: np.ndarray, jump_px: float) -> list[slice]:
-    """Slices of (u, v) (sorted by u) where columns follow each other and v does not jump."""
-    brk = np.nonzero((np.diff(u) > 1.5) | (np.abs(np.diff(v)) > jump_px))[0] + 1
+    """Slices of (u, v) (sorted by u) where columns follow each other and v does not jump
+    off the line's own slope (:func:`_jumps`)."""
+    brk = np.nonzero((np.diff(u) > 1.5) | _jumps(u, v, jump_px))[0] + 1
     edges = np.concatenate([[0], brk, [len(u)]])
     return [slice(a, b) for a, b in zip(edges[:-1], edges[1:]) if b > a]
+
+
+def _jumps(u: np.ndarray, v: np.ndarray, jump_px: float, size: int = 9) -> np.ndarray:
+    """Where v (n,) steps off the line between consecutive centres (n − 1,) bool: by more
+    than ``jump_px`` from what the line's local slope (the median over ``size`` steps, which
+    a step does not move) gives over the columns between them. A line 40° across the image
+    (a crossed pass) climbs 0.85 px a column: its v alone would jump at every wobble of
+    speckle and leave pieces too short to keep, its last 7 columns on a top among them."""
+    du, dv = np.diff(u), np.diff(v)
+    if not len(du):
+        return np.zeros(0, bool)
+    slope = median_filter(dv / np.maximum(du, 1.0), size=size, mode="nearest")
+    return np.abs(dv - slope * du) > jump_px
 
 
 def wander_correlation_px(c: LineCentres, jump_px: float = 1.0, min_run: int = 80,
@@ -114,7 +128,8 @@ def smooth_centres(c: LineCentres, half_window: int = 7, jump_px: float = 1.0,
     """Local quadratic fit of v against the column over 2·half_window + 1 columns, along each
     stretch of the line that no discontinuity cuts.
 
-    Pieces: columns that follow each other with v not jumping by more than ``jump_px``. At each
+    Pieces: columns that follow each other with v not stepping off the line by more than
+    ``jump_px`` (its local slope allowed for: :func:`_jumps`). At each
     end of a piece, columns whose peak is below ``end_fraction`` of its median peak are
     dropped (0, the default: none; height calibrations made before it dropped them at 0.5 as
     the blurred tail beyond an edge). Speckle dims a line's last columns as often as blur
@@ -122,7 +137,7 @@ def smooth_centres(c: LineCentres, half_window: int = 7, jump_px: float = 1.0,
     the dropped ends jumped inwards by 0 to 7 px, the edges a part is located by with them.
     Pieces shorter than ``drop_short`` columns are dropped as isolated (spurious)
     detections. Stretches: the pieces left, joined across gaps of at most ``half_window``
-    columns where v runs on (within ``jump_px`` plus the line's typical slope times the gap):
+    columns where v runs on (within ``jump_px`` of the line's local slope times the gap):
     a dark speckle blotch, or a spike dropped, does not cut the line; a step or an occlusion
     does. Each point gets the quadratic fitted to its stretch's points in the window centred
     on it, shifted to stay inside the stretch at its ends (Savitzky–Golay's interp mode, which
@@ -158,9 +173,7 @@ def _local_quadratic(col: np.ndarray, v: np.ndarray, h: int, jump_px: float) -> 
     n = len(v)
     if n < 2:
         return v.copy()
-    dc, dv = np.diff(col), np.abs(np.diff(v))
-    slope = float(np.median(dv[dc == 1])) if (dc == 1).any() else 0.0
-    cut = (dc > h + 1) | (dv > jump_px + slope * (dc - 1))
+    cut = (np.diff(col) > h + 1) | _jumps(col, v, jump_px)
     first = np.r_[0, np.flatnonzero(cut) + 1]
     last = np.r_[first[1:], n] - 1
     span = col[last] - col[first]
