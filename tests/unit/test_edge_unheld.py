@@ -42,10 +42,19 @@ def test_edges_facing_one_way_leave_the_other_direction_free(heights):
     assert align_edges(heights, moved, u @ R.T) is None     # without free: no fit
 
 
-def test_edges_both_ways_hold_both_and_none_found_names_none(heights):
-    e1, u1 = _samples(np.linspace(-8, 8, 12), -20.0, 5.0, -1)
+def test_two_faces_leave_their_bisector_free_and_a_third_holds_it(heights):
+    """Insetting a corner's two edges alike moves it along their bisector: two faces alone
+    do not place the part; a third does."""
+    e1, u1 = _samples(np.linspace(-8, 8, 12), -20.0, 5.0, -1)      # faces -y
     side = np.column_stack([np.full(12, 9.95), np.linspace(22, 38, 12), np.full(12, 15.0)])
-    e, u = np.vstack([e1, side]), np.vstack([u1, np.tile([1.0, 0.0], (12, 1))])
-    assert unheld(heights, e, u) == (24, None)
+    e, u = np.vstack([e1, side]), np.vstack([u1, np.tile([1.0, 0.0], (12, 1))])  # and +x
+    found, free = unheld(heights, e, u)
+    assert found == 24 and abs(free @ np.array([1.0, -1.0])) / np.sqrt(2) > 0.99
+    assert align_edges(heights, e, u) is None
+    e3, u3 = _samples(np.linspace(-8, 8, 12), 40.0, 15.0, +1)       # and +y
+    e, u = np.vstack([e, e3]), np.vstack([u, u3])
+    moved = e + [0.1, -0.15, 0.0]
+    fit = align_edges(heights, moved, u)
+    assert fit is not None and np.abs(fit.shift_mm - [-0.1, 0.15]).max() < 0.01
     far = np.column_stack([np.linspace(-5, 5, 10), np.full(10, -30.0), np.full(10, 3.0)])
     assert unheld(heights, far, np.tile([0.0, 1.0], (10, 1))) == (0, None)

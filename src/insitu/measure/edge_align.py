@@ -329,40 +329,41 @@ def _spread(r: np.ndarray) -> float:
     return float(1.4826 * np.median(np.abs(r - np.median(r))))
 
 
-HOLD = 0.02
-"""Below this share of the edges' normals (squared) along a direction, nothing holds it."""
-
-
 def unheld(heights: HeightImage, e: np.ndarray, u: np.ndarray
            ) -> tuple[int, np.ndarray | None]:
     """Why :func:`align_edges` may find no fit at this pose: the edge samples ``e`` (K, 3),
     part frame, directions ``u`` (K, 2), that find the reference's edge, and the unit
-    direction (2,) part frame along which their edges' normals give no hold (the least
-    eigenvector of Σ n nᵀ / K, its eigenvalue below :data:`HOLD`; None: both held)."""
+    direction (2,) part frame of the shift their edges hold least, with the inset (the
+    least eigenvector of Σ [n, −1][n, −1]ᵀ / K; None: no sample found). Edges that all
+    face one way leave the shift along them free; edges facing two ways alone leave it free
+    along their bisector, where moving the part and insetting both edges alike look the
+    same (a triangle whose third side runs along the lines, a corner of two sides)."""
     s, n = edge_distance(heights, e, u)
     ok = np.isfinite(s) & (np.einsum("ij,ij->i", n, u) > MIN_COS)
     if not ok.any():
         return 0, None
-    w, v = np.linalg.eigh(n[ok].T @ n[ok] / ok.sum())
-    return int(ok.sum()), (v[:, 0] if w[0] < HOLD else None)
+    J = np.column_stack([n[ok], -np.ones(ok.sum())])
+    d = np.linalg.eigh(J.T @ J / ok.sum())[1][:2, 0]
+    return int(ok.sum()), d / max(float(np.linalg.norm(d)), 1e-12)
 
 
-def unheld_reason(heights: HeightImage, e: np.ndarray, u: np.ndarray, total: int,
+def unheld_reason(heights: HeightImage, e: np.ndarray, u: np.ndarray,
                   angle_rad: float) -> tuple[str, np.ndarray | None]:
-    """Why the edges give no fit at a pose, and the direction (2,) part frame they leave
-    free (None: none): too few of the scan's ``total`` edge samples (``e``, ``u`` in the
-    part's frame) find the reference's edges, or those found all face one way (the free
-    direction named in the world frame; ``angle_rad``: the world → part turn)."""
+    """Why the edges give no fit at a pose, and the direction (2,) part frame they hold
+    least (None: too few samples to say): too few of the scan's edge samples (``e``, ``u``
+    in the part's frame) lie by the reference's edges, or those found leave a direction
+    free (named in the world frame; ``angle_rad``: the world → part turn)."""
     found, free = unheld(heights, e, u)
-    if free is None:
-        enough = found >= MIN_SAMPLES and found >= MIN_FOUND * total
-        return (f"{found} of the scan's {total} edge samples find the reference's edges"
-                + (", but they settle into no one fit" if enough
-                   else f" (at least {MIN_SAMPLES} and {MIN_FOUND:.0%} needed)")), None
+    near = _near_edges(heights, e, u, np.zeros(2), 0.0, np.zeros(2))
+    if found < MIN_SAMPLES or near < MIN_FOUND * len(e):
+        return (f"{found} of the scan's {len(e)} edge samples find the reference's edges "
+                f"along their lines and {near} lie by one (at least {MIN_SAMPLES} and "
+                f"{MIN_FOUND:.0%} needed)"), None
     name, faces = direction_name(rot_z(-angle_rad)[:2, :2] @ free)   # part frame → world
-    return (f"the {found} edges the scan lines cross all face {faces}: nothing holds the "
-            f"part along {name}; turn the part or the scan so that lines cross edges that "
-            f"face {name if name[0] == '(' else '±' + name}"), free
+    return (f"the {found} edge samples the scan lines give hold the part along {faces} "
+            f"only: nothing holds it along {name}; turn the part or the scan, or scan "
+            f"crossed, so that lines cross an edge facing "
+            f"{name if name[0] == '(' else '±' + name}"), free
 
 
 def direction_name(d: np.ndarray) -> tuple[str, str]:

@@ -272,7 +272,7 @@ def _aligned(ref: PartReference, pts: np.ndarray, lines: np.ndarray | None,
         step = align_edges(ref.heights, ep, up)
         edges, why = (0, np.inf, np.inf), ""
         if step is None:
-            why, free = unheld_reason(ref.heights, ep, up, len(ep), a)
+            why, free = unheld_reason(ref.heights, ep, up, a)
             step = None if free is None else align_edges(ref.heights, ep, up, free=free)
             if step is not None:              # the turn and the shift across held: refined
                 edges = (step.samples, np.inf, step.sigma_deg)
