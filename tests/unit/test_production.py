@@ -167,6 +167,69 @@ def test_a_part_not_found_is_set_aside_without_a_serial(recipe, tmp_path):
     assert rec.outcome == "refused" and rec.serial is None and "no part" in rec.error
 
 
+def _line_angles(cloud) -> np.ndarray:
+    """Each scan line's direction in x, y, degrees 0 … 180 (lines of ≥ 20 points)."""
+    lines = cloud.attributes["line"]
+    out = []
+    for k in np.unique(lines):
+        p = cloud.points[lines == k, :2]
+        if len(p) >= 20:
+            d = np.linalg.svd(p - p.mean(0), full_matrices=False)[2][0]
+            out.append(np.degrees(np.arctan2(d[1], d[0])) % 180.0)
+    return np.array(out)
+
+
+@pytest.mark.parametrize("second_look", [True, False])
+def test_a_pose_the_lines_leave_unheld_gets_a_second_look_crossed(recipe, tmp_path,
+                                                                   second_look):
+    """The lines along y leave the pose unheld (the locator refuses with the pose it could
+    not pin down): the part is scanned again crossed, over its footprint at that pose, and
+    located on that; without ``second_look`` it is set aside."""
+    from dataclasses import replace
+
+    from insitu.cli.recipe import read
+    from insitu.geometry.pose import flat_pose
+    from insitu.measure.locate import LocateRefused, Solution
+    from insitu.measure.part_reference import reference_from_mesh
+    from insitu.sim.workpieces import make_workpiece
+
+    mesh = make_workpiece("step-block")
+    log = tmp_path / "run.jsonl"
+    with connect(None, "step-block", 0, BINNING) as station:
+        run, truths = _run(recipe, log, 1, station)
+        r = read(recipe)                     # the region a tray would give, wider than the part
+        run.recipe = replace(r, scan=replace(r.scan, region=(-45.0, 45.0, -70.0, 70.0),
+                                             spacing_mm=0.5, second_look=second_look))
+        clouds = []
+
+        def locate(cloud):
+            clouds.append(cloud)
+            if len(clouds) == 1:
+                x, y, a = flat_pose(truths["now"])
+                raise LocateRefused("poor-fit", "x, y and the turn are not pinned down",
+                                    Solution(x, y, 0.0, a, 1.0, 1.0, 0.02))
+            return production.Located(truths["now"], 1.0, 0.0)
+        locate.reference = reference_from_mesh(mesh.vertices, mesh.triangles, "step-block")
+        run.locate = locate
+        (rec,) = production.produce(run)
+    if not second_look:
+        assert rec.outcome == "refused" and rec.rescan_s is None and len(clouds) == 1
+        return
+    assert rec.outcome == "marked" and rec.rescan_s > 0 and len(clouds) == 2
+    first, second = (_line_angles(c) for c in clouds)
+    assert np.mean(np.abs(first - 90.0) < 2.0) > 0.9                # along y only
+    assert not np.any(np.abs(first - 45.0) < 2.0)
+    assert np.mean(np.abs(second - 45.0) < 2.0) > 0.3               # and crossed
+    # the second look covers the part's footprint grown by the margin, not the whole region
+    x, y, a = flat_pose(truths["now"])
+    c, s_ = np.cos(np.radians(a)), np.sin(np.radians(a))
+    foot = mesh.vertices[:, :2] @ np.array([[c, s_], [-s_, c]]) + [x, y]
+    lo, hi = clouds[1].points[:, :2].min(0), clouds[1].points[:, :2].max(0)
+    assert np.all(lo >= foot.min(0) - 4.0 - 1.0) and np.all(hi <= foot.max(0) + 4.0 + 1.0)
+    assert np.ptp(clouds[0].points[:, 0]) > 60.0
+    assert read_log(log)[0].rescan_s == rec.rescan_s
+
+
 def test_a_recipe_job_marks_every_placement_where_the_part_lies(recipe, tmp_path):
     """plan_recipe (what mark --recipe and produce write): the placements moved by the pose,
     one job, the serial from the recipe's counter."""

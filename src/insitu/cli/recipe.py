@@ -93,6 +93,9 @@ def new(
         callback=bounded("spacing_mm"),
         help="The crossed pass's line spacing, mm (it only has to cross the edges the "
              "first pass runs along, so it may be coarser).")] = 0.5,
+    second_look: Annotated[bool, typer.Option(
+        help="With --no-cross: when the lines along y leave a part's pose unheld (its edges "
+             "run along them), scan it again crossed over where it lies.")] = True,
     power: Annotated[float, typer.Option(callback=bounded("power_pct"),
                                          help="Laser power, % of full.")] = 30.0,
     frequency: Annotated[float, typer.Option(callback=bounded("frequency_khz"),
@@ -124,7 +127,8 @@ def new(
         placements=(_placement(pattern, at, width, rotate, mode, hatch, hatch_angle, beam),),
         laser={"power_pct": power, "frequency_khz": frequency, "mark_speed_mm_s": speed,
                "jump_speed_mm_s": 3000.0},
-        scan=RecipeScan(region, margin, spacing, cross=cross, cross_spacing_mm=cross_spacing),
+        scan=RecipeScan(region, margin, spacing, cross=cross, cross_spacing_mm=cross_spacing,
+                        second_look=second_look),
         prefer_angle_deg=prefer_angle,
         counter=None if counter is None else counter.absolute(), serial_start=serial_start,
         fields=parse_fields(fields or []), workpiece=workpiece)

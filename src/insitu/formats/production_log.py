@@ -5,7 +5,7 @@ JSON lines after each record, for a spreadsheet).
     {"part": 7, "serial": 7, "outcome": "marked", "x_mm": 3.1, "y_mm": -12.0,
      "angle_deg": 131.5, "fitness": 0.97, "rmse_mm": 0.02, "decoded": "00007",
      "decode_ok": true, "grade": "A", "offset_mm": 0.03, "job": "part-0007.job.json",
-     "scan_s": 1.2, "locate_s": 0.4, "plan_s": 0.3, "mark_s": 0.8, "read_s": 0.5,
+     "scan_s": 1.2, "rescan_s": null, "locate_s": 0.4, "plan_s": 0.3, "mark_s": 0.8, "read_s": 0.5,
      "error": null, "resumed": false, "time": "2026-12-02T05:01:02+00:00"}
 
 ``outcome``: "marked" (marked and read back), "refused" (not located or not planned: no serial
@@ -34,7 +34,7 @@ from insitu.formats.validation import validation_message
 
 MAX_LOG_BYTES = 64 << 20
 OUTCOMES = ("marked", "refused", "fault", "aborted")
-STAGES = ("scan", "locate", "plan", "mark", "read")
+STAGES = ("scan", "rescan", "locate", "plan", "mark", "read")
 
 
 class PartRecord(BaseModel):
@@ -55,6 +55,7 @@ class PartRecord(BaseModel):
     offset_mm: float | None = None
     job: str | None = None
     scan_s: float | None = None
+    rescan_s: float | None = None
     locate_s: float | None = None
     plan_s: float | None = None
     mark_s: float | None = None

@@ -9,7 +9,8 @@
                "jump_speed_mm_s": 3000},
      "scan": {"region": null, "margin_mm": 5, "spacing_mm": 0.25, "exposure_ms": 10,
               "speed_mm_s": 2000,                   # region: world (x0, x1, y0, y1) mm
-              "cross": true, "cross_spacing_mm": 0.5},  # a crossed pass (absent: none)
+              "cross": true, "cross_spacing_mm": 0.5,   # a crossed pass (absent: none)
+              "second_look": true},                # along y only: crossed when unheld
      "locate": {"prefer_angle_deg": null},         # which of a symmetric part's turns
      "serial": {"counter": "serial.counter.json", "start": 1, "fields": {}}}
 
@@ -18,8 +19,11 @@ it, or the cloud of a first scan (its world frame is then the part's). ``scan.re
 where the part lies, grown by ``margin_mm`` (the simulated rig knows where; a real rig needs
 the region). ``scan.cross``: a second, crossed pass (lines at 45° to x, ``cross_spacing_mm``
 apart, null: ``spacing_mm``), so every edge of the part is crossed by some line whatever its
-turn; absent (older recipes): along y only; ``insitu recipe new`` turns it on. ``serial.start``
-creates the counter when it does not exist yet.
+turn; absent (older recipes): along y only; ``insitu recipe new`` turns it on.
+``scan.second_look`` (default on): a scan along y only whose lines run along the part's
+edges, so that they leave its pose unheld, is followed by a crossed scan over where the part
+lies, and the part is located on that. ``serial.start`` creates the counter when it does not
+exist yet.
 """
 
 from __future__ import annotations
@@ -73,6 +77,7 @@ class _Scan(_Strict):
     speed_mm_s: Speed = 2000.0
     cross: bool = False
     cross_spacing_mm: Spacing | None = None
+    second_look: bool = True
 
 
 class _Locate(_Strict):
@@ -104,7 +109,8 @@ class RecipeScan:
     where the part lies, grown by ``margin_mm``), line ``spacing_mm``, camera
     ``exposure_ms``, line sweep ``speed_mm_s``; ``cross``: a second, crossed pass
     ``cross_spacing_mm`` apart (None: ``spacing_mm``); off unless asked, as in files without
-    it (``insitu recipe new`` asks for it by default)."""
+    it (``insitu recipe new`` asks for it by default); ``second_look``: without ``cross``,
+    scan crossed over the part when the lines along y leave its pose unheld."""
 
     region: tuple[float, float, float, float] | None = None
     margin_mm: float = 5.0
@@ -113,6 +119,7 @@ class RecipeScan:
     speed_mm_s: float = 2000.0
     cross: bool = False
     cross_spacing_mm: float | None = None
+    second_look: bool = True
 
 
 @dataclass(frozen=True)
@@ -164,7 +171,7 @@ def recipe_json(recipe: Recipe, path: Path) -> str:
         workpiece=recipe.workpiece, placements=placements, laser=_Laser(**recipe.laser),
         scan=_Scan(region=s.region, margin_mm=s.margin_mm, spacing_mm=s.spacing_mm,
                    exposure_ms=s.exposure_ms, speed_mm_s=s.speed_mm_s, cross=s.cross,
-                   cross_spacing_mm=s.cross_spacing_mm),
+                   cross_spacing_mm=s.cross_spacing_mm, second_look=s.second_look),
         locate=_Locate(prefer_angle_deg=recipe.prefer_angle_deg),
         serial=_Serial(counter=_rel(counter, folder), start=recipe.serial_start,
                        fields=dict(recipe.fields)))
@@ -208,7 +215,7 @@ def read_recipe(path: str | Path, placement: Callable[..., Any],
         reference=_abs(getattr(d.reference, kind), folder, f"reference.{kind}", path),
         reference_kind=kind, placements=tuple(placements), laser=d.laser.model_dump(),
         scan=RecipeScan(s.region, s.margin_mm, s.spacing_mm, s.exposure_ms, s.speed_mm_s,
-                        s.cross, s.cross_spacing_mm),
+                        s.cross, s.cross_spacing_mm, s.second_look),
         prefer_angle_deg=d.locate.prefer_angle_deg,
         counter=_abs(d.serial.counter, folder, "serial.counter", path, must_exist=False),
         serial_start=d.serial.start, fields=dict(d.serial.fields), workpiece=d.workpiece)

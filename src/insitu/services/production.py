@@ -30,6 +30,7 @@ from insitu.formats.recipe import Recipe
 from insitu.geometry.camera import CameraModel
 from insitu.geometry.pose import flat_pose, pose_matrix
 from insitu.marking import LaserParams, MarkJob, read_job
+from insitu.measure.locate import LocateRefused
 from insitu.services import mark as mark_svc
 from insitu.services import serials
 from insitu.services.height import crossed_model
@@ -240,25 +241,20 @@ def _text(e: BaseException) -> str:
 
 
 def _stage(run: Production, part: _Part, name: str, work: Callable[[], Any]) -> Any:
+    """``work()`` as stage ``name`` of ``part``, its time added to the stage's."""
     if run.on_stage is not None:
         run.on_stage(part.number, name)
     t0 = time.perf_counter()
     try:
         return work()
     finally:
-        part.times[name] = time.perf_counter() - t0
+        part.times[name] = part.times.get(name, 0.0) + time.perf_counter() - t0
 
 
 def _run_part(run: Production, part: _Part) -> PartRecord:
-    r = run.recipe
-    scan = _stage(run, part, "scan", lambda: scan_live(
-        run.station, r.scan.spacing_mm, scan_region(run), run.height_cal,
-        exposure_ms=r.scan.exposure_ms, speed_mm_s=r.scan.speed_mm_s, cancel=run.cancel,
-        cross=r.scan.cross, cross_spacing=r.scan.cross_spacing_mm))
-    cloud = scan.cloud
-    write_ply(run.cloud_path(part.number), cloud)
+    cloud = _scan_part(run, part, "scan", scan_region(run), run.recipe.scan.cross)
     try:
-        located = _stage(run, part, "locate", lambda: run.locate(cloud))
+        cloud, located = _locate(run, part, cloud)
         x, y, a = located.pose()
         part.fields.update(x_mm=x, y_mm=y, angle_deg=a, fitness=round(located.fitness, 4),
                            rmse_mm=round(located.rmse_mm, 4))
@@ -271,6 +267,53 @@ def _run_part(run: Production, part: _Part) -> PartRecord:
         return part.record("refused", _text(e))
     _stage(run, part, "mark", lambda: _mark(run, planned.job, part.job))
     return _read(run, part, planned.result, cloud)
+
+
+def _scan_part(run: Production, part: _Part, stage: str, region, cross: bool) -> PointCloud:
+    """The part's scan over ``region`` as the recipe says (``cross``: with the crossed pass),
+    written where the run keeps the part's cloud."""
+    s = run.recipe.scan
+    cloud = _stage(run, part, stage, lambda: scan_live(
+        run.station, s.spacing_mm, region, run.height_cal, exposure_ms=s.exposure_ms,
+        speed_mm_s=s.speed_mm_s, cancel=run.cancel, cross=cross,
+        cross_spacing=s.cross_spacing_mm)).cloud
+    write_ply(run.cloud_path(part.number), cloud)
+    return cloud
+
+
+def _locate(run: Production, part: _Part, cloud: PointCloud) -> tuple[PointCloud, Located]:
+    """(the cloud the part was located on, its pose). The second look: when lines along y
+    alone leave the pose unheld (edges along them: LocateRefused with the refused pose) and
+    the recipe allows it, the part is scanned again, crossed, over its footprint at that
+    pose grown by the margin, and located on that scan (its time in ``rescan_s``)."""
+    try:
+        return cloud, _stage(run, part, "locate", lambda: run.locate(cloud))
+    except LocateRefused as e:
+        if e.best is None or not _second_look(run):
+            raise
+        region = _footprint(run, e.best)
+    cloud = _scan_part(run, part, "rescan", region, True)
+    return cloud, _stage(run, part, "locate", lambda: run.locate(cloud))
+
+
+def _second_look(run: Production) -> bool:
+    s, cal = run.recipe.scan, run.height_cal
+    return s.second_look and not s.cross and (cal is None or cal.sheet_cross is not None)
+
+
+def _footprint(run: Production, best) -> tuple[float, float, float, float]:
+    """The part's reference laid at the refused pose ``best`` (a locate Solution), its
+    x, y extent grown by the margin, within the scan region."""
+    reference = getattr(run.locate, "reference", None)
+    x0, x1, y0, y1 = scan_region(run)
+    if reference is None:
+        return x0, x1, y0, y1
+    a = np.radians(best.angle_deg)
+    xy = reference.points[:, :2] @ np.array([[np.cos(a), np.sin(a)], [-np.sin(a), np.cos(a)]])
+    lo = xy.min(axis=0) + [best.x_mm, best.y_mm] - run.recipe.scan.margin_mm
+    hi = xy.max(axis=0) + [best.x_mm, best.y_mm] + run.recipe.scan.margin_mm
+    return (max(x0, float(lo[0])), min(x1, float(hi[0])),
+            max(y0, float(lo[1])), min(y1, float(hi[1])))
 
 
 def _mark(run: Production, job: MarkJob, path: Path, **resume) -> None:
