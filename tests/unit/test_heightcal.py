@@ -160,6 +160,23 @@ def test_heights_outside_the_calibration_are_refused(cal):
         scan_replay(DATA / "scan-step-block-b4", narrow)
 
 
+def test_a_few_stray_heights_are_dropped_more_are_refused(cal):
+    """A ghost's short streak above the calibrated heights loses its points, not the scan;
+    a part the calibration does not reach is refused."""
+    from insitu.measure.heightcal import STRAY, check_bracket
+    from insitu.services.height import height_model
+
+    model = height_model(cal)[1]
+    lo, hi = model.z_range
+    z = np.linspace(lo, hi, 10_000)
+    z[:int(STRAY * len(z))] = hi + 3.0
+    inside = check_bracket(model, z, "scan")
+    assert (~inside).sum() == int(STRAY * len(z)) and inside[int(STRAY * len(z)):].all()
+    z[:int(STRAY * len(z)) + 1] = hi + 3.0
+    with pytest.raises(MeasurementError, match="outside the height calibration"):
+        check_bracket(model, z, "scan")
+
+
 def test_wrong_sequence_kind(tmp_path):
     res = runner.invoke(app, ["calibrate", "height", str(DATA / "scan-step-block-b4"),
                               "-o", str(tmp_path / "h.json")])

@@ -220,13 +220,22 @@ class SheetHeightModel:
                    np.array(d["coefficients_mm"]), tuple(d["x_range_mm"]), tuple(d["z_range_mm"]))
 
 
-def check_bracket(model, z: np.ndarray, what: str, tol_mm: float = 2.0) -> None:
-    """Refuse results far outside the heights the calibration recorded."""
+STRAY = 0.001
+"""Share of a scan's points that may lie outside the calibrated heights as strays (a ghost's
+streak; dropped): more is a part the calibration does not reach (refused)."""
+
+
+def check_bracket(model, z: np.ndarray, what: str, tol_mm: float = 2.0,
+                  stray: float = STRAY) -> np.ndarray:
+    """Which heights z (N,) lie within the heights the calibration recorded (± ``tol_mm``);
+    MeasurementError when more than the share ``stray`` of them do not."""
     lo, hi = model.z_range
-    zf = z[np.isfinite(z)]
-    if len(zf) and (zf.min() < lo - tol_mm or zf.max() > hi + tol_mm):
+    inside = ~np.isfinite(z) | ((z >= lo - tol_mm) & (z <= hi + tol_mm))
+    if (~inside).sum() > stray * len(z):
+        zf = z[np.isfinite(z)]
         raise MeasurementError(f"{what}: measured heights {zf.min():.1f} … {zf.max():.1f} mm are "
                                f"outside the height calibration's {lo:g} … {hi:g} mm")
+    return inside
 
 
 def height_residuals(model, camera: CameraModel, obs: list[LineObservation]) -> dict[str, float]:

@@ -116,8 +116,10 @@ class ScanReconstructor:
         """All points so far, less isolated ones (fewer than ``outlier_neighbours`` others
         within ``outlier_radius_mm``: spurious detections floating off the surface; 0 keeps
         all) and, with ``cross_check``, those the neighbouring lines do not confirm
-        (:mod:`insitu.measure.consistency`; counted in ``unconfirmed_removed``). Raises
-        MeasurementError when no frame showed a line or heights leave the calibrated range."""
+        (:mod:`insitu.measure.consistency`; counted in ``unconfirmed_removed``), and a few
+        strays outside the calibrated heights (:func:`check_bracket`; counted with the
+        isolated ones). Raises MeasurementError when no frame showed a line or more heights
+        leave the calibrated range."""
         if not self._chunks:
             raise MeasurementError(f"no laser line found in any of {self.frames} frames "
                                    "(laser off, exposure too low, or the part outside the view)")
@@ -131,8 +133,10 @@ class ScanReconstructor:
             confirmed = self._confirmed(pts, attrs["line"])
             pts, attrs = pts[confirmed], {k: a[confirmed] for k, a in attrs.items()}
             self.unconfirmed_removed = int(len(confirmed) - confirmed.sum())
-        if self.model is not None:
-            check_bracket(self.model, pts[:, 2], "scan")
+        if self.model is not None:               # a few strays (a ghost's streak) dropped
+            inside = check_bracket(self.model, pts[:, 2], "scan")
+            pts, attrs = pts[inside], {k: a[inside] for k, a in attrs.items()}
+            self.outliers_removed += int(len(inside) - inside.sum())
         return PointCloud(pts, attrs)
 
     def _confirmed(self, pts: np.ndarray, line: np.ndarray) -> np.ndarray:

@@ -17,7 +17,7 @@ from dataclasses import asdict, dataclass, replace
 
 import cv2
 import numpy as np
-from scipy.ndimage import correlate1d, median_filter
+from scipy.ndimage import correlate1d
 from scipy.signal import savgol_filter
 
 from insitu.errors import ConfigError
@@ -87,16 +87,19 @@ def runs(u: np.ndarray, v: np.ndarray, jump_px: float) -> list[slice]:
     return [slice(a, b) for a, b in zip(edges[:-1], edges[1:]) if b > a]
 
 
-def _jumps(u: np.ndarray, v: np.ndarray, jump_px: float, size: int = 9) -> np.ndarray:
+def _jumps(u: np.ndarray, v: np.ndarray, jump_px: float) -> np.ndarray:
     """Where v (n,) steps off the line between consecutive centres (n − 1,) bool: by more
-    than ``jump_px`` from what the line's local slope (the median over ``size`` steps, which
-    a step does not move) gives over the columns between them. A line 40° across the image
-    (a crossed pass) climbs 0.85 px a column: its v alone would jump at every wobble of
-    speckle and leave pieces too short to keep, its last 7 columns on a top among them."""
+    than ``jump_px`` from what the line's slope in the frame (the median over its steps,
+    which the steps themselves do not move) gives over the columns between them. A line 40°
+    across the image (a crossed pass) climbs 0.85 px a column: its v alone would jump at
+    every wobble of speckle and leave pieces too short to keep, its last 7 columns on a top
+    among them. The frame's slope, not a local one, which would follow a ghost's streak at
+    another slope as readily as the line."""
     du, dv = np.diff(u), np.diff(v)
     if not len(du):
         return np.zeros(0, bool)
-    slope = median_filter(dv / np.maximum(du, 1.0), size=size, mode="nearest")
+    near = (du > 0.5) & (du < 1.5)
+    slope = float(np.median(dv[near] / du[near])) if near.any() else 0.0
     return np.abs(dv - slope * du) > jump_px
 
 
@@ -129,7 +132,7 @@ def smooth_centres(c: LineCentres, half_window: int = 7, jump_px: float = 1.0,
     stretch of the line that no discontinuity cuts.
 
     Pieces: columns that follow each other with v not stepping off the line by more than
-    ``jump_px`` (its local slope allowed for: :func:`_jumps`). At each
+    ``jump_px`` (its slope in the frame allowed for: :func:`_jumps`). At each
     end of a piece, columns whose peak is below ``end_fraction`` of its median peak are
     dropped (0, the default: none; height calibrations made before it dropped them at 0.5 as
     the blurred tail beyond an edge). Speckle dims a line's last columns as often as blur
@@ -137,7 +140,7 @@ def smooth_centres(c: LineCentres, half_window: int = 7, jump_px: float = 1.0,
     the dropped ends jumped inwards by 0 to 7 px, the edges a part is located by with them.
     Pieces shorter than ``drop_short`` columns are dropped as isolated (spurious)
     detections. Stretches: the pieces left, joined across gaps of at most ``half_window``
-    columns where v runs on (within ``jump_px`` of the line's local slope times the gap):
+    columns where v runs on (within ``jump_px`` of the line's slope times the gap):
     a dark speckle blotch, or a spike dropped, does not cut the line; a step or an occlusion
     does. Each point gets the quadratic fitted to its stretch's points in the window centred
     on it, shifted to stay inside the stretch at its ends (Savitzky–Golay's interp mode, which
