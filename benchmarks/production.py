@@ -298,7 +298,7 @@ def main() -> None:
 
         report(argparse.Namespace(count=args.parts, binning=args.binning, seed=args.seed + 1,
                                   fault_at=7, module=0.35, spacing=0.25,
-                                  cross=args.cross))
+                                  cross=args.cross, second_look=True))
     console.print(json.dumps({"binning": args.binning, "poses": args.poses}))
 
 

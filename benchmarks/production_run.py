@@ -17,7 +17,7 @@ at one part, the run resumed from its log.
    counter and the log agree), the faulted part without a serial.
 
 Run: .venv/bin/python benchmarks/production_run.py [--count 20] [--binning 2] [--seed 1]
-     [--fault-at 7] [--module 0.35] [--spacing 0.25] [--cross 0.5]
+     [--fault-at 7] [--module 0.35] [--spacing 0.25] [--cross 0.5] [--no-second-look]
      (or benchmarks/production.py, which runs it last)
 """
 
@@ -57,15 +57,15 @@ PART = "step-block"
 AT = (0.0, -30.0)           # on the 3 mm step, part frame
 
 
-def calibrations(folder: Path, seed: int, binning: int, cross: bool = False):
-    """(field correction file, height calibration) fitted from simulated recordings
-    (``cross``: the height calibration with crossed lines)."""
+def calibrations(folder: Path, seed: int, binning: int):
+    """(field correction file, height calibration) fitted from simulated recordings (the
+    height calibration with crossed lines, as `insitu record height-calibration` records it:
+    for a crossed scan, or a second look)."""
     rig = sim_world(PART, seed=seed, binning=binning).rig
     record_marked_field_calibration(simulated(SimWorld(rig, seed=seed)), folder / "field")
     field = folder / "field.json"
     save_field_correction(field, calibrate_field(folder / "field", "rbf"))
-    record_height_calibration(simulated(SimWorld(rig, seed=seed)), folder / "hcal",
-                              cross=cross)
+    record_height_calibration(simulated(SimWorld(rig, seed=seed)), folder / "hcal", cross=True)
     return field, calibrate_height(folder / "hcal")
 
 
@@ -90,7 +90,8 @@ def run(args, folder: Path, field: Path, height) -> tuple[list, dict, dict]:
     write_recipe(recipe_path, Recipe(folder / "part.stl", "mesh", (p,),
                                      scan=RecipeScan(margin_mm=4.0, spacing_mm=args.spacing,
                                                      cross=bool(args.cross),
-                                                     cross_spacing_mm=args.cross),
+                                                     cross_spacing_mm=args.cross,
+                                                     second_look=args.second_look),
                                      serial_start=1,
                                      workpiece=PART))
     from insitu.cli.recipe import read
@@ -130,11 +131,11 @@ def run(args, folder: Path, field: Path, height) -> tuple[list, dict, dict]:
 
 def report(args) -> None:
     """Calibrate, run, resume and print both tables (``args``: count, binning, seed,
-    fault_at, module, spacing, cross: the crossed pass's spacing or None)."""
+    fault_at, module, spacing, cross: the crossed pass's spacing or None, second_look)."""
     with tempfile.TemporaryDirectory() as tmp:
         folder = Path(tmp)
         t0 = time.perf_counter()
-        field, height = calibrations(folder, args.seed, args.binning, bool(args.cross))
+        field, height = calibrations(folder, args.seed, args.binning)
         t_cal = time.perf_counter() - t0
         records, truths, offsets = run(args, folder, field, height)
         t_run = time.perf_counter() - t0 - t_cal
@@ -148,7 +149,7 @@ def report(args) -> None:
                       f"camera fault at part {args.fault_at}, resumed")
     for c in ("part", "serial", "outcome", "pose truth (x, y, °)", "pose error mm / °",
               "on part vs recipe mm (truth)", "read back", "grade", "offset read mm",
-              "scan/locate/plan/mark/read s"):
+              "scan/rescan/locate/plan/mark/read s"):
         tab.add_column(c)
     for r in records:
         tx, ty, ta = flat_pose(truths[r.part])
@@ -157,7 +158,7 @@ def report(args) -> None:
             da = (r.angle_deg - ta + 180) % 360 - 180
             err = f"{np.hypot(r.x_mm - tx, r.y_mm - ty):.3f} / {abs(da):.3f}"
         times = "/".join("-" if getattr(r, f"{s}_s") is None else f"{getattr(r, f'{s}_s'):.1f}"
-                         for s in ("scan", "locate", "plan", "mark", "read"))
+                         for s in ("scan", "rescan", "locate", "plan", "mark", "read"))
         tab.add_row(str(r.part), str(r.serial), r.outcome + (" (resumed)" if r.resumed else ""),
                     f"{tx:.2f}, {ty:.2f}, {ta:.1f}", err,
                     f"{offsets[r.part]:.3f}" if r.outcome == "marked" else "-",
@@ -172,6 +173,9 @@ def report(args) -> None:
     s.add_row("log complete: parts with a last record", f"{len(last)} of {args.count}",
               f"{args.count}")
     s.add_row("parts marked", f"{len(marked)}", f"{args.count}")
+    looked = [r for r in last.values() if r.rescan_s is not None]
+    s.add_row("second looks (scanned again crossed)", f"{len(looked)}, "
+              f"{sum(r.outcome == 'marked' for r in looked)} of them marked", "")
     s.add_row("serials issued (counter)", f"{issued[:3]}…{issued[-2:]} ({len(issued)}, "
               f"distinct {len(set(issued))}; = 1 … {len(marked)}: "
               f"{issued == list(range(1, len(marked) + 1))})", f"1 … {len(marked)} once each")
@@ -205,6 +209,9 @@ def main() -> None:
     ap.add_argument("--spacing", type=float, default=0.25, help="scan line spacing, mm")
     ap.add_argument("--cross", type=float, default=None, metavar="MM",
                     help="scan crossed: a second pass at 45° to x, its lines MM apart")
+    ap.add_argument("--no-second-look", dest="second_look", action="store_false",
+                    help="along y only: refuse a part whose pose the lines leave unheld "
+                         "instead of scanning it again crossed")
     report(ap.parse_args())
 
 
