@@ -357,3 +357,22 @@ def test_a_ghosts_short_tail_beyond_a_line_does_not_win():
         res = fn(img)
         ghostly = np.abs(errors(res, v0 + 26, margin=0)) < 3
         assert not ghostly[(res.u >= 388) & (res.u < 400)].any(), name
+
+
+def test_a_thin_line_is_found_to_its_end():
+    """A speckled line 1–2 px wide (binning 2) fading over its last columns, as one clipped by
+    an edge: the square median halves its peak, and its dimmer columns — the end's among
+    them — failed the detector's thresholds (a tenth of the line lost). Carried on along the
+    row, it is found to its last column; nothing is added away from it."""
+    rng = np.random.default_rng(21)
+    v0 = centre_curve()
+    u = np.arange(W)
+    amp = np.where(u < 400, 90.0, 0.0) * np.clip((404 - u) / 8.0, 0.0, 1.0)   # fades 396–399
+    img = sensor((ambient((H, W), rng) + profile(v0, 0.6, amp)) * speckle((H, W), rng, 0.3),
+                 rng)
+    for name, fn in METHODS.items():
+        got, old = fn(img), fn(img, extend_ends=False)
+        on, was = (np.abs(errors(r, v0, margin=0)) < 1.5 for r in (got, old))
+        assert on.sum() >= 0.98 * 400 and got.u[on].max() >= 398, name
+        assert was.sum() <= 0.92 * 400, name
+        assert set(got.u[~on]) <= set(old.u[~was]), name

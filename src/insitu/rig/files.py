@@ -178,6 +178,7 @@ class CentreSettingsSpec(BaseModel):
     end_fraction: float = Field(default=0.5, ge=0, lt=1)
     smooth_grains: float = Field(default=0.0, ge=0, le=100)    # 0: files before it: fixed
     background: bool = False                                    # files before it: Eq. 7
+    extend_ends: bool = False                                   # files before it: none
 
 
 class ResidualGridSpec(BaseModel):

@@ -27,7 +27,7 @@ def gray_centroid(image: np.ndarray, k: float = 0.5, min_peak: float = 40.0,
                   window: int | None = 12, median: int = 3, *, band=None,
                   min_contrast: float = 20.0, snr: float = 6.0, continuity: bool = True,
                   saturation: float | None = None, subtract: bool = False,
-                  background: bool = False) -> LineCentres:
+                  background: bool = False, extend_ends: bool = True) -> LineCentres:
     """Gray-centroid centres of a line running along the rows: Li et al.'s (§2.3, Eq. 7), or
     above the local background.
 
@@ -46,7 +46,8 @@ def gray_centroid(image: np.ndarray, k: float = 0.5, min_peak: float = 40.0,
     :data:`~insitu.vision.extract.PAPER_SETTINGS` reproduces.
     """
     img = as_image(image)
-    det = detect(img, median, band, window, min_peak, min_contrast, snr, continuity)
+    det = detect(img, median, band, window, min_peak, min_contrast, snr, continuity,
+                 extend_ends=extend_ends)
     c, r, gmax = det.cols, det.row, det.gmax
     if background and window is not None:
         return _above_background(img, det, k, window, saturation)
@@ -175,11 +176,13 @@ class CentreMethod:
 
 
 CENTRE_METHODS: dict[str, CentreMethod] = {
-    "gray": CentreMethod(gray_centroid, ("k", "subtract", "background"),
+    "gray": CentreMethod(gray_centroid, ("k", "subtract", "background", "extend_ends"),
                          "gray centroid above k × the peak (Li et al. Eq. 7), or above the "
                          "background (background=True)", {"k": 0.5, "background": True}),
-    "gaussian": CentreMethod(gaussian_peak, (), "3-point Gaussian peak fit per column"),
-    "steger": CentreMethod(steger, (), "Steger's Hessian ridge detector (ours, the default)"),
+    "gaussian": CentreMethod(gaussian_peak, ("extend_ends",),
+                             "3-point Gaussian peak fit per column"),
+    "steger": CentreMethod(steger, ("extend_ends",),
+                           "Steger's Hessian ridge detector (ours, the default)"),
 }
 
 

@@ -2,6 +2,11 @@
 pre-filter, the peak row per column, a validity test, and a choice between two separated
 peaks. Common keyword arguments of the methods:
 
+* extend_ends: each run of valid columns carried on, column by column, while the line's
+  peak filtered along the row at the row its slope predicts passes the same thresholds
+  (:func:`carry_ends`): the square median halves the peak of a line 1–2 px wide (binning 2:
+  39 for a raw 98), and a line's dimmer last columns failed them — its ends came up to 6 px
+  short of the edge it leaves. Columns carried on this way are ``carried``.
 * band: (v_lo, v_hi), each (W,) or scalar — rows allowed per column, e.g. the light plane's
   expected band from the geometry; NaN: the column is not searched.
 * min_peak: absolute floor, gray values; min_contrast, snr: least peak − background, and least
@@ -71,7 +76,8 @@ class LineCentres:
 @dataclass
 class Detection:
     """Detection result for the n valid columns: cols, row (int, plateau-centred), gmax, bg,
-    contrast, ambiguous: (n,). pre: the filtered image. noise: its noise sigma (gray values)."""
+    contrast, ambiguous: (n,). pre: the filtered image. noise: its noise sigma (gray values).
+    carried: (n,) the columns a line's end was carried on to (``extend_ends``)."""
 
     cols: np.ndarray
     row: np.ndarray
@@ -81,6 +87,7 @@ class Detection:
     ambiguous: np.ndarray
     pre: np.ndarray
     noise: float
+    carried: np.ndarray | None = None
 
 
 def as_image(image) -> np.ndarray:
@@ -178,8 +185,50 @@ def _junction(lab1, lab2, own1, own2) -> np.ndarray:
     return line & (((hi[a] < cols) & (lo[b] > cols)) | ((hi[b] < cols) & (lo[a] > cols)))
 
 
+RUN = 4
+"""Valid columns in a row that make a line whose ends :func:`carry_ends` carries on."""
+
+
+def carry_ends(img: np.ndarray, ok: np.ndarray, row: np.ndarray, gmax: np.ndarray,
+               bg: np.ndarray, min_peak: float, thr: float, searched: np.ndarray,
+               steps: int = 8) -> tuple[np.ndarray, ...]:
+    """(ok, row, gmax, bg) (W,) with each run of valid columns carried on, up to ``steps``
+    columns each way, while the median of 3 px along the row of ``img`` (H, W) — which keeps
+    a thin line's peak — stands ≥ ``min_peak`` and ≥ ``thr`` above the run's background at
+    the row the line's slope in the frame predicts (± 1): a line's end columns, which the
+    square median dims below the thresholds; nothing starts away from a line (a run of at
+    least :data:`RUN` columns)."""
+    ok, row = ok.copy(), row.copy()
+    gmax, bg = gmax.astype(np.float64), bg.astype(np.float64)
+    H, W = img.shape
+    cols = np.flatnonzero(ok)
+    if len(cols) < 2:
+        return ok, row, gmax, bg
+    near = np.diff(cols) == 1
+    slope = float(np.median(np.diff(row[cols])[near])) if near.any() else 0.0
+    gap = np.diff(cols) > 1
+    first, last = cols[np.r_[True, gap]], cols[np.r_[gap, True]]
+    line = last - first + 1 >= RUN                     # a stray column or two is no line
+    fronts = [(c, -1) for c in first[line]] + [(c, 1) for c in last[line]]
+    for end, d in fronts:
+        for k in range(1, steps + 1):
+            c = end + d * k
+            if not 0 <= c < W or ok[c] or not searched[c]:
+                break
+            rr = np.clip(int(round(row[end] + slope * d * k)) + np.arange(-1, 2), 0, H - 1)
+            a, b, e = (img[rr, min(max(x, 0), W - 1)].astype(np.float64)
+                       for x in (c - 1, c, c + 1))
+            v = np.maximum(np.minimum(a, b), np.minimum(np.maximum(a, b), e))
+            j = int(np.argmax(v))
+            if v[j] < min_peak or v[j] - bg[end] < thr:
+                break
+            ok[c], row[c], gmax[c], bg[c] = True, rr[j], v[j], bg[end]
+    return ok, row, gmax, bg
+
+
 def detect(image, median=3, band=None, window=12, min_peak=40.0, min_contrast=20.0,
-            snr=6.0, continuity=True, max_jump=4.0, decisive=1.25) -> Detection:
+            snr=6.0, continuity=True, max_jump=4.0, decisive=1.25,
+            extend_ends=True) -> Detection:
     """Peak row per valid column of a line running along the rows (module docstring)."""
     img = as_image(image)
     pre = cv2.medianBlur(img, median) if median and median > 1 else img
@@ -223,8 +272,15 @@ def detect(image, median=3, band=None, window=12, min_peak=40.0, min_contrast=20
             ok &= ~ambiguous | step | (np.maximum(s1, s2) >= decisive * np.minimum(s1, s2))
             pairs = ((row, row2), (gmax, gmax2), (bg, bg2), (contrast, contrast2))
             row, gmax, bg, contrast = (np.where(second, b, a) for a, b in pairs)
+    carried = np.zeros(W, bool)
+    if extend_ends and median and median > 1:
+        was = ok
+        ok, row, gmax, bg = carry_ends(img, ok, row, gmax, bg, min_peak, thr, searched)
+        carried = ok & ~was
+        contrast = np.where(carried, gmax - bg, contrast)
     cols = np.flatnonzero(ok)
-    return Detection(cols, row[ok], gmax[ok], bg[ok], contrast[ok], ambiguous[ok], pre, noise)
+    return Detection(cols, row[ok], gmax[ok], bg[ok], contrast[ok], ambiguous[ok], pre, noise,
+                     carried[ok])
 
 
 def raw_saturated(img, det: Detection, sat: float) -> np.ndarray:

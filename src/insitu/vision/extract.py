@@ -33,8 +33,11 @@ class CentreSettings:
     ``method``: a key of :data:`~insitu.vision.centres.CENTRE_METHODS` ("gray" uses k,
     subtract and background: K from the local background and the peak, not the peak alone);
     ConfigError for another. ``smooth_grains``: the smoothing window in correlation lengths
-    of the frame's wander (0: fixed ``smooth_half_window``). A height calibration stores the
-    settings it was made with; a scan uses the same."""
+    of the frame's wander (0: fixed ``smooth_half_window``). ``extend_ends``: a line's
+    ends carried on where its peak, filtered along the row, still passes the detector's
+    thresholds (:func:`~insitu.vision.detect.carry_ends`; not in the paper's mode, nor in
+    calibrations made before). A height calibration stores the settings it was made with; a
+    scan uses the same."""
 
     method: str = "steger"
     k: float = 0.3
@@ -44,6 +47,7 @@ class CentreSettings:
     end_fraction: float = 0.0
     smooth_grains: float = 7.0
     background: bool = True
+    extend_ends: bool = True
 
     def __post_init__(self) -> None:
         if self.method not in CENTRE_METHODS:
@@ -55,7 +59,7 @@ class CentreSettings:
 
 
 PAPER_SETTINGS = CentreSettings(method="gray", k=0.5, smooth_half_window=0, smooth_grains=0.0,
-                                background=False)
+                                background=False, extend_ends=False)
 MAX_HALF_WINDOW = 25
 
 

@@ -77,7 +77,8 @@ def _plateau_centre(raw, inside, x, sat_mask, noise):
 
 def gaussian_peak(image: np.ndarray, min_peak: float = 40.0, window: int = 12, median: int = 3,
                   *, band=None, min_contrast: float = 20.0, snr: float = 6.0,
-                  continuity: bool = True, saturation: float | None = None) -> LineCentres:
+                  continuity: bool = True, saturation: float | None = None,
+                  extend_ends: bool = True) -> LineCentres:
     """Per-column Gaussian peak: 3-point log-parabola through the raw maximum and its two
     neighbours (background subtracted). Saturated or degenerate columns: the plateau's centre
     from a log-parabola fitted to its unsaturated flanks, else the centroid of the pixels above
@@ -85,7 +86,8 @@ def gaussian_peak(image: np.ndarray, min_peak: float = 40.0, window: int = 12, m
     Arguments as :func:`gray_centroid`; width: FWHM px.
     """
     img = as_image(image)
-    det = detect(img, median, band, window, min_peak, min_contrast, snr, continuity)
+    det = detect(img, median, band, window, min_peak, min_contrast, snr, continuity,
+                 extend_ends=extend_ends)
     c, r, bg, w = det.cols, det.row, det.bg, max(int(window), 3)
     sat = saturation_level(img, saturation)
     x = np.arange(-w, w + 1)[:, None]
@@ -178,7 +180,7 @@ def _normals(Iuu, Ivv, Iuv):
 def steger(image: np.ndarray, sigma: float | None = None, min_peak: float = 40.0,
            window: int = 12, median: int = 3, *, band=None, min_contrast: float = 20.0,
            snr: float = 6.0, continuity: bool = True, saturation: float | None = None,
-           min_curvature: float | None = None) -> LineCentres:
+           min_curvature: float | None = None, extend_ends: bool = True) -> LineCentres:
     """Steger centres of a line running along the rows of ``image`` (tilts to ≈ 60° work).
 
     Per column: Gaussian derivatives at the 7 rows around the detected peak; the Hessian's
@@ -195,13 +197,15 @@ def steger(image: np.ndarray, sigma: float | None = None, min_peak: float = 40.0
     patch biases the centre.
     """
     img = as_image(image)
-    det = detect(img, median, band, window, min_peak, min_contrast, snr, continuity)
+    det = detect(img, median, band, window, min_peak, min_contrast, snr, continuity,
+                 extend_ends=extend_ends)
     c, r, n, w = det.cols, det.row, len(det.cols), max(int(window), 3)
     x = np.arange(-w, w + 1)[:, None]
     g, inside = gather(det.pre, r[None, :] + x, c)
     width = fwhm(g, inside, det.bg, det.gmax)
     if sigma is None:
-        sigma = max(1.0, float(np.median(width)) / (2 * np.sqrt(3))) if n else 1.0
+        own = width if det.carried is None or det.carried.all() else width[~det.carried]
+        sigma = max(1.0, float(np.median(own)) / (2 * np.sqrt(3))) if n else 1.0
     if min_curvature is None:
         min_curvature = 0.1 * min_contrast / sigma**2
     Iu, Iv, Iuu, Ivv, Iuv = _derivatives(img, r, c, sigma)
