@@ -45,7 +45,7 @@ WINDOW = 12
 GATE = 3.0              # mm off the reference plane: not on the board (room, hand), dropped
 
 METHODS = {                               # name: (method, keywords)
-    "gray, Eq. 7 (paper, k = 0.5)": ("gray", {"k": 0.5}),
+    "gray, Eq. 7 (paper, k = 0.5)": ("gray", {"k": 0.5, "extend_ends": False}),
     "gray, background (k = 0.5)": ("gray", {"k": 0.5, "background": True}),
     "gaussian": ("gaussian", {}),
     "steger": ("steger", {}),
