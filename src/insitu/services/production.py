@@ -8,7 +8,8 @@ is aborted keeps the one it was issued (logged with it). ``resume`` finishes tha
 its own job — its journal decides what is marked again (the paths not done, the cut path
 again whole) — and carries on with the next part number. A device fault or an abort ends the
 run (the laser off, the record written, the error raised); a refusal sets the part aside and
-the run goes on.
+the run goes on. A scan along y whose lines leave the part's pose unheld (its edges along
+them) gets a second look: the part scanned again, crossed, where it lies (:func:`_locate`).
 """
 
 from __future__ import annotations
