@@ -9,10 +9,10 @@ JSON lines after each record, for a spreadsheet).
      "read_s": 0.5, "error": null, "resumed": false, "time": "2026-12-02T05:01:02+00:00"}
 
 ``rescan_s``: the second look's crossed scan (null: none). ``outcome``: "marked" (marked and
-read back), "refused" (not located or not planned: no serial taken, the part set aside), "fault" (a device failed: the laser is off, the run stopped) or
-"aborted" (the operator stopped the run). A part's last record is its outcome; a fault or an
-abort after its serial was issued keeps that serial in the record, and ``--resume`` finishes
-the same part with it.
+read back), "refused" (not located or not planned: no serial taken, the part set aside),
+"fault" (a device failed: the laser is off, the run stopped) or "aborted" (the operator
+stopped the run). A part's last record is its outcome; a fault or an abort after its serial
+was issued keeps that serial in the record, and ``--resume`` finishes the same part with it.
 """
 
 from __future__ import annotations
