@@ -301,3 +301,13 @@ def test_produce_command_logs_a_part_set_aside_and_refuses_to_overwrite_a_log(re
     assert "holds 1 records of an earlier run: --resume to continue it" in res.output
     res = CliRunner().invoke(app, args + ["--resume"])
     assert res.exit_code == 0 and len(read_log(log)) == 1       # the run was complete
+
+
+def test_a_part_line_says_it_took_a_second_look():
+    from insitu.cli.produce import part_line
+    from insitu.formats.production_log import PartRecord
+
+    rec = PartRecord(part=3, serial=3, outcome="marked", scan_s=2.0, rescan_s=1.5,
+                     locate_s=0.5, time="2026-12-02T15:00:00+00:00")
+    text = part_line(rec).plain
+    assert "second look, crossed (1.5 s)" in text and text.endswith("4.0 s")

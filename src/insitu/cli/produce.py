@@ -13,6 +13,7 @@ from rich.text import Text
 from insitu.cli.common import bounded, check_output, console, fail, one_line_errors, progress_bar
 from insitu.cli.job import Field, Rig, Seed, on_signals
 from insitu.errors import InsituError
+from insitu.formats.production_log import STAGES
 from insitu.formats.project import SIM_BINNING
 from insitu.services.scan import Cancelled
 
@@ -44,7 +45,9 @@ def part_line(rec) -> Text:
     if rec.decoded is not None or rec.grade is not None:
         bits.append(f"read {rec.decoded!r} ({'ok' if rec.decode_ok else 'NOT the plan'}), "
                     f"grade {rec.grade}, offset {rec.offset_mm} mm")
-    total = sum(getattr(rec, f"{s}_s") or 0.0 for s in ("scan", "locate", "plan", "mark", "read"))
+    if rec.rescan_s is not None:
+        bits.append(f"second look, crossed ({rec.rescan_s:.1f} s)")
+    total = sum(getattr(rec, f"{s}_s") or 0.0 for s in STAGES)
     bits.append(f"{total:.1f} s")
     if rec.error:
         bits.append(rec.error)
