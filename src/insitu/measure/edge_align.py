@@ -218,7 +218,7 @@ def align_edges(heights: HeightImage, e: np.ndarray, u: np.ndarray, iterations: 
     (wider Huber weights, the cut samples kept out). None when fewer than 20 samples, or
     less than ``MIN_FOUND`` of them, lie by an edge (the scan's edges are not the
     reference's there), or the edges cannot hold the turn and the shift. ``free``: a unit
-    direction (2,), part frame, the shift is not fitted along (edges that all face one way,
+    direction (2,), part frame, the shift is not fitted along (the one the edges hold least,
     :func:`unheld`): the turn and the shift across it only; ``sigma_mm`` is then the
     latter's."""
     if len(e) < MIN_SAMPLES:

@@ -309,10 +309,10 @@ def _footprint(run: Production, best) -> tuple[float, float, float, float]:
     x0, x1, y0, y1 = scan_region(run)
     if reference is None:
         return x0, x1, y0, y1
-    a = np.radians(best.angle_deg)
-    xy = reference.points[:, :2] @ np.array([[np.cos(a), np.sin(a)], [-np.sin(a), np.cos(a)]])
-    lo = xy.min(axis=0) + [best.x_mm, best.y_mm] - run.recipe.scan.margin_mm
-    hi = xy.max(axis=0) + [best.x_mm, best.y_mm] + run.recipe.scan.margin_mm
+    T = pose_matrix(best.x_mm, best.y_mm, best.angle_deg)
+    xy = reference.points[:, :2] @ T[:2, :2].T + T[:2, 3]
+    lo = xy.min(axis=0) - run.recipe.scan.margin_mm
+    hi = xy.max(axis=0) + run.recipe.scan.margin_mm
     return (max(x0, float(lo[0])), min(x1, float(hi[0])),
             max(y0, float(lo[1])), min(y1, float(hi[1])))
 

@@ -123,6 +123,11 @@ def _noise(pre: np.ndarray) -> float:
     return float(1.4826 / np.sqrt(2.0) * np.median(np.abs(diff)))
 
 
+def median3(a, b, c):
+    """The element-wise median of three arrays."""
+    return np.maximum(np.minimum(a, b), np.minimum(np.maximum(a, b), c))
+
+
 def _stats(pre, row, w):
     """Plateau-centred rows, peak, background and contrast for all columns. Background: the
     mean of the medians of 3 px at each end of the ±w band; contrast: peak minus the brighter
@@ -136,8 +141,7 @@ def _stats(pre, row, w):
     above, _ = gather(pre, row[None, :] + np.arange(-w, -w + 3)[:, None], cols)
     below, _ = gather(pre, row[None, :] + np.arange(w - 2, w + 1)[:, None], cols)
     (a0, a1, a2), (b0, b1, b2) = above, below
-    top = np.maximum(np.minimum(a0, a1), np.minimum(np.maximum(a0, a1), a2))   # medians of 3
-    bot = np.maximum(np.minimum(b0, b1), np.minimum(np.maximum(b0, b1), b2))
+    top, bot = median3(a0, a1, a2), median3(b0, b1, b2)
     return row, gmax, (top + bot) / 2, gmax - np.maximum(top, bot)
 
 
@@ -218,7 +222,7 @@ def carry_ends(img: np.ndarray, ok: np.ndarray, row: np.ndarray, gmax: np.ndarra
             rr = np.clip(int(round(row[end] + slope * d * k)) + np.arange(-1, 2), 0, H - 1)
             a, b, e = (img[rr, min(max(x, 0), W - 1)].astype(np.float64)
                        for x in (c - 1, c, c + 1))
-            v = np.maximum(np.minimum(a, b), np.minimum(np.maximum(a, b), e))
+            v = median3(a, b, e)
             j = int(np.argmax(v))
             if v[j] < min_peak or v[j] - bg[end] < thr:
                 break
@@ -294,8 +298,7 @@ def band_background(g: np.ndarray) -> np.ndarray:
     part the two sides of the line differ (a lit top on one, a dark face on the other); one
     level for both would leave a pedestal on one flank and cut the other."""
     (a0, a1, a2), (b0, b1, b2) = g[:3], g[-3:]
-    top = np.maximum(np.minimum(a0, a1), np.minimum(np.maximum(a0, a1), a2))   # medians of 3
-    bot = np.maximum(np.minimum(b0, b1), np.minimum(np.maximum(b0, b1), b2))
+    top, bot = median3(a0, a1, a2), median3(b0, b1, b2)
     half = (len(g) - 1) / 2
     return (top + bot) / 2 + (bot - top) / (2 * half) * (np.arange(len(g)) - half)[:, None]
 
