@@ -342,6 +342,25 @@ def test_a_line_ending_at_a_step_keeps_its_last_columns():
         assert (on_top | (np.abs(errors(res, v0 - 26, margin=0)) < 3)).all(), name
 
 
+@pytest.mark.parametrize("dv", [-6.0, -26.0])
+def test_the_columns_a_step_shares_go_to_the_higher_surface(dv):
+    """The lower line, brighter, begins 3 columns before the top's line ends, ``dv`` rows
+    away (6: closer than the detector's window, one peak a column; 26: two peaks): told
+    which side a higher surface puts the line (``upper``), the top keeps its last columns —
+    its end is what locates the edge; by brightness alone the lower line takes them. Every
+    point lies on one of the two lines (not the gray centroid's 6 rows apart: its ±window
+    sum takes in both lines, shared column or not)."""
+    img, v0 = _step_frame(np.random.default_rng(13), 397, 230.0, dv)
+    for name, fn in METHODS.items():
+        if name == "gray" and dv > -12:
+            continue
+        got, old = fn(img, upper=1), fn(img)
+        top, was = (np.abs(errors(r, v0, margin=0)) < 2 for r in (got, old))
+        assert got.u[top].max() >= 398, name
+        assert old.u[was].max() <= 397, name
+        assert (top | (np.abs(errors(got, v0 + dv, margin=0)) < 2)).all(), name
+
+
 def test_a_ghosts_short_tail_beyond_a_line_does_not_win():
     """A ghost 26 rows off runs under the line's last 12 columns, brighter, and on past its
     end for 4 columns of its own before the next line begins: too few to be a line — the

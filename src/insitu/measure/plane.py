@@ -66,3 +66,16 @@ def expected_band(camera: CameraModel, start, end, pivot_height_mm: float,
     lo = np.fmin(*edges) - margin_px
     hi = np.fmax(*edges) + margin_px
     return lo, hi
+
+
+def higher_side(camera: CameraModel, start, end, pivot_height_mm: float,
+                z_range_mm: tuple[float, float], telecentric: bool = False,
+                along_rows: bool = True) -> int:
+    """Which way a higher surface moves the line start → end across itself in the image:
+    +1 to larger rows (columns when not ``along_rows``), −1 to smaller, 0 where it cannot be
+    told (the line outside the image)."""
+    lo, hi = (expected_band(camera, start, end, pivot_height_mm, (z, z), 0.0, telecentric,
+                            along_rows)[0] for z in z_range_mm)
+    d = (hi - lo) * np.sign(z_range_mm[1] - z_range_mm[0])
+    d = d[np.isfinite(d)]
+    return int(np.sign(np.median(d))) if len(d) else 0

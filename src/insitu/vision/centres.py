@@ -27,7 +27,8 @@ def gray_centroid(image: np.ndarray, k: float = 0.5, min_peak: float = 40.0,
                   window: int | None = 12, median: int = 3, *, band=None,
                   min_contrast: float = 20.0, snr: float = 6.0, continuity: bool = True,
                   saturation: float | None = None, subtract: bool = False,
-                  background: bool = False, extend_ends: bool = True) -> LineCentres:
+                  background: bool = False, extend_ends: bool = True,
+                  upper: int = 0) -> LineCentres:
     """Gray-centroid centres of a line running along the rows: Li et al.'s (§2.3, Eq. 7), or
     above the local background.
 
@@ -47,7 +48,7 @@ def gray_centroid(image: np.ndarray, k: float = 0.5, min_peak: float = 40.0,
     """
     img = as_image(image)
     det = detect(img, median, band, window, min_peak, min_contrast, snr, continuity,
-                 extend_ends=extend_ends)
+                 extend_ends=extend_ends, upper=upper)
     c, r, gmax = det.cols, det.row, det.gmax
     if background and window is not None:
         return _above_background(img, det, k, window, saturation)

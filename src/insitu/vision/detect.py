@@ -20,8 +20,15 @@ peaks. Common keyword arguments of the methods:
   gives no point rather than a guess. Where one chain's own columns (no second peak there)
   all lie before the column and the other's all after it, at least ``OWN_COLUMNS`` each — a
   line ending at a step and the lower line beginning, overlapping for a few columns — both
-  are real: the brighter peak is kept (the longer chain would cut every top's end there).
-  Points kept this way are ``ambiguous``.
+  are real: the peak on the higher surface's side is kept (``upper``), else the brighter
+  (the longer chain would cut every top's end there). Points kept this way are ``ambiguous``.
+* upper: +1 when a higher surface puts the line at larger rows, −1 at smaller, 0 unknown.
+  Where a top's line ends at a step and the lower line begins, their columns overlap by the
+  blur of the lower line's start; the top's end is what locates the edge, so the shared
+  columns go to the line on the higher side — also when the two lie closer than ``window``
+  rows (a small step), where they are one peak per column, by :func:`carry_ends`. The
+  brighter peak lost a step block's top one or two columns at its step walls when the lower
+  line began first in the image (its samples 0.15–0.26 mm inside those edges at binning 2).
 * saturation: gray value counted as saturated (None: the dtype's maximum).
 """
 
@@ -191,17 +198,21 @@ def _junction(lab1, lab2, own1, own2) -> np.ndarray:
 
 RUN = 4
 """Valid columns in a row that make a line whose ends :func:`carry_ends` carries on."""
+SHARED = 3
+"""Columns past a top's end the lower line's blurred start may share with it."""
 
 
 def carry_ends(img: np.ndarray, ok: np.ndarray, row: np.ndarray, gmax: np.ndarray,
                bg: np.ndarray, min_peak: float, thr: float, searched: np.ndarray,
-               steps: int = 8) -> tuple[np.ndarray, ...]:
+               steps: int = 8, upper: int = 0) -> tuple[np.ndarray, ...]:
     """(ok, row, gmax, bg) (W,) with each run of valid columns carried on, up to ``steps``
     columns each way, while the median of 3 px along the row of ``img`` (H, W) — which keeps
     a thin line's peak — stands ≥ ``min_peak`` and ≥ ``thr`` above the run's background at
     the row the line's slope in the frame predicts (± 1): a line's end columns, which the
     square median dims below the thresholds; nothing starts away from a line (a run of at
-    least :data:`RUN` columns)."""
+    least :data:`RUN` columns). A column another line holds is carried into (its first
+    :data:`SHARED` columns) only when that line lies more than 2 px on the lower side
+    (``upper``, module docstring)."""
     ok, row = ok.copy(), row.copy()
     gmax, bg = gmax.astype(np.float64), bg.astype(np.float64)
     H, W = img.shape
@@ -210,16 +221,19 @@ def carry_ends(img: np.ndarray, ok: np.ndarray, row: np.ndarray, gmax: np.ndarra
         return ok, row, gmax, bg
     near = np.diff(cols) == 1
     slope = float(np.median(np.diff(row[cols])[near])) if near.any() else 0.0
-    gap = np.diff(cols) > 1
+    gap = (np.diff(cols) > 1) | (np.abs(np.diff(row[cols]) - slope) > 2)  # or a step
     first, last = cols[np.r_[True, gap]], cols[np.r_[gap, True]]
     line = last - first + 1 >= RUN                     # a stray column or two is no line
     fronts = [(c, -1) for c in first[line]] + [(c, 1) for c in last[line]]
     for end, d in fronts:
         for k in range(1, steps + 1):
             c = end + d * k
-            if not 0 <= c < W or ok[c] or not searched[c]:
+            if not 0 <= c < W or not searched[c]:
                 break
-            rr = np.clip(int(round(row[end] + slope * d * k)) + np.arange(-1, 2), 0, H - 1)
+            at = row[end] + slope * d * k
+            if ok[c] and not (k <= SHARED and upper * (row[c] - at) < -2.0):
+                break
+            rr = np.clip(int(round(at)) + np.arange(-1, 2), 0, H - 1)
             a, b, e = (img[rr, min(max(x, 0), W - 1)].astype(np.float64)
                        for x in (c - 1, c, c + 1))
             v = median3(a, b, e)
@@ -232,7 +246,7 @@ def carry_ends(img: np.ndarray, ok: np.ndarray, row: np.ndarray, gmax: np.ndarra
 
 def detect(image, median=3, band=None, window=12, min_peak=40.0, min_contrast=20.0,
             snr=6.0, continuity=True, max_jump=4.0, decisive=1.25,
-            extend_ends=True) -> Detection:
+            extend_ends=True, upper=0) -> Detection:
     """Peak row per valid column of a line running along the rows (module docstring)."""
     img = as_image(image)
     pre = cv2.medianBlur(img, median) if median and median > 1 else img
@@ -271,16 +285,17 @@ def detect(image, median=3, band=None, window=12, min_peak=40.0, min_contrast=20
         ambiguous = ok & ok2
         if ambiguous.any():
             s1, s2, lab1, lab2 = _continuity(row, row2, ok, ok2, contrast, contrast2, max_jump)
-            step = ambiguous & _junction(lab1, lab2, ok & ~ok2, ok2 & ~ok)   # the brighter
-            second = ambiguous & (s2 > s1) & ~step
+            step = ambiguous & _junction(lab1, lab2, ok & ~ok2, ok2 & ~ok)
+            second = (ambiguous & (s2 > s1) & ~step) | (step & (upper * (row2 - row) > 0))
             ok &= ~ambiguous | step | (np.maximum(s1, s2) >= decisive * np.minimum(s1, s2))
             pairs = ((row, row2), (gmax, gmax2), (bg, bg2), (contrast, contrast2))
             row, gmax, bg, contrast = (np.where(second, b, a) for a, b in pairs)
     carried = np.zeros(W, bool)
     if extend_ends and median and median > 1:
-        was = ok
-        ok, row, gmax, bg = carry_ends(img, ok, row, gmax, bg, min_peak, thr, searched)
-        carried = ok & ~was
+        was, before = ok, row
+        ok, row, gmax, bg = carry_ends(img, ok, row, gmax, bg, min_peak, thr, searched,
+                                       upper=upper)
+        carried = ok & (~was | (row != before))
         contrast = np.where(carried, gmax - bg, contrast)
     cols = np.flatnonzero(ok)
     return Detection(cols, row[ok], gmax[ok], bg[ok], contrast[ok], ambiguous[ok], pre, noise,

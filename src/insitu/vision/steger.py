@@ -78,7 +78,7 @@ def _plateau_centre(raw, inside, x, sat_mask, noise):
 def gaussian_peak(image: np.ndarray, min_peak: float = 40.0, window: int = 12, median: int = 3,
                   *, band=None, min_contrast: float = 20.0, snr: float = 6.0,
                   continuity: bool = True, saturation: float | None = None,
-                  extend_ends: bool = True) -> LineCentres:
+                  extend_ends: bool = True, upper: int = 0) -> LineCentres:
     """Per-column Gaussian peak: 3-point log-parabola through the raw maximum and its two
     neighbours (background subtracted). Saturated or degenerate columns: the plateau's centre
     from a log-parabola fitted to its unsaturated flanks, else the centroid of the pixels above
@@ -87,7 +87,7 @@ def gaussian_peak(image: np.ndarray, min_peak: float = 40.0, window: int = 12, m
     """
     img = as_image(image)
     det = detect(img, median, band, window, min_peak, min_contrast, snr, continuity,
-                 extend_ends=extend_ends)
+                 extend_ends=extend_ends, upper=upper)
     c, r, bg, w = det.cols, det.row, det.bg, max(int(window), 3)
     sat = saturation_level(img, saturation)
     x = np.arange(-w, w + 1)[:, None]
@@ -180,7 +180,8 @@ def _normals(Iuu, Ivv, Iuv):
 def steger(image: np.ndarray, sigma: float | None = None, min_peak: float = 40.0,
            window: int = 12, median: int = 3, *, band=None, min_contrast: float = 20.0,
            snr: float = 6.0, continuity: bool = True, saturation: float | None = None,
-           min_curvature: float | None = None, extend_ends: bool = True) -> LineCentres:
+           min_curvature: float | None = None, extend_ends: bool = True,
+           upper: int = 0) -> LineCentres:
     """Steger centres of a line running along the rows of ``image`` (tilts to ≈ 60° work).
 
     Per column: Gaussian derivatives at the 7 rows around the detected peak; the Hessian's
@@ -198,7 +199,7 @@ def steger(image: np.ndarray, sigma: float | None = None, min_peak: float = 40.0
     """
     img = as_image(image)
     det = detect(img, median, band, window, min_peak, min_contrast, snr, continuity,
-                 extend_ends=extend_ends)
+                 extend_ends=extend_ends, upper=upper)
     c, r, n, w = det.cols, det.row, len(det.cols), max(int(window), 3)
     x = np.arange(-w, w + 1)[:, None]
     g, inside = gather(det.pre, r[None, :] + x, c)
