@@ -204,7 +204,8 @@ SHARED = 3
 
 def carry_ends(img: np.ndarray, ok: np.ndarray, row: np.ndarray, gmax: np.ndarray,
                bg: np.ndarray, min_peak: float, thr: float, searched: np.ndarray,
-               steps: int = 8, upper: int = 0) -> tuple[np.ndarray, ...]:
+               steps: int = 8, upper: int = 0, locked: np.ndarray | None = None
+               ) -> tuple[np.ndarray, ...]:
     """(ok, row, gmax, bg) (W,) with each run of valid columns carried on, up to ``steps``
     columns each way, while the median of 3 px along the row of ``img`` (H, W) — which keeps
     a thin line's peak — stands ≥ ``min_peak`` and ≥ ``thr`` above the run's background at
@@ -212,7 +213,8 @@ def carry_ends(img: np.ndarray, ok: np.ndarray, row: np.ndarray, gmax: np.ndarra
     square median dims below the thresholds; nothing starts away from a line (a run of at
     least :data:`RUN` columns). A column another line holds is carried into (its first
     :data:`SHARED` columns) only when that line lies more than 2 px on the lower side
-    (``upper``, module docstring)."""
+    (``upper``, module docstring) and the column is not ``locked`` (W,) — where the
+    continuity of two peaks chose, a ghost beside the line does not take it back."""
     ok, row = ok.copy(), row.copy()
     gmax, bg = gmax.astype(np.float64), bg.astype(np.float64)
     H, W = img.shape
@@ -231,7 +233,8 @@ def carry_ends(img: np.ndarray, ok: np.ndarray, row: np.ndarray, gmax: np.ndarra
             if not 0 <= c < W or not searched[c]:
                 break
             at = row[end] + slope * d * k
-            if ok[c] and not (k <= SHARED and upper * (row[c] - at) < -2.0):
+            if ok[c] and not (k <= SHARED and upper * (row[c] - at) < -2.0
+                              and (locked is None or not locked[c])):
                 break
             rr = np.clip(int(round(at)) + np.arange(-1, 2), 0, H - 1)
             a, b, e = (img[rr, min(max(x, 0), W - 1)].astype(np.float64)
@@ -277,7 +280,7 @@ def detect(image, median=3, band=None, window=12, min_peak=40.0, min_contrast=20
 
     j1 = np.argmax(search, axis=1)
     row, gmax, bg, contrast, ok = candidate(j1)
-    ambiguous = np.zeros(W, bool)
+    ambiguous, locked = np.zeros(W, bool), np.zeros(W, bool)
     if continuity and W > 2 and search.shape[1] > 2 * w + 1:
         guard = np.clip(j1[:, None] + np.arange(-w, w + 1)[None, :], 0, search.shape[1] - 1)
         np.put_along_axis(search, guard, fill, axis=1)
@@ -286,6 +289,7 @@ def detect(image, median=3, band=None, window=12, min_peak=40.0, min_contrast=20
         if ambiguous.any():
             s1, s2, lab1, lab2 = _continuity(row, row2, ok, ok2, contrast, contrast2, max_jump)
             step = ambiguous & _junction(lab1, lab2, ok & ~ok2, ok2 & ~ok)
+            locked = ambiguous & ~step
             second = (ambiguous & (s2 > s1) & ~step) | (step & (upper * (row2 - row) > 0))
             ok &= ~ambiguous | step | (np.maximum(s1, s2) >= decisive * np.minimum(s1, s2))
             pairs = ((row, row2), (gmax, gmax2), (bg, bg2), (contrast, contrast2))
@@ -294,7 +298,7 @@ def detect(image, median=3, band=None, window=12, min_peak=40.0, min_contrast=20
     if extend_ends and median and median > 1:
         was, before = ok, row
         ok, row, gmax, bg = carry_ends(img, ok, row, gmax, bg, min_peak, thr, searched,
-                                       upper=upper)
+                                       upper=upper, locked=locked)
         carried = ok & (~was | (row != before))
         contrast = np.where(carried, gmax - bg, contrast)
     cols = np.flatnonzero(ok)
