@@ -342,15 +342,16 @@ def test_a_line_ending_at_a_step_keeps_its_last_columns():
         assert (on_top | (np.abs(errors(res, v0 - 26, margin=0)) < 3)).all(), name
 
 
-@pytest.mark.parametrize("dv", [-6.0, -26.0])
-def test_the_columns_a_step_shares_go_to_the_higher_surface(dv):
-    """The lower line, brighter, begins 3 columns before the top's line ends, ``dv`` rows
-    away (6: closer than the detector's window, one peak a column; 26: two peaks): told
-    which side a higher surface puts the line (``upper``), the top keeps its last columns —
+@pytest.mark.parametrize("dv, lower_from", [(-6.0, 397), (-26.0, 394)])
+def test_the_columns_a_step_shares_go_to_the_higher_surface(dv, lower_from):
+    """The lower line, brighter, begins before the top's line ends (column 400), ``dv`` rows
+    away (6: closer than the detector's window, one peak a column, 3 columns shared; 26: two
+    peaks, 6 shared — more than the end is carried): told which side a higher surface puts
+    the line (``upper``), the top keeps its last columns —
     its end is what locates the edge; by brightness alone the lower line takes them. Every
     point lies on one of the two lines (not the gray centroid's 6 rows apart: its ±window
     sum takes in both lines, shared column or not)."""
-    img, v0 = _step_frame(np.random.default_rng(13), 397, 230.0, dv)
+    img, v0 = _step_frame(np.random.default_rng(13), lower_from, 230.0, dv)
     for name, fn in METHODS.items():
         if name == "gray" and dv > -12:
             continue
