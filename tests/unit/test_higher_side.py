@@ -1,12 +1,12 @@
 """Which way a higher surface moves a scan line across itself in the image
-(insitu.measure.plane.higher_side), against the camera's projection of the light plane."""
+(insitu.measure.plane.band_and_side), against the camera's projection of the light plane."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from insitu.measure.plane import higher_side
+from insitu.measure.plane import band_and_side
 from insitu.sim.rig import default_rig
 
 PIVOT = 350.0
@@ -28,5 +28,5 @@ def test_a_higher_surface_moves_the_line_to_the_side_it_names(start, end):
     across = 1 if along_rows else 0
     want = int(np.sign(uv[1, across] - uv[0, across]))
     assert want != 0
-    assert higher_side(cam, start, end, PIVOT, (0.0, 10.0), False, along_rows) == want
-    assert higher_side(cam, start, end, PIVOT, (10.0, 0.0), False, along_rows) == want
+    for z_range in ((0.0, 10.0), (10.0, 0.0)):
+        assert band_and_side(cam, start, end, PIVOT, z_range, 0.0, False, along_rows)[2] == want

@@ -46,6 +46,18 @@ def expected_band(camera: CameraModel, start, end, pivot_height_mm: float,
     distortion and calibration errors. ``along_rows``: the line crosses the columns, and the
     band is rows (lo, hi) per column, each (W,); else columns per row, each (H,). NaN where
     the line cannot be."""
+    lo, hi, _ = band_and_side(camera, start, end, pivot_height_mm, z_range_mm, margin_px,
+                              telecentric, along_rows)
+    return lo, hi
+
+
+def band_and_side(camera: CameraModel, start, end, pivot_height_mm: float,
+                  z_range_mm: tuple[float, float], margin_px: float = 25.0,
+                  telecentric: bool = False, along_rows: bool = True
+                  ) -> tuple[np.ndarray, np.ndarray, int]:
+    """:func:`expected_band` (lo, hi), and which way a higher surface moves the line across
+    itself in the image: +1 to larger rows (columns when not ``along_rows``), −1 to
+    smaller, 0 where it cannot be told (the line outside the image)."""
     plane = light_plane(pivot_height_mm, start, end, telecentric)
     s = np.linspace(-0.05, 1.05, 96)[:, None]
     xy = (1 - s) * np.asarray(start, float) + s * np.asarray(end, float)
@@ -60,22 +72,10 @@ def expected_band(camera: CameraModel, start, end, pivot_height_mm: float,
         uv = camera.project(p)
         uv = uv[np.isfinite(uv).all(axis=1)]
         if len(uv) < 2:
-            return np.full(n, np.nan), np.full(n, np.nan)
+            return np.full(n, np.nan), np.full(n, np.nan), 0
         o = np.argsort(uv[:, along])
         edges.append(np.interp(grid, uv[o, along], uv[o, across], left=np.nan, right=np.nan))
-    lo = np.fmin(*edges) - margin_px
-    hi = np.fmax(*edges) + margin_px
-    return lo, hi
-
-
-def higher_side(camera: CameraModel, start, end, pivot_height_mm: float,
-                z_range_mm: tuple[float, float], telecentric: bool = False,
-                along_rows: bool = True) -> int:
-    """Which way a higher surface moves the line start → end across itself in the image:
-    +1 to larger rows (columns when not ``along_rows``), −1 to smaller, 0 where it cannot be
-    told (the line outside the image)."""
-    lo, hi = (expected_band(camera, start, end, pivot_height_mm, (z, z), 0.0, telecentric,
-                            along_rows)[0] for z in z_range_mm)
-    d = (hi - lo) * np.sign(z_range_mm[1] - z_range_mm[0])
-    d = d[np.isfinite(d)]
-    return int(np.sign(np.median(d))) if len(d) else 0
+    rise = (edges[1] - edges[0]) * np.sign(z_range_mm[1] - z_range_mm[0])
+    rise = rise[np.isfinite(rise)]
+    side = int(np.sign(np.median(rise))) if len(rise) else 0
+    return np.fmin(*edges) - margin_px, np.fmax(*edges) + margin_px, side

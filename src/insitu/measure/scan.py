@@ -12,8 +12,7 @@ from insitu.geometry.camera import CameraModel
 from insitu.measure.consistency import cross_line_inliers
 from insitu.measure.height_models import HeightModel
 from insitu.measure.heightcal import check_bracket
-from insitu.measure.plane import (expected_band, higher_side, line_runs_along_rows,
-                                  reconstruct_line)
+from insitu.measure.plane import band_and_side, line_runs_along_rows, reconstruct_line
 from insitu.measure.turned_sheet import TurnedSheetModel, line_angle, same_direction, turned_offset
 from insitu.vision.extract import CentreSettings, extract_centres
 
@@ -77,10 +76,9 @@ class ScanReconstructor:
         rows = line_runs_along_rows(self.camera, start, end)
         band, upper = None, 0
         if self.z_range:
-            band = expected_band(self.camera, start, end, self.H, self.z_range,
-                                 telecentric=self.telecentric, along_rows=rows)
-            upper = higher_side(self.camera, start, end, self.H, self.z_range,
-                                self.telecentric, rows)
+            lo, hi, upper = band_and_side(self.camera, start, end, self.H, self.z_range,
+                                          telecentric=self.telecentric, along_rows=rows)
+            band = (lo, hi)
         centres = extract_centres(image, self.settings, band, rows, upper)
         self.last_centres, self.last_points = centres.uv, np.zeros((0, 3))
         if len(centres) < self.min_points:

@@ -94,7 +94,7 @@ class Detection:
     ambiguous: np.ndarray
     pre: np.ndarray
     noise: float
-    carried: np.ndarray | None = None
+    carried: np.ndarray
 
 
 def as_image(image) -> np.ndarray:

@@ -205,7 +205,7 @@ def steger(image: np.ndarray, sigma: float | None = None, min_peak: float = 40.0
     g, inside = gather(det.pre, r[None, :] + x, c)
     width = fwhm(g, inside, det.bg, det.gmax)
     if sigma is None:
-        own = width if det.carried is None or det.carried.all() else width[~det.carried]
+        own = width if det.carried.all() else width[~det.carried]
         sigma = max(1.0, float(np.median(own)) / (2 * np.sqrt(3))) if n else 1.0
     if min_curvature is None:
         min_curvature = 0.1 * min_contrast / sigma**2
