@@ -116,3 +116,30 @@ def test_the_scan_camera_is_the_height_calibrations():
     assert scan_camera(rig.operator.camera, None) is rig.operator.camera
     got = scan_camera(rig.operator.camera, cal)
     assert np.allclose(got.K, rig.camera.K) and np.allclose(got.R, rig.camera.R)
+
+
+def test_an_edges_normal_at_any_angle():
+    """The insert's sides face 180° and ±60°, its hole every way: the normal edge_distance
+    gives is theirs within 1° wherever a line crosses them (the hole's, a polygon of facets a
+    few degrees apart, within 2°; differenced over a few pixels
+    alone, a sharp step's normal reads as a multiple of 45°: the ±60° sides as ±46°)."""
+    w = make_workpiece("insert")
+    ref = reference_from_mesh(w.vertices, w.triangles, "insert")
+    r_in, r_hole, top = 16.14 / (2 * np.sqrt(3)), 3.80 / 2, 4.68
+    t = np.linspace(-3.0, 3.0, 13)
+    cases = []                                        # (sample points, outward normals)
+    for a in np.radians([180.0, 60.0, -60.0]):
+        n = np.array([np.cos(a), np.sin(a)])
+        cases.append(((r_in - 0.05) * n + t[:, None] * np.array([-n[1], n[0]]),
+                      np.tile(n, (len(t), 1))))
+    b = np.radians(np.arange(0.0, 360.0, 15.0) + 7.0)
+    radial = np.column_stack([np.cos(b), np.sin(b)])
+    cases.append(((r_hole + 0.05) * radial, -radial))
+    for xy, n_true in cases:
+        turn = rot_z(np.radians(25.0))[:2, :2]         # lines 25° off the normals
+        u = n_true @ turn.T
+        e = np.column_stack([xy, np.full(len(xy), top)])
+        s, n = edge_distance(ref.heights, e, u)
+        assert np.isfinite(s).all()
+        err = np.degrees(np.arccos(np.clip(np.einsum("ij,ij->i", n, n_true), -1, 1)))
+        assert err.max() < (1.0 if len(xy) == len(t) else 2.0), err   # the hole: facets

@@ -37,7 +37,8 @@ def test_the_sparse_independent_scan_is_refused_never_located_wrong(scanned):
         locate_cloud(ref, cloud)
     assert e.value.reason == "poor-fit" and "not pinned down" in str(e.value)
     # the step edges the lines cross all face ±y: the refusal names x as the free direction
-    assert "hold the part along ±y only: nothing holds it along x" in str(e.value)
+    # (the edges hold the best pose along ±y only, or a pose 1.1 mm along x fits as well)
+    assert re.search(r"nothing holds (it|the part) along x", str(e.value)), str(e.value)
     # what they do hold, scored against the truth (x 0, y 0, 0°): y and the turn, fitted on
     # the 60 edge samples, which scatter 0.07–0.24 mm rms about each edge on these frames
     # (1σ of the turn 0.21°): within 0.1 mm and 3σ

@@ -176,24 +176,21 @@ def edge_distance(heights: HeightImage, e: np.ndarray,
     f = np.clip((h0 - level) / np.where(h0 - h1 != 0, h0 - h1, 1.0), 0.0, 1.0)
     dist = np.where(found, s[j - 1] + f * (s[j] - s[j - 1]), np.nan)
     at = e[:, :2] + np.nan_to_num(dist)[:, None] * u
-    d = 2 * heights.px_mm
-    c = (at[:, 0] - heights.x0_mm) / heights.px_mm
-    r = (at[:, 1] - heights.y0_mm) / heights.px_mm
-    hx0, hx1, hy0, hy1 = sample([heights.z], np.concatenate([c - 2, c + 2, c, c]),
-                                np.concatenate([r, r, r - 2, r + 2]))[0].reshape(4, -1)
-    g = np.column_stack([hx1 - hx0, hy1 - hy0]) / (2 * d)
-    n = -g / np.maximum(np.linalg.norm(g, axis=1, keepdims=True), 1e-12)
+    n = _normal(heights, at)
     # a straight edge: the normal the same 0.3 mm along it either way (not a corner)
     for side in (-1.0, 1.0):
-        at2 = at + side * CORNER_MM * np.column_stack([-n[:, 1], n[:, 0]])
-        c = (at2[:, 0] - heights.x0_mm) / heights.px_mm
-        r = (at2[:, 1] - heights.y0_mm) / heights.px_mm
-        hx0, hx1, hy0, hy1 = sample([heights.z], np.concatenate([c - 2, c + 2, c, c]),
-                                    np.concatenate([r, r, r - 2, r + 2]))[0].reshape(4, -1)
-        g2 = -np.column_stack([hx1 - hx0, hy1 - hy0])
-        cos = np.einsum("ij,ij->i", g2, n) / np.maximum(np.linalg.norm(g2, axis=1), 1e-12)
-        dist = np.where(cos > np.cos(np.radians(20)), dist, np.nan)
+        n2 = _normal(heights, at + side * CORNER_MM * np.column_stack([-n[:, 1], n[:, 0]]))
+        dist = np.where(np.einsum("ij,ij->i", n2, n) > np.cos(np.radians(20)), dist, np.nan)
     return dist, n
+
+
+def _normal(heights: HeightImage, xy: np.ndarray) -> np.ndarray:
+    """The outward unit normals (K, 2) of the reference's edges at ``xy`` (K, 2): down its
+    blurred slope (:attr:`HeightImage.slope`)."""
+    c = (xy[:, 0] - heights.x0_mm) / heights.px_mm
+    r = (xy[:, 1] - heights.y0_mm) / heights.px_mm
+    g = -np.column_stack(sample(heights.slope, c, r))
+    return g / np.maximum(np.linalg.norm(g, axis=1, keepdims=True), 1e-12)
 
 
 @dataclass(frozen=True)

@@ -355,7 +355,8 @@ def _choose(sols: list[Solution], n: int, where: str, s: LocateSettings,
                                 + "; ".join(o.describe() for o in near))
         near = pick
     if len(near) > 1 and (slid := _slid(near[0], near[1])) is not None:
-        raise LocateRefused("poor-fit", f"x, y and the turn are not pinned down: {slid}")
+        raise LocateRefused("poor-fit", f"x, y and the turn are not pinned down: {slid}",
+                            near[0])
     if len(near) > 1:
         raise LocateRefused("ambiguous", f"ambiguous: {near[0].describe()} and "
                             f"{near[1].describe()} fit nearly equally (a symmetric part?): "
