@@ -1,6 +1,7 @@
-"""The edge step of locating (:mod:`insitu.measure.edge_align`): one inset across the edges,
-whatever angle the lines cross them at; samples beyond their edge measured so (negative);
-lines cut short weigh nothing; each line's points taken in the order of their pixels."""
+"""The edge step of locating (:mod:`insitu.measure.edge_align`): one inset along the lines,
+whatever angle they cross the edges at; the edges' normals at any angle; samples beyond their
+edge measured so (negative); lines cut short weigh nothing; each line's points taken in the
+order of their pixels."""
 
 import numpy as np
 import pytest
@@ -33,15 +34,16 @@ def block():
 
 
 @pytest.mark.parametrize("inset", [0.04, -0.04])
-def test_one_inset_across_the_edges_leaves_the_pose(block, inset):
-    """Every sample moved further inside (or beyond) its edge by 0.04 mm across it — 0.04 /
-    cos along its line, which crosses the long sides at 33° and the steps at 57°: the pose
-    moves by less than 0.002 mm and 0.002°, the inset by the 0.04 mm (an inset along the
-    lines would move the part towards the steps)."""
+def test_one_inset_along_the_lines_leaves_the_pose(block, inset):
+    """Every sample moved further inside (or beyond) its edge by 0.04 mm along its line —
+    0.04·cos across it, the line crossing the long sides at 33° and the steps at 57°, as a
+    line's end found pixel by pixel loses the same length whatever the angle: the pose moves
+    by less than 0.002 mm and 0.002°, the inset by the 0.04 mm (one inset across the edges
+    moves the part 0.005 mm towards the steps)."""
     heights, e, u, nu = block
     assert nu.min() < 0.6 < nu.max()                 # both kinds of crossing are there
     moved = e.copy()
-    moved[:, :2] -= (inset / nu)[:, None] * u
+    moved[:, :2] -= inset * u
     before, fit = align_edges(heights, e, u), align_edges(heights, moved, u)
     assert abs(np.degrees(fit.angle_rad - before.angle_rad)) < 0.002
     assert np.linalg.norm(fit.shift_mm - before.shift_mm) < 0.002, fit.shift_mm
@@ -143,3 +145,17 @@ def test_an_edges_normal_at_any_angle():
         assert np.isfinite(s).all()
         err = np.degrees(np.arccos(np.clip(np.einsum("ij,ij->i", n, n_true), -1, 1)))
         assert err.max() < (1.0 if len(xy) == len(t) else 2.0), err   # the hole: facets
+
+
+def test_a_step_beside_a_higher_wall_is_no_edge_of_its_own():
+    """A line 0.02 mm inside the block's side wall ends where a step drops beside it: the
+    wall's slope (10 mm down to the table) outweighs the step's there, so the normal found
+    is the wall's — and a line running along the wall would then seem to hold x. Moved
+    0.3 mm along that wall the line meets the step 0.2 mm away, or nothing: no sample. The
+    same step 1 mm in from the wall is one, facing −y."""
+    w = make_workpiece("step-block")
+    ref = reference_from_mesh(w.vertices, w.triangles, "step-block")
+    e = np.array([[-9.98, 0.06, 10.02], [-9.0, 0.06, 10.02]])
+    s, n = edge_distance(ref.heights, e, np.array([[-0.054, -0.999], [0.0, -1.0]]))
+    assert np.isnan(s[0])
+    assert s[1] == pytest.approx(0.06, abs=0.02) and n[1] == pytest.approx([0, -1], abs=0.02)

@@ -11,15 +11,17 @@ u, from e to the reference's edge (found on the reference's height image seen fr
 Along each line the points are taken in the order of their pixels (the camera known): the
 lower line beside an oblique edge lies shifted across the line, where the light plane meets
 the floor, and in x, y begins before the top ends. How far inside its edge a top's last
-point lies is then about the same for every edge, across the edge: the line's light is
-clipped by the edge over its width before its centre leaves the top, and the centre's last
-pixel lies within a pixel of the edge. (An inset along the line per class of how the line
-ends in the image, fitted before, did not hold: the sides of a triangular insert, crossed at
-different angles, differed by 0.1 mm along their lines, the same across them.) So one inset
-across the edges is fitted with the turn and the shift (least squares, Huber weights; a
-sample far beyond the others, its line cut short, weighs nothing), then x, y with the turn
-kept. Only the upper side of a drop is used: the lower side lies in the shadow of the wall
-or hidden behind its top.
+point lies, along its line, is then about the same for every edge: the line's centre is
+found pixel by pixel along the line until its light, clipped by the edge, falls below the
+detector's threshold, a fraction of a pixel before the edge whatever angle the line crosses
+it at. Across the edge that inset is the cosine ν between the line and the edge's normal
+smaller: a line grazing an edge ends nearly on it. (One inset across the edges, fitted
+before, put the grazing samples 0.02–0.03 mm too far in: a part held across by grazing lines
+alone — an arc turned 15° to the lines, a step block turned ~180° — moved 0.06 mm.) So one
+inset along the lines is fitted with the turn and the shift (least squares on the residuals
+across the edges, Huber weights; a sample far beyond the others, its line cut short, weighs
+nothing), then x, y with the turn kept. Only the upper side of a drop is used: the lower
+side lies in the shadow of the wall or hidden behind its top.
 """
 
 from __future__ import annotations
@@ -51,6 +53,7 @@ MIN_SAMPLES = 20
 MIN_FOUND = 0.7
 """At the fitted pose this share of the edge samples must find the reference's edge."""
 CORNER_MM = 0.3
+STRAIGHT_MM = 0.05
 MIN_COS = 0.1
 """Lines crossing an edge more obliquely than this (cosine to its normal) are not used. A line
 grazing an edge still measures it across well (its distance along the line is searched for,
@@ -152,8 +155,23 @@ def edge_distance(heights: HeightImage, e: np.ndarray,
     (K, 2) from each edge sample ``e`` (K, 3) (part frame) to where the reference's height
     falls below halfway between the sample's height and the reference's height ``SEARCH_MM``
     beyond, nearest the sample (negative: the sample lies beyond the edge); NaN where it does
-    not within ±``SEARCH_MM``, or where the edge turns within ``CORNER_MM`` (a corner holds
-    no direction)."""
+    not within ±``SEARCH_MM``, or where the edge does not run on straight ``CORNER_MM`` either
+    way along the normal's edge: the same line moved there crosses it further than
+    ``STRAIGHT_MM`` (across the edge) away or not at all — a corner, or a lower edge beside a
+    higher wall whose slope the normal took."""
+    dist = _crossing(heights, e, u)
+    n = _normal(heights, e[:, :2] + np.nan_to_num(dist)[:, None] * u)
+    nu = np.maximum(np.einsum("ij,ij->i", n, u), MIN_COS)
+    tangent = np.column_stack([-n[:, 1], n[:, 0]])
+    for side in (-1.0, 1.0):
+        moved = e + np.column_stack([side * CORNER_MM * tangent, np.zeros(len(e))])
+        off = np.abs(_crossing(heights, moved, u) - dist) * nu
+        dist = np.where(off <= STRAIGHT_MM, dist, np.nan)
+    return dist, n
+
+
+def _crossing(heights: HeightImage, e: np.ndarray, u: np.ndarray) -> np.ndarray:
+    """The distance s (K,) of :func:`edge_distance`, NaN where the height does not fall."""
     s = np.arange(-SEARCH_MM, SEARCH_MM + 1e-9, 0.02)
     xy = e[:, None, :2] + s[None, :, None] * u[:, None, :]
     cols = (xy[..., 0] - heights.x0_mm) / heights.px_mm
@@ -174,14 +192,7 @@ def edge_distance(heights: HeightImage, e: np.ndarray,
     j = np.maximum(j, 1)
     h0, h1 = h[np.arange(len(e)), j - 1], h[np.arange(len(e)), j]
     f = np.clip((h0 - level) / np.where(h0 - h1 != 0, h0 - h1, 1.0), 0.0, 1.0)
-    dist = np.where(found, s[j - 1] + f * (s[j] - s[j - 1]), np.nan)
-    at = e[:, :2] + np.nan_to_num(dist)[:, None] * u
-    n = _normal(heights, at)
-    # a straight edge: the normal the same 0.3 mm along it either way (not a corner)
-    for side in (-1.0, 1.0):
-        n2 = _normal(heights, at + side * CORNER_MM * np.column_stack([-n[:, 1], n[:, 0]]))
-        dist = np.where(np.einsum("ij,ij->i", n2, n) > np.cos(np.radians(20)), dist, np.nan)
-    return dist, n
+    return np.where(found, s[j - 1] + f * (s[j] - s[j - 1]), np.nan)
 
 
 def _normal(heights: HeightImage, xy: np.ndarray) -> np.ndarray:
@@ -196,7 +207,7 @@ def _normal(heights: HeightImage, xy: np.ndarray) -> np.ndarray:
 @dataclass(frozen=True)
 class EdgeFit:
     """A corrected point is ``Rz(angle_rad) @ p + shift_mm`` (x, y only); ``b_mm``: how far
-    inside its edge a top's last point lies, across the edge (on average: what the line's
+    inside its edge a top's last point lies, along its line (on average: what the line's
     end loses); ``samples`` used; ``sigma_mm``, ``sigma_deg``: 1σ of the shift (its worst
     direction) and of the turn, from the residuals' spread — large when the edges the lines
     cross do not pin the part down (edges along the lines)."""
@@ -212,12 +223,12 @@ class EdgeFit:
 def align_edges(heights: HeightImage, e: np.ndarray, u: np.ndarray, iterations: int = 20,
                 free: np.ndarray | None = None) -> EdgeFit | None:
     """The correction that moves the edge samples ``e`` (K, 3), part frame, with outward
-    directions ``u`` (K, 2), onto the reference's edges, each inside by one inset b across
-    its edge: first the turn, the shift and b (Huber weights; a sample far beyond the
-    others, its line cut short, weighs nothing), then the shift and b with the turn kept
-    (wider Huber weights, the cut samples kept out). None when fewer than 20 samples, or
-    less than ``MIN_FOUND`` of them, lie by an edge (the scan's edges are not the
-    reference's there), or the edges cannot hold the turn and the shift. ``free``: a unit
+    directions ``u`` (K, 2), onto the reference's edges, each inside by one inset b along
+    its line (b·ν across the edge): first the turn, the shift and b (Huber weights; a
+    sample far beyond the others, its line cut short, weighs nothing), then the shift and b
+    with the turn kept (wider Huber weights, the cut samples kept out). None when fewer than
+    20 samples, or less than ``MIN_FOUND`` of them, lie by an edge (the scan's edges are not
+    the reference's there), or the edges cannot hold the turn and the shift. ``free``: a unit
     direction (2,), part frame, the shift is not fitted along (the one the edges hold least,
     :func:`unheld`): the turn and the shift across it only; ``sigma_mm`` is then the
     latter's."""
@@ -245,10 +256,10 @@ def align_edges(heights: HeightImage, e: np.ndarray, u: np.ndarray, iterations: 
 
 def _fit(heights: HeightImage, e: np.ndarray, u: np.ndarray, c: np.ndarray, start: tuple,
          across: np.ndarray | None, turn: bool, iterations: int, cut: np.ndarray | None = None):
-    """Gauss–Newton on the residuals s·ν − b from ``start`` (theta, t, b): the turn (when
-    ``turn``), the shift (only along ``across`` when given) and b. ``cut``: sample indices
-    kept out; None: Huber weights that cut from the second step on (stage one), else the
-    wider ones that do not.
+    """Gauss–Newton on the residuals (s − b)·ν across the edges from ``start`` (theta, t,
+    b): the turn (when ``turn``), the shift (only along ``across`` when given) and b.
+    ``cut``: sample indices kept out; None: Huber weights that cut from the second step on
+    (stage one), else the wider ones that do not.
     ((theta, t, b), samples found, normal matrix, residuals, the samples cut), or None."""
     theta, t, b = start
     k = 2 if across is None else 1
@@ -256,12 +267,12 @@ def _fit(heights: HeightImage, e: np.ndarray, u: np.ndarray, c: np.ndarray, star
         s, n, nu, d, ok = _residuals(heights, e, u, c, theta, t)
         if ok.sum() < MIN_SAMPLES:
             return None
-        r = s * nu - b
+        r = (s - b) * nu
         if cut is None:                   # none cut before the first step: the start is rough
             w = _weights(r, cut_mm=CUT_MM if it else np.inf)
         else:
             w = _weights(r, SHIFT_HUBER_MM, np.inf) * ~np.isin(np.flatnonzero(ok), cut)
-        cols = [n if across is None else (n @ across)[:, None], -np.ones((len(r), 1))]
+        cols = [n if across is None else (n @ across)[:, None], -nu[:, None]]
         if turn:
             cols.insert(0, (-n[:, 0] * d[:, 1] + n[:, 1] * d[:, 0])[:, None])
         x, A = _solve(np.column_stack(cols), w, r)
@@ -334,15 +345,16 @@ def unheld(heights: HeightImage, e: np.ndarray, u: np.ndarray
     """Why :func:`align_edges` may find no fit at this pose: the edge samples ``e`` (K, 3),
     part frame, directions ``u`` (K, 2), that find the reference's edge, and the unit
     direction (2,) part frame of the shift their edges hold least, with the inset (the
-    least eigenvector of Σ [n, −1][n, −1]ᵀ / K; None: no sample found). Edges that all
+    least eigenvector of Σ [n, −ν][n, −ν]ᵀ / K; None: no sample found). Edges that all
     face one way leave the shift along them free; edges facing two ways alone leave it free
     along their bisector, where moving the part and insetting both edges alike look the
     same (a triangle whose third side runs along the lines, a corner of two sides)."""
     s, n = edge_distance(heights, e, u)
-    ok = np.isfinite(s) & (np.einsum("ij,ij->i", n, u) > MIN_COS)
+    nu = np.einsum("ij,ij->i", n, u)
+    ok = np.isfinite(s) & (nu > MIN_COS)
     if not ok.any():
         return 0, None
-    J = np.column_stack([n[ok], -np.ones(ok.sum())])
+    J = np.column_stack([n[ok], -nu[ok]])
     d = np.linalg.eigh(J.T @ J / ok.sum())[1][:2, 0]
     return int(ok.sum()), d / max(float(np.linalg.norm(d)), 1e-12)
 
