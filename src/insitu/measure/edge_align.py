@@ -54,6 +54,9 @@ MIN_FOUND = 0.7
 """At the fitted pose this share of the edge samples must find the reference's edge."""
 CORNER_MM = 0.3
 STRAIGHT_MM = 0.05
+"""How far (across the edge) the same line moved ``CORNER_MM`` along its edge may meet it: a
+straight edge the same, the insert's 1.9 mm hole 0.025 mm away, a corner or a wall beside
+the edge much further or not at all."""
 MIN_COS = 0.1
 """Lines crossing an edge more obliquely than this (cosine to its normal) are not used. A line
 grazing an edge still measures it across well (its distance along the line is searched for,
