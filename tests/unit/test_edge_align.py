@@ -123,8 +123,8 @@ def test_the_scan_camera_is_the_height_calibrations():
 def test_an_edges_normal_at_any_angle():
     """The insert's sides face 180° and ±60°, its hole every way: the normal edge_distance
     gives is theirs within 1° wherever a line crosses them (the hole's, a polygon of facets a
-    few degrees apart, within 2°; differenced over a few pixels
-    alone, a sharp step's normal reads as a multiple of 45°: the ±60° sides as ±46°)."""
+    few degrees apart, within 2°; differenced over a few pixels alone, a sharp step's normal
+    reads as a multiple of 45°: the ±60° sides as ±46°)."""
     w = make_workpiece("insert")
     ref = reference_from_mesh(w.vertices, w.triangles, "insert")
     r_in, r_hole, top = 16.14 / (2 * np.sqrt(3)), 3.80 / 2, 4.68

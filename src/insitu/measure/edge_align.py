@@ -167,7 +167,8 @@ def edge_distance(heights: HeightImage, e: np.ndarray,
     nu = np.maximum(np.einsum("ij,ij->i", n, u), MIN_COS)
     tangent = np.column_stack([-n[:, 1], n[:, 0]])
     for side in (-1.0, 1.0):
-        moved = e + np.column_stack([side * CORNER_MM * tangent, np.zeros(len(e))])
+        moved = e.copy()
+        moved[:, :2] += side * CORNER_MM * tangent
         off = np.abs(_crossing(heights, moved, u) - dist) * nu
         dist = np.where(off <= STRAIGHT_MM, dist, np.nan)
     return dist, n
@@ -177,8 +178,7 @@ def _crossing(heights: HeightImage, e: np.ndarray, u: np.ndarray) -> np.ndarray:
     """The distance s (K,) of :func:`edge_distance`, NaN where the height does not fall."""
     s = np.arange(-SEARCH_MM, SEARCH_MM + 1e-9, 0.02)
     xy = e[:, None, :2] + s[None, :, None] * u[:, None, :]
-    cols = (xy[..., 0] - heights.x0_mm) / heights.px_mm
-    rows = (xy[..., 1] - heights.y0_mm) / heights.px_mm
+    cols, rows = heights.pixel(xy)
     h = sample([heights.z], cols.ravel(), rows.ravel())[0].reshape(xy.shape[:2])
     level = (e[:, 2] + h[:, -1]) / 2
     below = h < level[:, None]
@@ -201,9 +201,7 @@ def _crossing(heights: HeightImage, e: np.ndarray, u: np.ndarray) -> np.ndarray:
 def _normal(heights: HeightImage, xy: np.ndarray) -> np.ndarray:
     """The outward unit normals (K, 2) of the reference's edges at ``xy`` (K, 2): down its
     blurred slope (:attr:`HeightImage.slope`)."""
-    c = (xy[:, 0] - heights.x0_mm) / heights.px_mm
-    r = (xy[:, 1] - heights.y0_mm) / heights.px_mm
-    g = -np.column_stack(sample(heights.slope, c, r))
+    g = -np.column_stack(sample(heights.slope, *heights.pixel(xy)))
     return g / np.maximum(np.linalg.norm(g, axis=1, keepdims=True), 1e-12)
 
 

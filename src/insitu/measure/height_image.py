@@ -35,6 +35,10 @@ class HeightImage:
     y0_mm: float
     px_mm: float = PX_MM
 
+    def pixel(self, xy: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(columns, rows) (...) of part-frame points ``xy`` (..., ≥2) mm on this grid."""
+        return (xy[..., 0] - self.x0_mm) / self.px_mm, (xy[..., 1] - self.y0_mm) / self.px_mm
+
     @cached_property
     def slope(self) -> tuple[np.ndarray, np.ndarray]:
         """(∂z/∂x, ∂z/∂y) (H, W) float32 of the heights blurred by ``NORMAL_SIGMA_PX``: its
@@ -74,8 +78,7 @@ def splat(points: np.ndarray, like: HeightImage) -> tuple[np.ndarray, np.ndarray
     ``like``'s grid: bilinear splats spread by a Gaussian of ``SIGMA_MM`` and normalised
     (the gaps between scan lines fill); measured within ``COVER_MM`` of a point."""
     h, w = like.z.shape
-    c = (points[:, 0] - like.x0_mm) / like.px_mm
-    r = (points[:, 1] - like.y0_mm) / like.px_mm
+    c, r = like.pixel(points)
     inside = (c >= 0) & (c < w - 1) & (r >= 0) & (r < h - 1)
     c, r, z = c[inside], r[inside], points[inside, 2]
     c0, r0 = np.floor(c).astype(np.int64), np.floor(r).astype(np.int64)
