@@ -15,7 +15,8 @@ random poses located against their meshes, and patterns marked where they belong
    the rig's own calibration offset (the scan and the marks share it), the scatter around it
    the locating's own. And against the *rig-frame truth*, the pose an error-free locate gives
    on this rig (:func:`rig_frame_truth`): the locating's own error, what issue 13's
-   0.05 mm / 0.05° is about.
+   0.05 mm / 0.05° is about. Beside it the RMS of each turn error over the fit's own 1σ:
+   near 1, the error is the line ends' noise, which only more or better samples bring down.
 2. Time to locate a scan of about 200 k points (binning 1, lines 0.35 mm apart) on one core.
 3. Mark: a 3 mm square placed in the part's frame (`--part-pose`) on the step block's top
    step and the arc's crest at a few poses, marked with the FIELD.json an operator would
@@ -129,6 +130,16 @@ def _stats(e: np.ndarray, turns: list[float]) -> list[str]:
             f"{max(turns):.3f} / {np.mean(turns):.3f}"]
 
 
+def _noise(turns: list[float], sigmas: list[float]) -> str:
+    """Table cell: the RMS of each pose's turn error (°) over the fit's own 1σ, and the median
+    1σ — near 1 when the error is the line ends' noise the fit knows of, far above 1 when
+    it is a bias the fit does not see."""
+    z = np.array(turns) / np.array(sigmas)
+    z = z[np.isfinite(z)]
+    return (f"{np.sqrt(np.mean(z ** 2)):.2f} ({np.nanmedian(sigmas):.3f})" if len(z)
+            else "–")
+
+
 def locate_table(args, rig, cal, cache: Path) -> None:
     tab = Table(title=f"located against the mesh, {args.poses} random poses each (±25 mm, any "
                       f"turn), binning {args.binning}; errors against the simulator's truth "
@@ -137,7 +148,8 @@ def locate_table(args, rig, cal, cache: Path) -> None:
     for col in ("part", "breaker", "located", "refused", "wrong", "|xy| max / mean, mm",
                 "mean error (x, y), mm", "|xy − mean| max, mm", "turn max / mean, °",
                 "rig frame: |xy| max / mean, mm", "rig frame: turn max / mean, °",
-                "rig frame − truth", "time median, s"):
+                "rig frame: turn / its 1σ, RMS (median 1σ, °)", "rig frame − truth",
+                "time median, s"):
         tab.add_column(col)
     camera = scan_camera(rig.operator.camera, cal)
     for k, (name, fold) in enumerate(PARTS.items()):
@@ -153,6 +165,7 @@ def locate_table(args, rig, cal, cache: Path) -> None:
                            for r, p in zip(rig_truths, poses)])
         for breaker in ((False, True) if fold > 1 else (False,)):
             errs, turns, rig_errs, rig_turns, times, refused, wrong = [], [], [], [], [], [], 0
+            sigmas = []
             for i, pose in enumerate(poses):
                 cloud = scan(cache, name, pose, rig, args.seed, cal,
                              f"{name}-{i}-b{args.binning}-s{args.seed}", args.spacing,
@@ -179,6 +192,7 @@ def locate_table(args, rig, cal, cache: Path) -> None:
                 r = rig_truths[i]
                 rig_errs.append([b.x_mm - r[0], b.y_mm - r[1]])
                 rig_turns.append(angle_err(b.angle_deg, r[2]))
+                sigmas.append(b.sigma_deg if b.sigma_deg else np.nan)
             e = np.array(errs).reshape(-1, 2)
             rig_cells = _stats(np.array(rig_errs).reshape(-1, 2), rig_turns)
             m = shifts.mean(0)
@@ -186,6 +200,7 @@ def locate_table(args, rig, cal, cache: Path) -> None:
                         f"{len(refused)}" + (f" ({', '.join(sorted(set(refused)))})"
                                              if refused else ""), str(wrong),
                         *_stats(e, turns), rig_cells[0], rig_cells[3],
+                        _noise(rig_turns, sigmas),
                         f"({m[0]:+.3f}, {m[1]:+.3f}) mm ± "
                         f"{np.linalg.norm(shifts[:, :2] - m[:2], axis=1).max():.3f}, "
                         f"{m[2]:+.3f}°",
