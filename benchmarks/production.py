@@ -17,6 +17,10 @@ random poses located against their meshes, and patterns marked where they belong
    on this rig (:func:`rig_frame_truth`): the locating's own error, what issue 13's
    0.05 mm / 0.05° is about. Beside it the RMS of each turn error over the fit's own 1σ:
    near 1, the error is the line ends' noise, which only more or better samples bring down.
+   Each part once more with the room-light frame (the station's, laser off, auto-exposed,
+   as a scan takes it before its lines; cached beside the clouds): x, y and the turn from
+   the top's edges in it where they agree with the scan's (`locate_part(image=...)`); the
+   column says at how many poses it placed the part.
 2. Time to locate a scan of about 200 k points (binning 1, lines 0.35 mm apart) on one core.
 3. Mark: a 3 mm square placed in the part's frame (`--part-pose`) on the step block's top
    step and the arc's crest at a few poses, marked with the FIELD.json an operator would
@@ -41,6 +45,7 @@ import os
 import time
 from pathlib import Path
 
+import cv2
 import numpy as np
 from rich.console import Console
 from rich.table import Table
@@ -54,6 +59,7 @@ from insitu.services import calibrate_height, scan_live
 from insitu.services.mark import plan_mark
 from insitu.services.field import calibrate_field
 from insitu.services.record import record_height_calibration, record_marked_field_calibration
+from insitu.services.room_light import station_room_light
 from insitu.services.height import scan_camera
 from insitu.services.station import simulated
 from insitu.sim.devices import SimController
@@ -145,7 +151,8 @@ def locate_table(args, rig, cal, cache: Path) -> None:
                       f"turn), binning {args.binning}; errors against the simulator's truth "
                       "and against the rig-frame truth (what an error-free locate gives on "
                       "this rig)")
-    for col in ("part", "breaker", "located", "refused", "wrong", "|xy| max / mean, mm",
+    for col in ("part", "breaker", "room-light frame: poses it placed", "located", "refused",
+                "wrong", "|xy| max / mean, mm",
                 "mean error (x, y), mm", "|xy − mean| max, mm", "turn max / mean, °",
                 "rig frame: |xy| max / mean, mm", "rig frame: turn max / mean, °",
                 "rig frame: turn / its 1σ, RMS (median 1σ, °)", "rig frame − truth",
@@ -163,19 +170,22 @@ def locate_table(args, rig, cal, cache: Path) -> None:
         rig_truths = [rig_frame_truth(rig, ref, pose) for pose in poses]
         shifts = np.array([[r[0] - p[0], r[1] - p[1], r[2] - p[2]]
                            for r, p in zip(rig_truths, poses)])
-        for breaker in ((False, True) if fold > 1 else (False,)):
+        for breaker, framed in ([(False, False), (True, False), (True, True)] if fold > 1
+                                else [(False, False), (False, True)]):
             errs, turns, rig_errs, rig_turns, times, refused, wrong = [], [], [], [], [], [], 0
-            sigmas = []
+            sigmas, by_frame = [], 0
             for i, pose in enumerate(poses):
-                cloud = scan(cache, name, pose, rig, args.seed, cal,
-                             f"{name}-{i}-b{args.binning}-s{args.seed}", args.spacing,
+                tag = f"{name}-{i}-b{args.binning}-s{args.seed}"
+                cloud = scan(cache, name, pose, rig, args.seed, cal, tag, args.spacing,
                              args.cross)
+                frame = room_frame(cache, name, pose, rig, args.seed, tag) if framed else None
                 prefer = ((pose[2] + rough[i] - 50, pose[2] + rough[i] + 50) if breaker
                           else None)
                 t = time.perf_counter()
                 try:
                     got = locate_part(ref, cloud.points, prefer_angle=prefer,
-                                      lines=cloud.attributes.get("line"), camera=camera)
+                                      lines=cloud.attributes.get("line"), camera=camera,
+                                      image=frame)
                 except LocateRefused as e:
                     refused.append(e.reason)
                     continue
@@ -192,11 +202,13 @@ def locate_table(args, rig, cal, cache: Path) -> None:
                 r = rig_truths[i]
                 rig_errs.append([b.x_mm - r[0], b.y_mm - r[1]])
                 rig_turns.append(angle_err(b.angle_deg, r[2]))
-                sigmas.append(b.sigma_deg if b.sigma_deg else np.nan)
+                sigmas.append(b.image_sigma_deg if b.image_edges else b.sigma_deg or np.nan)
+                by_frame += b.image_edges > 0
             e = np.array(errs).reshape(-1, 2)
             rig_cells = _stats(np.array(rig_errs).reshape(-1, 2), rig_turns)
             m = shifts.mean(0)
-            tab.add_row(name, "prefer-angle ±50°" if breaker else "none", str(len(e)),
+            tab.add_row(name, "prefer-angle ±50°" if breaker else "none",
+                        f"{by_frame}" if framed else "not used", str(len(e)),
                         f"{len(refused)}" + (f" ({', '.join(sorted(set(refused)))})"
                                              if refused else ""), str(wrong),
                         *_stats(e, turns), rig_cells[0], rig_cells[3],
@@ -206,6 +218,16 @@ def locate_table(args, rig, cal, cache: Path) -> None:
                         f"{m[2]:+.3f}°",
                         f"{np.median(times):.2f}" if times else "–")
     console.print(tab)
+
+
+def room_frame(cache: Path, name: str, pose, rig, seed: int, tag: str) -> np.ndarray:
+    """The station's room-light frame of ``name`` at ``pose`` (auto-exposed, laser off, as a
+    scan takes it first), cached as ``tag``-room.png."""
+    path = cache / f"{tag}-room.png"
+    if not path.exists():
+        with simulated(sim_world(name, seed=seed, rig=rig, pose=pose)) as station:
+            cv2.imwrite(str(path), station_room_light(station).image)
+    return cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
 
 
 def timing(args, rig1, cal1, cache: Path) -> None:

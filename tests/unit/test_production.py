@@ -62,7 +62,7 @@ def _run(recipe_path, log, count, station, seed=3, **kw):
         truths[k] = present(k)
         truths["now"] = truths[k]
 
-    def truth(cloud):
+    def truth(cloud, room_light=None):
         return production.Located(truths["now"], 1.0, 0.0)
     return production.Production(r, station, log, count, truth, present=put, **kw), truths
 
@@ -202,7 +202,7 @@ def test_a_pose_the_lines_leave_unheld_gets_a_second_look_crossed(recipe, tmp_pa
                                              spacing_mm=0.5, second_look=second_look))
         clouds = []
 
-        def locate(cloud):
+        def locate(cloud, room_light=None):
             clouds.append(cloud)
             if len(clouds) == 1:
                 x, y, a = flat_pose(truths["now"])

@@ -5,11 +5,14 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Annotated
 
+import cv2
 import typer
 from rich.table import Table
 
 from insitu.cli.common import (bounded, bounded_each, check_output, console, one_line_errors,
                                progress_bar)
+from insitu.errors import ConfigError
+from insitu.formats.images import read_image
 from insitu.measure.locate import LocateSettings
 
 _D = LocateSettings()
@@ -41,10 +44,16 @@ def locate(
         "--height-cal", help="The height calibration CLOUD was scanned with: its camera "
                              "tells how each scan line ends in the image, for a more "
                              "precise turn (default: unknown).")] = None,
+    room_light: Annotated[Path | None, typer.Option(
+        "--room-light", metavar="FRAME.png",
+        help="A frame of that camera under the room light, laser off, the part as scanned "
+             "(needs --height-cal): x, y and the turn then come from the top's edges seen "
+             "whole in it, where they agree with the scan's.")] = None,
 ) -> None:
     """Find the part of REFERENCE in CLOUD: the table taken away, a global registration
     (FPFH features + RANSAC, and a search over turns about z), point-to-plane ICP kept flat
-    on the table, then x, y and the turn from the edges the scan lines cross. Writes
+    on the table, then x, y and the turn from the edges the scan lines cross (or, with
+    --room-light, from the edges in that frame). Writes
     POSE.json (T_world_part maps the part's frame to the world). Refused, nothing written,
     when the part is not found, fits poorly, is only partly in the scan, or when a symmetric
     part fits nearly equally well turned (say which with --prefer-angle)."""
@@ -53,13 +62,19 @@ def locate(
     from insitu.services.locate import locate as svc
 
     check_output(out, ".json")
+    if room_light is not None and height_cal is None:
+        raise ConfigError("--room-light needs --height-cal: the frame's edges are placed "
+                          "through the camera the scan was measured with")
     camera = (camera_model(load_height_calibration(height_cal).camera)
               if height_cal is not None else None)
+    frame = (None if room_light is None else
+             read_image(room_light, cv2.IMREAD_GRAYSCALE | cv2.IMREAD_ANYDEPTH,
+                        expect=(camera.width, camera.height), expected="the camera's frame is"))
     settings = LocateSettings(min_fitness=min_fitness, min_coverage=min_coverage,
                               max_rmse_mm=max_rmse, table_z_mm=table_z)
     with progress_bar("locating") as progress:
         progress(0, 1)
-        pose = svc(reference, cloud, out, settings, prefer_angle, camera)
+        pose = svc(reference, cloud, out, settings, prefer_angle, camera, frame)
     b, s = pose.best, pose.second
     table = Table(title=f"part pose → {out}", show_header=False)
     table.add_row("position, mm", f"x {b.x_mm:.3f}, y {b.y_mm:.3f}, z {b.z_mm:.3f}")
@@ -69,6 +84,9 @@ def locate(
     table.add_row("edges", f"{b.edges} samples, 1σ {b.sigma_mm:.3f} mm, {b.sigma_deg:.3f}°"
                   if b.edges else "not used (the cloud has no scan-line indices): x, y and "
                                   "the turn from the ICP, a few tenths of a mm")
+    if frame is not None:
+        table.add_row("room-light edges", f"{b.image_edges} points, 1σ {b.image_sigma_mm:.4f} "
+                      f"mm, {b.image_sigma_deg:.4f}°" if b.image_edges else b.image_note)
     table.add_row("second best", "none" if s is None else s.describe())
     table.add_row("table", "not found" if pose.table_z_mm is None
                   else f"z {pose.table_z_mm:.3f} mm")

@@ -5,11 +5,13 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Annotated
 
+import cv2
 import typer
 from rich.table import Table
 
 from insitu.cli.common import bounded, check_output, console, fail, one_line_errors, progress_bar
 from insitu.cli.job import CrossScan, CrossSpacing, PartPose
+from insitu.formats.atomic import atomic_write_bytes
 from insitu.formats.project import SIM_BINNING
 from insitu.formats.validation import one_of
 from insitu.measure.height_models import HEIGHT_MODELS
@@ -48,6 +50,10 @@ def scan(
         help="How fast the head sweeps each line, mm/s (default: the rig file's).")] = None,
     preview: Annotated[Path | None, typer.Option(help="Also write a picture of the cloud (.png): the top view by height, and "
                                       "in the camera's room-light grey when the scan has it.")] = None,
+    room_light: Annotated[Path | None, typer.Option(
+        "--room-light", metavar="FRAME.png",
+        help="Also write the camera's frame under the room light, laser off, taken before the "
+             "lines (for `insitu locate --room-light`).")] = None,
 ) -> None:
     """Scan a part (or replay a recorded scan: its own lines, crossed or not) and write its
     point cloud."""
@@ -55,6 +61,8 @@ def scan(
     from insitu.services.station import connect
 
     check_output(out, ".ply")
+    if room_light is not None:
+        check_output(room_light, ".png")
     if height_cal is None and rig is not None and replay is None:
         height_cal = _rig_height_calibration(rig)
     method = method or ("height" if height_cal is not None else "plane")
@@ -77,6 +85,8 @@ def scan(
                                model=height_model, progress=progress, speed_mm_s=line_speed,
                                cross=cross, cross_spacing=cross_spacing)
     services.save_cloud(result, out)
+    if room_light is not None and result.room_light is not None:
+        atomic_write_bytes(room_light, cv2.imencode(".png", result.room_light)[1].tobytes())
     if preview is not None:
         from insitu.measure.preview import save_cloud_picture
         save_cloud_picture(result.cloud, check_output(preview, ".png"), title=out.name)
@@ -91,6 +101,9 @@ def scan(
     table.add_row("y range, mm", f"{s.bounds_min[1]:.2f} … {s.bounds_max[1]:.2f}")
     table.add_row("z range, mm", f"{s.bounds_min[2]:.2f} … {s.bounds_max[2]:.2f}")
     table.add_row("camera colours", s.ambient)
+    if room_light is not None:
+        table.add_row("room-light frame", f"→ {room_light}" if result.room_light is not None
+                      else f"not written: {s.ambient}")
     table.add_row("time", f"{s.seconds:.1f} s")
     console.print(table)
 

@@ -3,12 +3,14 @@ appended and fsynced as each part ends) and as CSV beside it (rewritten atomical
 JSON lines after each record, for a spreadsheet).
 
     {"part": 7, "serial": 7, "outcome": "marked", "x_mm": 3.1, "y_mm": -12.0,
-     "angle_deg": 131.5, "fitness": 0.97, "rmse_mm": 0.02, "decoded": "00007",
+     "angle_deg": 131.5, "fitness": 0.97, "rmse_mm": 0.02, "image_edges": 1104,
+     "decoded": "00007",
      "decode_ok": true, "grade": "A", "offset_mm": 0.03, "job": "part-0007.job.json",
      "scan_s": 1.2, "rescan_s": null, "locate_s": 0.4, "plan_s": 0.3, "mark_s": 0.8,
      "read_s": 0.5, "error": null, "resumed": false, "time": "2026-12-02T05:01:02+00:00"}
 
-``rescan_s``: the second look's crossed scan (null: none). ``outcome``: "marked" (marked and
+``image_edges``: the room-light frame's edge points that gave x, y and the turn (0: the scan
+lines' edges did). ``rescan_s``: the second look's crossed scan (null: none). ``outcome``: "marked" (marked and
 read back), "refused" (not located or not planned: no serial taken, the part set aside),
 "fault" (a device failed: the laser is off, the run stopped) or "aborted" (the operator
 stopped the run). A part's last record is its outcome; a fault or an abort after its serial
@@ -49,6 +51,7 @@ class PartRecord(BaseModel):
     angle_deg: float | None = None
     fitness: float | None = None
     rmse_mm: float | None = None
+    image_edges: int | None = None
     decoded: str | None = None
     decode_ok: bool | None = None
     grade: str | None = None

@@ -229,7 +229,9 @@ def align_edges(heights: HeightImage, e: np.ndarray, u: np.ndarray, iterations: 
     sample far beyond the others, its line cut short, weighs nothing), then the shift and b
     with the turn kept (wider Huber weights, the cut samples kept out). None when fewer than
     20 samples, or less than ``MIN_FOUND`` of them, lie by an edge (the scan's edges are not
-    the reference's there), or the edges cannot hold the turn and the shift. ``free``: a unit
+    the reference's there), when it moves a sample further than ``SEARCH_MM`` (beyond where
+    the samples look for their edges: a slide along edges that do not hold it), or the
+    edges cannot hold the turn and the shift. ``free``: a unit
     direction (2,), part frame, the shift is not fitted along (the one the edges hold least,
     :func:`unheld`): the turn and the shift across it only; ``sigma_mm`` is then the
     latter's."""
@@ -246,8 +248,9 @@ def align_edges(heights: HeightImage, e: np.ndarray, u: np.ndarray, iterations: 
     if second is None:
         return None
     (theta, t, b), found, A, r, _ = second
-    if _near_edges(heights, e, u, c, theta, t) < MIN_FOUND * len(e):
-        return None
+    if (np.linalg.norm(_moved(e, u, c, theta, t)[0][:, :2] - e[:, :2], axis=1).max() > SEARCH_MM
+            or _near_edges(heights, e, u, c, theta, t) < MIN_FOUND * len(e)):
+        return None                  # moved beyond where its samples look for their edges
     k = 2 if across is None else 1
     cov = _spread(r) ** 2 * np.linalg.inv(A)
     R = rot_z(theta)[:2, :2]

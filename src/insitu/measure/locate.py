@@ -16,6 +16,12 @@ and a shift), or a refusal naming why — never a doubtful pose.
    when a second distinct solution scores within ``ambiguity`` of it (a symmetric part)
    unless ``prefer_angle`` picks exactly one of them; and when the edges leave the pose
    uncertain by more than ``max_sigma_mm`` (1σ, at the part's rim).
+5. With a room-light frame of the camera the scan was measured through, the chosen pose's
+   x, y and turn are taken from the top's edges in it (:mod:`insitu.measure.image_edges`),
+   seen whole there, when they hold the pose to ``max_sigma_mm`` and agree with the scan's
+   within its own uncertainty (3σ + ``agree_mm``; 0.3 mm where the scan's edges did not
+   hold it); then the uncertainty check of 4. is the frame's. Else the scan's pose stands,
+   the reason noted.
 """
 
 from __future__ import annotations
@@ -31,10 +37,13 @@ from insitu.geometry.camera import CameraModel
 from insitu.measure.flat_icp import Fit, Pose4, apply, icp_flat, inverse, matrix, rot_z, score
 from insitu.measure.edge_align import (align_edges, direction_name, edge_samples,
                                        unheld_reason)
+from insitu.measure.image_edges import align_image
 from insitu.measure.part_reference import (PartReference, above_table, coarse_features,
                                            find_table, thin)
 
 MIN_POINTS = 200
+UNHELD_MM = 0.3
+"""How far the room-light frame's edges may move a pose the scan's edges did not hold."""
 MAX_FINE_POINTS = 40_000
 
 
@@ -67,6 +76,7 @@ class LocateSettings:
     max_sigma_mm: float = 0.03
     turn_step_deg: float = 5.0
     turn_candidates: int = 6
+    agree_mm: float = 0.02
 
 
 @dataclass(frozen=True)
@@ -75,7 +85,10 @@ class Solution:
     (degrees, −180 … 180); ``fitness``, ``coverage`` and ``rmse_mm`` as in the module's
     docstring; ``score`` = fitness × coverage; ``edges``: the edge samples that fixed x, y
     and the turn (0: not refined, the ICP's), ``sigma_mm`` and ``sigma_deg`` their 1σ
-    (None: not refined; inf: the edges could not fix them, ``unheld`` then says why)."""
+    (None: not refined; inf: the edges could not fix them, ``unheld`` then says why);
+    ``image_edges``: the room-light frame's edge points that fixed x, y and the turn instead
+    (0: not used, ``image_note`` says why when a frame was given), ``image_sigma_mm``,
+    ``image_sigma_deg`` their 1σ."""
 
     x_mm: float
     y_mm: float
@@ -88,6 +101,10 @@ class Solution:
     sigma_mm: float | None = None
     sigma_deg: float | None = None
     unheld: str = ""
+    image_edges: int = 0
+    image_sigma_mm: float | None = None
+    image_sigma_deg: float | None = None
+    image_note: str = ""
 
     @property
     def score(self) -> float:
@@ -128,6 +145,8 @@ class PartPose:
                 "z_mm": b.z_mm, "angle_deg": b.angle_deg, "fitness": b.fitness,
                 "coverage": b.coverage, "inlier_rmse_mm": b.rmse_mm, "edge_samples": b.edges,
                 "sigma_mm": finite(b.sigma_mm), "sigma_deg": finite(b.sigma_deg),
+                "image_edges": b.image_edges, "image_sigma_mm": b.image_sigma_mm,
+                "image_sigma_deg": b.image_sigma_deg, "image_note": b.image_note,
                 "second": None if s is None else {
                     k: getattr(s, k) for k in ("x_mm", "y_mm", "z_mm", "angle_deg", "fitness",
                                                "coverage", "rmse_mm")} | {"score": s.score},
@@ -139,7 +158,8 @@ def locate_part(reference: PartReference, points: np.ndarray,
                 settings: LocateSettings = LocateSettings(),
                 prefer_angle: tuple[float, float] | None = None,
                 lines: np.ndarray | None = None,
-                camera: CameraModel | None = None) -> PartPose:
+                camera: CameraModel | None = None,
+                image: np.ndarray | None = None) -> PartPose:
     """The pose of ``reference``'s part in a scan ``points`` (N, 3) float64, mm, world
     frame (table included or not); ``lines`` (N,) int: each point's scan line (the cloud's
     ``line`` attribute), for the edge step — without it x, y and the turn are the ICP's,
@@ -149,7 +169,9 @@ def locate_part(reference: PartReference, points: np.ndarray,
     along the line in x, y, and edges crossed obliquely are found short. ``prefer_angle``
     (lo, hi) degrees: of solutions that fit
     nearly equally well (a symmetric part), take the one turned within lo … hi (wrapping
-    around 360°). Raises :class:`LocateRefused` (a MeasurementError) naming why when the
+    around 360°). ``image`` (H, W): a frame of ``camera`` under the room light, laser off,
+    the part as scanned — its edges then give x, y and the turn (step 5 of the module's
+    docstring). Raises :class:`LocateRefused` (a MeasurementError) naming why when the
     part is not found, fits poorly, is only partly in the scan or is ambiguous."""
     t0 = time.perf_counter()
     s = settings
@@ -168,8 +190,38 @@ def locate_part(reference: PartReference, points: np.ndarray,
     sols = _aligned(reference, pts, None if lines is None else np.asarray(lines), ~up, fine,
                     sols, s, camera)
     rim = float(np.linalg.norm(reference.top[:, :2] - reference.top_centroid, axis=1).max())
-    pose = _choose(sols, len(part), where, s, prefer_angle, rim)
-    return PartPose(pose[0], pose[1], table, len(part), time.perf_counter() - t0)
+    framed = (None if image is None or camera is None else
+              lambda best: _imaged(reference, best, image, camera, s, rim))
+    best, second = _choose(sols, len(part), where, s, prefer_angle, rim, framed)
+    return PartPose(best, second, table, len(part), time.perf_counter() - t0)
+
+
+def _imaged(ref: PartReference, best: Solution, image: np.ndarray, camera: CameraModel,
+            s: LocateSettings, rim: float) -> Solution:
+    """``best`` with x, y and the turn from the room-light frame's edges when they hold the
+    pose to ``max_sigma_mm`` at the rim and agree with the scan's; else ``best`` with why
+    not (``image_note``)."""
+    fit = align_image(image, camera, ref.heights, ref.outline, best.T_world_part)
+    if isinstance(fit, str):
+        return replace(best, image_note=f"not used: {fit}")
+    spread = float(np.hypot(fit.sigma_mm, np.radians(fit.sigma_deg) * rim))
+    if spread > s.max_sigma_mm:
+        return replace(best, image_note=f"not used: its edges hold the pose to {spread:.3f} "
+                                        f"mm at the part's rim (at most {s.max_sigma_mm:g})")
+    angle = (np.degrees(fit.angle_rad) + 180.0) % 360.0 - 180.0
+    turn = np.radians((angle - best.angle_deg + 180.0) % 360.0 - 180.0)
+    moved = float(np.hypot(np.hypot(fit.xy_mm[0] - best.x_mm, fit.xy_mm[1] - best.y_mm),
+                           turn * rim))
+    held = best.sigma_mm is not None and np.isfinite(best.sigma_mm)
+    allowed = s.agree_mm + (3 * float(np.hypot(best.sigma_mm, np.radians(best.sigma_deg) * rim))
+                            if held else UNHELD_MM)
+    if moved > allowed:
+        return replace(best, image_note=(
+            f"not used: its edges put the part {moved:.3f} mm (at the rim) from the scan's "
+            f"pose, more than the {allowed:.3f} mm the two may differ"))
+    return replace(best, x_mm=float(fit.xy_mm[0]), y_mm=float(fit.xy_mm[1]),
+                   angle_deg=float(angle), image_edges=fit.edges,
+                   image_sigma_mm=fit.sigma_mm, image_sigma_deg=fit.sigma_deg)
 
 
 def _subsample(points: np.ndarray, n: int) -> np.ndarray:
@@ -333,9 +385,11 @@ def _in_range(angle: float, lo: float, hi: float) -> bool:
 
 
 def _choose(sols: list[Solution], n: int, where: str, s: LocateSettings,
-            prefer: tuple[float, float] | None, radius_mm: float
+            prefer: tuple[float, float] | None, radius_mm: float, framed=None
             ) -> tuple[Solution, Solution | None]:
-    """(best, second) or LocateRefused."""
+    """(best, second) or LocateRefused. ``framed``: the best refined by the room-light
+    frame's edges (:func:`_imaged`; None: no frame) — which also place a part whose scan
+    edges left it too uncertain, when they agree with its pose."""
     top = sols[0] if sols else None
     if top is None or top.fitness < s.min_fitness * 0.6 or top.coverage < s.min_coverage / 2:
         fit, cover = (top.fitness, top.coverage) if top else (0.0, 0.0)
@@ -367,16 +421,19 @@ def _choose(sols: list[Solution], n: int, where: str, s: LocateSettings,
         raise LocateRefused("poor-fit", f"fits poorly: {best.describe()}, inlier RMSE "
                             f"{best.rmse_mm:.3f} mm (needed: fitness ≥ {s.min_fitness:.0%}, "
                             f"RMSE ≤ {s.max_rmse_mm:g} mm)")
-    if best.sigma_mm is not None:
+    if framed is not None:
+        best = framed(best)
+    if best.sigma_mm is not None and not best.image_edges:
+        frame = f"; the room-light frame: {best.image_note}" if best.image_note else ""
         spread = float(np.hypot(best.sigma_mm, np.radians(best.sigma_deg) * radius_mm))
         if not np.isfinite(spread):
             raise LocateRefused("poor-fit", f"x, y and the turn are not pinned down at "
-                                f"{best.describe()}: {best.unheld}", best)
+                                f"{best.describe()}: {best.unheld}{frame}", best)
         if not spread <= s.max_sigma_mm:
             raise LocateRefused(
                 "poor-fit", f"x, y and the turn are not pinned down by the edges the scan lines "
                 f"cross ({best.edges} samples; 1σ {best.sigma_mm:.3f} mm and "
                 f"{best.sigma_deg:.3f}°, {spread:.3f} mm at the part's rim, at most "
                 f"{s.max_sigma_mm:g} mm): scan finer (binning, spacing), or turn the part or "
-                "the scan when its edges run along the lines", best)
+                f"the scan when its edges run along the lines{frame}", best)
     return best, second

@@ -17,6 +17,7 @@ from scipy.spatial import cKDTree
 
 from insitu.errors import MeasurementError
 from insitu.measure.height_image import HeightImage, mesh_height_image, splat_image
+from insitu.measure.image_edges import Outline, outline
 
 UP_NZ = -0.2
 """Mesh faces whose normal's z is below this face the table: no camera above sees them."""
@@ -57,6 +58,12 @@ class PartReference:
     def top_centroid(self) -> np.ndarray:
         """(2,) x, y mm: centre of the top's area, seen from above."""
         return self.top[:, :2].mean(axis=0) if len(self.top) else self.points[:, :2].mean(0)
+
+    @cached_property
+    def outline(self) -> Outline:
+        """The edges of its top seen from above (:func:`insitu.measure.image_edges.outline`),
+        for a room-light frame's edges."""
+        return outline(self.heights)
 
     def coarse(self, voxel_mm: float):
         """(points (K, 3), normals (K, 3), FPFH features (33, K)) on a ``voxel_mm`` grid, for

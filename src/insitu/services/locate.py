@@ -6,6 +6,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import numpy as np
+
 from insitu.formats.mesh import is_mesh_file, read_mesh
 from insitu.formats.pointcloud import PointCloud, read_ply
 from insitu.geometry.camera import CameraModel
@@ -32,24 +34,26 @@ def load_reference(path: str | Path, settings: LocateSettings = LocateSettings()
 def locate_cloud(reference: PartReference, cloud: PointCloud,
                  settings: LocateSettings = LocateSettings(),
                  prefer_angle: tuple[float, float] | None = None,
-                 camera: CameraModel | None = None) -> PartPose:
+                 camera: CameraModel | None = None,
+                 image: np.ndarray | None = None) -> PartPose:
     """:func:`~insitu.measure.locate.locate_part` of a measured cloud (its scan lines used
     for the edges when it records them; ``camera``: the one it was measured through, see
-    :func:`insitu.services.height.scan_camera`). LocateRefused (a MeasurementError) names
-    why when no pose is given."""
+    :func:`insitu.services.height.scan_camera`; ``image``: that camera's room-light frame of
+    the part, for its edges). LocateRefused (a MeasurementError) names why when no pose is
+    given."""
     return locate_part(reference, cloud.points, settings, prefer_angle,
-                       lines=cloud.attributes.get("line"), camera=camera)
+                       lines=cloud.attributes.get("line"), camera=camera, image=image)
 
 
 def locate(reference: str | Path, cloud: str | Path, out: str | Path,
            settings: LocateSettings = LocateSettings(),
            prefer_angle: tuple[float, float] | None = None,
-           camera: CameraModel | None = None) -> PartPose:
+           camera: CameraModel | None = None, image: np.ndarray | None = None) -> PartPose:
     """Locate the part of ``reference`` in the cloud file ``cloud`` (measured through
-    ``camera``, None: unknown) and write POSE.json ``out`` atomically (nothing is written
-    when it is refused)."""
+    ``camera``, None: unknown; ``image``: its room-light frame of the part) and write
+    POSE.json ``out`` atomically (nothing is written when it is refused)."""
     measured = read_ply(cloud)
     pose = locate_cloud(load_reference(reference, settings), measured, settings, prefer_angle,
-                        camera)
+                        camera, image)
     save_pose(out, pose, [str(reference), str(cloud)], prefer_angle, measured.rig)
     return pose

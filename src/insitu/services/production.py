@@ -35,7 +35,7 @@ from insitu.measure.locate import LocateRefused
 from insitu.services import mark as mark_svc
 from insitu.services import serials
 from insitu.services.height import crossed_model
-from insitu.services.scan import Cancelled, scan_live
+from insitu.services.scan import Cancelled, ScanResult, scan_live
 from insitu.services.station import Station
 
 
@@ -58,11 +58,13 @@ class NoWait:
 @dataclass(frozen=True)
 class Located:
     """Where the part lies: ``T_world_part`` (4, 4) maps part mm into the world; the
-    registration's ``fitness`` (0 … 1) and inlier ``rmse_mm``."""
+    registration's ``fitness`` (0 … 1) and inlier ``rmse_mm``; ``image_edges``: the
+    room-light frame's edge points that gave x, y and the turn (0: the scan's edges did)."""
 
     T_world_part: np.ndarray
     fitness: float
     rmse_mm: float
+    image_edges: int = 0
 
     def pose(self) -> tuple[float, float, float]:
         """(x mm, y mm, angle_deg about +z)."""
@@ -82,23 +84,26 @@ class PartReading:
     offset_mm: float | None = None
 
 
-Locator = Callable[[PointCloud], Located]
+Locator = Callable[[PointCloud, "np.ndarray | None"], Located]
 
 
 def recipe_locator(recipe: Recipe, camera: CameraModel | None = None) -> Locator:
-    """``locate(cloud) -> Located`` against the recipe's reference (read once:
+    """``locate(cloud, room_light) -> Located`` against the recipe's reference (read once:
     :func:`insitu.services.locate.load_reference`), keeping a symmetric part's turn within
     the recipe's ``prefer_angle_deg``; ``camera``: the one the scans are measured through
-    (:func:`insitu.services.height.scan_camera`; None: unknown, a less precise turn); it raises the registration's one-line refusal (part
-    not found, partly scanned, poor fit, ambiguous). ``locate.reference``: the reference."""
+    (:func:`insitu.services.height.scan_camera`; None: unknown, a less precise turn) and
+    ``room_light`` its frame of the part, laser off (None: none), whose edges then give x, y
+    and the turn; it raises the registration's one-line refusal (part not found, partly
+    scanned, poor fit, ambiguous). ``locate.reference``: the reference."""
     from insitu.services.locate import load_reference, locate_cloud
 
     reference = load_reference(recipe.reference)
 
-    def locate(cloud: PointCloud) -> Located:
+    def locate(cloud: PointCloud, room_light: np.ndarray | None = None) -> Located:
         pose = locate_cloud(reference, cloud, prefer_angle=recipe.prefer_angle_deg,
-                            camera=camera)
-        return Located(pose.T_world_part, pose.best.fitness, pose.best.rmse_mm)
+                            camera=camera, image=room_light)
+        return Located(pose.T_world_part, pose.best.fitness, pose.best.rmse_mm,
+                       pose.best.image_edges)
     locate.reference = reference
     return locate
 
@@ -253,12 +258,12 @@ def _stage(run: Production, part: _Part, name: str, work: Callable[[], Any]) -> 
 
 
 def _run_part(run: Production, part: _Part) -> PartRecord:
-    cloud = _scan_part(run, part, "scan", scan_region(run), run.recipe.scan.cross)
+    scanned = _scan_part(run, part, "scan", scan_region(run), run.recipe.scan.cross)
     try:
-        cloud, located = _locate(run, part, cloud)
+        cloud, located = _locate(run, part, scanned)
         x, y, a = located.pose()
         part.fields.update(x_mm=x, y_mm=y, angle_deg=a, fitness=round(located.fitness, 4),
-                           rmse_mm=round(located.rmse_mm, 4))
+                           rmse_mm=round(located.rmse_mm, 4), image_edges=located.image_edges)
         planned = _stage(run, part, "plan", lambda: plan_part(run, part, cloud, located))
     except (Cancelled, DeviceError):
         raise
@@ -270,31 +275,34 @@ def _run_part(run: Production, part: _Part) -> PartRecord:
     return _read(run, part, planned.result, cloud)
 
 
-def _scan_part(run: Production, part: _Part, stage: str, region, cross: bool) -> PointCloud:
+def _scan_part(run: Production, part: _Part, stage: str, region, cross: bool) -> ScanResult:
     """The part's scan over ``region`` as the recipe says (``cross``: with the crossed pass),
-    written where the run keeps the part's cloud."""
+    its cloud written where the run keeps the part's cloud."""
     s = run.recipe.scan
-    cloud = _stage(run, part, stage, lambda: scan_live(
+    scanned = _stage(run, part, stage, lambda: scan_live(
         run.station, s.spacing_mm, region, run.height_cal, exposure_ms=s.exposure_ms,
         speed_mm_s=s.speed_mm_s, cancel=run.cancel, cross=cross,
-        cross_spacing=s.cross_spacing_mm)).cloud
-    write_ply(run.cloud_path(part.number), cloud)
-    return cloud
+        cross_spacing=s.cross_spacing_mm))
+    write_ply(run.cloud_path(part.number), scanned.cloud)
+    return scanned
 
 
-def _locate(run: Production, part: _Part, cloud: PointCloud) -> tuple[PointCloud, Located]:
-    """(the cloud the part was located on, its pose). The second look: when lines along y
-    alone leave the pose unheld (edges along them: LocateRefused with the refused pose) and
-    the recipe allows it, the part is scanned again, crossed, over its footprint at that
-    pose grown by the margin, and located on that scan (its time in ``rescan_s``)."""
+def _locate(run: Production, part: _Part, scanned: ScanResult) -> tuple[PointCloud, Located]:
+    """(the cloud the part was located on, its pose, from the cloud and the scan's
+    room-light frame). The second look: when lines along y alone leave the pose unheld
+    (edges along them: LocateRefused with the refused pose) and the recipe allows it, the
+    part is scanned again, crossed, over its footprint at that pose grown by the margin, and
+    located on that scan (its time in ``rescan_s``)."""
     try:
-        return cloud, _stage(run, part, "locate", lambda: run.locate(cloud))
+        return scanned.cloud, _stage(run, part, "locate",
+                                     lambda: run.locate(scanned.cloud, scanned.room_light))
     except LocateRefused as e:
         if e.best is None or not _second_look(run):
             raise
         region = _footprint(run, e.best)
-    cloud = _scan_part(run, part, "rescan", region, True)
-    return cloud, _stage(run, part, "locate", lambda: run.locate(cloud))
+    again = _scan_part(run, part, "rescan", region, True)
+    return again.cloud, _stage(run, part, "locate",
+                               lambda: run.locate(again.cloud, again.room_light))
 
 
 def _second_look(run: Production) -> bool:

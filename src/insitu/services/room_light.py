@@ -2,7 +2,7 @@
 point's grey value, the camera's picture on the cloud) and the marked part's inspection image.
 
 The exposure is found by a short auto-exposure: the sensor is linear, so one frame at a known
-exposure tells the exposure that puts the bright end of the part (the 99.5th percentile) at
+exposure tells the exposure that puts the bright end of the part (the 99.95th percentile) at
 70 % of full scale; a frame that saturates halves it. The camera's exposure is set back
 afterwards, so the laser lines keep theirs.
 """
@@ -18,6 +18,9 @@ from insitu.formats.bounds import BOUNDS
 from insitu.services.station import Station
 
 TARGET = 0.70             # the bright end of the part: 70 % of full scale
+BRIGHT = 99.95
+"""The bright end of the part: this percentile of the frame (the insert's top is 0.4 % of a
+frame: at the 99.5th it was clipped, its edges with it)."""
 ACCEPT = (0.45, 0.90)     # ... anywhere in here is kept
 SATURATED = 0.005         # more than 0.5 % of the pixels at full scale is saturated
 MAX_GRABS = 4
@@ -34,11 +37,11 @@ class RoomLightFrame:
 
 
 def bright_level(image: np.ndarray) -> tuple[float, float]:
-    """(99.5th percentile, fraction of pixels at full scale), both 0..1 of the dtype's full
+    """(99.95th percentile, fraction of pixels at full scale), both 0..1 of the dtype's full
     scale, of a frame (H, W) uint8 or uint16 (every 4th pixel each way: fast, enough)."""
     full = 255 if image.dtype == np.uint8 else 65535
     sample = image[::4, ::4]
-    return float(np.percentile(sample, 99.5)) / full, float(np.mean(sample >= full))
+    return float(np.percentile(sample, BRIGHT)) / full, float(np.mean(sample >= full))
 
 
 def next_exposure(exposure_ms: float, level: float, saturated: float) -> float | None:

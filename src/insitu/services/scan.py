@@ -50,8 +50,12 @@ class ScanSummary:
 
 @dataclass(frozen=True)
 class ScanResult:
+    """The scan's ``cloud``, its ``summary`` and the ``room_light`` frame (H, W) taken (or
+    recorded) before the lines, laser off (None: none), whose edges refine a part's pose."""
+
     cloud: PointCloud
     summary: ScanSummary
+    room_light: np.ndarray | None = None
 
 
 @dataclass(frozen=True)
@@ -97,14 +101,14 @@ def _partial(rec: ScanReconstructor, t0: float, rig: RigRecord | None,
 
 
 def _finish(rec: ScanReconstructor, t0: float, rig: RigRecord | None = None,
-            ambient: str = "none") -> ScanResult:
+            ambient: str = "none", room_light: np.ndarray | None = None) -> ScanResult:
     """The result so far, its cloud recording ``rig`` (the station's; None for a replay)."""
     cloud = replace(rec.cloud(), rig=rig)
     lo, hi = cloud.points.min(axis=0), cloud.points.max(axis=0)
     return ScanResult(cloud, ScanSummary(len(cloud), rec.frames, rec.frames_with_line, rec.method,
                                          time.perf_counter() - t0, tuple(lo), tuple(hi),
                                          rec.outliers_removed, rec.unconfirmed_removed,
-                                         ambient))
+                                         ambient), room_light)
 
 
 def reconstructor(camera: CameraModel, pivot_height_mm: float, telecentric: bool,
@@ -204,15 +208,15 @@ def _scan(camera: Camera, head: ScanHead, lines, rec: ScanReconstructor, t0: flo
     the summary's ``ambient`` — then each line drawn, grabbed and reconstructed in turn; the
     laser off at the end, on a cancel (:class:`Cancelled`) or a device fault
     (:class:`ScanInterrupted`), each keeping what was measured."""
-    ambient = "none"
+    ambient, room = "none", None
     try:
         if room_light is not None:
             try:
-                image = room_light()
-                ambient = "yes" if image is not None else "none (no room-light frame)"
+                room = room_light()
+                ambient = "yes" if room is not None else "none (no room-light frame)"
             except DeviceError as e:
-                image, ambient = None, f"none (the room-light frame failed: {e})"
-            rec.set_ambient(image)
+                ambient = f"none (the room-light frame failed: {e})"
+            rec.set_ambient(room)
         for i, (a, b) in enumerate(lines):
             if cancel is not None and cancel.is_set():
                 raise Cancelled(f"scan cancelled after {i} of {len(lines)} {what}",
@@ -231,7 +235,7 @@ def _scan(camera: Camera, head: ScanHead, lines, rec: ScanReconstructor, t0: flo
                 progress(i + 1, len(lines))
     finally:
         head.off()
-    return _finish(rec, t0, rig, ambient)
+    return _finish(rec, t0, rig, ambient, room)
 
 
 class RecordedHead:

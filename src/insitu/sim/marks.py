@@ -17,7 +17,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from insitu.geometry.camera import CameraModel
-from insitu.sim.render import NOMINAL_EXPOSURE_MS
+from insitu.sim.render import NOMINAL_EXPOSURE_MS, area_rays, edge_pixels, lens_blur_px
 from insitu.sim.rig import SimRig
 from insitu.sim.scene import Scene
 
@@ -87,37 +87,64 @@ def mark_darkness(points: np.ndarray, burns: list[Burn],
 
 
 class RoomLightView:
-    """What the true camera of ``rig`` sees of ``scene`` under room light, one ray per pixel
-    centre, cast once: ``hit`` (H·W,) bool, ``points`` (M, 3) float32 mm of the hit pixels,
-    ``shade`` (M,) float32 DN at the nominal exposure (albedo, textured unless ``ideal``,
-    shaded by the normal)."""
+    """What the true camera of ``rig`` sees of ``scene`` under room light, cast once: one ray
+    per pixel centre, and in the pixels an edge crosses (:func:`~insitu.sim.render.
+    edge_pixels`) ``_EDGE_SUB``² rays over the pixel's area. ``hit`` (H·W,) bool, ``points``
+    (M, 3) float32 mm where the hit pixels' centres meet, ``shade`` (M,) float32 DN at the
+    nominal exposure (albedo, textured unless ``ideal``, shaded by the normal; an edge's
+    pixels their area's mean), ``blur_px``: the lens PSF's σ at the scene's depth."""
 
     def __init__(self, rig: SimRig, scene: Scene, ideal: bool = False, rows: int = 256):
-        cam, o = rig.camera, rig.optics
-        self.shape = (cam.height, cam.width)
-        hit, points, shade = [], [], []
-        for v0 in range(0, cam.height, rows):          # a block of rows at a time: flat memory
-            u, v = np.meshgrid(np.arange(cam.width, dtype=np.float64),
-                               np.arange(v0, min(v0 + rows, cam.height), dtype=np.float64))
-            origin, dirs = cam.rays(np.column_stack([u.ravel(), v.ravel()]))
-            hits = scene.cast(np.broadcast_to(origin, dirs.shape), dirs)
-            p, part, nrm = hits.points[hits.hit], hits.part[hits.hit], hits.normals[hits.hit]
-            albedo = (np.array([scene.materials[i].albedo for i in part]) if ideal
-                      else scene.albedo(p, part))
+        cam = rig.camera
+        H, W = self.shape = (cam.height, cam.width)
+        hit, points, shade, keys = [], [], [], []
+        for v0 in range(0, H, rows):                 # a block of rows at a time: flat memory
+            u, v = np.meshgrid(np.arange(W, dtype=np.float64),
+                               np.arange(v0, min(v0 + rows, H), dtype=np.float64))
+            hits, s = self._cast(rig, scene, np.column_stack([u.ravel(), v.ravel()]), ideal)
+            key = np.full((len(s), 3), -1.0, np.float32)   # part, |n_z|, depth
+            p = hits.points[hits.hit]
+            key[hits.hit] = np.column_stack([hits.part[hits.hit],
+                                             np.abs(hits.normals[hits.hit, 2]),
+                                             cam.to_camera(p)[:, 2]])
             hit.append(hits.hit)
             points.append(p.astype(np.float32))
-            shade.append((o.ambient_dn * albedo * (0.6 + 0.4 * np.abs(nrm[:, 2])))
-                         .astype(np.float32))
+            shade.append(s[hits.hit])
+            keys.append(key)
         self.hit, self.points, self.shade = (np.concatenate(a) for a in (hit, points, shade))
+        key = np.concatenate(keys).reshape(H, W, 3)
+        rows_, cols = np.nonzero(edge_pixels(key[..., 0], key[..., 1], key[..., 2])
+                                 & self.hit.reshape(H, W))
+        if len(rows_):
+            area = self._cast(rig, scene, area_rays(rows_, cols), ideal)[1]
+            index = np.cumsum(self.hit) - 1                  # pixel → its row in shade
+            self.shade[index[rows_ * W + cols]] = area.reshape(len(rows_), -1).mean(1)
+        seen = key[..., 0] >= 0
+        self.blur_px = float(lens_blur_px(rig, np.median(key[..., 2][seen]))) if seen.any() \
+            else 0.0
+
+    @staticmethod
+    def _cast(rig: SimRig, scene: Scene, uv: np.ndarray, ideal: bool):
+        """The hits of the true camera's rays through pixels ``uv`` (N, 2) and their room
+        light (N,) float32 DN at the nominal exposure (0 where nothing is met)."""
+        origin, dirs = rig.camera.rays(uv)
+        hits = scene.cast(np.broadcast_to(origin, dirs.shape), dirs)
+        p, part, nrm = hits.points[hits.hit], hits.part[hits.hit], hits.normals[hits.hit]
+        albedo = (np.array([scene.materials[i].albedo for i in part]) if ideal
+                  else scene.albedo(p, part))
+        shade = np.zeros(len(uv), np.float32)
+        shade[hits.hit] = rig.optics.ambient_dn * albedo * (0.6 + 0.4 * np.abs(nrm[:, 2]))
+        return hits, shade
 
 
 def render_inspection(rig: SimRig, scene: Scene, burns: list[Burn],
                       exposure_ms: float = 12 * NOMINAL_EXPOSURE_MS, seed: int = 0,
                       ideal: bool = False, contrast: float = MARK_CONTRAST,
                       view: RoomLightView | None = None) -> np.ndarray:
-    """(H, W) frame of the true camera under room light, marks darker. One ray per pixel
-    centre (``view``: that cast, made for the same rig, scene and ``ideal``, kept by the
-    caller). ``ideal``: untextured, noise-free float32; else 8-bit with shot and read noise."""
+    """(H, W) frame of the true camera under room light, marks darker, through the lens PSF
+    (``view``: the scene's :class:`RoomLightView`, made for the same rig, scene and
+    ``ideal``, kept by the caller). ``ideal``: untextured, noise-free float32; else 8-bit with
+    shot and read noise."""
     o = rig.optics
     view = view or RoomLightView(rig, scene, ideal)
     H, W = view.shape
@@ -132,6 +159,8 @@ def render_inspection(rig: SimRig, scene: Scene, burns: list[Burn],
     img = np.zeros(H * W, np.float32)
     img[view.hit] = shade * np.float32(exposure_ms / NOMINAL_EXPOSURE_MS)
     img = img.reshape(H, W)
+    if view.blur_px > 0.05:
+        img = cv2.GaussianBlur(img, (0, 0), view.blur_px)
     if ideal:
         return img
     rng = np.random.default_rng(seed)

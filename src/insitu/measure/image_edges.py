@@ -1,0 +1,225 @@
+"""The last step of locating a part when a room-light frame is at hand: x, y and the turn
+from the top's edges as the camera sees them whole.
+
+A scan line crosses an edge once per line spacing and its end is known along the line to
+about 0.07 mm (the pixel, the speckle): a 16 mm insert's turn only to 0.05–0.08°. In a frame
+under the room light (laser off) the same edges are seen at every pixel along them: where a
+top meets the wall below it or the surface beyond, the grey value steps, and the step's
+centre is found to a fraction of a pixel. Each point of the reference's outline (the upper
+side of every drop, :func:`outline`) is projected through the camera at the located pose;
+along the edge's normal in the image the steepest step of grey within ``SEARCH_PX`` is the
+edge, placed by a parabola through the derivative's peak; that pixel's ray cut at the
+point's height gives the edge in x, y. Points whose wall the camera sees as a thin sliver
+are left out: its grey blends into the step. Gauss–Newton on the distances across the edges (Huber
+weights) turns and shifts the outline onto them, searching again at each step. Outline
+points the part hides from the camera (a higher wall in front of them) or whose grey value
+does not step (two surfaces alike) are not used.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+from insitu.geometry.camera import CameraModel
+from insitu.measure.edge_align import edge_distance
+from insitu.measure.flat_icp import rot_z
+from insitu.measure.height_image import HeightImage, sample
+
+STEEP = 1.0
+"""Slope (of the height image blurred as for its normals) above which a pixel lies on an
+edge."""
+START_MM = 0.5
+INSIDE_MM = 0.2
+SLOPE_MM = 0.3
+"""The top's height at its edge: from ``INSIDE_MM`` inside it (past the edge's own pixels of
+the height image), and its slope over this further in."""
+SPACING_MM = 0.05
+SEARCH_PX = 4.0
+STEP_PX = 0.25
+SMOOTH_PX = 0.7
+"""The frame is blurred this much (Gaussian σ) before the grey values are read: the noise."""
+CONTRAST = 2.5
+"""An edge's step: its slope of grey this many times the median slope along the outline's
+profiles (what noise and the surfaces' texture give off the edges)."""
+WALL_PX = 3.0
+MAX_SPREAD_MM = 0.1
+"""Edges found scattered more than this (robust 1σ) about the fitted outline are not the
+part's (its own: 0.01–0.06 mm; the texture of an empty table: 0.45)."""
+MIN_POINTS = 50
+MIN_FOUND = 0.5
+ITERATIONS = 10
+"""Steps at most; the found edges may flicker between pixels, so the last step need only be
+within the fit's own 1σ (or 0.002 mm, 0.002°)."""
+
+
+@dataclass(frozen=True)
+class Outline:
+    """The part's edges seen from above: ``points`` (K, 3) part frame, mm, on the upper side
+    of each drop (z: the top's height there), ``normals`` (K, 2) outward unit, ``below``
+    (K,) the height of the surface beyond the drop, mm."""
+
+    points: np.ndarray
+    normals: np.ndarray
+    below: np.ndarray
+
+
+def outline(heights: HeightImage) -> Outline:
+    """The edges of the reference's height image, a point every ``SPACING_MM`` along them:
+    from every pixel steeper than ``STEEP``, ``START_MM`` inside (beyond the blurred slope and
+    the edge's own pixels), out along its normal to where the height falls halfway to the
+    lower side (as the edge step finds the reference's edge for a scan line; corners, where
+    the edge does not run on straight, are left out); its height: the top's, carried on at
+    its slope (from ``SLOPE_MM`` inside) to the edge."""
+    gx, gy = heights.slope
+    rows, cols = np.nonzero(np.hypot(gx, gy) > STEEP)
+    g = -np.column_stack([gx[rows, cols], gy[rows, cols]])
+    n = g / np.linalg.norm(g, axis=1, keepdims=True)
+    start = np.column_stack([heights.x0_mm + cols * heights.px_mm,
+                             heights.y0_mm + rows * heights.px_mm]) - START_MM * n
+    z = sample([heights.z], *heights.pixel(start))[0]
+    s, normal = edge_distance(heights, np.column_stack([start, z]), n)
+    ok = np.isfinite(s)
+    edge, n = start[ok] + s[ok, None] * n[ok], n[ok]
+    near, far, below = sample([heights.z], *heights.pixel(np.concatenate(
+        [edge - INSIDE_MM * n, edge - (INSIDE_MM + SLOPE_MM) * n, edge + START_MM * n])))[0] \
+        .reshape(3, -1)
+    top = near + (near - far) * INSIDE_MM / SLOPE_MM   # a sloping top carried on to its edge
+    _, keep = np.unique(np.floor(edge / SPACING_MM).astype(np.int64), axis=0,
+                        return_index=True)
+    return Outline(np.column_stack([edge, top])[keep], normal[ok][keep], below[keep])
+
+
+@dataclass(frozen=True)
+class ImageFit:
+    """The pose from the frame's edges: ``angle_rad`` and ``xy_mm`` (2,) of the part frame's
+    origin in the world; ``edges``: outline points whose edge was found and used, of
+    ``visible``; ``sigma_mm``, ``sigma_deg``: 1σ of the shift (its worst direction) and of
+    the turn, from the distances' spread; ``rms_mm`` that spread (robust)."""
+
+    angle_rad: float
+    xy_mm: np.ndarray
+    edges: int
+    visible: int
+    sigma_mm: float
+    sigma_deg: float
+    rms_mm: float
+
+
+def align_image(image: np.ndarray, camera: CameraModel, heights: HeightImage,
+                edges: Outline, T_world_part: np.ndarray) -> ImageFit | str:
+    """The pose that puts ``edges`` (the reference's, :func:`outline`; ``heights`` its height
+    image) on the edges of ``image`` (H, W) grey, a frame of ``camera`` under the room light
+    with the part as the scan found it, starting from ``T_world_part`` (4, 4; a turn about
+    z and a shift). Why not, as a sentence, when the frame is not the camera's, too few
+    outline points are in view or show an edge, the edges found scatter about the fit, or
+    the fit does not settle."""
+    if image.shape[:2] != (camera.height, camera.width):
+        return (f"the frame is {image.shape[1]}×{image.shape[0]} px, the camera "
+                f"{camera.width}×{camera.height}")
+    grey = cv2.GaussianBlur(np.asarray(image, np.float32), (0, 0), SMOOTH_PX)
+    full = np.iinfo(image.dtype).max if np.issubdtype(image.dtype, np.integer) else np.inf
+    clipped = (np.asarray(image) >= full).astype(np.float32)
+    angle = float(np.arctan2(T_world_part[1, 0], T_world_part[0, 0]))
+    t = np.asarray(T_world_part[:3, 3], np.float64)
+    seen = _visible(heights, edges, camera, angle, t) & ~_sliver(edges, camera, angle, t)
+    if seen.sum() < MIN_POINTS:
+        return f"{seen.sum()} of the outline's {len(edges.points)} points in view"
+    p, n = edges.points[seen], edges.normals[seen]
+    offs = np.arange(-SEARCH_PX, SEARCH_PX + 1e-9, STEP_PX)
+    for _ in range(ITERATIONS):
+        R = rot_z(angle)[:2, :2]
+        pw = np.column_stack([p[:, :2] @ R.T + t[:2], p[:, 2] + t[2]])
+        nw = n @ R.T
+        found, e = _edge_points(grey, clipped, camera, pw, nw, offs)
+        if found.sum() < max(MIN_POINTS, MIN_FOUND * len(p)):
+            return (f"{found.sum()} of the {len(p)} outline points in view show an edge in "
+                    f"the frame (at least {max(MIN_POINTS, int(MIN_FOUND * len(p)))} needed)")
+        r = np.einsum("ij,ij->i", e - pw[:, :2], nw)[found]
+        lever = pw[found, :2] - t[:2]
+        J = np.column_stack([nw[found, 1] * lever[:, 0] - nw[found, 0] * lever[:, 1],
+                             nw[found]])
+        dev = np.abs(r - np.median(r))
+        mad = 1.4826 * float(np.median(dev))
+        w = np.minimum(1.0, 1.5 * max(mad, 1e-4) / np.maximum(dev, 1e-12))
+        A = J.T @ (J * w[:, None])
+        try:
+            x = np.linalg.solve(A, J.T @ (w * r))
+        except np.linalg.LinAlgError:
+            return "the frame's edges do not hold the turn and the shift"
+        t[:2] += x[1:]
+        angle += x[0]
+        if abs(x[0]) < 2e-5 and np.linalg.norm(x[1:]) < 1e-3:   # 0.001°, 0.001 mm
+            break
+    if mad > MAX_SPREAD_MM:
+        return (f"the frame's edges scatter {mad:.3f} mm about the outline (at most "
+                f"{MAX_SPREAD_MM:g}): not the part's edges")
+    cov = mad ** 2 * np.linalg.inv(A)
+    if (abs(x[0]) > max(np.sqrt(cov[0, 0]), 4e-5)
+            or np.linalg.norm(x[1:]) > max(np.sqrt(np.trace(cov[1:, 1:])), 2e-3)):
+        return (f"the fit to the frame's edges did not settle in {ITERATIONS} steps (the last "
+                f"{np.degrees(x[0]):+.4f}°, {np.linalg.norm(x[1:]):.4f} mm)")
+    return ImageFit(angle, t[:2].copy(), int(found.sum()), len(p),
+                    float(np.sqrt(np.linalg.eigvalsh(cov[1:, 1:]).max())),
+                    float(np.degrees(np.sqrt(cov[0, 0]))), mad)
+
+
+def _edge_points(grey: np.ndarray, clipped: np.ndarray, camera: CameraModel, pw: np.ndarray,
+                 nw: np.ndarray, offs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(found (K,) bool, the edge in x, y (K, 2) world, mm) for outline points ``pw``
+    (K, 3) world with normals ``nw`` (K, 2): along the normal's image, within the offsets
+    ``offs`` px, the steepest grey step (its slope above ``CONTRAST`` times the median),
+    cut at the point's height; none where a pixel on the way is at full scale (``clipped``
+    (H, W) 1: a step cut off there has its steepest slope moved toward the dark side)."""
+    uv = camera.project(pw)
+    step = camera.project(np.column_stack([pw[:, :2] + 0.05 * nw, pw[:, 2]])) - uv
+    d = step / np.maximum(np.linalg.norm(step, axis=1, keepdims=True), 1e-12)
+    q = uv[:, None, :] + offs[None, :, None] * d[:, None, :]
+    inside = (camera.in_image(q.reshape(-1, 2), 1.0).reshape(len(pw), -1).all(1)
+              & np.isfinite(uv).all(1))
+    prof, cut = (s.reshape(len(pw), -1)
+                 for s in sample([grey, clipped], q[..., 0].ravel(), q[..., 1].ravel()))
+    slope = np.abs(np.gradient(prof, STEP_PX, axis=1))
+    noise = float(np.median(slope))           # the slope off the edges: noise, texture
+    j = np.argmax(slope, axis=1)
+    k = np.arange(len(pw))
+    peak = (j > 0) & (j < len(offs) - 1) & (slope[k, j] > CONTRAST * max(noise, 1e-3))
+    j = np.clip(j, 1, len(offs) - 2)
+    y0, y1, y2 = slope[k, j - 1], slope[k, j], slope[k, j + 1]
+    den = y0 - 2 * y1 + y2
+    frac = np.where(den < 0, 0.5 * (y0 - y2) / np.where(den < 0, den, -1.0), 0.0)
+    px = uv + (offs[j] + frac * STEP_PX)[:, None] * d
+    o, dirs = camera.rays(np.nan_to_num(px))
+    e = o[:2] + dirs[:, :2] * ((pw[:, 2] - o[2]) / dirs[:, 2])[:, None]
+    return inside & peak & ~(cut > 0).any(axis=1), e
+
+
+def _sliver(edges: Outline, camera: CameraModel, angle: float, t: np.ndarray) -> np.ndarray:
+    """(K,) bool: the outline points whose wall the camera sees as a sliver less than
+    ``WALL_PX`` wide (turned nearly edge-on to it): its grey blends into the edge's step and
+    moves it outward (0.12 px on the insert's side 7° from edge-on). A wall seen wider has
+    its own step beyond the top's; one facing away is hidden behind the top."""
+    R = rot_z(angle)[:2, :2]
+    xy, nw = edges.points[:, :2] @ R.T + t[:2], edges.normals @ R.T
+    top = camera.project(np.column_stack([xy, edges.points[:, 2] + t[2]]))
+    foot = camera.project(np.column_stack([xy, edges.below + t[2]]))
+    out = camera.project(np.column_stack([xy + 0.05 * nw, edges.points[:, 2] + t[2]])) - top
+    width = np.einsum("ij,ij->i", foot - top, out / np.linalg.norm(out, axis=1, keepdims=True))
+    return (width > 0) & (width < WALL_PX)
+
+
+def _visible(heights: HeightImage, edges: Outline, camera: CameraModel, angle: float,
+             t: np.ndarray) -> np.ndarray:
+    """(K,) bool: the outline points the part does not hide from ``camera`` at the pose
+    (turn ``angle`` rad, shift ``t`` (3,)): the height image lies below the ray from each
+    point to the camera, looked at every 0.2 mm (in x, y) up to 40 mm."""
+    R = rot_z(angle)
+    c = R.T @ (camera.centre_world - t)              # the camera in the part's frame
+    d = c - edges.points
+    d /= np.linalg.norm(d[:, :2], axis=1, keepdims=True)   # per mm in x, y
+    h = np.arange(0.2, 40.0, 0.2)
+    q = edges.points[:, None, :] + h[None, :, None] * d[:, None, :]
+    z = sample([heights.z], *heights.pixel(q.reshape(-1, 3)))[0].reshape(q.shape[:2])
+    return ~(z > q[..., 2] + 0.05).any(axis=1)

@@ -1,0 +1,104 @@
+"""Locating from the room-light frame's edges (:mod:`insitu.measure.image_edges`): the
+insert turned to within 0.04° by them (its scan lines' ends leave 0.05–0.15°); a frame
+without the part, of another size, or showing it elsewhere is not used, and says why;
+``insitu locate --room-light`` needs the camera."""
+
+import numpy as np
+import pytest
+from typer.testing import CliRunner
+
+from insitu.cli.main import app
+from insitu.geometry.pose import pose_matrix
+from insitu.measure.image_edges import align_image
+from insitu.measure.locate import LocateRefused, locate_part
+from insitu.measure.part_reference import reference_from_mesh
+from insitu.services.room_light import station_room_light
+from insitu.services.station import simulated
+from insitu.sim.rig import default_rig
+from insitu.sim.workpieces import make_workpiece
+from insitu.sim.world import SimWorld, sim_world
+from test_locate import synthetic_scan
+
+POSE = (6.0, -4.0, 37.0)
+
+
+@pytest.fixture(scope="module")
+def rig():
+    return default_rig(seed=0, binning=2)
+
+
+@pytest.fixture(scope="module")
+def insert():
+    w = make_workpiece("insert")
+    return reference_from_mesh(w.vertices, w.triangles, "insert")
+
+
+def _frame(world):
+    with simulated(world) as station:
+        return station_room_light(station).image
+
+
+def _errors(angle_deg, xy, pose):
+    return (float(np.hypot(xy[0] - pose[0], xy[1] - pose[1])),
+            abs((angle_deg - pose[2] + 60.0) % 120.0 - 60.0))
+
+
+def test_the_frames_edges_turn_the_insert_within_four_hundredths_of_a_degree(rig, insert):
+    image = _frame(sim_world("insert", rig=rig, pose=POSE))
+    start = pose_matrix(POSE[0] + 0.04, POSE[1] - 0.03, POSE[2] + 0.12)
+    fit = align_image(image, rig.camera, insert.heights, insert.outline, start)
+    assert not isinstance(fit, str), fit
+    xy, turn = _errors(np.degrees(fit.angle_rad), fit.xy_mm, POSE)
+    assert xy < 0.01 and turn < 0.04, (xy, turn)
+    assert fit.edges > 0.8 * fit.visible and fit.sigma_deg < 0.02
+
+
+def test_a_frame_without_the_part_or_of_another_camera_is_not_used(rig, insert):
+    table = _frame(SimWorld(rig, parts=[], seed=0))
+    start = pose_matrix(*POSE)
+    why = align_image(table, rig.camera, insert.heights, insert.outline, start)
+    assert isinstance(why, str) and "not the part's edges" in why
+    why = align_image(table[:100], rig.camera, insert.heights, insert.outline, start)
+    assert isinstance(why, str) and "px" in why
+
+
+def test_locate_takes_the_frames_edges_only_where_they_agree_with_the_scan(rig, insert):
+    points, lines = synthetic_scan("insert", POSE, noise=0.02)
+    near = (POSE[2] - 30.0, POSE[2] + 30.0)
+    alone = locate_part(insert, points, lines=lines, prefer_angle=near).best
+    here = _frame(sim_world("insert", rig=rig, pose=POSE))
+    got = locate_part(insert, points, lines=lines, prefer_angle=near, camera=rig.camera,
+                      image=here).best
+    assert got.image_edges > 0 and got.image_note == ""
+    xy, turn = _errors(got.angle_deg, (got.x_mm, got.y_mm), POSE)
+    assert xy < 0.01 and turn < 0.04, (xy, turn)
+    elsewhere = _frame(sim_world("insert", rig=rig, pose=(POSE[0] + 0.4, POSE[1], POSE[2])))
+    kept = locate_part(insert, points, lines=lines, prefer_angle=near, camera=rig.camera,
+                       image=elsewhere).best
+    assert kept.image_edges == 0 and kept.image_note.startswith("not used")
+    assert (kept.x_mm, kept.y_mm, kept.angle_deg) == (alone.x_mm, alone.y_mm, alone.angle_deg)
+
+
+def test_the_command_wants_the_camera_for_a_room_light_frame(tmp_path):
+    frame = tmp_path / "room.png"
+    frame.write_bytes(b"")
+    got = CliRunner().invoke(app, ["locate", "part.stl", "cloud.ply", "-o",
+                                   str(tmp_path / "pose.json"), "--room-light", str(frame)])
+    assert got.exit_code != 0 and "--room-light needs --height-cal" in got.output
+    assert not (tmp_path / "pose.json").exists()
+
+
+def test_the_frame_places_a_part_the_scan_lines_leave_unheld(rig, insert):
+    points, lines = synthetic_scan("insert", POSE, noise=0.05, spacing=2.0)
+    near = (POSE[2] - 30.0, POSE[2] + 30.0)
+    with pytest.raises(LocateRefused, match="not pinned down"):
+        locate_part(insert, points, lines=lines, prefer_angle=near)
+    here = _frame(sim_world("insert", rig=rig, pose=POSE))
+    got = locate_part(insert, points, lines=lines, prefer_angle=near, camera=rig.camera,
+                      image=here).best
+    xy, turn = _errors(got.angle_deg, (got.x_mm, got.y_mm), POSE)
+    assert got.image_edges > 0 and xy < 0.01 and turn < 0.04, (xy, turn)
+    elsewhere = _frame(sim_world("insert", rig=rig, pose=(POSE[0] + 0.6, POSE[1], POSE[2])))
+    with pytest.raises(LocateRefused, match="the room-light frame: not used"):
+        locate_part(insert, points, lines=lines, prefer_angle=near, camera=rig.camera,
+                    image=elsewhere)
