@@ -51,8 +51,10 @@ part's (its own: 0.01–0.06 mm; the texture of an empty table: 0.45)."""
 MIN_POINTS = 50
 MIN_FOUND = 0.5
 ITERATIONS = 10
-"""Steps at most; the found edges may flicker between pixels, so the last step need only be
-within the fit's own 1σ (or 0.002 mm, 0.002°)."""
+SETTLE_MM = 0.005
+SETTLE_RAD = np.radians(0.02)
+"""Steps at most; the edges found may flicker between pixels (an edge along the pixel grid),
+so the last step need only be within the fit's own 1σ or these."""
 
 
 @dataclass(frozen=True)
@@ -157,8 +159,8 @@ def align_image(image: np.ndarray, camera: CameraModel, heights: HeightImage,
         return (f"the frame's edges scatter {mad:.3f} mm about the outline (at most "
                 f"{MAX_SPREAD_MM:g}): not the part's edges")
     cov = mad ** 2 * np.linalg.inv(A)
-    if (abs(x[0]) > max(np.sqrt(cov[0, 0]), 4e-5)
-            or np.linalg.norm(x[1:]) > max(np.sqrt(np.trace(cov[1:, 1:])), 2e-3)):
+    if (abs(x[0]) > max(np.sqrt(cov[0, 0]), SETTLE_RAD)
+            or np.linalg.norm(x[1:]) > max(np.sqrt(np.trace(cov[1:, 1:])), SETTLE_MM)):
         return (f"the fit to the frame's edges did not settle in {ITERATIONS} steps (the last "
                 f"{np.degrees(x[0]):+.4f}°, {np.linalg.norm(x[1:]):.4f} mm)")
     return ImageFit(angle, t[:2].copy(), int(found.sum()), len(p),

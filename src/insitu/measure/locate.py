@@ -76,7 +76,8 @@ class LocateSettings:
     max_sigma_mm: float = 0.03
     turn_step_deg: float = 5.0
     turn_candidates: int = 6
-    agree_mm: float = 0.02
+    agree_mm: float = 0.05   # + 3σ: how far the frame's pose may lie from the scan's (whose
+    #                          σ misses its pixel aliasing: the arc at 91°, 0.053 mm at its rim)
 
 
 @dataclass(frozen=True)
