@@ -1,13 +1,14 @@
 """Locating from the room-light frame's edges (:mod:`insitu.measure.image_edges`): the
 insert turned to within 0.04° by them (its scan lines' ends leave 0.05–0.15°); a frame
 without the part, of another size, or showing it elsewhere is not used, and says why;
-``insitu locate --room-light`` needs the camera."""
+``insitu scan --room-light`` writes the frame, ``insitu locate --room-light`` needs the camera."""
 
 import numpy as np
 import pytest
 from typer.testing import CliRunner
 
 from insitu.cli.main import app
+from insitu.formats.images import read_image
 from insitu.geometry.pose import pose_matrix
 from insitu.measure.image_edges import align_image
 from insitu.measure.locate import LocateRefused, locate_part
@@ -102,3 +103,13 @@ def test_the_frame_places_a_part_the_scan_lines_leave_unheld(rig, insert):
     with pytest.raises(LocateRefused, match="the room-light frame: not used"):
         locate_part(insert, points, lines=lines, prefer_angle=near, camera=rig.camera,
                     image=elsewhere)
+
+
+def test_the_scan_command_writes_its_room_light_frame(tmp_path):
+    got = CliRunner().invoke(app, ["scan", "-o", str(tmp_path / "part.ply"), "--workpiece",
+                                   "insert", "--binning", "4", "--spacing", "0.5",
+                                   "--room-light", str(tmp_path / "room.png")])
+    assert got.exit_code == 0, got.output
+    frame = read_image(tmp_path / "room.png")
+    camera = default_rig(seed=0, binning=4).camera
+    assert frame.shape == (camera.height, camera.width) and frame.max() > 100

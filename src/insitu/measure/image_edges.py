@@ -9,11 +9,11 @@ centre is found to a fraction of a pixel. Each point of the reference's outline 
 side of every drop, :func:`outline`) is projected through the camera at the located pose;
 along the edge's normal in the image the steepest step of grey within ``SEARCH_PX`` is the
 edge, placed by a parabola through the derivative's peak; that pixel's ray cut at the
-point's height gives the edge in x, y. Points whose wall the camera sees as a thin sliver
-are left out: its grey blends into the step. Gauss–Newton on the distances across the edges (Huber
-weights) turns and shifts the outline onto them, searching again at each step. Outline
-points the part hides from the camera (a higher wall in front of them) or whose grey value
-does not step (two surfaces alike) are not used.
+point's height gives the edge in x, y. Gauss–Newton on the distances across the edges
+(Huber weights) turns and shifts the outline onto them, searching again at each step.
+Outline points are not used where the part hides them from the camera (a higher wall in
+front), where the camera sees their wall as a thin sliver (its grey blends into the step),
+where the grey value does not step (two surfaces alike) or a pixel on the way is clipped.
 """
 
 from __future__ import annotations
