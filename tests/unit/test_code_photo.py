@@ -126,3 +126,16 @@ def test_a_bent_symbol_is_sampled_on_its_modules():
                      np.array([0.0, s]), "datamatrix", True)
     assert g.overall >= 3 and g.reflectance_margin == 4, g.summary()
     assert g.grid_nonuniformity > 0.1
+
+
+def test_a_blurred_grown_mark_reads_sharpened(monkeypatch):
+    """A 0.3 mm Data Matrix as the simulated rig's read-back rectifies it (3.8 camera px a
+    module through the lens PSF: its light modules small and grey) reads only through the
+    sharpened rung of the ladder."""
+    from insitu.marking.readback import decode_picture
+    from insitu.vision import code_decode
+
+    picture = read_image(PHOTOS.parent / "readback" / "dm-0.3mm-blurred.png", 0)
+    assert decode_picture(picture, "datamatrix", 8) == "SN 0000"
+    monkeypatch.setattr(code_decode, "SHARPEN", 0.0)
+    assert decode_picture(picture, "datamatrix", 8) is None

@@ -111,13 +111,14 @@ class ImageFit:
 
 
 def align_image(image: np.ndarray, camera: CameraModel, heights: HeightImage,
-                edges: Outline, T_world_part: np.ndarray) -> ImageFit | str:
+                edges: Outline, T_world_part: np.ndarray,
+                max_spread_mm: float = MAX_SPREAD_MM) -> ImageFit | str:
     """The pose that puts ``edges`` (the reference's, :func:`outline`; ``heights`` its height
     image) on the edges of ``image`` (H, W) grey, a frame of ``camera`` under the room light
     with the part as the scan found it, starting from ``T_world_part`` (4, 4; a turn about
     z and a shift). Why not, as a sentence, when the frame is not the camera's, too few
     outline points are in view or show an edge, the edges found scatter about the fit, or
-    the fit does not settle."""
+    the fit does not settle (``max_spread_mm``: at most this robust 1σ about the fit)."""
     if image.shape[:2] != (camera.height, camera.width):
         return (f"the frame is {image.shape[1]}×{image.shape[0]} px, the camera "
                 f"{camera.width}×{camera.height}")
@@ -155,9 +156,9 @@ def align_image(image: np.ndarray, camera: CameraModel, heights: HeightImage,
         angle += x[0]
         if abs(x[0]) < 2e-5 and np.linalg.norm(x[1:]) < 1e-3:   # 0.001°, 0.001 mm
             break
-    if mad > MAX_SPREAD_MM:
+    if mad > max_spread_mm:
         return (f"the frame's edges scatter {mad:.3f} mm about the outline (at most "
-                f"{MAX_SPREAD_MM:g}): not the part's edges")
+                f"{max_spread_mm:g}): not the part's edges")
     cov = mad ** 2 * np.linalg.inv(A)
     if (abs(x[0]) > max(np.sqrt(cov[0, 0]), SETTLE_RAD)
             or np.linalg.norm(x[1:]) > max(np.sqrt(np.trace(cov[1:, 1:])), SETTLE_MM)):
