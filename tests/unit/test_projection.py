@@ -278,6 +278,22 @@ def test_nothing_is_marked_in_the_strip_a_step_leaves_unmeasured(shift):
     assert not (np.abs(proj.points[:, 1] + 0.1) < 0.01).any()  # the row at y = −0.1: none
 
 
+def test_beyond_a_levels_last_point_less_is_measured_as_the_levels_lie_apart():
+    """The levels' facing points 1.45 spacings apart, the upper's last 0.02 mm over the true
+    edge (the step block on the simulated rig): a target 0.07 mm beyond it is unmeasured — a
+    half spacing's allowance (a fully measured step's) marked it 2 mm high; 0.03 mm beyond
+    it, still within the upper's measured extent, is measured."""
+    x = np.arange(-3.0, 3.01, 0.5)
+    upper = -0.02 + 0.15 * np.arange(40)
+    lower = -0.02 - 1.45 * 0.15 - 0.15 * np.arange(40)
+    cloud = np.vstack([np.column_stack([np.repeat(x, len(y)), np.tile(y, len(x)),
+                                        np.full(len(x) * len(y), z)])
+                       for y, z in ((upper, 5.0), (lower, 3.0))])
+    s = Surface(cloud).sample(np.array([[0.0, -0.09], [0.0, -0.05], [0.0, 0.05]]))
+    assert s.unmeasured.tolist() == [True, False, False]
+    np.testing.assert_allclose(s.z[1:], 5.0, atol=1e-6)
+
+
 def test_a_fully_measured_step_keeps_its_paths_whole():
     cloud = grid_cloud(lambda x, y: np.where(y > 0.0, 5.0, 3.0), -6, 6, -6, 6, 0.15)
     proj = project([np.array([[1.0, -3.0], [1.0, 3.0]])], cloud)

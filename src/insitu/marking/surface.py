@@ -20,9 +20,12 @@ lines stop short of the edge: between the two levels lies a strip neither measur
 there is ``unmeasured``: across the wall (from its level towards the other), its level's
 nearest measured point — among those beside it along the wall, within the coverage spacing —
 lies more than half the point spacing behind it (a measured point stands for ± half the
-spacing around it). Where points were lost there (the levels' facing points more than 1.5
-spacings apart), the wall may be anywhere in the strip and a level's last point itself may lie
-over the edge: a point within half a spacing of it is unmeasured too. Nothing is marked there.
+spacing around it) where the levels' facing points are a spacing apart; less as they lie
+further apart (a quarter at 1.5 spacings: the step block's upper level 0.019 mm over its edge
+and a target 0.076 mm beyond that, 0.47 spacing, was marked 2 mm high). Where points were lost
+there (the facing points more than 1.5 spacings apart), the wall may be anywhere in the strip
+and a level's last point itself may lie over the edge: a point within half a spacing of it is
+unmeasured too. Nothing is marked there.
 """
 
 from __future__ import annotations
@@ -170,8 +173,8 @@ class Surface:
         beside = along <= self.coverage_mm
         edge = np.where(own & beside, across, -np.inf).max(1)     # the level's last point
         foot = np.where(other & beside, across, np.inf).min(1)    # the other's first, mm
-        lost = foot - edge > _LOST * self.spacing_mm
-        need = np.where(lost, 0.5, -0.5) * self.spacing_mm
+        sp, gap = self.spacing_mm, foot - edge
+        need = np.where(gap > _LOST * sp, 0.5 * sp, np.clip(0.5 * gap - sp, -0.5 * sp, 0.0))
         return other.any(1) & (norm > 0) & (edge < need)
 
     def quadric(self, centre: np.ndarray, radius_mm: float, max_points: int = 20000
