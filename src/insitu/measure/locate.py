@@ -3,7 +3,7 @@ and a shift), or a refusal naming why — never a doubtful pose.
 
 1. The table is taken away (:func:`~insitu.measure.part_reference.find_table`).
 2. Global step, two ways, on a ``voxel_mm`` grid: FPFH features matched by RANSAC
-   (``open3d.pipelines.registration``), and a search over turns about z (every
+   (``open3d.pipelines.registration``, :data:`RANSAC_RUNS` times), and a search over turns about z (every
    ``turn_step_deg``, x, y from the tops' centroids) for parts with few features; each start
    refined by a coarse flat ICP.
 3. Fine step: point-to-plane ICP of the scan (thinned to ``fine_voxel_mm``, table excluded)
@@ -45,6 +45,10 @@ MIN_POINTS = 200
 UNHELD_MM = 0.3
 """How far the room-light frame's edges may move a pose the scan's edges did not hold."""
 MAX_FINE_POINTS = 40_000
+RANSAC_RUNS = 4
+"""FPFH + RANSAC starts, each seeded anew: Open3D's RANSAC is multi-threaded and not
+repeatable whatever its seed, and one run finds the independent recording's half block (whose
+centroid the turn search cannot use) 17 times in 20."""
 
 
 class LocateRefused(MeasurementError):
@@ -238,9 +242,7 @@ def _global(ref: PartReference, part: np.ndarray, s: LocateSettings, z0: float) 
     rtree = ref.__dict__.setdefault("_coarse_tree", {}).setdefault(v, cKDTree(rp))
     cp, _, cf = coarse_features(part, None, v)
     starts = _turn_search(rp, rtree, cp, ref.top_centroid, z0, s)
-    fp = _fpfh_start(cp, cf, rp, rf, v)
-    if fp is not None:
-        starts.append(fp)
+    starts += [p for seed in range(RANSAC_RUNS) if (p := _fpfh_start(cp, cf, rp, rf, v, seed))]
     return [icp_flat(cp, rp, rn, rtree, p, (4 * v, 2 * v, v), iterations=10, inlier_mm=v)
             for p in starts]
 
@@ -267,9 +269,9 @@ def _turn_search(rp, rtree, cp, centre_r, z0: float, s: LocateSettings) -> list[
     return [poses[i] for i in chosen]
 
 
-def _fpfh_start(cp, cf, rp, rf, v: float) -> Pose4 | None:
-    """FPFH + RANSAC (Open3D) start, flattened to a turn about z; None when it tilts the
-    part more than 10°."""
+def _fpfh_start(cp, cf, rp, rf, v: float, seed: int = 0) -> Pose4 | None:
+    """FPFH + RANSAC (Open3D, seeded with ``seed``) start, flattened to a turn about z; None
+    when it tilts the part more than 10°."""
     import open3d as o3d
 
     reg = o3d.pipelines.registration
@@ -277,7 +279,7 @@ def _fpfh_start(cp, cf, rp, rf, v: float) -> Pose4 | None:
                 for p in (cp, rp))
     fs, fd = reg.Feature(), reg.Feature()
     fs.data, fd.data = np.ascontiguousarray(cf), np.ascontiguousarray(rf)
-    o3d.utility.random.seed(0)
+    o3d.utility.random.seed(seed)
     res = reg.registration_ransac_based_on_feature_matching(
         src, dst, fs, fd, False, 1.5 * v, reg.TransformationEstimationPointToPoint(False), 3,
         [reg.CorrespondenceCheckerBasedOnEdgeLength(0.9),
