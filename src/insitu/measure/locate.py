@@ -3,9 +3,9 @@ and a shift), or a refusal naming why — never a doubtful pose.
 
 1. The table is taken away (:func:`~insitu.measure.part_reference.find_table`).
 2. Global step, two ways, on a ``voxel_mm`` grid: FPFH features matched by RANSAC
-   (``open3d.pipelines.registration``, :data:`RANSAC_RUNS` times), and a search over turns about z (every
-   ``turn_step_deg``, x, y from the tops' centroids) for parts with few features; each start
-   refined by a coarse flat ICP.
+   (``open3d.pipelines.registration``; up to :data:`RANSAC_RUNS` times), and a search over
+   turns about z (every ``turn_step_deg``, x, y from the tops' centroids) for parts with few
+   features; each start refined by a coarse flat ICP.
 3. Fine step: point-to-plane ICP of the scan (thinned to ``fine_voxel_mm``, table excluded)
    onto the dense reference, restricted to the 4 degrees of freedom of a part lying flat
    (:mod:`insitu.measure.flat_icp`); then x, y and the turn from the edges the scan lines
@@ -46,9 +46,10 @@ UNHELD_MM = 0.3
 """How far the room-light frame's edges may move a pose the scan's edges did not hold."""
 MAX_FINE_POINTS = 40_000
 RANSAC_RUNS = 4
-"""FPFH + RANSAC starts, each seeded anew: Open3D's RANSAC is multi-threaded and not
-repeatable whatever its seed, and one run finds the independent recording's half block (whose
-centroid the turn search cannot use) 17 times in 20."""
+"""FPFH + RANSAC starts, each seeded anew, when the first run's best would be refused: Open3D's
+RANSAC is not repeatable whatever its seed, and one run finds the independent recording's half
+block (whose centroid the turn search cannot use) 17 times in 20 (0.3 s a run at 200 k
+points, one core: a run, not four, where the part is found)."""
 
 
 class LocateRefused(MeasurementError):
@@ -192,6 +193,9 @@ def locate_part(reference: PartReference, points: np.ndarray,
     z0 = reference.base_z_mm - (table if table is not None else part[:, 2].min())
     fits = _global(reference, part, s, z0)
     sols = _refine(reference, fine, fits, s)
+    if not sols or sols[0].fitness < s.min_fitness or sols[0].coverage < s.min_coverage:
+        fits += _global(reference, part, s, z0, range(1, RANSAC_RUNS), turns=False)
+        sols = _refine(reference, fine, fits, s)
     sols = _aligned(reference, pts, None if lines is None else np.asarray(lines), ~up, fine,
                     sols, s, camera)
     rim = float(np.linalg.norm(reference.top[:, :2] - reference.top_centroid, axis=1).max())
@@ -235,14 +239,16 @@ def _subsample(points: np.ndarray, n: int) -> np.ndarray:
     return points[np.random.default_rng(0).choice(len(points), n, replace=False)]
 
 
-def _global(ref: PartReference, part: np.ndarray, s: LocateSettings, z0: float) -> list[Fit]:
-    """Coarse fits (world → part) from the turn search and from FPFH + RANSAC."""
+def _global(ref: PartReference, part: np.ndarray, s: LocateSettings, z0: float,
+            seeds: range = range(1), turns: bool = True) -> list[Fit]:
+    """Coarse fits (world → part) from the turn search (with ``turns``) and from FPFH +
+    RANSAC, a run for each of ``seeds``."""
     v = s.voxel_mm
     rp, rn, rf = ref.coarse(v)
     rtree = ref.__dict__.setdefault("_coarse_tree", {}).setdefault(v, cKDTree(rp))
     cp, _, cf = coarse_features(part, None, v)
-    starts = _turn_search(rp, rtree, cp, ref.top_centroid, z0, s)
-    starts += [p for seed in range(RANSAC_RUNS) if (p := _fpfh_start(cp, cf, rp, rf, v, seed))]
+    starts = _turn_search(rp, rtree, cp, ref.top_centroid, z0, s) if turns else []
+    starts += [p for seed in seeds if (p := _fpfh_start(cp, cf, rp, rf, v, seed))]
     return [icp_flat(cp, rp, rn, rtree, p, (4 * v, 2 * v, v), iterations=10, inlier_mm=v)
             for p in starts]
 
