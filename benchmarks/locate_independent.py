@@ -50,7 +50,8 @@ DEFAULT = Path(__file__).resolve().parents[2] / "shared" / "recordings"
 def median_frame(scan: Path) -> np.ndarray:
     """(H, W) the recording's frames' per-pixel median: the laser lines taken away."""
     seq = Sequence.open(scan)
-    return np.median(np.stack([image for _, _, image in seq]), axis=0).astype(seq.read_frame(0).dtype)
+    frames = np.stack([image for _, _, image in seq])
+    return np.median(frames, axis=0).astype(frames.dtype)
 
 
 def measure(root: Path, paper: bool = False) -> tuple[PointCloud, dict, list[float]]:
@@ -166,12 +167,12 @@ def main() -> None:
                               ("true", true_camera, 1.0)):
         fit = align_image(frame, cam, ref.heights, ref.outline, pose_matrix(*p["center"], 0.0),
                           spread)
+        what = fit if isinstance(fit, str) else (
+            f"x {fit.xy_mm[0] - p['center'][0]:+.3f}, y {fit.xy_mm[1] - p['center'][1]:+.3f} "
+            f"mm, turn {np.degrees(fit.angle_rad):+.3f}° (1σ {fit.sigma_deg:.3f}°), "
+            f"{fit.edges} edge points, scatter {fit.rms_mm:.3f} mm")
         console.print(f"the frames' median alone, its edges fitted from the truth through the "
-                      f"{name} camera, scatter up to {spread:g} mm: " + (fit if isinstance(fit, str) else
-                      f"x {fit.xy_mm[0] - p['center'][0]:+.3f}, y "
-                      f"{fit.xy_mm[1] - p['center'][1]:+.3f} mm, turn "
-                      f"{np.degrees(fit.angle_rad):+.3f}° (1σ {fit.sigma_deg:.3f}°), "
-                      f"{fit.edges} edge points, scatter {fit.rms_mm:.3f} mm"))
+                      f"{name} camera, scatter up to {spread:g} mm: {what}")
 
 
 if __name__ == "__main__":

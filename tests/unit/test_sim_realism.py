@@ -70,9 +70,9 @@ def test_fixed_pattern_noise_belongs_to_the_camera(rig):
 def test_a_parts_edges_fall_between_pixels_in_the_room_light(rig, pose):
     """A pixel a part's edge crosses integrates its area (one ray per pixel, or a half-size
     map enlarged, puts the edge on whole pixels): the insert's top edges in the noise-free
-    room light — the laser frames' background and the laser-off frame — lie on its outline
-    within 0.04 mm (robust 1σ; 0.155 mm pixels; the half-size map 0.062–0.074) and turn it
-    less than 0.04°."""
+    room light — the renderer's (the laser frames' background, the laser-off frame) and the
+    inspection frame's — lie on its outline within 0.04 mm (robust 1σ; 0.155 mm pixels; the
+    half-size map 0.062–0.074) and turn it less than 0.04°."""
     from insitu.geometry.pose import pose_matrix
     from insitu.measure.image_edges import align_image
     from insitu.measure.part_reference import reference_from_mesh
