@@ -110,3 +110,32 @@ def check_extent(pts_mm: np.ndarray, path: Path, what: str) -> None:
     span = float(np.ptp(pts_mm, axis=0).max())
     if span > MAX_MM:
         raise FormatError(f"{path}: {what} is {span:.4g} mm across (more than {MAX_MM:g} mm)")
+
+
+def dashed(points, pattern, offset: float = 0.0, closed: bool = False,
+           max_dashes: int = 200_000) -> list[np.ndarray]:
+    """The pieces (each (n, 2)) of a polyline (N, 2) under a dash ``pattern`` — lengths on,
+    off, on, off, … in the points' units (an even count; a dash of length 0 is a dot, a
+    one-point piece) — starting ``offset`` into the pattern; a closed polyline is dashed from
+    its first point round to it. A line needing more than ``max_dashes`` dashes is returned
+    whole (its dashes are finer than anything a beam draws)."""
+    p = np.asarray(points, np.float64)[:, :2]
+    if closed:
+        p = np.vstack([p, p[:1]])
+    s = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(p, axis=0), axis=1))])
+    total, pat = float(s[-1]), np.asarray(pattern, np.float64)
+    period = float(pat.sum())
+    if not (total > 0 and period > 0) or total / period * len(pat) / 2 > max_dashes:
+        return [p]
+    edges = np.concatenate([[0.0], np.cumsum(pat)])
+    first = -(offset % period)
+    k = np.arange(math.ceil((total - first) / period) + 1)[:, None] * period + first
+    a = (k + edges[0:-1:2][None, :]).ravel()
+    b = (k + edges[1::2][None, :]).ravel()
+    keep = (b >= 0) & (a <= total) & ((b > a) | (a >= 0))
+    out = []
+    for lo, hi in zip(np.clip(a[keep], 0, total), np.clip(b[keep], 0, total)):
+        inner = np.flatnonzero((s > lo) & (s < hi))
+        t = np.concatenate([[lo], s[inner], [hi]]) if hi > lo else np.array([lo])
+        out.append(np.column_stack([np.interp(t, s, p[:, 0]), np.interp(t, s, p[:, 1])]))
+    return out
