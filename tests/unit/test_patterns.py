@@ -460,5 +460,5 @@ def test_svg_shape_of_absurd_size_is_refused(tmp_path):
     (tmp_path / "huge.svg").write_text(
         '<svg xmlns="http://www.w3.org/2000/svg" width="10mm" height="10mm" viewBox="0 0 10 10">'
         '<rect x="0" y="0" width="1e300" height="5" fill="black"/></svg>')
-    with pytest.raises(FormatError, match=r"huge\.svg: a <rect> has coordinates that .* beyond"):
+    with pytest.raises(FormatError, match=r"huge\.svg: <rect> #1 has coordinates that .* beyond"):
         load_pattern(tmp_path / "huge.svg")

@@ -6,7 +6,8 @@ A spec is a file (its suffix picks the source) or ``prefix:payload`` (text:, qr:
 microqr:, code128:, fiducials:),
 each with optional ``;key=value`` options at the end (the entry's ``options``)::
 
-    logo.svg                         SVG (fills → contours, strokes → paths)
+    logo.svg                         SVG or .svgz (fills → contours, strokes → paths),
+                                     paint=threshold|dither for gradients and the like
     photo.png;mode=dither;width=20   image: mode fill|threshold|dither, dpi, width (mm),
                                      threshold (0–1), invert (0/1)
     text:"Serial 0042";font=DejaVu Serif Bold;size=5
@@ -100,9 +101,11 @@ def _fiducials(body: str, o: dict) -> Pattern:
 
 
 SOURCES: dict[str, PatternSource] = {
-    "svg": PatternSource(lambda path, o: svg.load_svg(path, beam_mm=o.get("beam", BEAM_MM)),
-                         "SVG drawing, strokes ≥ ;beam= mm as areas", {"beam": float},
-                         suffixes=(".svg",)),
+    "svg": PatternSource(lambda path, o: svg.load_svg(path, beam_mm=o.get("beam", BEAM_MM),
+                                                      paint=o.get("paint", "threshold")),
+                         "SVG drawing, strokes ≥ ;beam= mm as areas, shaded paints "
+                         ";paint=threshold|dither", {"beam": float, "paint": str},
+                         suffixes=(".svg", ".svgz")),
     "dxf": PatternSource(lambda path, o: dxf.load_dxf(path, fill=o.get("fill", "auto"),
                                                       units=o.get("units")),
                          "DXF drawing, ;fill=auto|all|none ;units=", {"fill": str, "units": str},
