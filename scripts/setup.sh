@@ -2,7 +2,7 @@
 # Sourced by demo.sh and test.sh: installs what is missing, quickly when nothing is.
 # Debian system libraries (open3d: libusb; Qt/OpenGL tests: Xvfb + Mesa; Qt's xcb platform, which
 # the OpenGL test and `insitu gui` on a desktop use: libxcb-*; the fake RTC library that the
-# device tests compile: gcc, libc6-dev; cairosvg for the vector corpus: libcairo2), then .venv with insitu, its GUI and the test tools
+# device tests compile: gcc, libc6-dev; cairosvg, which renders SVG paints: libcairo2), then .venv with insitu, its GUI and the test tools
 # (INSITU_EXTRAS, default gui,test,test-gui; scripts/test-core.sh makes .venv-core without the GUI).
 set -euo pipefail
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"

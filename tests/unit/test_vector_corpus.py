@@ -38,8 +38,6 @@ SVGS = [p for p in FILES if p.suffix.lower() == ".svg"]
 # what the reference leaves out or reads differently, and why (the loader's own behaviour is
 # tested in test_every_file_loads_or_is_refused_in_one_line and test_patterns.py)
 REFERENCE_EDITS = {
-    # text is not marked (the loader warns): left out of the reference too
-    "transforms.svg": [(r"<text\b.*?</text>", "")],
     # stroke-width="0.35 px" (a space inside the length): svgelements reads 0.35 px,
     # cairosvg draws no stroke; the reference is drawn with the space taken out
     "negative-scale.svg": [(r"0\.35 px", "0.35px")],

@@ -94,12 +94,11 @@ def test_a_file_without_a_page_is_not_clipped(tmp_path):
     assert p.to_shapely().area == pytest.approx(400 * PX * PX, rel=1e-9)
 
 
-def test_text_and_images_left_out_are_said(tmp_path):
-    body = ('<rect width="10" height="10"/><text x="20" y="20">A</text>'
-            '<image x="0" y="0" width="5" height="5" href="x.png"/>')
+def test_what_is_left_out_is_said(tmp_path):
+    body = ('<rect width="10" height="10"/><foreignObject x="20" y="20" width="5" height="5">'
+            '<p xmlns="http://www.w3.org/1999/xhtml">A</p></foreignObject>')
     notes = load_pattern(_svg(tmp_path, body)).notes
-    assert "warning: 1 <text> element(s) not marked (convert text to paths)" in notes
-    assert "warning: 1 <image> element(s) not marked" in notes
+    assert "warning: 1 <foreignObject> element(s) not marked" in notes
 
 
 # --- DXF ---------------------------------------------------------------------------------------

@@ -148,9 +148,8 @@ def load_svg(path: str | Path, tol_mm: float = TOL_MM, beam_mm: float = BEAM_MM,
     if clipped:
         notes.append(clipped)
     notes += warnings
-    for what, effect in list(doc.effects.items())[:3]:
-        notes.append(f"warning: {what}: {effect} drawn as cairosvg draws it (blur and "
-                     "lighting effects are not applied)")
+    for what, effect in list(doc.effects.items())[:5]:
+        notes.append(f"warning: {what}: {effect}")
     for family, used in doc.fonts.items():
         notes.append(f"warning: font {family!r} is not installed: its text is outlined "
                      f"with {used}")

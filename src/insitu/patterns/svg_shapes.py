@@ -22,6 +22,9 @@ from insitu.patterns.vector import (MM_PER_PX, _arc_steps, bezier_points, bezier
                                     check_extent, check_finite, dashed)
 
 
+_NUMERIC = ("x", "y", "width", "height", "r", "rx", "ry", "cx", "cy", "x1", "y1", "x2", "y2")
+
+
 def subpaths(shape, se, tol: float, budget, what: str) -> list[tuple[np.ndarray, bool]]:
     """Flatten one svgelements shape, in its own user space, into (points, closed) subpaths
     within ``tol`` of the curves; a lone move-to is a one-point subpath (a dot under a round
@@ -251,17 +254,19 @@ def shape_items(doc, el, name: str, c: Ctx, style: dict) -> list[Item]:
 
     if style.get("visibility", "visible") in ("hidden", "collapse"):
         return []
+    what = doc.describe(el)
+    check_finite([[length(el.get(k)), 0.0] for k in _NUMERIC if el.get(k)], doc.path, what)
     shape = geometry(el, name, style, c.viewport)
     if shape is None:
         return []
-    what = doc.describe(el)
-    scale = float(np.linalg.norm(c.ctm[:, :2], 2))
+    scale = float(max(np.hypot(*c.ctm[:, 0]), np.hypot(*c.ctm[:, 1])))
     if not scale > 0:
         return []
     subs = subpaths(shape, se, doc.tol_px / scale, doc.budget, what)
     if not subs:
         return []
     page = [(apply(c.ctm, q), cl) for q, cl in subs]
+    check_finite(np.concatenate([q for q, _ in page]), doc.path, what)
     check_extent(np.concatenate([q for q, _ in page]) * MM_PER_PX, doc.path, what)
     rings = [q[:-1] if cl else q for q, cl in page if len(q) >= 3]
     if c.clip:

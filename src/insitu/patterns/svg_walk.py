@@ -222,7 +222,8 @@ def walk(doc: Doc, el, c: Ctx) -> list[Item]:
         if fid in doc.ids:
             why = why or "filter"
             kinds = sorted({local(f.tag) or "" for f in doc.ids[fid]} - {""})
-            doc.effects[doc.describe(el)] = f"filter ({', '.join(kinds[:3])})"
+            doc.effects[doc.describe(el)] = (f"filter ({', '.join(kinds[:3])}) drawn as cairosvg "
+                                             "draws it: blur and lighting are not applied")
     c = replace(c, ctm=compose(c.ctm, matrix(el.get("transform"))), why=why)
     if name in ("g", "a"):
         items = children(doc, el, replace(c, style=style))
