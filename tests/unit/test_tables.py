@@ -85,7 +85,7 @@ def test_the_loader_dispatches_on_the_pattern_sources(tmp_path):
     assert load_pattern(str(SAMPLES / "logo.svg")).contours
     assert load_pattern("fiducials:2x3").size == pytest.approx((11.0, 6.0))
     (tmp_path / "a.xyz").write_text("x")
-    with pytest.raises(FormatError, match=r"expected \.svg, \.dxf, \.png, .*\.webp\)"):
+    with pytest.raises(FormatError, match=r"expected \.svg, \.svgz, \.dxf, \.png, .*\.webp\)"):
         load_pattern(str(tmp_path / "a.xyz"))
     with pytest.raises(FormatError, match=r"unknown option 'colour' \(allowed: ec, quiet, invert"):
         load_pattern("qr:x;colour=red")
