@@ -186,3 +186,41 @@ def test_many_clones_of_a_shaded_tile_are_drawn_once(tmp_path):
     p = load_pattern(_svg(tmp_path, tile + uses, size='width="110" height="100"'))
     assert time.perf_counter() - t < 8
     assert len(shapely.get_parts(p.to_shapely())) >= 107
+
+
+def test_a_placement_that_enlarges_a_render_loads_it_at_a_finer_pixel(tmp_path):
+    from insitu.marking.placement import Placement
+
+    path = _svg(tmp_path, _GRADIENT)
+    natural = load_pattern(path)
+    placed = Placement(str(path), (0.0, 0.0), 100.0).placed()
+    scale = 100.0 / natural.mark_width
+    assert natural.raster_mm == pytest.approx(0.05) and scale > 4
+    assert placed.raster_mm * scale <= 0.05 * 1.01
+
+
+def test_pattern_show_takes_paint_and_refuses_a_bad_one(tmp_path):
+    from typer.testing import CliRunner
+
+    from insitu.cli.main import app
+
+    path = str(_svg(tmp_path, _GRADIENT))
+    res = CliRunner().invoke(app, ["pattern", "show", path, "--paint", "dither"])
+    assert res.exit_code == 0 and "0 contours" in res.output, res.output
+    res = CliRunner().invoke(app, ["pattern", "show", path, "--paint", "blur"])
+    assert res.exit_code == 1 and "--paint 'blur': expected one of threshold, dither" in res.output
+
+
+def test_insitu_pattern_imports_only_what_patterns_need():
+    import subprocess
+    import sys
+
+    code = ("import sys; sys.argv = ['insitu', 'pattern', '--help']\n"
+            "from insitu.cli.entry import main\n"
+            "try:\n    main()\nexcept SystemExit:\n    pass\n"
+            "heavy = [m for m in ('scipy', 'open3d', 'cv2', 'insitu.services', 'insitu.sim',"
+            " 'matplotlib') if m in sys.modules]\n"
+            "print('HEAVY', heavy)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         timeout=120).stdout
+    assert "HEAVY []" in out, out

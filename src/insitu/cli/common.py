@@ -15,6 +15,7 @@ from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import typer
+import typer.core
 from typer._click import exceptions as usage  # typer vendors click: its errors, not click's
 from rich.console import Console
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
@@ -204,3 +205,29 @@ def parse_heights(text: str) -> list[float]:
         fail(f"--heights {text!r}: expected distinct plate heights in mm separated by commas, "
              "e.g. 0,20")
     return zs
+
+
+USAGE_EXIT = 2                            # a command-line mistake exits 2, as click's do
+
+
+class OneLineUsage(typer.core.TyperGroup):
+    """The root group: a mistake in any command's options or arguments is one line on stderr
+    naming the option and what it expects, and exit code ``USAGE_EXIT``."""
+
+    def invoke(self, ctx: typer.Context):
+        words = [*getattr(ctx, "_protected_args", ()), *ctx.args]   # the command's name first
+        ctx.meta[ARGS_KEY] = words
+        try:
+            return super().invoke(ctx)
+        except usage.NoArgsIsHelpError:
+            raise
+        except usage.UsageError as e:
+            command, path = self, ctx.command_path
+            for word in words:                    # the (sub)command the words were for
+                sub = getattr(command, "commands", {}).get(word)
+                if sub is None:
+                    break
+                command, path = sub, f"{path} {word}"
+            err_console.print(tagged("error:", "bold red", usage_line(e, command, path)),
+                              highlight=False, soft_wrap=True)
+            raise typer.Exit(USAGE_EXIT) from None

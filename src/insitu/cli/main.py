@@ -8,7 +8,6 @@ from typing import Annotated
 
 import typer
 import typer.core
-from typer._click import exceptions as usage  # typer vendors click: its errors, not click's
 
 from insitu.cli import calibrate as calibrate_cmd
 from insitu.cli import camera as camera_cmd
@@ -25,36 +24,11 @@ from insitu.cli import record as record_cmd
 from insitu.cli import scan as scan_cmd
 from insitu.cli import serial as serial_cmd
 from insitu.cli import sim as sim_cmd
-from insitu.cli.common import ARGS_KEY, bounded, err_console, fail, tagged, usage_line
+from insitu.cli.common import USAGE_EXIT, OneLineUsage, bounded, err_console, fail, tagged
 from insitu.formats.project import SIM_BINNING
 
+__all__ = ["USAGE_EXIT", "app", "main"]
 GUI_MODULES = ("PySide6", "OpenGL")      # the packages of the ``gui`` extra, as imported
-USAGE_EXIT = 2                            # a command-line mistake exits 2, as click's do
-
-
-class OneLineUsage(typer.core.TyperGroup):
-    """The root group: a mistake in any command's options or arguments is one line on stderr
-    naming the option and what it expects, and exit code ``USAGE_EXIT``."""
-
-    def invoke(self, ctx: typer.Context):
-        words = [*getattr(ctx, "_protected_args", ()), *ctx.args]   # the command's name first
-        ctx.meta[ARGS_KEY] = words
-        try:
-            return super().invoke(ctx)
-        except usage.NoArgsIsHelpError:
-            raise
-        except usage.UsageError as e:
-            command, path = self, ctx.command_path
-            for word in words:                    # the (sub)command the words were for
-                sub = getattr(command, "commands", {}).get(word)
-                if sub is None:
-                    break
-                command, path = sub, f"{path} {word}"
-            err_console.print(tagged("error:", "bold red", usage_line(e, command, path)),
-                              highlight=False, soft_wrap=True)
-            raise typer.Exit(USAGE_EXIT) from None
-
-
 app = typer.Typer(cls=OneLineUsage, help=__doc__.split("\n")[0] if __doc__ else None,
                   no_args_is_help=True, pretty_exceptions_enable=False, add_completion=False,
                   rich_markup_mode="markdown")

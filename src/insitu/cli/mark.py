@@ -16,7 +16,7 @@ from insitu.cli.job import (CutPath, Field, PartPose, Preview, Restart, Resume, 
 from insitu.marking.modes import PROJECTIONS, projection_mode
 from insitu.patterns.dxf import FILL_MODES
 from insitu.patterns.load import sources_help
-from insitu.patterns.vector import BEAM_MM
+from insitu.patterns.vector import BEAM_MM, PAINT_MODES
 
 
 @one_line_errors
@@ -61,6 +61,9 @@ def mark(
         callback=bounded("length_mm"), help="Beam width, mm: strokes at least this wide are "
                                             "marked as their area, thinner ones as lines; a "
                                             "code's default hatch is no coarser.")] = BEAM_MM,
+    paint: Annotated[str, typer.Option(help="An SVG's shaded paints (gradients, patterns, "
+                                            "opacity, masks): threshold (marked where darker "
+                                            "than 50 %) or dither (dots).")] = "threshold",
     force: Annotated[bool, typer.Option(help="Write the job even when a code would not decode "
                                              "from the planned marks.")] = False,
     pen: Annotated[str | None, typer.Option(
@@ -143,8 +146,10 @@ def mark(
     check_run_options(resume, restart, cut_path)
     if fill not in FILL_MODES:
         fail(f"--fill {fill!r}: expected one of {', '.join(FILL_MODES)}")
+    if paint not in PAINT_MODES:
+        fail(f"--paint {paint!r}: expected one of {', '.join(PAINT_MODES)}")
     placement = Placement(pattern, at, width, rotate, mode, hatch, hatch_angle, cross, fill,
-                          beam)
+                          beam, paint=paint)
     located = None
     if part_pose is not None:
         from insitu.measure.pose_file import load_pose

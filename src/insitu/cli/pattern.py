@@ -6,7 +6,6 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Annotated
 
-import cv2
 import numpy as np
 import typer
 from rich.table import Table
@@ -15,7 +14,7 @@ from rich.text import Text
 from insitu.cli.common import bounded, check_output, console, fail, one_line_errors
 from insitu.patterns.dxf import FILL_MODES
 from insitu.patterns.load import sources_help
-from insitu.patterns.vector import BEAM_MM
+from insitu.patterns.vector import BEAM_MM, PAINT_MODES
 
 app = typer.Typer(help="Patterns: show what one will mark.", no_args_is_help=True,
                   add_completion=False)
@@ -26,6 +25,8 @@ FILL, LINE, OUTLINE, FRAME = (60, 60, 60), (200, 90, 0), (0, 0, 220), (0, 170, 0
 def preview(pattern, size_px: int = 800, margin_px: int = 20) -> np.ndarray:
     """(H, W, 3) uint8 BGR picture of ``pattern``: fills dark gray, open lines blue, closed
     outlines red, a code's quiet-zone frame green; y up, 1 mm = the same pixels both ways."""
+    import cv2
+
     x0, y0, x1, y1 = pattern.bounds()
     s = (size_px - 2 * margin_px) / max(x1 - x0, y1 - y0, 1e-9)
     w, h = (int(np.ceil(d * s)) + 2 * margin_px for d in (x1 - x0, y1 - y0))
@@ -63,6 +64,9 @@ def show(
     beam: Annotated[float, typer.Option(
         callback=bounded("length_mm"), help="Beam width, mm: strokes at least this wide "
                                             "are areas.")] = BEAM_MM,
+    paint: Annotated[str, typer.Option(help="An SVG's shaded paints (gradients, patterns, "
+                                            "opacity, masks): threshold (marked where darker "
+                                            "than 50 %) or dither (dots).")] = "threshold",
     fields: Annotated[list[str] | None, typer.Option(
         "--var", metavar="NAME=VALUE", help="A value for {NAME} in the text.")] = None,
     serial: Annotated[int, typer.Option(help="The serial {serial} is shown with "
@@ -79,10 +83,12 @@ def show(
 
     if fill not in FILL_MODES:
         fail(f"--fill {fill!r}: expected one of {', '.join(FILL_MODES)}")
+    if paint not in PAINT_MODES:
+        fail(f"--paint {paint!r}: expected one of {', '.join(PAINT_MODES)}")
     if out is not None:
         check_output(out, ".png")
     rendered = _render(spec, fields or [], serial)
-    p = load_pattern(rendered, fill=fill, beam=beam)
+    p = load_pattern(rendered, fill=fill, beam=beam, paint=paint)
     closed = sum(1 for q in p.paths if len(q) > 2 and np.allclose(q[0], q[-1]))
     lines = len(p.paths) - closed
     length = sum(float(np.linalg.norm(np.diff(q, axis=0), axis=1).sum()) for q in p.paths)
@@ -107,8 +113,27 @@ def show(
                       note.removeprefix("warning: "))
     console.print(table)
     if out is not None:
+        import cv2
+
         ok, buf = cv2.imencode(".png", preview(p))
         if not ok:
             fail(f"{out}: OpenCV could not encode the preview")
         atomic_write_bytes(out, buf.tobytes())
         console.print(f"preview → {out}")
+
+
+def standalone() -> None:
+    """Run ``insitu pattern …`` under a root like :mod:`insitu.cli.main`'s (its one-line
+    usage errors and exit codes) that holds only this group."""
+    import sys
+
+    from insitu.cli.common import OneLineUsage, err_console, tagged
+
+    root = typer.Typer(cls=OneLineUsage, no_args_is_help=True, pretty_exceptions_enable=False,
+                       add_completion=False, rich_markup_mode="markdown")
+    root.add_typer(app, name="pattern")
+    try:
+        root(prog_name="insitu")
+    except KeyboardInterrupt:
+        err_console.print(tagged("error:", "bold red", "interrupted"))
+        sys.exit(130)

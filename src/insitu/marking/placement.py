@@ -24,7 +24,8 @@ class Placement:
     only — but a code is hatched along its modules); ``hatch_angle_deg``, ``cross``: the
     hatch's direction(s); ``fill``: a DXF's closed outlines, auto|all|none; ``beam_mm``: the
     beam's width (strokes at least this wide, once placed, are marked as areas); ``pen``:
-    the name of its pen (:mod:`insitu.formats.pens`; None: the table's default)."""
+    the name of its pen (:mod:`insitu.formats.pens`; None: the table's default); ``paint``:
+    how an SVG's shaded paints are marked, threshold|dither."""
 
     pattern: str
     at_mm: tuple[float, float]
@@ -37,6 +38,7 @@ class Placement:
     fill: str = "auto"
     beam_mm: float = BEAM_MM
     pen: str | None = None
+    paint: str = "threshold"
 
     def in_world(self, T_world_part: np.ndarray) -> Placement:
         """This placement, given in a part's frame, moved where the part lies:
@@ -54,12 +56,14 @@ class Placement:
         When the scaling decides otherwise for a stroke (wider or thinner than the beam once
         placed), the file is loaded again with the beam in its own size."""
         projection_mode(self.mode)
-        p = load_pattern(self.pattern, fill=self.fill, beam=self.beam_mm)
+        p = load_pattern(self.pattern, fill=self.fill, beam=self.beam_mm, paint=self.paint)
         width = p.mark_width if self.width_mm is None else self.width_mm
         scale = width / p.mark_width if p.mark_width > 0 else 1.0
-        if p.beam_mm is not None and any((w >= p.beam_mm) != (w * scale >= self.beam_mm)
-                                         for w in p.stroke_widths):
-            p = load_pattern(self.pattern, fill=self.fill, beam=self.beam_mm / scale)
+        if (p.beam_mm is not None and any((w >= p.beam_mm) != (w * scale >= self.beam_mm)
+                                          for w in p.stroke_widths)) \
+                or (p.raster_mm is not None and p.raster_mm * scale > 1.01 * self.beam_mm):
+            p = load_pattern(self.pattern, fill=self.fill, beam=self.beam_mm / scale,
+                             paint=self.paint)
             width = p.mark_width if self.width_mm is None else self.width_mm
         return p.placed(self.at_mm, width, self.rotate_deg)
 

@@ -4,22 +4,30 @@ images, text, QR codes, fiducial grids), fills (hatch, offset) and path ordering
     >>> from insitu.patterns import load_pattern, hatch
     >>> p = load_pattern('qr:"insitu"').placed((0, 0), width_mm=30)
     >>> polylines = hatch(p, spacing_mm=0.04)          # ordered (N, 2) mm arrays
+
+Names are imported from their modules when first used, so a command that reads one kind of
+pattern imports only what that needs.
 """
 
-from insitu.patterns.codes import fiducial_centres, fiducial_grid, qr_pattern
-from insitu.patterns.fill import hatch, offset
-from insitu.patterns.load import (FILE_SUFFIXES, SOURCES, SPEC_PREFIXES, PatternSource, is_spec,
-                                 load_pattern, sources_help)
-from insitu.patterns.model import Pattern, from_shapely, to_svg
-from insitu.patterns.order import jump_length, order_paths, simplify
-from insitu.patterns.raster import load_image
-from insitu.patterns.text import text_pattern
-from insitu.patterns.dxf import load_dxf
-from insitu.patterns.svg import load_svg
+from __future__ import annotations
 
-__all__ = [
-    "FILE_SUFFIXES", "SOURCES", "SPEC_PREFIXES", "Pattern", "PatternSource", "is_spec",
-    "sources_help", "fiducial_centres", "fiducial_grid", "from_shapely", "hatch", "jump_length",
-    "load_dxf", "load_image", "load_pattern", "load_svg", "offset", "order_paths",
-    "qr_pattern", "simplify", "text_pattern", "to_svg",
-]
+import importlib
+
+_HOME = {
+    "fiducial_centres": "codes", "fiducial_grid": "codes", "qr_pattern": "codes",
+    "hatch": "fill", "offset": "fill",
+    "FILE_SUFFIXES": "load", "SOURCES": "load", "SPEC_PREFIXES": "load",
+    "PatternSource": "load", "is_spec": "load", "load_pattern": "load", "sources_help": "load",
+    "Pattern": "model", "from_shapely": "model", "to_svg": "model",
+    "jump_length": "order", "order_paths": "order", "simplify": "order",
+    "load_image": "raster", "text_pattern": "text", "load_dxf": "dxf", "load_svg": "svg",
+}
+__all__ = sorted(_HOME)
+
+
+def __getattr__(name: str):
+    if name not in _HOME:
+        raise AttributeError(f"module 'insitu.patterns' has no attribute {name!r}")
+    value = getattr(importlib.import_module(f"insitu.patterns.{_HOME[name]}"), name)
+    globals()[name] = value
+    return value

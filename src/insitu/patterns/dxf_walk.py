@@ -88,7 +88,8 @@ def visible_entities(doc, hidden: dict[str, str], skipped: list[str],
                         continue
                     children = list(e.virtual_entities())
                 except Exception as err:  # noqa: BLE001 — a malformed entity, named
-                    skipped.append(f"{name_of(e)}: {' '.join(str(err).split())[:60] or 'malformed'}")
+                    why = " ".join(str(err).split())[:60] or "malformed"
+                    skipped.append(f"{name_of(e)}: {why}")
                     continue
                 if kind == "INSERT":
                     yield from walk(e.attribs, layer, ltype, depth + 1)

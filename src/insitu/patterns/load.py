@@ -30,6 +30,7 @@ win. Every failure is a one-line FormatError.
 
 from __future__ import annotations
 
+import importlib
 import re
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -37,7 +38,6 @@ from pathlib import Path
 from typing import Any
 
 from insitu.errors import FormatError
-from insitu.patterns import codes, dxf, gs1, raster, svg, text
 from insitu.patterns.model import Pattern
 from insitu.patterns.vector import BEAM_MM
 
@@ -63,20 +63,28 @@ class PatternSource:
         return " ".join(self.suffixes) if self.prefix is None else self.prefix + self.payload_hint
 
 
+def _module(name: str):
+    """A source's module, imported when a pattern of that source is first loaded."""
+    return importlib.import_module(f"insitu.patterns.{name}")
+
+
 def _image(path: Path, o: dict) -> Pattern:
-    return raster.load_image(path, dpi=o.get("dpi"), width_mm=o.get("width"),
+    return _module("raster").load_image(path, dpi=o.get("dpi"), width_mm=o.get("width"),
                              mode=o.get("mode", "fill"), threshold=o.get("threshold", 0.5),
                              invert=o.get("invert", False))
 
 
 def _text(body: str, o: dict) -> Pattern:
+    text = _module("text")
     return text.text_pattern(body, font=o.get("font", text.DEFAULT_FONT),
                              size_mm=o.get("size", 10.0), line_spacing=o.get("line_spacing", 1.0))
 
 
 def _qr(body: str, o: dict) -> Pattern:
-    return codes.qr_pattern(body, error=o.get("ec", "M"), quiet_zone=o.get("quiet", 4),
-                            module_mm=o.get("module", 1.0), invert=o.get("invert", False))
+    return _module("codes").qr_pattern(body, error=o.get("ec", "M"),
+                                       quiet_zone=o.get("quiet", 4),
+                                       module_mm=o.get("module", 1.0),
+                                       invert=o.get("invert", False))
 
 
 def _zxing(symbology: str):
@@ -85,9 +93,9 @@ def _zxing(symbology: str):
         if symbology == "datamatrix":
             opts["gs1"] = o.get("gs1", body.startswith("("))
             if opts["gs1"]:
-                gs1.check_gtin(body, f"datamatrix:{body[:40]!r}")
-        return codes.code_pattern(symbology, body, module_mm=o.get("module", 1.0),
-                                  quiet_zone=o.get("quiet"), **opts)
+                _module("gs1").check_gtin(body, f"datamatrix:{body[:40]!r}")
+        return _module("codes").code_pattern(symbology, body, module_mm=o.get("module", 1.0),
+                                             quiet_zone=o.get("quiet"), **opts)
     return load
 
 
@@ -96,18 +104,20 @@ def _fiducials(body: str, o: dict) -> Pattern:
     if not m:
         raise FormatError(f"fiducials:{body[:40]!r}: expected fiducials:ROWSxCOLS, e.g. "
                           "fiducials:5x5")
-    return codes.fiducial_grid(int(m[1]), int(m[2]), pitch_mm=o.get("pitch", 5.0),
-                               diameter_mm=o.get("diameter", 1.0), filled=o.get("filled", True))
+    return _module("codes").fiducial_grid(int(m[1]), int(m[2]), pitch_mm=o.get("pitch", 5.0),
+                                          diameter_mm=o.get("diameter", 1.0),
+                                          filled=o.get("filled", True))
 
 
 SOURCES: dict[str, PatternSource] = {
-    "svg": PatternSource(lambda path, o: svg.load_svg(path, beam_mm=o.get("beam", BEAM_MM),
-                                                      paint=o.get("paint", "threshold")),
+    "svg": PatternSource(lambda path, o: _module("svg").load_svg(
+                             path, beam_mm=o.get("beam", BEAM_MM),
+                             paint=o.get("paint", "threshold")),
                          "SVG drawing, strokes ≥ ;beam= mm as areas, shaded paints "
                          ";paint=threshold|dither", {"beam": float, "paint": str},
                          suffixes=(".svg", ".svgz")),
-    "dxf": PatternSource(lambda path, o: dxf.load_dxf(path, fill=o.get("fill", "auto"),
-                                                      units=o.get("units")),
+    "dxf": PatternSource(lambda path, o: _module("dxf").load_dxf(
+                             path, fill=o.get("fill", "auto"), units=o.get("units")),
                          "DXF drawing, ;fill=auto|all|none ;units=", {"fill": str, "units": str},
                          suffixes=(".dxf",)),
     "image": PatternSource(_image, "image, ;mode=fill|threshold|dither",

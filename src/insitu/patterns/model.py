@@ -57,6 +57,9 @@ class Pattern:
     stroke_widths: widths (mm, as loaded) of the strokes the loader met; with ``beam_mm`` the
         width at or above which they were loaded as areas (thinner ones are lines), so a
         placement that scales the pattern can tell whether to load it again.
+    raster_mm: the pixel (mm, as loaded) of paints marked from a render (gradients and the
+        like), None when there are none: a placement that enlarges it beyond the beam loads
+        the file again at a finer pixel.
     """
 
     contours: tuple[np.ndarray, ...] = ()
@@ -67,6 +70,7 @@ class Pattern:
     notes: tuple[str, ...] = ()
     stroke_widths: tuple[float, ...] = ()
     beam_mm: float | None = None
+    raster_mm: float | None = None
 
     def __post_init__(self) -> None:
         cs = tuple(c for c in (_clean(c, True) for c in self.contours) if c is not None)
@@ -117,7 +121,7 @@ class Pattern:
         return Pattern(tuple(fn(c) for c in self.contours), tuple(fn(p) for p in self.paths),
                        self.name if name is None else name,
                        None if self.frame is None else fn(self.frame), self.code, self.notes,
-                       self.stroke_widths, self.beam_mm)
+                       self.stroke_widths, self.beam_mm, self.raster_mm)
 
     @property
     def mark_width(self) -> float:

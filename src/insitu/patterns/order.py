@@ -13,7 +13,6 @@ from collections import deque
 
 import numpy as np
 import shapely
-from scipy.spatial import cKDTree
 
 from insitu.patterns.model import Pattern
 
@@ -32,6 +31,8 @@ def jump_length(paths, start=(0.0, 0.0)) -> float:
 def _nearest_neighbour(entry: np.ndarray, exit_: np.ndarray, start) -> tuple[list, list]:
     """Greedy tour. entry, exit_: (n, 2, 2) points of each unit run forwards (variant 0) or
     backwards (variant 1). Returns (units in order, variant of each)."""
+    from scipy.spatial import cKDTree
+
     n = len(entry)
     pts = entry.reshape(-1, 2)
     alive = np.ones(2 * n, bool)
@@ -73,6 +74,8 @@ def _two_opt(entry, exit_, sym, start, order, var, neighbours: int = 10,
     Reversing positions i..j flips each unit's variant; runs with an asymmetric unit (one whose
     backward run is not its forward run reversed) are never reversed.
     """
+    from scipy.spatial import cKDTree
+
     n = len(order)
     if n < 2:
         return order, var

@@ -25,7 +25,8 @@ from insitu.formats.limits import MAX_DRAWING_BYTES
 from insitu.patterns.model import Pattern, contours_of
 from insitu.patterns.svg_doc import (computed, length, matrix, read_root, viewbox_matrix,
                                      viewbox_of)
-from insitu.patterns.vector import BEAM_MM, MM_PER_PX, TOL_MM, _check_file, _fail, _non_empty
+from insitu.patterns.vector import (BEAM_MM, MM_PER_PX, PAINT_MODES, TOL_MM, _check_file, _fail,
+                                    _non_empty)
 
 # svgelements turns mm and cm into px with 0.0393701 in/mm; this ppi makes those exact
 _SVG_PPI = 96.0 / (25.4 * 0.0393701)
@@ -112,17 +113,17 @@ def load_svg(path: str | Path, tol_mm: float = TOL_MM, beam_mm: float = BEAM_MM,
 
     path = Path(path)
     _check_file(path)
-    if paint not in svg_paint.PAINT_MODES:
+    if paint not in PAINT_MODES:
         raise FormatError(f"{path}: paint={paint!r}: expected one of "
-                          f"{', '.join(svg_paint.PAINT_MODES)}")
+                          f"{', '.join(PAINT_MODES)}")
     tol_px, beam_px = tol_mm / MM_PER_PX, beam_mm / MM_PER_PX
     try:
         root = read_root(path, MAX_DRAWING_BYTES * 8)
         doc, page, items = _walk(root, path, tol_px, beam_px)
         dark, thin, raster_region = svg_paint.composite(items)
-        raster_lines, warnings = [], []
+        raster_lines, warnings, pixel = [], [], None
         if not raster_region.is_empty:
-            dark, raster_lines, warnings = svg_paint.apply_renderer(
+            dark, raster_lines, warnings, pixel = svg_paint.apply_renderer(
                 root, page, path, dark, raster_region, items, beam_px, paint)
         # slivers thinner than the tolerance (a fill of a straight path, an erasure's seam)
         parts = shapely.get_parts(dark)
@@ -162,5 +163,6 @@ def load_svg(path: str | Path, tol_mm: float = TOL_MM, beam_mm: float = BEAM_MM,
                           f"{h:.4g} mm)")
     return _non_empty(Pattern(contours, tuple(to_mm(p) for p in lines), path.name,
                               notes=tuple(notes),
-                              stroke_widths=tuple(sorted(doc.widths)), beam_mm=beam_mm),
+                              stroke_widths=tuple(sorted(doc.widths)), beam_mm=beam_mm,
+                              raster_mm=None if pixel is None else pixel * MM_PER_PX),
                       path, "filled or stroked shapes")

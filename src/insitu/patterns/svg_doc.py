@@ -82,8 +82,9 @@ def cascade(root) -> dict:
     import cssselect2
     import tinycss2
 
-    out = {el: {local(k) or k.split("}")[-1]: v for k, v in el.attrib.items()
-                if (local(k) or "") in PROPERTIES or k == "{http://www.w3.org/XML/1998/namespace}space"}
+    xml_space = "{http://www.w3.org/XML/1998/namespace}space"
+    out = {el: {("xml:space" if k == xml_space else local(k)): v for k, v in el.attrib.items()
+                if (local(k) or "") in PROPERTIES or k == xml_space}
            for el in root.iter()}
     normal, important = cssselect2.Matcher(), cssselect2.Matcher()
     sheets = [el.text for el in root.iter() if local(el.tag) == "style" and el.text]

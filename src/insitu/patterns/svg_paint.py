@@ -20,7 +20,6 @@ import shapely.affinity
 
 from insitu.patterns.svg_doc import href, local, opacity, url_id
 
-PAINT_MODES = ("threshold", "dither")
 MAX_RASTER_PX = 24_000_000
 
 
@@ -208,9 +207,9 @@ def _raster_mask(geom, box, pixel: float, shape: tuple[int, int]) -> np.ndarray:
 
 def apply_renderer(root, page, path, dark, where, items: list[Item], beam_px: float,
                    mode: str):
-    """(the marked region, scan lines of dithered dots, warnings), page px: ``dark`` (the
-    flat paints) outside ``where``, the render of the document inside it — thresholded at
-    50 % grey, or dithered."""
+    """(the marked region, scan lines of dithered dots, warnings, the pixel used), page px:
+    ``dark`` (the flat paints) outside ``where``, the render of the document inside it —
+    thresholded at 50 % grey, or dithered."""
     from insitu.patterns.raster import _BAYER8, mask_region, scan_lines
 
     x0, y0, x1, y1 = where.bounds
@@ -243,7 +242,7 @@ def apply_renderer(root, page, path, dark, where, items: list[Item], beam_px: fl
         region = shapely.affinity.affine_transform(mask_region(marked, pixel), flip)
         region = region.intersection(where)
     out = shapely.unary_union([dark.difference(where), region])
-    return out, lines, notes + _shade_warnings(items, gray, box, pixel, mode)
+    return out, lines, notes + _shade_warnings(items, gray, box, pixel, mode), pixel
 
 
 def _edges_from_inside(dark: np.ndarray, inside: np.ndarray) -> np.ndarray:

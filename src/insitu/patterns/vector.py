@@ -23,6 +23,7 @@ TOL_MM = 0.002
 MM_PER_PX = 25.4 / 96.0  # CSS pixel, the SVG user unit
 MAX_MM = 1e5      # 100 m: an entity larger than this is a broken file, not a pattern
 FAR_MM = 1e9      # coordinates beyond this (1000 km) have lost their precision
+PAINT_MODES = ("threshold", "dither")  # how an SVG's shaded paints are marked
 BEAM_MM = 0.05    # default beam width: strokes at least this wide are marked as areas
 MAX_SEGMENTS = 2_000_000  # flattened segments in one file (a detailed logo has ~1e4)
 
