@@ -4,8 +4,8 @@ file has fills.
 What is drawn: model space with blocks and dimensions exploded, entities on layers that are
 off, frozen or not plotted left out (:mod:`insitu.patterns.dxf_walk`). HATCH, MPOLYGON,
 SOLID, TRACE, wide (LW)POLYLINEs (banded as ezdxf draws them: each segment's start and end
-width) and text (TEXT, ATTRIB, an ATTDEF's tag, MTEXT through ezdxf's own text-to-path with
-the file's style and font) are fills: the contours of the region. A hatch with a pattern
+width) and text (TEXT, ATTRIB, an ATTDEF's tag, MTEXT: the glyphs ezdxf's drawing add-on fills, with
+the file's styles, fonts and MTEXT layout) are fills: the contours of the region. A hatch with a pattern
 (ANSI31, honeycomb, …) is its pattern's lines, as ezdxf's hatching draws them. The
 boundary of an associative solid hatch is not marked again, nor a closed outline that runs
 along a fill's edge. Lines with a dashed linetype (the entity's, its layer's or its block's,
@@ -83,20 +83,12 @@ def _scale(doc, units: str | None, path: Path) -> tuple[float, str]:
 
 def _entities(doc, hidden, skipped, hidden_count):
     """(entity, layer, linetype) of what is drawn (:func:`dxf_walk.visible_entities`); an
-    ATTDEF as the TEXT of its tag, MTEXT exploded into TEXT (its background mask dropped)."""
-    from ezdxf.addons.mtxpl import MTextExplode
-    from ezdxf.layouts import VirtualLayout
-
+    ATTDEF as the TEXT of its tag."""
     for e, layer, ltype in visible_entities(doc, hidden, skipped, hidden_count):
         if e.dxftype() == "ATTDEF":  # shown as its tag, as ezdxf's drawing add-on does
             yield geo.attdef_text(e, doc), layer, ltype
-        elif e.dxftype() != "MTEXT":
-            yield e, layer, ltype
         else:
-            vl = VirtualLayout()
-            with MTextExplode(vl, doc) as x:
-                x.explode(e, destroy=False)
-            yield from ((v, layer, ltype) for v in vl if v.dxftype() != "SOLID")
+            yield e, layer, ltype
 
 
 def _small_drawing(contours, paths, note: str) -> str | None:
@@ -126,15 +118,29 @@ class _Drawing:
         self.skip: set[str] = set()
         self.notes: list[str] = []
         self.wipeouts = self.patterns = self.dashed = 0
+        self.context = None             # ezdxf's drawing add-on's, for text
 
 
-def _paths(e, kind: str) -> list:
+def _text_paths(d: _Drawing, doc, e) -> list:
+    """The glyph outlines of a TEXT, ATTRIB or MTEXT as ezdxf's drawing add-on fills them
+    (its fonts, MTEXT layout and inline formatting), ezdxf paths."""
+    from ezdxf.addons.drawing import Frontend, RenderContext
+    from ezdxf.addons.drawing.recorder import FilledPathsRecord, Recorder
+
+    if d.context is None:
+        d.context = RenderContext(doc)
+    recorder = Recorder()
+    Frontend(d.context, recorder).draw_entities([e])
+    return [p.to_path() for r, _ in recorder.player().recordings()
+            if isinstance(r, FilledPathsRecord) for p in r.paths]
+
+
+def _paths(d: _Drawing, doc, e, kind: str) -> list:
     """ezdxf paths of an entity's outline(s); none for an entity without one (POINT, …)."""
     from ezdxf import path as dxfpath
-    from ezdxf.addons import text2path
 
-    if kind in ("TEXT", "ATTRIB"):
-        return text2path.make_paths_from_entity(e)
+    if kind in _TEXTS:
+        return _text_paths(d, doc, e)
     if kind in ("HATCH", "MPOLYGON"):
         return list(dxfpath.from_hatch(e))
     try:
@@ -182,7 +188,7 @@ def _add(d: _Drawing, e, kind: str, doc, layer: str, ltype: str, k: float, tol_m
             return
         if e.dxf.get("associative", 0):
             d.skip.update(h for bp in e.paths for h in bp.source_boundary_objects)
-    paths = _paths(e, kind)
+    paths = _paths(d, doc, e, kind)
     cv = [np.array([(v.x, v.y, v.z) for v in p.control_vertices()], np.float64)
           .reshape(-1, 3) for p in paths]
     cv = np.concatenate(cv or [np.zeros((0, 3))])

@@ -22,10 +22,10 @@ def chain(pieces: list[np.ndarray], tol: float) -> tuple[list[np.ndarray], list[
 
     Returns (closed loops without repeated end point, open chains). Chains run only through
     points where exactly two ends meet."""
-    from scipy.spatial import cKDTree
-
     if not pieces:
         return [], []
+    from scipy.spatial import cKDTree
+
     ends = np.array([[p[0], p[-1]] for p in pieces]).reshape(-1, 2)
     parent = np.arange(len(ends))
 

@@ -145,8 +145,32 @@ def composite(items: list[Item]) -> tuple[object, list[np.ndarray], object]:
     return shapely.unary_union([filled, *dark]), lines, shapely.unary_union(raster)
 
 
-def rendered(root, page: tuple[float, float], base_url: str, box,
-             pixel_px: float) -> np.ndarray:
+def _sanitized(root):
+    """A copy of the document without references to ids it does not hold (a browser draws
+    nothing for them; cairosvg would stop)."""
+    import copy
+    import re
+
+    from insitu.patterns.svg_doc import XLINK_HREF
+
+    ids = {el.get("id") for el in root.iter() if el.get("id")}
+    url = re.compile(r"url\(\s*['\"]?#([^)'\"]+)['\"]?\s*\)")
+    if not any(m[1] not in ids for el in root.iter() for v in el.attrib.values()
+               for m in url.finditer(v)) and not any(
+            (el.get("href") or el.get(XLINK_HREF) or "#")[1:] not in ids
+            for el in root.iter() if (el.get("href") or el.get(XLINK_HREF) or "").startswith("#")):
+        return root
+    out = copy.deepcopy(root)
+    for el in out.iter():
+        for k, v in list(el.attrib.items()):
+            if k in ("href", XLINK_HREF) and v.startswith("#") and v[1:] not in ids:
+                del el.attrib[k]
+            elif "url(" in v:
+                el.set(k, url.sub(lambda m: m[0] if m[1] in ids else "none", v))
+    return out
+
+
+def rendered(root, page: tuple[float, float], box, pixel_px: float) -> np.ndarray:
     """(H, W) float64 grey 0–1 (0 black) of the document ``root`` rendered by cairosvg on
     white, its page ``page`` (w, h) px, over ``box`` (x0, y0, x1, y1 page px) at ``pixel_px``
     page px per pixel."""
@@ -160,7 +184,7 @@ def rendered(root, page: tuple[float, float], base_url: str, box,
 
     ET.register_namespace("", SVG_NS)
     ET.register_namespace("xlink", "http://www.w3.org/1999/xlink")
-    inner = copy.copy(root)
+    inner = copy.copy(_sanitized(root))
     inner.attrib = {k: v for k, v in root.attrib.items() if k not in ("x", "y")}
     inner.set("width", repr(page[0]))
     inner.set("height", repr(page[1]))
@@ -171,7 +195,7 @@ def rendered(root, page: tuple[float, float], base_url: str, box,
     doc = (f'<svg xmlns="{SVG_NS}" width="{w}" height="{h}" viewBox="{x0!r} {y0!r} {vw!r} '
            f'{vh!r}" preserveAspectRatio="none" shape-rendering="crispEdges" '
            'text-rendering="crispEdges">').encode() + ET.tostring(inner) + b"</svg>"
-    png = cairosvg.svg2png(bytestring=doc, url=base_url, output_width=w, output_height=h,
+    png = cairosvg.svg2png(bytestring=doc, output_width=w, output_height=h,
                            background_color="white")
     img = cv2.imdecode(np.frombuffer(png, np.uint8), cv2.IMREAD_COLOR)
     return cv2.cvtColor(img, cv2.COLOR_BGR2GRAY).astype(np.float64) / 255.0
@@ -224,7 +248,7 @@ def apply_renderer(root, page, path, dark, where, items: list[Item], beam_px: fl
     # centre would leave a seam (a renderer without anti-aliasing fills neither side)
     x0, y0 = x0 - 0.3819 * pixel, y0 - 0.2761 * pixel
     box = (x0, y0, x1, y1)
-    gray = rendered(root, page or (x1, y1), path.resolve().as_uri(), box, pixel)
+    gray = rendered(root, page or (x1, y1), box, pixel)
     h, w = gray.shape
     inside = _raster_mask(where, box, pixel, (h, w))
     if mode == "dither":

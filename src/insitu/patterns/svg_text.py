@@ -154,7 +154,10 @@ def _layout(doc, run: _Run, c, path_len) -> list[tuple[list[np.ndarray], dict]]:
         pen[1] += dy
         size = float(sty["font-size"])
         bold = sty.get("font-weight", "normal") in ("bold", "bolder") or \
-            (sty.get("font-weight", "").isdigit() and int(sty["font-weight"]) >= 600)
+            (sty.get("font-weight", "").isdigit() and int(sty["font-weight"]) >= 550)
+        if sty.get("font-variant", "normal") not in ("normal", "none"):
+            doc.effects.setdefault(f"font-variant {sty['font-variant']}",
+                                   "not drawn: its text is outlined in plain letters")
         italic = sty.get("font-style", "normal") in ("italic", "oblique")
         file, missing = font_for(sty.get("font-family", "sans-serif"), bold, italic)
         if missing:

@@ -18,8 +18,8 @@ import numpy as np
 import shapely
 import shapely.affinity
 
-from insitu.patterns.svg_doc import (cascade, compose, computed, href, length, local, matrix,
-                                     opacity, translate, url_id, viewbox_matrix, viewbox_of)
+from insitu.patterns.svg_doc import (XLINK_HREF, cascade, compose, computed, href, length, local,
+                                     matrix, opacity, translate, url_id, viewbox_matrix, viewbox_of)
 from insitu.patterns.svg_paint import Item
 from insitu.patterns.vector import Budget
 
@@ -169,7 +169,9 @@ def _use(doc: Doc, el, c: Ctx, style: dict) -> list[Item]:
             return []
         w = length(el.get("width") or ref.get("width") or "100%", vw, fp)
         h = length(el.get("height") or ref.get("height") or "100%", vh, fp)
-        items = viewport(doc, ref, replace(cc, style=sty), 0.0, 0.0, w, h)
+        x, y = ((length(ref.get("x"), vw, fp), length(ref.get("y"), vh, fp)) if kind == "svg"
+                else (0.0, 0.0))
+        items = viewport(doc, ref, replace(cc, style=sty), x, y, w, h)
     else:
         items = walk(doc, ref, cc)
     doc.cache[key] = (m, items)
@@ -247,8 +249,13 @@ def walk(doc: Doc, el, c: Ctx) -> list[Item]:
         vw, vh = c.viewport
         x, y, w, h = (length(el.get(k), r) for k, r in (("x", vw), ("y", vh), ("width", vw),
                                                           ("height", vh)))
+        link = (el.get("href") or el.get(XLINK_HREF) or "").strip()
         items = [Item(rect_region(c.ctm, x, y, w, h), None, doc.describe(el), "image")] \
             if w > 0 and h > 0 and style.get("visibility", "visible") == "visible" else []
+        if items and not link.startswith("data:"):
+            doc.effects[doc.describe(el)] = (f"links the picture {link[:40]!r}: not marked "
+                                             "(embed it in the SVG)")
+            items = []
     else:
         doc.skipped[name] += 1
         items = []
