@@ -121,6 +121,7 @@ class _Placement(_Strict):
     fill: Literal["auto", "all", "none"] = "auto"   # a DXF's closed outlines
     beam_mm: Length = 0.05                         # strokes this wide or more: areas
     pen: PenName | None = None                     # a pen of the table: read_project checks
+    paint: Literal["threshold", "dither"] = "threshold"   # an SVG's shaded paints
 
 
 class _Project(_Strict):
