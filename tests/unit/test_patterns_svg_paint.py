@@ -224,3 +224,40 @@ def test_insitu_pattern_imports_only_what_patterns_need():
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                          timeout=120).stdout
     assert "HEAVY []" in out, out
+
+
+def test_conditional_attributes_apply_to_any_element(tmp_path):
+    body = ('<rect width="10" height="10" systemLanguage="fr"/>'
+            '<rect x="20" width="10" height="10" requiredExtensions="http://example.org/x"/>'
+            '<rect x="40" width="10" height="10" systemLanguage="en-GB, fr"/>')
+    assert _area(load_pattern(_svg(tmp_path, body))) == pytest.approx(100)
+
+
+def test_a_link_inside_text_is_part_of_it_and_what_is_not_drawn_is_named(tmp_path):
+    body = ('<text x="5" y="30" font-size="20">A<a href="#x"><tspan>B</tspan></a></text>'
+            '<text x="5" y="60" font-size="20" text-decoration="underline">C</text>'
+            '<text x="5" y="90" font-size="20">\u0645\u0631\u062d\u0628\u0627</text>')
+    p = load_pattern(_svg(tmp_path, body))
+    assert not any("<a>" in n for n in p.notes)
+    a_b = [g for g in shapely.get_parts(p.to_shapely()) if g.bounds[1] > 60 * PX]
+    assert shapely.unary_union(a_b).bounds[2] / PX > 25           # B follows A
+    assert any("text-decoration underline: not drawn" in n for n in p.notes)
+    assert any("text in a script that needs shaping" in n for n in p.notes)
+
+
+def test_a_drawing_of_light_paints_only_is_refused_saying_so(tmp_path):
+    path = _svg(tmp_path, '<rect width="50" height="50" fill="#fad56e"/>')
+    with pytest.raises(Exception, match="nothing it paints is dark enough to mark"):
+        load_pattern(path)
+    assert load_pattern(f"{path};paint=dither").paths               # its shade as dots
+
+
+def test_light_paints_over_dark_ones_are_erased_quickly(tmp_path):
+    body = '<rect width="200" height="200"/>' + "".join(
+        f'<circle cx="{5 + 10 * (i % 20)}" cy="{5 + 10 * (i // 20)}" r="4" '
+        f'fill="{"white" if i % 2 else "black"}"/><rect x="{10 * (i % 20)}" '
+        f'y="{10 * (i // 20)}" width="2" height="2"/>' for i in range(400))
+    t = time.process_time()
+    p = load_pattern(_svg(tmp_path, body, size='width="200" height="200"'))
+    assert time.process_time() - t < 4                 # CPU: one cut per dark piece
+    assert _area(p) == pytest.approx(40000 - 200 * 3.14159 * 16, rel=1e-3)   # white erases

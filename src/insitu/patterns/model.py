@@ -245,6 +245,10 @@ def region(rings, rule: str = "evenodd") -> BaseGeometry:
     rings = [np.asarray(r, np.float64) for r in rings if len(r) >= 3]
     if not rings:
         return shapely.Polygon()
+    if len(rings) == 1:                  # one simple ring: the same region under either rule
+        g = shapely.Polygon(rings[0])
+        if g.is_valid:
+            return g
     polys = np.array([shapely.Polygon(r) for r in rings], dtype=object)
     if shapely.is_valid(polys).all():
         g = _simple_region(rings, polys, rule)  # noqa: SIM102

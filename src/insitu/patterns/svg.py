@@ -120,7 +120,7 @@ def load_svg(path: str | Path, tol_mm: float = TOL_MM, beam_mm: float = BEAM_MM,
     try:
         root = read_root(path, MAX_DRAWING_BYTES * 8)
         doc, page, items = _walk(root, path, tol_px, beam_px)
-        dark, thin, raster_region = svg_paint.composite(items)
+        dark, thin, raster_region = svg_paint.composite(items, paint)
         raster_lines, warnings, pixel = [], [], None
         if not raster_region.is_empty:
             dark, raster_lines, warnings, pixel = svg_paint.apply_renderer(
@@ -157,6 +157,9 @@ def load_svg(path: str | Path, tol_mm: float = TOL_MM, beam_mm: float = BEAM_MM,
     for kind, n in sorted(doc.skipped.items()):
         notes.append(f"warning: {n} <{kind}> element(s) not marked")
     contours = tuple(to_mm(c) for c in contours_of(filled))
+    if not had_content and any(not it.region.is_empty for it in items):
+        raise FormatError(f"{path}: nothing it paints is dark enough to mark: every paint is "
+                          "lighter than 50 % grey (--paint dither marks light shades as dots)")
     if had_content and not contours and not lines and page is not None:
         w, h = (v * MM_PER_PX for v in page)
         raise FormatError(f"{path}: everything it draws lies outside its page ({w:.4g} × "

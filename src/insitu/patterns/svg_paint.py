@@ -124,25 +124,33 @@ def resolve(value: str | None, opacity_value, style: dict, doc) -> Paint:
     return Paint(lum, alpha, None, 1 - alpha * (1 - lum))
 
 
-def composite(items: list[Item]) -> tuple[object, list[np.ndarray], object]:
+def composite(items: list[Item], mode: str = "threshold") -> tuple[object, list, object]:
     """(the dark region of the flat paints, their thin dark lines, the union of the regions
-    the renderer draws), page px. Flat paints in order: dark adds, light erases."""
-    filled, dark, lines, raster = shapely.Polygon(), [], [], []
-    for it in items:
-        if it.lum is None:
+    the renderer draws), page px. Flat paints in order: dark adds, light erases what was
+    painted before it — each dark piece is cut once, by the union of the light paints after
+    it that meet its box. Dithered, a flat light paint that is not white is drawn by the
+    renderer too (its shade as sparse dots)."""
+    dark, light, lines, raster = [], [], [], []
+    for n, it in enumerate(items):
+        if it.lum is None or (mode == "dither" and 0.5 < it.lum < 0.98):
             if not it.region.is_empty:
                 raster.append(it.region)
             continue
-        if it.lines:
-            lines.extend(it.lines)
-        if it.region.is_empty:
-            continue
-        if it.lum <= 0.5:
-            dark.append(it.region)
-        else:
-            filled = shapely.unary_union([filled, *dark]).difference(it.region)
-            dark = []
-    return shapely.unary_union([filled, *dark]), lines, shapely.unary_union(raster)
+        lines.extend(it.lines)
+        if not it.region.is_empty:
+            (dark if it.lum <= 0.5 else light).append((n, it.region))
+    if not dark:
+        return shapely.Polygon(), lines, shapely.unary_union(raster)
+    if light:
+        order = np.array([n for n, _ in light])
+        boxes = np.array([g.bounds for _, g in light])
+        for k, (n, g) in enumerate(dark):
+            b = g.bounds
+            hit = np.flatnonzero((order > n) & (boxes[:, 0] <= b[2]) & (boxes[:, 2] >= b[0])
+                                 & (boxes[:, 1] <= b[3]) & (boxes[:, 3] >= b[1]))
+            if len(hit):
+                dark[k] = (n, g.difference(shapely.unary_union([light[h][1] for h in hit])))
+    return shapely.unary_union([g for _, g in dark]), lines, shapely.unary_union(raster)
 
 
 def _sanitized(root):

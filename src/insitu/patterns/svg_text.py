@@ -23,6 +23,10 @@ from insitu.patterns.svg_doc import href, length, local, numbers
 from insitu.patterns.svg_paint import Item, resolve
 from insitu.patterns.svg_walk import apply
 
+# Arabic, Hebrew, Syriac, Thaana, Indic, Thai, Lao, Tibetan, Myanmar: letters that join or
+# reorder, which a renderer shapes (HarfBuzz) and a glyph-by-glyph layout cannot
+_SHAPED = re.compile("[\u0590-\u08ff\u0900-\u0dff\u0e00-\u0fff\u1000-\u109f"
+                     "\ufb1d-\ufdff\ufe70-\ufeff]")
 _GENERIC = {"sans-serif": "DejaVu Sans", "serif": "DejaVu Serif", "monospace": "DejaVu Sans Mono",
             "cursive": "DejaVu Sans", "fantasy": "DejaVu Sans", "system-ui": "DejaVu Sans"}
 
@@ -105,7 +109,7 @@ def _collect(doc, el, style: dict, run: _Run, vp, skip_space: list, path_el=None
     add(el.text, style)
     for child in el:
         name = local(child.tag)
-        if name in ("tspan", "textPath", "flowSpan"):
+        if name in ("tspan", "textPath", "flowSpan", "a"):
             sty = computed(doc.decl.get(child, {}), style)
             sub = doc.ids.get(href(child) or "") if name == "textPath" else path_el
             before = len(run.chars)
@@ -148,6 +152,13 @@ def _layout(doc, run: _Run, c, path_len) -> list[tuple[list[np.ndarray], dict]]:
     for ch, sty, x, y, dx, dy, rot, path_el in run.chars:
         if x is not None or y is not None:
             flush()
+        if _SHAPED.match(ch):
+            doc.effects.setdefault("text in a script that needs shaping",
+                                   "outlined letter by letter, unjoined and left to right "
+                                   "(convert the text to paths)")
+        deco = sty.get("text-decoration", "none")
+        if deco not in ("none", "", "normal"):
+            doc.effects.setdefault(f"text-decoration {deco}", "not drawn (only the letters)")
         pen[0] = x if x is not None else pen[0]
         pen[1] = y if y is not None else pen[1]
         pen[0] += dx

@@ -125,7 +125,8 @@ def children(doc: Doc, el, c: Ctx) -> list[Item]:
 
 
 def _passes(el) -> bool:
-    """Conditional processing (<switch>): no extensions asked, English or no language."""
+    """Conditional processing (on any element, and choosing a <switch>'s child): no
+    extensions asked, English or no language."""
     if (el.get("requiredExtensions") or "").strip():
         return False
     lang = el.get("systemLanguage")
@@ -206,7 +207,7 @@ def walk(doc: Doc, el, c: Ctx) -> list[Item]:
     from insitu.patterns import svg_shapes, svg_text
 
     name = local(el.tag)
-    if name is None or name in _NOT_DRAWN:
+    if name is None or name in _NOT_DRAWN or not _passes(el):
         return []
     style = computed(doc.decl.get(el, {}), c.style)
     if style.get("display") == "none":
