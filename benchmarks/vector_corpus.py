@@ -7,7 +7,8 @@ edges); DXFs with fills against ezdxf's drawing add-on.
     .venv/bin/python benchmarks/vector_corpus.py [--dxf]
 
 Prints one row per file and the counts. To measure another tree's loader against the same
-reference, put its ``src`` first on PYTHONPATH."""
+reference, put its ``src`` first on PYTHONPATH. Files our tests do not use, split in two
+halves (tuned on one, the other scored once): benchmarks/vector_heldout.py."""
 
 from __future__ import annotations
 

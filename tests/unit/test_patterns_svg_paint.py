@@ -229,18 +229,22 @@ def test_insitu_pattern_imports_only_what_patterns_need():
 def test_conditional_attributes_apply_to_any_element(tmp_path):
     body = ('<rect width="10" height="10" systemLanguage="fr"/>'
             '<rect x="20" width="10" height="10" requiredExtensions="http://example.org/x"/>'
-            '<rect x="40" width="10" height="10" systemLanguage="en-GB, fr"/>')
-    assert _area(load_pattern(_svg(tmp_path, body))) == pytest.approx(100)
+            '<rect x="40" width="10" height="10" systemLanguage="en-GB, fr"/>'
+            '<rect x="60" width="10" height="10" requiredFeatures="NO_SUCH_FEATURE"/>'
+            '<rect x="80" width="10" height="10" requiredFeatures='
+            '"http://www.w3.org/TR/SVG11/feature#Shape"/>')
+    assert _area(load_pattern(_svg(tmp_path, body))) == pytest.approx(200)
 
 
 def test_a_link_inside_text_is_part_of_it_and_what_is_not_drawn_is_named(tmp_path):
-    body = ('<text x="5" y="30" font-size="20">A<a href="#x"><tspan>B</tspan></a></text>'
+    body = ('<text x="5 60" y="30" font-size="20"> <a href="#x"><tspan>AB</tspan></a></text>'
             '<text x="5" y="60" font-size="20" text-decoration="underline">C</text>'
             '<text x="5" y="90" font-size="20">\u0645\u0631\u062d\u0628\u0627</text>')
     p = load_pattern(_svg(tmp_path, body))
     assert not any("<a>" in n for n in p.notes)
     a_b = [g for g in shapely.get_parts(p.to_shapely()) if g.bounds[1] > 60 * PX]
-    assert shapely.unary_union(a_b).bounds[2] / PX > 25           # B follows A
+    assert shapely.unary_union(a_b).bounds[0] / PX == pytest.approx(5, abs=2)  # the text's x
+    assert shapely.unary_union(a_b).bounds[2] / PX > 60           # B at the second x
     assert any("text-decoration underline: not drawn" in n for n in p.notes)
     assert any("text in a script that needs shaping" in n for n in p.notes)
 

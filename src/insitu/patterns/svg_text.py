@@ -119,7 +119,16 @@ def _collect(doc, el, style: dict, run: _Run, vp, skip_space: list, path_el=None
                 first = run.chars[before]
                 run.chars[before] = (first[0], first[1], 0.0 if "%" in offset else
                                      length(offset, 0, float(sty["font-size"])), *first[3:])
-            k += len(run.chars) - before
+            for i in range(before, len(run.chars)):   # the parent's lists, by character
+                v = list(run.chars[i])
+                for slot, values in ((2, xs), (3, ys)):
+                    if v[slot] is None and k < len(values):
+                        v[slot] = values[k]
+                for slot, values in ((4, dxs), (5, dys)):
+                    if k < len(values):
+                        v[slot] += values[k]
+                run.chars[i] = tuple(v)
+                k += 1
         elif name == "tref" or (name and name not in ("title", "desc")):
             doc.skipped[name] += 1
         add(child.tail, style)

@@ -126,9 +126,13 @@ def children(doc: Doc, el, c: Ctx) -> list[Item]:
 
 def _passes(el) -> bool:
     """Conditional processing (on any element, and choosing a <switch>'s child): no
-    extensions asked, English or no language."""
+    extensions asked, only SVG 1.1's features, English or no language."""
     if (el.get("requiredExtensions") or "").strip():
         return False
+    features = el.get("requiredFeatures")
+    if features is not None and not (features.split() and all(
+            f.startswith("http://www.w3.org/TR/SVG11/feature#") for f in features.split())):
+        return False                         # an empty list or a feature SVG 1.1 does not name
     lang = el.get("systemLanguage")
     return lang is None or any(x.strip().lower().startswith("en") for x in lang.split(","))
 
