@@ -2,7 +2,8 @@
 # Sourced by demo.sh and test.sh: installs what is missing, quickly when nothing is.
 # Debian system libraries (open3d: libusb; Qt/OpenGL tests: Xvfb + Mesa; Qt's xcb platform, which
 # the OpenGL test and `insitu gui` on a desktop use: libxcb-*; the fake RTC library that the
-# device tests compile: gcc, libc6-dev; cairosvg, which renders SVG paints: libcairo2), then .venv with insitu, its GUI and the test tools
+# device tests compile: gcc, libc6-dev; cairosvg, which renders SVG paints: libcairo2; fc-match,
+# which finds an SVG's fonts: fontconfig), then .venv with insitu, its GUI and the test tools
 # (INSITU_EXTRAS, default gui,test,test-gui; scripts/test-core.sh makes .venv-core without the GUI).
 set -euo pipefail
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
@@ -14,7 +15,7 @@ for pkg in libusb-1.0-0 gcc libc6-dev xvfb xauth libgl1 libegl1 libgl1-mesa-dri 
            libxkbcommon0 libxkbcommon-x11-0 libfontconfig1 libdbus-1-3 fonts-dejavu-core \
            libx11-xcb1 libxcb-cursor0 libxcb-glx0 libxcb-icccm4 libxcb-image0 libxcb-keysyms1 \
            libxcb-randr0 libxcb-render-util0 libxcb-shape0 libxcb-xfixes0 libxcb-xkb1 \
-           libglib2.0-0 libcairo2; do
+           libglib2.0-0 libcairo2 fontconfig; do
     dpkg-query -W -f='${Status}' "$pkg" 2>/dev/null | grep -q "install ok installed" || need_pkgs+=("$pkg")
 done
 if ((${#need_pkgs[@]})); then

@@ -18,6 +18,7 @@ import re
 import numpy as np
 import shapely
 
+from insitu.errors import FormatError
 from insitu.patterns.model import region, stroke_region
 from insitu.patterns.svg_doc import href, length, local, numbers
 from insitu.patterns.svg_paint import Item, resolve
@@ -47,6 +48,11 @@ def font_for(families: str, bold: bool, italic: bool) -> tuple[str, str | None]:
     got = _fc_match(_GENERIC.get(names[0].lower(), names[0]) + suffix)
     if got is not None and got[2]:
         return got[2], names[0]
+    for name in names:                   # no fontconfig: font files named like the family
+        try:
+            return str(find_font(_GENERIC.get(name.lower(), name))), None
+        except FormatError:
+            continue
     return str(find_font("DejaVu Sans")), names[0]
 
 
