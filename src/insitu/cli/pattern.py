@@ -76,8 +76,6 @@ def show(
     filled area, lines, closed outlines, size in mm, units chosen, remarks. -o writes a
     preview: fills gray, lines blue, outlines red, a code's quiet zone green. A text with
     variable data ({serial}, {date}, --var values) is shown rendered as a preview."""
-    import shapely
-
     from insitu.formats.atomic import atomic_write_bytes
     from insitu.patterns import load_pattern
 
@@ -89,14 +87,30 @@ def show(
         check_output(out, ".png")
     rendered = _render(spec, fields or [], serial)
     p = load_pattern(rendered, fill=fill, beam=beam, paint=paint)
+    table = _table(p, beam)
+    if rendered != spec:
+        table.add_row("preview", f"{rendered} (variable data; serial {serial} as an "
+                                 "example)")
+    console.print(table)
+    if out is not None:
+        import cv2
+
+        ok, buf = cv2.imencode(".png", preview(p))
+        if not ok:
+            fail(f"{out}: OpenCV could not encode the preview")
+        atomic_write_bytes(out, buf.tobytes())
+        console.print(f"preview → {out}")
+
+
+def _table(p, beam: float) -> Table:
+    """What ``p`` will mark: size, fills, lines, its code, stroke widths, the loader's notes."""
+    import shapely
+
     closed = sum(1 for q in p.paths if len(q) > 2 and np.allclose(q[0], q[-1]))
     lines = len(p.paths) - closed
     length = sum(float(np.linalg.norm(np.diff(q, axis=0), axis=1).sum()) for q in p.paths)
     (w, h), (x0, y0, _, _) = p.size, p.bounds()
     table = Table(title=f"pattern {p.name}", show_header=False)
-    if rendered != spec:
-        table.add_row("preview", f"{rendered} (variable data; serial {serial} as an "
-                                 "example)")
     table.add_row("size", f"{w:.4g} × {h:.4g} mm (from {x0:.4g}, {y0:.4g})")
     table.add_row("fills", f"{len(p.contours):,} contours, {shapely.area(p.to_shapely()):.4g} "
                            "mm² (hatched when marked)")
@@ -111,15 +125,7 @@ def show(
     for note in p.notes:
         table.add_row(Text("warning", "yellow") if note.startswith("warning:") else "loaded",
                       note.removeprefix("warning: "))
-    console.print(table)
-    if out is not None:
-        import cv2
-
-        ok, buf = cv2.imencode(".png", preview(p))
-        if not ok:
-            fail(f"{out}: OpenCV could not encode the preview")
-        atomic_write_bytes(out, buf.tobytes())
-        console.print(f"preview → {out}")
+    return table
 
 
 def standalone() -> None:
