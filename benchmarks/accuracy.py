@@ -30,9 +30,9 @@ from insitu.sim.world import SimWorld
 from insitu.services.station import simulated
 
 from insitu.sim.devices import SimCamera, SimScanHead
-from insitu.measure.scan import ScanReconstructor
+from insitu.reconstruct.scan import ScanReconstructor
 from insitu.services import calibrate_height, centre_settings, height_model
-from insitu.measure.plan import scan_lines
+from insitu.reconstruct.plan import scan_lines
 from insitu.services.record import record_height_calibration
 from insitu.sim.rig import default_rig
 from insitu.sim.workpieces import make_workpiece

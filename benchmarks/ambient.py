@@ -28,7 +28,7 @@ from rich.table import Table
 from scipy.spatial import cKDTree
 
 from insitu.marking.placement import Placement
-from insitu.measure.preview import save_cloud_picture
+from insitu.reconstruct.preview import save_cloud_picture
 from insitu.services.mark import mark_on_station, plan_mark
 from insitu.services.room_light import station_room_light
 from insitu.services.scan import scan_live

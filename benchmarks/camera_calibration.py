@@ -39,7 +39,7 @@ from insitu.calibrate.pose_from_spots import pose_from_spots
 from insitu.sim.world import SimWorld
 from insitu.formats.sequence import Sequence
 from insitu.geometry.camera import CameraModel
-from insitu.rig.files import CameraCalibration
+from insitu.formats.calibration import CameraCalibration
 from insitu.services.camera import (calibrate_camera, pose_change, recalibrate_camera_pose,
                                     spot_observations)
 from insitu.services.common import camera_model

@@ -22,7 +22,8 @@ import numpy as np
 from rich.console import Console
 from rich.table import Table
 
-from insitu.rig.files import HeightCalibration, load_json_model, save_json_model
+from insitu.formats.calibration import HeightCalibration
+from insitu.formats.json_file import load_json_model, save_json_model
 from insitu.services import calibrate_height, scan_live
 from insitu.services.record import record_height_calibration
 from insitu.services.station import simulated

@@ -46,7 +46,10 @@ from insitu.marking import (PROJECTIONS, GalvoDriver, LaserOverride, Placement, 
                             read_job, write_job)
 from insitu.patterns.dxf import load_dxf
 from insitu.patterns.svg import load_svg
-from insitu.rig.files import HeightCalibration, RigConfig, load_json_model, save_json_model
+from insitu.vision.extract import CentreSettings
+from insitu.formats.calibration import HeightCalibration
+from insitu.formats.json_file import load_json_model, save_json_model
+from insitu.formats.rig import RigConfig
 from insitu.services.height import height_model
 
 HEAD = TwoMirrorHead(350.0, 12.0)
@@ -133,7 +136,7 @@ def _rig(folder: Path):
 
 def _height(folder: Path):
     path = folder / "height.json"
-    save_json_model(path, HeightCalibration(camera=CAMERA, sheet={
+    save_json_model(path, HeightCalibration(camera=CAMERA, centres=CentreSettings().to_dict(), sheet={
         "pivot_height_mm": 350.0, "exponents": [[0, 0, 0], [1, 0, 0], [0, 1, 0]],
         "coefficients_mm": [0.0, 1.0, 0.5], "scale_mm": [100.0, 100.0, 50.0],
         "x_range_mm": [-50.0, 50.0], "z_range_mm": [-20.0, 20.0]}))

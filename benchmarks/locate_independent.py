@@ -33,10 +33,10 @@ from insitu.formats.camera_spec import CameraSpec
 from insitu.formats.pointcloud import PointCloud
 from insitu.formats.sequence import Sequence
 from insitu.geometry.pose import pose_matrix
-from insitu.measure.edge_align import edge_samples
-from insitu.measure.image_edges import MAX_SPREAD_MM, align_image
-from insitu.measure.locate import LocateRefused, locate_part
-from insitu.measure.part_reference import above_table, find_table, reference_from_mesh
+from insitu.locate.edge_align import edge_samples
+from insitu.locate.image_edges import MAX_SPREAD_MM, align_image
+from insitu.locate.part import LocateRefused, locate_part
+from insitu.locate.reference import above_table, find_table, reference_from_mesh
 from insitu.services import calibrate_height, scan_replay
 from insitu.services.common import camera_model
 from insitu.services.height import scan_camera

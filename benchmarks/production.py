@@ -52,9 +52,10 @@ from rich.table import Table
 
 from insitu.formats.pointcloud import PointCloud, read_ply, write_ply
 from insitu.marking import GalvoDriver, Placement, run_job
-from insitu.measure.locate import LocateRefused, locate_part
-from insitu.measure.part_reference import reference_from_mesh
-from insitu.rig.files import load_json_model, save_json_model, HeightCalibration
+from insitu.locate.part import LocateRefused, locate_part
+from insitu.locate.reference import reference_from_mesh
+from insitu.formats.calibration import HeightCalibration
+from insitu.formats.json_file import load_json_model, save_json_model
 from insitu.services import calibrate_height, scan_live
 from insitu.services.mark import plan_mark
 from insitu.services.field import calibrate_field

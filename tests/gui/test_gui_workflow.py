@@ -12,7 +12,7 @@ from PySide6.QtGui import QDropEvent
 from PySide6.QtTest import QTest
 
 from insitu import services
-from insitu.rig.files import save_json_model
+from insitu.formats.json_file import save_json_model
 from insitu.ui.qt.main_window import MainWindow
 from insitu.ui.model.session import RigChoice
 

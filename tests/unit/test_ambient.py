@@ -14,8 +14,8 @@ import pytest
 from insitu.errors import FormatError
 from insitu.formats.pointcloud import PointCloud, read_ply, write_ply
 from insitu.formats.sequence import Sequence, SequenceWriter
-from insitu.measure.preview import save_cloud_picture
-from insitu.measure.scan import ScanReconstructor, grey_at
+from insitu.reconstruct.preview import save_cloud_picture
+from insitu.reconstruct.scan import ScanReconstructor, grey_at
 from insitu.services.record import record_scan
 from insitu.services.room_light import ACCEPT, grab_room_light, station_room_light
 from insitu.services.scan import scan_live, scan_replay

@@ -164,7 +164,8 @@ def test_height_calibration_out_of_bounds(tmp_path, sheet, words):
 
 
 def test_a_good_height_calibration_passes_the_bounds(tmp_path):
-    from insitu.rig.files import HeightCalibration, load_json_model
+    from insitu.formats.calibration import HeightCalibration
+    from insitu.formats.json_file import load_json_model
 
     assert load_json_model(_height_calibration(tmp_path), HeightCalibration).sheet.exponents
 

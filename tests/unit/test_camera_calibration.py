@@ -19,7 +19,8 @@ from insitu.sim.world import SimWorld
 from insitu.errors import CalibrationError
 from insitu.formats.sequence import Sequence, SequenceWriter
 from insitu.geometry.camera import CameraModel
-from insitu.rig.files import CameraCalibration, load_json_model
+from insitu.formats.calibration import CameraCalibration
+from insitu.formats.json_file import load_json_model
 from insitu.services.record import record_camera_calibration
 from insitu.services.station import simulated
 from insitu.geometry.beams import axis_lines

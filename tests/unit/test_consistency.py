@@ -1,8 +1,8 @@
-"""The 3-D check across lines (insitu.measure.consistency): wrong lines go, edges stay."""
+"""The 3-D check across lines (insitu.reconstruct.consistency): wrong lines go, edges stay."""
 
 import numpy as np
 
-from insitu.measure.consistency import cross_line_inliers
+from insitu.reconstruct.consistency import cross_line_inliers
 
 SPACING = 0.5
 

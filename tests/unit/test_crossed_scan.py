@@ -13,12 +13,13 @@ from typer.testing import CliRunner
 from insitu.cli.main import app
 from insitu.errors import MeasurementError
 from insitu.geometry.beams import light_plane
-from insitu.measure.edge_align import edge_samples
-from insitu.measure.heightcal import LineObservation
-from insitu.measure.plan import scan_lines
-from insitu.measure.turned_sheet import (CROSS_ANGLE_DEG, TurnedSheetModel, line_angle,
+from insitu.locate.edge_align import edge_samples
+from insitu.calibrate.height_fit import LineObservation, fit_turned_sheet
+from insitu.reconstruct.plan import scan_lines
+from insitu.reconstruct.turned_sheet import (CROSS_ANGLE_DEG, TurnedSheetModel, line_angle,
                                          turned_lines, turned_offset)
-from insitu.rig.files import HeightCalibration, load_json_model, save_json_model
+from insitu.formats.calibration import HeightCalibration
+from insitu.formats.json_file import load_json_model, save_json_model
 from insitu.services import calibrate_height, load_height_calibration, scan_live
 from insitu.services.record import record_height_calibration
 from insitu.services.station import connect, simulated
@@ -72,7 +73,7 @@ def test_the_turned_sheet_model_is_exact_on_ideal_sheets():
             uv = camera.project(p)
             obs.append(LineObservation(turned_offset(a, b, CROSS_ANGLE_DEG), z, *uv.T))
             truth.append(p)
-    model = TurnedSheetModel.fit(obs, camera, H, CROSS_ANGLE_DEG)
+    model = fit_turned_sheet(obs, camera, H, CROSS_ANGLE_DEG)
     back = TurnedSheetModel.from_dict(json.loads(json.dumps(model.to_dict())))
     got = np.vstack([back.points(camera, o.x_mm, o.u, o.v) for o in obs])
     assert np.abs(got - np.vstack(truth)).max() < 1e-3
@@ -176,8 +177,8 @@ def test_a_part_square_to_the_lines_is_located_with_a_crossed_scan(crossed_cal):
     along y alone does not pin it down; with the crossed pass it is found where it lies
     (binning 4: within the coarse frame's precision and the rig's calibration offset), from
     edge samples of both passes."""
-    from insitu.measure.locate import LocateRefused, LocateSettings
-    from insitu.measure.part_reference import reference_from_mesh
+    from insitu.locate.part import LocateRefused, LocateSettings
+    from insitu.locate.reference import reference_from_mesh
     from insitu.services.locate import locate_cloud
 
     wp = make_workpiece("step-block")
@@ -203,7 +204,7 @@ def test_the_crossed_pass_leaves_the_first_pass_as_it_was():
     """The check across neighbouring lines runs within each pass: the lines along y of a
     crossed scan keep exactly the points they keep without the crossed pass (checked with
     the crossed lines' points beside them, the first pass lost 200 more of its 10,000)."""
-    from insitu.measure.scan import ScanReconstructor
+    from insitu.reconstruct.scan import ScanReconstructor
     from insitu.services.scan import plan_lines
 
     with simulated(sim_world("step-block", binning=4, pose=(3.0, 2.0, 20.0))) as station:

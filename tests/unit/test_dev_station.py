@@ -17,8 +17,9 @@ from fakes.station import allow
 
 from insitu.errors import ConfigError
 from insitu.formats.sequence import Sequence
-from insitu.rig.files import (CameraCalibration, RigConfig, ScanHeadConfig, load_json_model,
-                              save_json_model)
+from insitu.formats.calibration import CameraCalibration
+from insitu.formats.json_file import load_json_model, save_json_model
+from insitu.formats.rig import RigConfig, ScanHeadConfig
 from insitu.services.scan import ScanInterrupted, scan_live, scan_replay
 from insitu.services.station import connect
 

@@ -1,4 +1,4 @@
-"""The edge step of locating (:mod:`insitu.measure.edge_align`): one inset along the lines,
+"""The edge step of locating (:mod:`insitu.locate.edge_align`): one inset along the lines,
 whatever angle they cross the edges at; the edges' normals at any angle; samples beyond their
 edge measured so (negative); lines cut short weigh nothing; each line's points taken in the
 order of their pixels."""
@@ -7,9 +7,9 @@ import numpy as np
 import pytest
 
 from insitu.geometry.camera import CameraModel
-from insitu.measure.edge_align import align_edges, edge_distance, edge_samples
-from insitu.measure.flat_icp import apply, inverse, rot_z
-from insitu.measure.part_reference import reference_from_mesh
+from insitu.locate.edge_align import align_edges, edge_distance, edge_samples
+from insitu.geometry.pose import apply, inverse, rot_z
+from insitu.locate.reference import reference_from_mesh
 from insitu.sim.workpieces import make_workpiece
 
 from test_locate import synthetic_scan
@@ -108,7 +108,7 @@ def test_the_scan_camera_is_the_height_calibrations():
     """Method 2 scans are measured through the height calibration's camera, Method 1 scans
     through the rig's."""
     from insitu.formats.camera_spec import CameraSpec
-    from insitu.rig.files import HeightCalibration
+    from insitu.formats.calibration import HeightCalibration
     from insitu.services.height import scan_camera
     from insitu.sim.rig import default_rig
 

@@ -1,12 +1,12 @@
 """Why the edge step finds no fit: the direction the edges found leave free
-(:func:`insitu.measure.edge_align.unheld`), and the turn and shift across it fitted alone
+(:func:`insitu.locate.edge_align.unheld`), and the turn and shift across it fitted alone
 (``align_edges(free=…)``), on the step block's reference (part frame, mm)."""
 
 import numpy as np
 import pytest
 
-from insitu.measure.edge_align import align_edges, unheld
-from insitu.measure.part_reference import reference_from_mesh
+from insitu.locate.edge_align import align_edges, unheld
+from insitu.locate.reference import reference_from_mesh
 from insitu.sim.workpieces import make_workpiece
 
 

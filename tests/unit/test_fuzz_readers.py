@@ -25,8 +25,10 @@ from insitu.formats.sequence import Sequence
 from insitu.geometry.beams import TwoMirrorHead
 from insitu.marking import GalvoDriver, make_job, read_job, run_job, write_job
 from insitu.marking.run import history
-from insitu.rig.files import (CameraCalibration, HeightCalibration, RigConfig, ScanHeadConfig,
-                              load_json_model, save_json_model)
+from insitu.vision.extract import CentreSettings
+from insitu.formats.calibration import CameraCalibration, HeightCalibration
+from insitu.formats.json_file import load_json_model, save_json_model
+from insitu.formats.rig import RigConfig, ScanHeadConfig
 from insitu.services.common import camera_model
 from insitu.services.field import read_targets_csv
 from insitu.services.height import height_model
@@ -77,7 +79,7 @@ def _job():
 
 def _height_calibration():
     cam = Sequence.open(RECORDED).camera
-    return HeightCalibration(camera=cam, sheet={
+    return HeightCalibration(camera=cam, centres=CentreSettings().to_dict(), sheet={
         "pivot_height_mm": 350.0, "exponents": [[0, 0, 0], [1, 0, 0], [0, 1, 0]],
         "coefficients_mm": [0.0, 1.0, 0.5], "scale_mm": [100.0, 100.0, 50.0],
         "x_range_mm": [-50.0, 50.0], "z_range_mm": [-20.0, 20.0]})

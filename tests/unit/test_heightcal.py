@@ -10,8 +10,10 @@ from typer.testing import CliRunner
 from insitu.cli.main import app
 from insitu.errors import CalibrationError, MeasurementError
 from insitu.formats.pointcloud import read_ply
-from insitu.measure.heightcal import LineObservation, PaperHeightModel, SheetHeightModel
-from insitu.rig.files import HeightCalibration, load_json_model
+from insitu.calibrate.height_fit import LineObservation, fit_paper, fit_sheet
+from insitu.reconstruct.plate_models import SheetHeightModel
+from insitu.formats.calibration import HeightCalibration
+from insitu.formats.json_file import load_json_model
 from insitu.services import calibrate_height, load_height_calibration, scan_replay
 from insitu.sim.workpieces import make_workpiece
 
@@ -67,7 +69,7 @@ def test_sheet_model_recovers_a_synthetic_distorted_sheet():
             pts = np.column_stack([true_x(x, Y, z), Y, np.full_like(Y, z)])
             uv = cam.project(pts)
             obs.append(LineObservation(x, z, uv[:, 0], uv[:, 1]))
-    model = SheetHeightModel.fit(obs, cam, H)
+    model = fit_sheet(obs, cam, H)
     Y = np.linspace(-40, 40, 50)
     pts = np.column_stack([true_x(12.5, Y, 7.0), Y, np.full_like(Y, 7.0)])
     uv = cam.project(pts)
@@ -79,7 +81,7 @@ def test_sheet_model_recovers_a_synthetic_distorted_sheet():
 def test_paper_model_needs_the_reference_line():
     obs = [LineObservation(5.0, 0.0, np.arange(10.0), np.arange(10.0))]
     with pytest.raises(CalibrationError, match="reference line"):
-        PaperHeightModel.fit(obs)
+        fit_paper(obs)
 
 
 def _top_errors(cloud, margin=1.0):
@@ -163,7 +165,7 @@ def test_heights_outside_the_calibration_are_refused(cal):
 def test_a_few_stray_heights_are_dropped_more_are_refused(cal):
     """A ghost's short streak above the calibrated heights loses its points, not the scan;
     a part the calibration does not reach is refused."""
-    from insitu.measure.heightcal import STRAY, check_bracket
+    from insitu.reconstruct.plate_models import STRAY, check_bracket
     from insitu.services.height import height_model
 
     model = height_model(cal)[1]

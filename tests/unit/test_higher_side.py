@@ -1,12 +1,12 @@
 """Which way a higher surface moves a scan line across itself in the image
-(insitu.measure.plane.band_and_side), against the camera's projection of the light plane."""
+(insitu.reconstruct.plane.band_and_side), against the camera's projection of the light plane."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from insitu.measure.plane import band_and_side
+from insitu.reconstruct.plane import band_and_side
 from insitu.sim.rig import default_rig
 
 PIVOT = 350.0

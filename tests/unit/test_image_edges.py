@@ -1,4 +1,4 @@
-"""Locating from the room-light frame's edges (:mod:`insitu.measure.image_edges`): the
+"""Locating from the room-light frame's edges (:mod:`insitu.locate.image_edges`): the
 insert turned to within 0.04° by them (its scan lines' ends leave 0.05–0.15°); a frame
 without the part, of another size, or showing it elsewhere is not used, and says why;
 ``insitu scan --room-light`` writes the frame, ``insitu locate --room-light`` needs the camera."""
@@ -10,9 +10,9 @@ from typer.testing import CliRunner
 from insitu.cli.main import app
 from insitu.formats.images import read_image
 from insitu.geometry.pose import pose_matrix
-from insitu.measure.image_edges import align_image
-from insitu.measure.locate import LocateRefused, locate_part
-from insitu.measure.part_reference import reference_from_mesh
+from insitu.locate.image_edges import align_image
+from insitu.locate.part import LocateRefused, locate_part
+from insitu.locate.reference import reference_from_mesh
 from insitu.services.room_light import station_room_light
 from insitu.services.station import simulated
 from insitu.sim.rig import default_rig

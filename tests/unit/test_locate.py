@@ -12,9 +12,9 @@ from typer.testing import CliRunner
 from insitu.cli.main import app
 from insitu.errors import ConfigError
 from insitu.formats.pointcloud import PointCloud, write_ply
-from insitu.measure.locate import LocateRefused, locate_part
-from insitu.measure.part_reference import reference_from_cloud, reference_from_mesh
-from insitu.measure.pose_file import load_pose
+from insitu.locate.part import LocateRefused, locate_part
+from insitu.locate.reference import reference_from_cloud, reference_from_mesh
+from insitu.formats.pose import load_pose
 from insitu.sim.scene import Scene
 from insitu.sim.workpieces import make_workpiece
 
@@ -97,7 +97,7 @@ def test_a_part_square_to_the_lines_is_refused_or_right(refs):
 def test_edges_along_the_lines_do_not_pin_the_pose(refs):
     """The uncertainty check itself: with the samples of one edge direction only, the
     shift across them is free — refused."""
-    from insitu.measure.locate import LocateSettings
+    from insitu.locate.part import LocateSettings
     truth = (5.0, 3.0, 0.0)
     pts, lines = synthetic_scan("step-block", truth)
     with pytest.raises(LocateRefused, match="not pinned down"):
@@ -152,7 +152,7 @@ def test_a_first_scan_as_reference(refs):
     """The reference is a scan at one pose: the pose found in another is the move between.
     Its edges are only as sharp as its lines (0.5 mm apart), so the edge step may not pin the
     pose: then it is refused — never a pose far off."""
-    from insitu.measure.locate import LocateSettings
+    from insitu.locate.part import LocateSettings
     first, _ = synthetic_scan("step-block", (0.0, 0.0, 30.0), seed=2)
     ref = reference_from_cloud(first, "first.ply")
     assert ref.kind == "cloud" and ref.base_z_mm == pytest.approx(0.0, abs=0.02)
@@ -221,7 +221,7 @@ def test_pose_of_a_small_simulated_scan(refs):
     """A real (simulated) scan at binning 4: found where it lies, within the rig's own
     calibration offset (~0.1 mm) and the coarse frame's precision; the default precision
     check refuses it as too coarse, naming the numbers."""
-    from insitu.measure.locate import LocateSettings
+    from insitu.locate.part import LocateSettings
     from insitu.services import scan_live
     from insitu.services.locate import locate_cloud
     from insitu.services.station import simulated
@@ -241,8 +241,8 @@ def test_pose_of_a_small_simulated_scan(refs):
 def test_edges_that_are_not_the_references_are_refused(refs):
     """When a good share of the scan's edges finds no edge of the reference where the pose
     puts them, the edge step gives up (the pose would be doubtful)."""
-    from insitu.measure.edge_align import align_edges, edge_samples
-    from insitu.measure.flat_icp import apply, inverse, rot_z
+    from insitu.locate.edge_align import align_edges, edge_samples
+    from insitu.geometry.pose import apply, inverse, rot_z
 
     truth = (12.0, -7.0, 33.0)
     pts, lines = synthetic_scan("step-block", truth)

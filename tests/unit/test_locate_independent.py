@@ -11,8 +11,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from insitu.measure.locate import LocateRefused, locate_part
-from insitu.measure.part_reference import reference_from_mesh
+from insitu.locate.part import LocateRefused, locate_part
+from insitu.locate.reference import reference_from_mesh
 from insitu.services import calibrate_height, scan_replay
 from insitu.services.locate import locate_cloud
 from insitu.sim.workpieces import make_workpiece

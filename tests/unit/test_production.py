@@ -189,8 +189,8 @@ def test_a_pose_the_lines_leave_unheld_gets_a_second_look_crossed(recipe, tmp_pa
 
     from insitu.cli.recipe import read
     from insitu.geometry.pose import flat_pose
-    from insitu.measure.locate import LocateRefused, Solution
-    from insitu.measure.part_reference import reference_from_mesh
+    from insitu.locate.part import LocateRefused, Solution
+    from insitu.locate.reference import reference_from_mesh
     from insitu.sim.workpieces import make_workpiece
 
     mesh = make_workpiece("step-block")

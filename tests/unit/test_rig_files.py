@@ -10,9 +10,9 @@ import pytest
 
 from insitu.errors import ConfigError, FormatError
 from insitu.formats.sequence import ScanHeadSpec
-from insitu.rig.files import (CalibrationEnvelope, CameraCalibration, RigConfig, ScanHeadConfig,
-                              ScanHeadGeometry,
-                              load_json_model, save_json_model)
+from insitu.formats.calibration import CameraCalibration
+from insitu.formats.json_file import CalibrationEnvelope, load_json_model, save_json_model
+from insitu.formats.rig import RigConfig, ScanHeadConfig, ScanHeadGeometry
 
 CAMERA = {"width": 64, "height": 48, "K": [[60.0, 0, 32.0], [0, 60.0, 24.0], [0, 0, 1]],
           "dist": [0.01, -0.02, 0.0, 0.0, 0.0], "R": np.eye(3), "t": [0.0, 0.0, 300.0]}
@@ -156,3 +156,33 @@ def test_missing_and_unreadable_files(tmp_path):
         load_json_model(tmp_path / "list.json", RigConfig)
     with pytest.raises(FormatError, match="does not exist"):
         save_json_model(tmp_path / "no" / "rig.json", RigConfig())
+
+
+def test_height_calibration_of_version_1_reads_as_it_was_made(tmp_path):
+    """A version-1 height calibration left out the centre settings added after it: they are
+    read as it was extracted (no smoothing by grains, the paper's threshold, no carried ends),
+    not as a new calibration's defaults, and the file is written back whole as version 2."""
+    from pathlib import Path
+
+    from insitu.formats.calibration import HeightCalibration
+    from insitu.vision.extract import CentreSettings
+
+    data = json.loads((Path(__file__).parents[1] / "data" / "height-cal-b2.json").read_text())
+    data["schema_version"] = 1
+    for key in ("smooth_grains", "background", "extend_ends", "end_fraction"):
+        data["centres"].pop(key, None)
+    (tmp_path / "old.json").write_text(json.dumps(data))
+    cal = load_json_model(tmp_path / "old.json", HeightCalibration)
+    assert cal.schema_version == 2
+    c = cal.centres
+    assert (c.smooth_grains, c.background, c.extend_ends, c.end_fraction) == (0.0, False, False,
+                                                                              0.5)
+    new = CentreSettings()
+    assert (new.smooth_grains, new.background, new.extend_ends) != (0.0, False, False)
+    save_json_model(tmp_path / "new.json", cal)
+    again = json.loads((tmp_path / "new.json").read_text())
+    assert again["schema_version"] == 2 and again["centres"]["background"] is False
+    del again["centres"]["background"]          # a version-2 file must say it
+    (tmp_path / "bad.json").write_text(json.dumps(again))
+    with pytest.raises(ConfigError, match="bad.json: centres.background"):
+        load_json_model(tmp_path / "bad.json", HeightCalibration)

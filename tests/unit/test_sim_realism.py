@@ -74,8 +74,8 @@ def test_a_parts_edges_fall_between_pixels_in_the_room_light(rig, pose):
     inspection frame's — lie on its outline within 0.04 mm (robust 1σ; 0.155 mm pixels; the
     half-size map 0.062–0.074) and turn it less than 0.04°."""
     from insitu.geometry.pose import pose_matrix
-    from insitu.measure.image_edges import align_image
-    from insitu.measure.part_reference import reference_from_mesh
+    from insitu.locate.image_edges import align_image
+    from insitu.locate.reference import reference_from_mesh
     from insitu.sim.marks import render_inspection
 
     part = make_workpiece("insert")

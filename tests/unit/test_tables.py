@@ -19,9 +19,9 @@ from insitu.geometry.beams import TwoMirrorHead
 from insitu.geometry.field import check_in_field
 from insitu.marking import (PROJECTIONS, GalvoDriver, Limits, check_projection, check_targets,
                             make_job, project)
-from insitu.measure.height_models import HEIGHT_MODELS, HeightModel
+from insitu.reconstruct.height_models import HEIGHT_MODELS, HeightModel
 from insitu.patterns import FILE_SUFFIXES, SOURCES, SPEC_PREFIXES, is_spec, load_pattern
-from insitu.rig.files import save_json_model
+from insitu.formats.json_file import save_json_model
 from insitu.services import calibrate_height, height_model, load_height_calibration
 from insitu.marking import Placement
 from insitu.formats.project import Project, read_project, write_project

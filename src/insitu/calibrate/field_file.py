@@ -26,7 +26,7 @@ from insitu.formats.sequence import CameraSpec
 from insitu.formats.bounds import each_within, within
 from insitu.formats.validation import Finite, PositivePair, Vec2, bad, numbers
 from insitu.geometry.field import check_in_field
-from insitu.rig.files import CalibrationEnvelope, load_json_model, save_json_model
+from insitu.formats.json_file import CalibrationEnvelope, load_json_model, save_json_model
 
 CONVENTION = ("landing(C) = C + delta(C) on z = 0 (delta = measured P - commanded Q); the "
               "command for target Q is the K with K + delta(K) = Q")

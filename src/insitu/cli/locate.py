@@ -13,7 +13,7 @@ from insitu.cli.common import (bounded, bounded_each, check_output, console, one
                                progress_bar)
 from insitu.errors import ConfigError
 from insitu.formats.images import read_image
-from insitu.measure.locate import LocateSettings
+from insitu.locate.part import LocateSettings
 
 _D = LocateSettings()
 

@@ -152,7 +152,7 @@ def mark(
                           beam, paint=paint)
     located = None
     if part_pose is not None:
-        from insitu.measure.pose_file import load_pose
+        from insitu.formats.pose import load_pose
 
         located = load_pose(part_pose)
         if len(located.inputs) > 1 and Path(located.inputs[1]).name != cloud.name:

@@ -14,7 +14,7 @@ from insitu.cli.job import CrossScan, CrossSpacing, PartPose
 from insitu.formats.atomic import atomic_write_bytes
 from insitu.formats.project import SIM_BINNING
 from insitu.formats.validation import one_of
-from insitu.measure.height_models import HEIGHT_MODELS
+from insitu.reconstruct.height_models import HEIGHT_MODELS
 
 
 @one_line_errors
@@ -88,7 +88,7 @@ def scan(
     if room_light is not None and result.room_light is not None:
         atomic_write_bytes(room_light, cv2.imencode(".png", result.room_light)[1].tobytes())
     if preview is not None:
-        from insitu.measure.preview import save_cloud_picture
+        from insitu.reconstruct.preview import save_cloud_picture
         save_cloud_picture(result.cloud, check_output(preview, ".png"), title=out.name)
     s = result.summary
     table = Table(title=f"scan → {out}", show_header=False)
@@ -110,7 +110,8 @@ def scan(
 
 def _rig_height_calibration(rig: Path) -> Path | None:
     """The height calibration the rig file names (None: none)."""
-    from insitu.rig.files import RigConfig, load_json_model
+    from insitu.formats.json_file import load_json_model
+    from insitu.formats.rig import RigConfig
 
     cfg = load_json_model(rig, RigConfig)
     return cfg.resolve(cfg.height_calibration)

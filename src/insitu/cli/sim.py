@@ -128,7 +128,9 @@ def calib_cmd(
 ) -> None:
     """Write the simulated rig's files as its operator knows them: camera.json (calibrated
     camera, with realistic errors), scan-head.json (nominal geometry) and rig.json."""
-    from insitu.rig.files import CameraCalibration, RigConfig, ScanHeadConfig, save_json_model
+    from insitu.formats.calibration import CameraCalibration
+    from insitu.formats.json_file import save_json_model
+    from insitu.formats.rig import RigConfig, ScanHeadConfig
     from insitu.sim.rig import default_rig
 
     out.mkdir(parents=True, exist_ok=True)

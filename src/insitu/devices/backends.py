@@ -135,14 +135,14 @@ def _need_sim(sim: Devices | None, what: str) -> Devices:
 
 def open_devices(cfg, head_config, correction: FieldCorrection | None = None,
                  sim: Devices | None = None) -> Devices:
-    """The devices of ``cfg`` (a :class:`~insitu.rig.files.RigConfig`). ``head_config``:
-    the scan head's nominal geometry (a :class:`~insitu.rig.files.ScanHeadGeometry`);
+    """The devices of ``cfg`` (a :class:`~insitu.formats.rig.RigConfig`). ``head_config``:
+    the scan head's nominal geometry (a :class:`~insitu.formats.rig.ScanHeadGeometry`);
     ``correction``: the field correction for line projection; ``sim``: the simulated rig's
     devices, taken for those ``cfg`` names 'sim'. On failure, what was opened is closed
     again."""
     from insitu.devices.projection import GalvoLineProjector
 
-    head = head_config.two_mirror()
+    head = TwoMirrorHead.of(head_config)
     closers: list = []
 
     def opened(dev):

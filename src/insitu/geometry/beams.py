@@ -59,6 +59,13 @@ class TwoMirrorHead:
     mirror_distance_mm: float
     mirror_separation_mm: float
 
+    @classmethod
+    def of(cls, geometry) -> "TwoMirrorHead":
+        """The nominal kinematics of a scan head's geometry (anything with
+        ``mirror_distance_mm`` and ``mirror_separation_mm``, e.g.
+        :class:`insitu.formats.rig.ScanHeadGeometry`)."""
+        return cls(geometry.mirror_distance_mm, geometry.mirror_separation_mm)
+
     def forward(self, theta_x: np.ndarray, theta_y: np.ndarray, z: np.ndarray | float = 0.0
                 ) -> tuple[np.ndarray, np.ndarray]:
         """Eqs. 1–2: optical angles, height z → (x, y) where the beam crosses height z, mm."""

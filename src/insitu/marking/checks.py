@@ -31,9 +31,9 @@ class Limits:
 
     @classmethod
     def of(cls, head_config, max_slope_deg: float = DEFAULT_MAX_SLOPE_DEG) -> "Limits":
-        """From the scan head's geometry (a :class:`~insitu.rig.files.ScanHeadGeometry`)."""
+        """From the scan head's geometry (a :class:`~insitu.formats.rig.ScanHeadGeometry`)."""
         return cls(tuple(head_config.field_size_mm), tuple(head_config.z_range_mm),
-                   max_slope_deg, head_config.two_mirror())
+                   max_slope_deg, TwoMirrorHead.of(head_config))
 
 
 def _where(p: np.ndarray) -> str:

@@ -59,9 +59,9 @@ class GalvoDriver:
     @classmethod
     def from_config(cls, head_config, correction: FieldCorrection | None = None,
                     timing: Timing | None = None) -> "GalvoDriver":
-        """From the scan head's geometry (a :class:`~insitu.rig.files.ScanHeadGeometry`, or
-        its file :class:`~insitu.rig.files.ScanHeadConfig`)."""
-        return cls(head_config.two_mirror(), Limits.of(head_config), correction,
+        """From the scan head's geometry (a :class:`~insitu.formats.rig.ScanHeadGeometry`, or
+        its file :class:`~insitu.formats.rig.ScanHeadConfig`)."""
+        return cls(TwoMirrorHead.of(head_config), Limits.of(head_config), correction,
                    timing or Timing())
 
     def joints(self, points: np.ndarray) -> np.ndarray:

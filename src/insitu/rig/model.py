@@ -9,8 +9,9 @@ from pathlib import Path
 
 from insitu.errors import ConfigError
 from insitu.geometry.camera import CameraModel
-from insitu.rig.files import (CameraCalibration, RigConfig, ScanHeadConfig, ScanHeadGeometry,
-                              load_json_model)
+from insitu.formats.calibration import CameraCalibration
+from insitu.formats.json_file import load_json_model
+from insitu.formats.rig import RigConfig, ScanHeadConfig, ScanHeadGeometry
 
 SIMULATED = ("sim",)
 """Backends of the simulated rig (``replay`` and ``none`` open no device)."""

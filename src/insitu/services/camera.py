@@ -25,7 +25,9 @@ from insitu.errors import CalibrationError, InsituError
 from insitu.formats.sequence import Sequence
 from insitu.geometry.beams import BeamModel, PivotHead, ScanHeadOptics, TwoMirrorHead
 from insitu.geometry.camera import CameraModel
-from insitu.rig.files import CameraCalibration, ScanHeadConfig, load_json_model
+from insitu.formats.calibration import CameraCalibration
+from insitu.formats.json_file import load_json_model
+from insitu.formats.rig import ScanHeadConfig
 from insitu.services.common import Progress, camera_model, save_with_picture
 
 
@@ -203,7 +205,7 @@ def head_beams(seq: Sequence, scan_head: str | Path | None = None,
     pivot head at pivot_height_mm), corrected by a field correction file if given."""
     if scan_head is not None:
         cfg = load_json_model(scan_head, ScanHeadConfig)
-        beams, what = (cfg.two_mirror(),
+        beams, what = (TwoMirrorHead.of(cfg),
                        f"two-mirror head of {scan_head}")
     else:
         extra = seq.scan_head.model_extra or {}

@@ -16,7 +16,7 @@ Progress = Callable[[int, int], None]
 def save_with_picture(out: str | Path, result: BaseModel, draw: Callable[[Path], None]) -> None:
     """Write ``result`` to ``out`` (JSON) and ``draw`` its picture beside it (.png), both
     atomically: nothing is left behind if either fails."""
-    from insitu.rig.files import save_json_model
+    from insitu.formats.json_file import save_json_model
 
     out = Path(out)
     png = out.with_suffix(".png")

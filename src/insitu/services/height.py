@@ -10,13 +10,15 @@ from insitu.errors import CalibrationError, ConfigError, MeasurementError
 from insitu.formats.sequence import Sequence
 from insitu.formats.validation import one_of, show
 from insitu.geometry.camera import CameraModel
-from insitu.measure.height_models import HEIGHT_MODELS, HeightModel
-from insitu.measure.heightcal import (LineObservation, PaperHeightModel, SheetHeightModel,
-                                      cross_validate_sheet, height_residuals, residual_grid)
-from insitu.measure.plane import expected_band, line_runs_along_rows
-from insitu.measure.turned_sheet import (TurnedSheetModel, line_angle, same_direction,
+from insitu.reconstruct.height_models import HEIGHT_MODELS, HeightModel
+from insitu.calibrate.height_fit import (LineObservation, cross_validate_sheet, fit_paper,
+                                         fit_sheet, fit_turned_sheet, height_residuals,
+                                         residual_grid)
+from insitu.reconstruct.plane import expected_band, line_runs_along_rows
+from insitu.reconstruct.turned_sheet import (TurnedSheetModel, line_angle, same_direction,
                                          turned_camera, turned_offset)
-from insitu.rig.files import HeightCalibration, ResidualGridSpec, load_json_model
+from insitu.formats.calibration import HeightCalibration, ResidualGridSpec
+from insitu.formats.json_file import load_json_model
 from insitu.services.common import Progress, camera_model, save_with_picture
 from insitu.vision.centres import CENTRE_METHODS
 from insitu.vision.extract import CentreSettings, extract_centres
@@ -28,7 +30,7 @@ def observations(seq: Sequence, settings: CentreSettings = CentreSettings(),
     """Line centres of every frame of a height-calibration sequence, one frame at a time,
     each searched where its light plane meets the plate (± 3 mm): (the frames of lines along
     y, each at its x; the crossed frames, each at its offset in the turned frame
-    (:mod:`insitu.measure.turned_sheet`); the crossed lines' angle to x, None without)."""
+    (:mod:`insitu.reconstruct.turned_sheet`); the crossed lines' angle to x, None without)."""
     if seq.kind != "height-calibration":
         raise CalibrationError(f"{seq.folder}: a '{seq.kind}' sequence, not a height calibration")
     camera, H = camera_model(seq.camera), seq.scan_head.pivot_height_mm
@@ -66,16 +68,16 @@ def calibrate_height(folder: str | Path, settings: CentreSettings = CentreSettin
     camera = camera_model(seq.camera)
     H = seq.scan_head.pivot_height_mm
     obs, crossed, angle = observations(seq, settings, progress)
-    sheet = SheetHeightModel.fit(obs, camera, H)
+    sheet = fit_sheet(obs, camera, H)
     residuals = {f"sheet_{k}": v for k, v in height_residuals(sheet, camera, obs).items()}
     residuals.update({f"sheet_{k}": v for k, v in cross_validate_sheet(obs, camera, H).items()})
     paper = None
     if any(o.x_mm == 0.0 and o.z_mm == 0.0 for o in obs):
-        paper = PaperHeightModel.fit(obs)
+        paper = fit_paper(obs)
         residuals.update({f"paper_{k}": v for k, v in height_residuals(paper, camera, obs).items()})
     cross = None
     if crossed:
-        cross = TurnedSheetModel.fit(crossed, camera, H, angle)
+        cross = fit_turned_sheet(crossed, camera, H, angle)
         tcam = turned_camera(camera, angle)
         residuals.update({f"sheet_cross_{k}": v for k, v in
                           height_residuals(cross.sheet, tcam, crossed).items()})

@@ -11,10 +11,10 @@ import numpy as np
 from insitu.formats.mesh import is_mesh_file, read_mesh
 from insitu.formats.pointcloud import PointCloud, read_ply
 from insitu.geometry.camera import CameraModel
-from insitu.measure.locate import LocateSettings, PartPose, locate_part
-from insitu.measure.part_reference import (PartReference, reference_from_cloud,
+from insitu.locate.part import LocateSettings, PartPose, locate_part
+from insitu.locate.reference import (PartReference, reference_from_cloud,
                                            reference_from_mesh)
-from insitu.measure.pose_file import save_pose
+from insitu.formats.pose import save_pose
 
 
 def load_reference(path: str | Path, settings: LocateSettings = LocateSettings()
@@ -36,7 +36,7 @@ def locate_cloud(reference: PartReference, cloud: PointCloud,
                  prefer_angle: tuple[float, float] | None = None,
                  camera: CameraModel | None = None,
                  image: np.ndarray | None = None) -> PartPose:
-    """:func:`~insitu.measure.locate.locate_part` of a measured cloud (its scan lines used
+    """:func:`~insitu.locate.part.locate_part` of a measured cloud (its scan lines used
     for the edges when it records them; ``camera``: the one it was measured through, see
     :func:`insitu.services.height.scan_camera`; ``image``: that camera's room-light frame of
     the part, for its edges). LocateRefused (a MeasurementError) names why when no pose is
@@ -55,5 +55,5 @@ def locate(reference: str | Path, cloud: str | Path, out: str | Path,
     measured = read_ply(cloud)
     pose = locate_cloud(load_reference(reference, settings), measured, settings, prefer_angle,
                         camera, image)
-    save_pose(out, pose, [str(reference), str(cloud)], prefer_angle, measured.rig)
+    save_pose(out, pose.to_dict(), [str(reference), str(cloud)], prefer_angle, measured.rig)
     return pose

@@ -31,7 +31,7 @@ from insitu.formats.recipe import Recipe
 from insitu.geometry.camera import CameraModel
 from insitu.geometry.pose import flat_pose, pose_matrix
 from insitu.marking import LaserParams, MarkJob, read_job
-from insitu.measure.locate import LocateRefused
+from insitu.locate.part import LocateRefused
 from insitu.services import mark as mark_svc
 from insitu.services import serials
 from insitu.services.height import crossed_model

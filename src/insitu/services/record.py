@@ -13,8 +13,8 @@ import numpy as np
 from insitu.errors import ConfigError, DeviceError
 from insitu.formats.sequence import SequenceWriter
 from insitu.geometry.beams import axis_lines
-from insitu.measure.plan import check_region
-from insitu.measure.turned_sheet import CROSS_ANGLE_DEG, turned_lines, turned_offset
+from insitu.reconstruct.plan import check_region
+from insitu.reconstruct.turned_sheet import CROSS_ANGLE_DEG, turned_lines, turned_offset
 from insitu.services.common import Progress
 from insitu.services.room_light import station_room_light
 from insitu.services.scan import plan_lines

@@ -18,10 +18,10 @@ from insitu.formats.pointcloud import PointCloud, write_ply
 from insitu.formats.rig_record import RigRecord
 from insitu.formats.sequence import Sequence
 from insitu.geometry.camera import CameraModel
-from insitu.measure.plan import check_region, scan_lines
-from insitu.measure.scan import ScanReconstructor
-from insitu.measure.turned_sheet import CROSS_ANGLE_DEG
-from insitu.rig.files import HeightCalibration
+from insitu.reconstruct.plan import check_region, scan_lines
+from insitu.reconstruct.scan import ScanReconstructor
+from insitu.reconstruct.turned_sheet import CROSS_ANGLE_DEG
+from insitu.formats.calibration import HeightCalibration
 from insitu.services.common import Progress, camera_model
 from insitu.services.height import (centre_settings, check_same_camera, crossed_model,
                                     height_model)

@@ -14,7 +14,8 @@ from insitu.errors import ConfigError, SafetyError
 from insitu.formats.project import SIM_BINNING
 from insitu.formats.rig_record import RigRecord, describe, same_rig
 from insitu.marking import GalvoDriver
-from insitu.rig.files import RigConfig, load_json_model
+from insitu.formats.json_file import load_json_model
+from insitu.formats.rig import RigConfig
 from insitu.rig.model import RigModel, rig_model, simulated_devices
 
 if TYPE_CHECKING:

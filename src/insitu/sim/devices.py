@@ -38,6 +38,7 @@ from insitu.devices.galvo import (Command, ListPosition, focus_points, list_dige
                                   nominal_commands)
 from insitu.devices.protocols import check_in_field
 from insitu.errors import DeviceError, SafetyError
+from insitu.geometry.beams import TwoMirrorHead
 from insitu.sim.marks import Burn, RoomLightView, render_inspection
 from insitu.sim.render import NOMINAL_EXPOSURE_MS
 from insitu.sim.scene import Scene
@@ -133,7 +134,7 @@ class SimController:
     def __init__(self, world: SimWorld, sample_mm: float = 0.02, scene: Scene | None = None):
         self.world = world
         rig = world.rig
-        self.nominal = rig.operator.head.two_mirror()
+        self.nominal = TwoMirrorHead.of(rig.operator.head)
         self._scene = scene
         self.sample_mm = float(sample_mm)
         self.burns: list[Burn] = []

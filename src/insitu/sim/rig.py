@@ -14,7 +14,7 @@ import numpy as np
 from insitu.geometry.beams import ScanHeadOptics, TwoMirrorHead
 from insitu.geometry.camera import CameraModel, rotation_about
 from insitu.geometry.distortion import FieldDistortion, NoDistortion, PolynomialFieldDistortion
-from insitu.rig.files import ScanHeadGeometry
+from insitu.formats.rig import ScanHeadGeometry
 from insitu.rig.model import RigModel
 
 PIXEL_PITCH_MM = 0.00345

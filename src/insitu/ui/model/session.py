@@ -103,7 +103,7 @@ class Session:
     def __init__(self) -> None:
         self.rig_choice = RigChoice()
         self.height_cal_path: Path | None = None
-        self.height_cal = None              # insitu.rig.files.HeightCalibration
+        self.height_cal = None              # insitu.formats.calibration.HeightCalibration
         self.field_path: Path | None = None
         self.camera_cal_path: Path | None = None
         self.cloud: PointCloud | None = None

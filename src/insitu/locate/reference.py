@@ -16,8 +16,8 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from insitu.errors import MeasurementError
-from insitu.measure.height_image import HeightImage, mesh_height_image, splat_image
-from insitu.measure.image_edges import Outline, outline
+from insitu.locate.height_image import HeightImage, mesh_height_image, splat_image
+from insitu.locate.image_edges import Outline, outline
 
 UP_NZ = -0.2
 """Mesh faces whose normal's z is below this face the table: no camera above sees them."""
@@ -32,7 +32,7 @@ class PartReference:
     the surfaces visible from above; ``base_z_mm``: the height it rests on (a mesh's lowest
     z; a scan's table); ``kind``: "mesh" or "cloud"; ``source``: where it came from (a file
     name); ``spacing_mm``: the samples' mean spacing; ``heights``: the part and the table
-    around it seen from above (:mod:`insitu.measure.height_image`)."""
+    around it seen from above (:mod:`insitu.locate.height_image`)."""
 
     points: np.ndarray
     normals: np.ndarray
@@ -61,7 +61,7 @@ class PartReference:
 
     @cached_property
     def outline(self) -> Outline:
-        """The edges of its top seen from above (:func:`insitu.measure.image_edges.outline`),
+        """The edges of its top seen from above (:func:`insitu.locate.image_edges.outline`),
         for a room-light frame's edges."""
         return outline(self.heights)
 

@@ -9,11 +9,11 @@ from scipy.spatial import cKDTree
 from insitu.errors import MeasurementError
 from insitu.formats.pointcloud import PointCloud
 from insitu.geometry.camera import CameraModel
-from insitu.measure.consistency import cross_line_inliers
-from insitu.measure.height_models import HeightModel
-from insitu.measure.heightcal import check_bracket
-from insitu.measure.plane import band_and_side, line_runs_along_rows, reconstruct_line
-from insitu.measure.turned_sheet import TurnedSheetModel, line_angle, same_direction, turned_offset
+from insitu.reconstruct.consistency import cross_line_inliers
+from insitu.reconstruct.height_models import HeightModel
+from insitu.reconstruct.plate_models import check_bracket
+from insitu.reconstruct.plane import band_and_side, line_runs_along_rows, reconstruct_line
+from insitu.reconstruct.turned_sheet import TurnedSheetModel, line_angle, same_direction, turned_offset
 from insitu.vision.extract import CentreSettings, extract_centres
 
 
@@ -118,7 +118,7 @@ class ScanReconstructor:
         """All points so far, less isolated ones (fewer than ``outlier_neighbours`` others
         within ``outlier_radius_mm``: spurious detections floating off the surface; 0 keeps
         all) and, with ``cross_check``, those the neighbouring lines do not confirm
-        (:mod:`insitu.measure.consistency`; counted in ``unconfirmed_removed``), and a few
+        (:mod:`insitu.reconstruct.consistency`; counted in ``unconfirmed_removed``), and a few
         strays outside the calibrated heights (:func:`check_bracket`; counted with the
         isolated ones). Raises MeasurementError when no frame showed a line or more heights
         leave the calibrated range."""

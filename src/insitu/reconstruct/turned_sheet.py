@@ -1,6 +1,6 @@
 """The height model of a crossed pass: lines at ``angle_deg`` to x instead of along y.
 
-:class:`~insitu.measure.heightcal.SheetHeightModel` knows lines along y (constant x) only.
+:class:`~insitu.reconstruct.plate_models.SheetHeightModel` knows lines along y (constant x) only.
 Turn the whole problem about z — the world and the camera by β = 90° − angle — and the
 crossed lines run along y; the same sheet model is fitted and evaluated there and its points
 are turned back. The nominal pivot model X = x (H − Z) / H is the same in any turned frame;
@@ -20,8 +20,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from insitu.geometry.camera import CameraModel
-from insitu.measure.flat_icp import rot_z
-from insitu.measure.heightcal import LineObservation, SheetHeightModel
+from insitu.geometry.pose import rot_z
+from insitu.reconstruct.plate_models import SheetHeightModel
 
 CROSS_ANGLE_DEG = 45.0
 """The crossed pass's line direction, degrees from +x (lines along y are at 90°)."""
@@ -80,13 +80,6 @@ class TurnedSheetModel:
     @property
     def z_range(self) -> tuple[float, float]:
         return self.sheet.z_range
-
-    @classmethod
-    def fit(cls, obs: list[LineObservation], camera: CameraModel, pivot_height_mm: float,
-            angle_deg: float) -> "TurnedSheetModel":
-        """``obs``: the crossed frames, each ``x_mm`` its turned offset."""
-        cam = turned_camera(camera, angle_deg)
-        return cls(float(angle_deg), SheetHeightModel.fit(obs, cam, pivot_height_mm))
 
     def points(self, camera: CameraModel, x_mm: float, u: np.ndarray, v: np.ndarray
                ) -> np.ndarray:

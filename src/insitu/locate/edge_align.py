@@ -31,8 +31,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from insitu.geometry.camera import CameraModel
-from insitu.measure.flat_icp import rot_z
-from insitu.measure.height_image import HeightImage, sample
+from insitu.geometry.pose import rot_z
+from insitu.locate.height_image import HeightImage, sample
 
 DROP_MM = 0.5
 FLAT_MM = 0.15

@@ -24,9 +24,9 @@ import cv2
 import numpy as np
 
 from insitu.geometry.camera import CameraModel
-from insitu.measure.edge_align import edge_distance
-from insitu.measure.flat_icp import rot_z
-from insitu.measure.height_image import HeightImage, sample
+from insitu.locate.edge_align import edge_distance
+from insitu.geometry.pose import rot_z
+from insitu.locate.height_image import HeightImage, sample
 
 STEEP = 1.0
 """Slope (of the height image blurred as for its normals) above which a pixel lies on an

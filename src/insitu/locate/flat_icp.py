@@ -1,7 +1,6 @@
 """Point-to-plane ICP restricted to a part lying flat: a turn about z and a shift in x, y, z
-(4 degrees of freedom), so a fit can never tilt the part off the table.
-
-A pose is ``(angle_rad, t)``: a point p maps to ``Rz(angle) @ p + t`` (t: (3,) mm).
+(4 degrees of freedom), so a fit can never tilt the part off the table. Poses are
+:data:`insitu.geometry.pose.Pose4`.
 """
 
 from __future__ import annotations
@@ -11,31 +10,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import cKDTree
 
-Pose4 = tuple[float, np.ndarray]
-
-
-def rot_z(angle_rad: float) -> np.ndarray:
-    """(3, 3) rotation by ``angle_rad`` about +z."""
-    c, s = np.cos(angle_rad), np.sin(angle_rad)
-    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
-
-
-def apply(pose: Pose4, points: np.ndarray) -> np.ndarray:
-    """``points`` (N, 3) mapped by ``pose``."""
-    return points @ rot_z(pose[0]).T + pose[1]
-
-
-def inverse(pose: Pose4) -> Pose4:
-    """The pose that undoes ``pose``."""
-    return -pose[0], -(rot_z(-pose[0]) @ pose[1])
-
-
-def matrix(pose: Pose4) -> np.ndarray:
-    """(4, 4) homogeneous transform of ``pose``."""
-    T = np.eye(4)
-    T[:3, :3], T[:3, 3] = rot_z(pose[0]), pose[1]
-    return T
-
+from insitu.geometry.pose import Pose4, apply, rot_z
 
 @dataclass(frozen=True)
 class Fit:

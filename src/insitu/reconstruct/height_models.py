@@ -11,7 +11,7 @@ from typing import Protocol, runtime_checkable
 import numpy as np
 
 from insitu.geometry.camera import CameraModel
-from insitu.measure.heightcal import PaperHeightModel, SheetHeightModel
+from insitu.reconstruct.plate_models import PaperHeightModel, SheetHeightModel
 
 
 @runtime_checkable

@@ -1,6 +1,6 @@
 """A part seen from straight above: heights on a grid of its own frame, the table around it
 — exactly from a mesh (ray cast), or from a scan (its points splatted). The edge step of
-locating (:mod:`insitu.measure.edge_align`) finds the reference's edges on it.
+locating (:mod:`insitu.locate.edge_align`) finds the reference's edges on it.
 """
 
 from __future__ import annotations

@@ -1,5 +1,5 @@
-"""Height calibration (Li et al. §2.2) from a flat plate recorded at known heights with lines
-at known offsets, and the better model of ours that uses every centre's row and column.
+"""The height models of Method 2 as a scan evaluates them — fitted on a flat plate recorded
+at known heights with lines at known offsets (:mod:`insitu.calibrate.height_fit`).
 
 * :class:`PaperHeightModel` — exactly the paper: P = P1 + P2 (Eq. 6) with average pixel
   distances to the reference line (offset 0, height 0); P1(x) by linear interpolation, Z from
@@ -12,7 +12,7 @@ at known offsets, and the better model of ours that uses every centre's row and 
   sheet (Newton on the ray, started from Method 1).
 
 Both take lines along y (constant x), as the paper does; both are a
-:class:`~insitu.measure.height_models.HeightModel`.
+:class:`~insitu.reconstruct.height_models.HeightModel`.
 """
 
 from __future__ import annotations
@@ -22,30 +22,20 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.polynomial import polynomial as P
 
-from insitu.errors import CalibrationError, MeasurementError
+from insitu.errors import MeasurementError
 from insitu.geometry.camera import CameraModel
 from insitu.geometry.beams import light_plane
 
-_SCALE = np.array([100.0, 100.0, 25.0])   # x, Y, Z normalisation, mm
+SCALE_MM = np.array([100.0, 100.0, 25.0])   # x, Y, Z normalisation, mm
 
 
-@dataclass(frozen=True)
-class LineObservation:
-    """Centres of one calibration frame: the line at offset ``x_mm`` on the plate at ``z_mm``."""
-
-    x_mm: float
-    z_mm: float
-    u: np.ndarray
-    v: np.ndarray
-
-
-def _ray_at_height(camera: CameraModel, uv: np.ndarray, z: np.ndarray) -> np.ndarray:
+def ray_at_height(camera: CameraModel, uv: np.ndarray, z: np.ndarray) -> np.ndarray:
+    """(N, 3) world mm where the camera rays of pixels ``uv`` (N, 2) reach heights ``z`` (N,)."""
     origin, d = camera.rays(uv)
     s = (z - origin[2]) / d[:, 2]
     return origin + s[:, None] * d
 
 
-# -- the paper's model ------------------------------------------------------------------------
 @dataclass(frozen=True)
 class PaperHeightModel:
     """Li et al.'s P = P1 + P2. ``ref_u``, ``ref_v``: the reference line's centres (offset 0,
@@ -58,26 +48,6 @@ class PaperHeightModel:
     P: np.ndarray
 
     name = "paper"
-
-    @classmethod
-    def fit(cls, obs: list[LineObservation]) -> "PaperHeightModel":
-        offsets = np.unique([o.x_mm for o in obs])
-        heights = np.unique([o.z_mm for o in obs])
-        ref = [o for o in obs if o.x_mm == 0.0 and o.z_mm == 0.0]
-        if not ref:
-            raise CalibrationError("height calibration: the paper's method needs the reference "
-                                   "line (offset 0 mm on the plate at height 0 mm)")
-        ref_u, ref_v = ref[0].u, ref[0].v
-        P = np.full((len(offsets), len(heights)), np.nan)
-        for o in obs:
-            d = o.v - np.interp(o.u, ref_u, ref_v, left=np.nan, right=np.nan)
-            if np.isfinite(d).sum() >= 5:
-                P[np.searchsorted(offsets, o.x_mm), np.searchsorted(heights, o.z_mm)] = np.nanmean(d)
-        if np.isnan(P).any():
-            k, j = np.argwhere(np.isnan(P))[0]
-            raise CalibrationError(f"height calibration: no line seen at offset {offsets[k]:g} mm "
-                                   f"on the plate at {heights[j]:g} mm")
-        return cls(ref_u, ref_v, offsets, heights, P)
 
     @property
     def z_range(self) -> tuple[float, float]:
@@ -103,7 +73,7 @@ class PaperHeightModel:
 
     def points(self, camera: CameraModel, x_mm: float, u: np.ndarray, v: np.ndarray) -> np.ndarray:
         z = self.height(x_mm, u, v)
-        return _ray_at_height(camera, np.column_stack([u, v]), z)
+        return ray_at_height(camera, np.column_stack([u, v]), z)
 
     def to_dict(self) -> dict:
         return {"ref_u": self.ref_u.tolist(), "ref_v": self.ref_v.tolist(),
@@ -126,21 +96,6 @@ def _interp_extrap(x, xp, fp):
 
 
 # -- our model ---------------------------------------------------------------------------------
-def _exponents(deg_x: int, deg_y: int, deg_z: int, total: int) -> np.ndarray:
-    """(M, 3) exponents (a, b, c) of x^a Y^b Z^c with a ≤ deg_x, b ≤ deg_y, c ≤ deg_z and
-    a + b + c ≤ total, in np.polynomial.polyvander3d's column order."""
-    e = [(a, b, c) for a in range(deg_x + 1) for b in range(deg_y + 1) for c in range(deg_z + 1)]
-    return np.array([t for t in e if sum(t) <= total], dtype=np.int64)
-
-
-def _design(exps: np.ndarray, x: np.ndarray, Y: np.ndarray, Z: np.ndarray) -> np.ndarray:
-    """(N, M) monomials of the normalised (x, Y, Z)."""
-    deg = exps.max(axis=0)
-    V = P.polyvander3d(np.broadcast_to(x, Y.shape) / _SCALE[0], Y / _SCALE[1], Z / _SCALE[2], deg)
-    cols = (exps[:, 0] * (deg[1] + 1) + exps[:, 1]) * (deg[2] + 1) + exps[:, 2]
-    return V[:, cols]
-
-
 @dataclass(frozen=True)
 class SheetHeightModel:
     """All light sheets as X = x (H − Z) / H + δX(x, Y, Z); δX a polynomial (``exps`` (M, 3),
@@ -154,41 +109,18 @@ class SheetHeightModel:
 
     name = "sheet"
 
-    @classmethod
-    def fit(cls, obs: list[LineObservation], camera: CameraModel, pivot_height_mm: float,
-            degrees=(3, 4, 2), total: int = 6) -> "SheetHeightModel":
-        xs, pts = [], []
-        for o in obs:
-            pts.append(_ray_at_height(camera, np.column_stack([o.u, o.v]), np.full(len(o.u), o.z_mm)))
-            xs.append(np.full(len(o.u), o.x_mm))
-        x, p = np.concatenate(xs), np.concatenate(pts)
-        X, Y, Z = p.T
-        exps = _exponents(*degrees, total)
-        if len(np.unique(x)) < 2 or len(np.unique(Z)) < 2 or len(x) < 4 * len(exps):
-            raise CalibrationError("height calibration: needs lines at two or more offsets on "
-                                   "the plate at two or more heights")
-        H = float(pivot_height_mm)
-        resid = X - x * (H - Z) / H
-        A = _design(exps, x, Y, Z)
-        keep = np.ones(len(x), bool)
-        for _ in range(3):  # drop gross outliers (ghost centres) and refit
-            coef = np.linalg.lstsq(A[keep], resid[keep], rcond=None)[0]
-            r = A @ coef - resid
-            keep = np.abs(r) < max(6 * 1.4826 * np.median(np.abs(r[keep])), 1e-3)
-        return cls(H, exps, coef, (float(x.min()), float(x.max())), (float(Z.min()), float(Z.max())))
-
     def _frame_poly(self, x_mm: float) -> np.ndarray:
         """δX for the line at offset x as a 2-D coefficient array over (Y/100, Z/25)."""
         deg = self.exps.max(axis=0)
         C = np.zeros((deg[1] + 1, deg[2] + 1))
-        xa = (x_mm / _SCALE[0]) ** self.exps[:, 0]
+        xa = (x_mm / SCALE_MM[0]) ** self.exps[:, 0]
         np.add.at(C, (self.exps[:, 1], self.exps[:, 2]), self.coef * xa)
         return C
 
     def sheet_x(self, x_mm: float, Y: np.ndarray, Z: np.ndarray) -> np.ndarray:
         """X (N,) of the sheet of the line at offset x at (Y, Z), mm."""
         C = self._frame_poly(x_mm)
-        return x_mm * (self.H - Z) / self.H + P.polyval2d(Y / _SCALE[1], Z / _SCALE[2], C)
+        return x_mm * (self.H - Z) / self.H + P.polyval2d(Y / SCALE_MM[1], Z / SCALE_MM[2], C)
 
     def points(self, camera: CameraModel, x_mm: float, u: np.ndarray, v: np.ndarray) -> np.ndarray:
         """(N, 3) world points of centres (u, v) of the line at offset x: each camera ray meets
@@ -196,13 +128,13 @@ class SheetHeightModel:
         uv = np.column_stack([u, v])
         origin, d = camera.rays(uv)
         C = self._frame_poly(x_mm)
-        CY, CZ = P.polyder(C, axis=0) / _SCALE[1], P.polyder(C, axis=1) / _SCALE[2]
+        CY, CZ = P.polyder(C, axis=0) / SCALE_MM[1], P.polyder(C, axis=1) / SCALE_MM[2]
         plane = light_plane(self.H, [x_mm, -1.0], [x_mm, 1.0])
         with np.errstate(divide="ignore", invalid="ignore"):
             s = -(origin @ plane[:3] + plane[3]) / (d @ plane[:3])
             for _ in range(4):
                 p = origin + s[:, None] * d
-                y, z = p[:, 1] / _SCALE[1], p[:, 2] / _SCALE[2]
+                y, z = p[:, 1] / SCALE_MM[1], p[:, 2] / SCALE_MM[2]
                 f = p[:, 0] - x_mm * (self.H - p[:, 2]) / self.H - P.polyval2d(y, z, C)
                 df = (d[:, 0] + x_mm * d[:, 2] / self.H
                       - P.polyval2d(y, z, CY) * d[:, 1] - P.polyval2d(y, z, CZ) * d[:, 2])
@@ -211,7 +143,7 @@ class SheetHeightModel:
 
     def to_dict(self) -> dict:
         return {"pivot_height_mm": self.H, "exponents": self.exps.tolist(),
-                "coefficients_mm": self.coef.tolist(), "scale_mm": _SCALE.tolist(),
+                "coefficients_mm": self.coef.tolist(), "scale_mm": SCALE_MM.tolist(),
                 "x_range_mm": list(self.x_range), "z_range_mm": list(self.z_range)}
 
     @classmethod
@@ -238,43 +170,3 @@ def check_bracket(model, z: np.ndarray, what: str, tol_mm: float = 2.0,
     return inside
 
 
-def height_residuals(model, camera: CameraModel, obs: list[LineObservation]) -> dict[str, float]:
-    """Height error of ``model`` on calibration frames: RMS and max |Z − plate height|, mm."""
-    err = np.concatenate([model.points(camera, o.x_mm, o.u, o.v)[:, 2] - o.z_mm for o in obs])
-    err = err[np.isfinite(err)]
-    return {"rms_mm": float(np.sqrt(np.mean(err**2))), "max_mm": float(np.max(np.abs(err))),
-            "points": float(len(err))}
-
-
-def residual_grid(model, camera: CameraModel, obs: list[LineObservation]
-                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Where the calibration is good: plate heights (H,) and line offsets (X,), mm, and the
-    RMS of |Z − plate height| (H, X), mm, of the frame at each (NaN where there is none)."""
-    heights = np.unique([o.z_mm for o in obs])
-    offsets = np.unique([o.x_mm for o in obs])
-    sq = np.zeros((len(heights), len(offsets)))
-    n = np.zeros_like(sq)
-    for o in obs:
-        e = model.points(camera, o.x_mm, o.u, o.v)[:, 2] - o.z_mm
-        e = e[np.isfinite(e)]
-        i, j = np.searchsorted(heights, o.z_mm), np.searchsorted(offsets, o.x_mm)
-        sq[i, j] += float(np.sum(e * e))
-        n[i, j] += len(e)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        return heights, offsets, np.where(n > 0, np.sqrt(sq / n), np.nan)
-
-
-def cross_validate_sheet(obs: list[LineObservation], camera: CameraModel,
-                         pivot_height_mm: float) -> dict[str, float]:
-    """Leave-one-height-out: fit without each plate height, test on it (needs ≥ 3 heights)."""
-    heights = np.unique([o.z_mm for o in obs])
-    errs = []
-    for z in heights[1:-1]:  # interpolation only: the end heights would be extrapolation
-        model = SheetHeightModel.fit([o for o in obs if o.z_mm != z], camera, pivot_height_mm)
-        test = [o for o in obs if o.z_mm == z]
-        errs.append(np.concatenate([model.points(camera, o.x_mm, o.u, o.v)[:, 2] - z for o in test]))
-    if not errs:
-        return {}
-    e = np.concatenate(errs)
-    e = e[np.isfinite(e)]
-    return {"cv_rms_mm": float(np.sqrt(np.mean(e**2))), "cv_max_mm": float(np.max(np.abs(e)))}

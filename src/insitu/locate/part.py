@@ -1,15 +1,15 @@
 """Locate a part lying flat on the table in a scan: its pose ``T_world_part`` (a turn about z
 and a shift), or a refusal naming why — never a doubtful pose.
 
-1. The table is taken away (:func:`~insitu.measure.part_reference.find_table`).
+1. The table is taken away (:func:`~insitu.locate.reference.find_table`).
 2. Global step, two ways, on a ``voxel_mm`` grid: FPFH features matched by RANSAC
    (``open3d.pipelines.registration``; up to :data:`RANSAC_RUNS` times), and a search over
    turns about z (every ``turn_step_deg``, x, y from the tops' centroids) for parts with few
    features; each start refined by a coarse flat ICP.
 3. Fine step: point-to-plane ICP of the scan (thinned to ``fine_voxel_mm``, table excluded)
    onto the dense reference, restricted to the 4 degrees of freedom of a part lying flat
-   (:mod:`insitu.measure.flat_icp`); then x, y and the turn from the edges the scan lines
-   cross (:mod:`insitu.measure.edge_align`), which flat tops do not give the ICP.
+   (:mod:`insitu.locate.flat_icp`); then x, y and the turn from the edges the scan lines
+   cross (:mod:`insitu.locate.edge_align`), which flat tops do not give the ICP.
 4. Each distinct solution is scored: ``fitness`` (the scan's points within ``inlier_mm`` of
    the reference's surface), ``coverage`` (the reference's top measured by the scan) and the
    inliers' RMSE. The best is refused when it fits poorly or is only partly in the scan;
@@ -17,7 +17,7 @@ and a shift), or a refusal naming why — never a doubtful pose.
    unless ``prefer_angle`` picks exactly one of them; and when the edges leave the pose
    uncertain by more than ``max_sigma_mm`` (1σ, at the part's rim).
 5. With a room-light frame of the camera the scan was measured through, the chosen pose's
-   x, y and turn are taken from the top's edges in it (:mod:`insitu.measure.image_edges`),
+   x, y and turn are taken from the top's edges in it (:mod:`insitu.locate.image_edges`),
    seen whole there, when they hold the pose to ``max_sigma_mm`` and agree with the scan's
    within its own uncertainty (3σ + ``agree_mm``; 0.3 mm where the scan's edges did not
    hold it); then the uncertainty check of 4. is the frame's. Else the scan's pose stands,
@@ -34,11 +34,12 @@ from scipy.spatial import cKDTree
 
 from insitu.errors import MeasurementError
 from insitu.geometry.camera import CameraModel
-from insitu.measure.flat_icp import Fit, Pose4, apply, icp_flat, inverse, matrix, rot_z, score
-from insitu.measure.edge_align import (align_edges, direction_name, edge_samples,
+from insitu.geometry.pose import Pose4, apply, inverse, matrix, rot_z
+from insitu.locate.flat_icp import Fit, icp_flat, score
+from insitu.locate.edge_align import (align_edges, direction_name, edge_samples,
                                        unheld_reason)
-from insitu.measure.image_edges import align_image
-from insitu.measure.part_reference import (PartReference, above_table, coarse_features,
+from insitu.locate.image_edges import align_image
+from insitu.locate.reference import (PartReference, above_table, coarse_features,
                                            find_table, thin)
 
 MIN_POINTS = 200
@@ -171,7 +172,7 @@ def locate_part(reference: PartReference, points: np.ndarray,
     ``line`` attribute), for the edge step — without it x, y and the turn are the ICP's,
     a few tenths of a mm off on flat parts; ``camera``: the camera the scan was measured
     through (the height calibration's), so the edge step takes each line's points in the
-    order of their pixels (:mod:`insitu.measure.edge_align`) — without it, in the order
+    order of their pixels (:mod:`insitu.locate.edge_align`) — without it, in the order
     along the line in x, y, and edges crossed obliquely are found short. ``prefer_angle``
     (lo, hi) degrees: of solutions that fit
     nearly equally well (a symmetric part), take the one turned within lo … hi (wrapping
@@ -317,7 +318,7 @@ def _aligned(ref: PartReference, pts: np.ndarray, lines: np.ndarray | None,
              table: np.ndarray, fine: np.ndarray, sols: list[Solution],
              s: LocateSettings, camera: CameraModel | None) -> list[Solution]:
     """The solutions within reach of the best (those that may be chosen) with x, y and the
-    turn refined on the edges the scan lines cross (:mod:`insitu.measure.edge_align`), z
+    turn refined on the edges the scan lines cross (:mod:`insitu.locate.edge_align`), z
     kept; unchanged without line indices or too few edge samples."""
     if not sols or lines is None:
         return sols

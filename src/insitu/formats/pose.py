@@ -14,8 +14,7 @@ from pydantic import BaseModel, ConfigDict, field_validator
 from insitu.errors import ConfigError
 from insitu.formats.bounds import within
 from insitu.formats.validation import bad
-from insitu.measure.locate import PartPose
-from insitu.rig.files import CalibrationEnvelope, load_json_model, save_json_model
+from insitu.formats.json_file import CalibrationEnvelope, load_json_model, save_json_model
 
 Mm, Deg, Share = within("position_mm"), within("angle_deg"), within("fraction")
 Rmse = within("residual_mm")
@@ -80,10 +79,10 @@ class PoseFile(CalibrationEnvelope):
         return np.asarray(self.T_world_part, dtype=float)
 
 
-def save_pose(path: str | Path, pose: PartPose, inputs: list[str],
+def save_pose(path: str | Path, d: dict, inputs: list[str],
               prefer_angle: tuple[float, float] | None = None, rig: dict | None = None) -> None:
-    """Write ``pose`` to ``path`` atomically, with its ``inputs`` (file names)."""
-    d = pose.to_dict()
+    """Write the located pose ``d`` (``insitu.locate.part.PartPose.to_dict()``: the fields of
+    :class:`PoseFile`) to ``path`` atomically, with its ``inputs`` (file names)."""
     save_json_model(path, PoseFile(
         inputs=inputs, residuals={"inlier_rmse_mm": d["inlier_rmse_mm"],
                                   "fitness": d["fitness"], "coverage": d["coverage"]},
