@@ -29,7 +29,8 @@ from scipy.spatial import cKDTree
 
 from insitu.marking.placement import Placement
 from insitu.reconstruct.preview import save_cloud_picture
-from insitu.services.mark import mark_on_station, plan_mark
+from insitu.services.mark import mark_on_station
+from insitu.services.plan import plan_mark
 from insitu.services.room_light import station_room_light
 from insitu.services.scan import scan_live
 from insitu.services.station import connect

@@ -41,7 +41,7 @@ from insitu.marking.surface import Surface
 from insitu.services import calibrate_height
 from insitu.services.field import calibrate_field
 from insitu.marking import Placement
-from insitu.services.mark import plan_mark
+from insitu.services.plan import plan_mark
 from insitu.services.scan import scan_live
 from insitu.sim.world import sim_world
 from insitu.sim.marks import find_marks

@@ -57,7 +57,7 @@ from insitu.locate.reference import reference_from_mesh
 from insitu.formats.calibration import HeightCalibration
 from insitu.formats.json_file import load_json_model, save_json_model
 from insitu.services import calibrate_height, scan_live
-from insitu.services.mark import plan_mark
+from insitu.services.plan import plan_mark
 from insitu.services.field import calibrate_field
 from insitu.services.record import record_height_calibration, record_marked_field_calibration
 from insitu.services.room_light import station_room_light

@@ -37,7 +37,7 @@ from insitu.marking import GalvoDriver, Placement, run_job
 from insitu.marking.readback import decode_picture, find_offset, planned_paths
 from insitu.marking.verify import render
 from insitu.services.inspect import read_back_image
-from insitu.services.mark import plan_mark
+from insitu.services.plan import plan_mark
 from insitu.services.station import simulated
 from insitu.sim.devices import SimController
 from insitu.sim.marks import RoomLightView, render_inspection

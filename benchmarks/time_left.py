@@ -19,7 +19,7 @@ from rich.table import Table
 
 from insitu import services
 from insitu.marking import Placement
-from insitu.services.mark import plan_all
+from insitu.services.plan import plan_placements
 from insitu.services.station import connect
 from insitu.ui.model.operations import joined
 from insitu.marking import path_seconds
@@ -31,7 +31,7 @@ DATA = Path(__file__).parents[1] / "tests" / "data"
 def planned_path_times() -> np.ndarray:
     cloud = services.scan_replay(DATA / "scan-step-block-b4").cloud
     with connect(binning=4) as station:
-        plans = plan_all(cloud, [Placement('text:"AB"', (0.0, 28.0), 12.0, hatch_mm=0.1),
+        plans = plan_placements(cloud, [Placement('text:"AB"', (0.0, 28.0), 12.0, hatch_mm=0.1),
                                  Placement('qr:"insitu"', (0.0, -30.0), 10.0)],
                          station.driver)
         job = joined(plans)

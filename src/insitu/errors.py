@@ -8,7 +8,13 @@ import math
 
 
 class InsituError(Exception):
-    """Base of all user-facing failures."""
+    """Base of all user-facing failures. ``field``: the request field the message is about
+    (``cut_path``); the message then starts with its name in words (``cut path 'x': expected
+    one of …``), which the commands show as their option (``--cut-path 'x': …``)."""
+
+    def __init__(self, *args, field: str | None = None):
+        super().__init__(*args)
+        self.field = field
 
 
 class FormatError(InsituError):

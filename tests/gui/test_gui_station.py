@@ -15,7 +15,7 @@ from test_gui_workflow import DATA, WAIT_MS, fire, place, scan_recording
 
 from insitu.formats.pointcloud import write_ply
 from insitu.marking import journal_path_for, read_job
-from insitu.services.mark import save_job
+from insitu.services.serials import save_job
 from insitu.ui.qt.main_window import MainWindow
 from insitu.ui.qt.scan_panel import NO_RIG
 

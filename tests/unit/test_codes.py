@@ -17,7 +17,7 @@ from insitu.marking import Placement
 from insitu.marking.verify import check_code
 from insitu.patterns import load_pattern
 from insitu.patterns.model import Code
-from insitu.services.mark import plan_mark
+from insitu.services.plan import plan_mark
 from insitu.services.scan import scan_replay
 from insitu.services.station import connect
 
@@ -96,7 +96,7 @@ def test_every_code_decodes_wrapped_on_the_arc(station, kind):
 
 def test_a_code_that_would_not_read_is_refused_unless_forced(station, step_block):
     bad = Placement(SPECS["qr"] + ";module=0.25", (0.0, -10.0), None, hatch_mm=0.6)
-    with pytest.raises(FormatError, match=r"qr:HELLO WORLD: does not decode .*--force"):
+    with pytest.raises(FormatError, match=r"qr:HELLO WORLD: does not decode .*nothing written"):
         plan_mark(step_block, bad, station.driver)
     plan = plan_mark(step_block, bad, station.driver, force=True)
     assert not plan.codes[0].ok
@@ -138,14 +138,14 @@ def test_segno_svgs_decode_from_the_job(station, step_block, tmp_path, name, tex
 
 
 def test_a_code_whose_quiet_zone_another_mark_enters_is_refused(station, step_block):
-    from insitu.services.mark import plan_all
+    from insitu.services.plan import plan_placements
 
     code = Placement(SPECS["datamatrix"] + ";module=0.3", (0.0, -10.0), None)
     near = Placement('text:"A"', (3.2, -10.0), 2.0)     # the symbol ends at x = 2.4, zone 3.0
     far = Placement('text:"A"', (6.0, -10.0), 2.0)
-    out = plan_all(step_block, [code, near], station.driver)
+    out = plan_placements(step_block, [code, near], station.driver)
     assert out[0].plan is None and "placement 2's marks enter its quiet zone" in out[0].error
     assert out[1].plan is None and "its marks enter the quiet zone of placement 1" in out[1].error
     assert out[0].where == out[1].where and 2.4 < out[1].where[0] < 3.0   # where they meet
-    out = plan_all(step_block, [code, far], station.driver)
+    out = plan_placements(step_block, [code, far], station.driver)
     assert out[0].plan is not None and out[0].plan.codes[0].ok

@@ -176,7 +176,7 @@ def test_a_real_rig_never_simulates_and_scans_only_where_it_is_told(tmp_path, rt
     res = CliRunner().invoke(app, ["scan", "-o", str(out), "--rig", str(rig)])
     lines = [ln for ln in res.output.splitlines() if ln.strip()]
     assert res.exit_code == 1 and len(lines) == 1, res.output
-    assert "a scan on a real rig needs a region (--region X0 X1 Y0 Y1, mm)" in lines[0]
+    assert "--region: a scan on a real rig needs one (X0 X1 Y0 Y1, mm)" in lines[0]
     assert not out.exists() and not FakeBoard(rtc_lib).laser_enabled
 
 

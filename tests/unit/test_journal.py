@@ -112,7 +112,7 @@ def test_resume_with_a_cut_path_refuses_without_a_choice_and_sends_nothing(tmp_p
     board = Board()
     with pytest.raises(SafetyError, match=r"path 2 of 5 was started but not confirmed "
                                           r"\(the board reported \d+ marks done\): choose "
-                                          "--cut-path remark"):
+                                          "for the cut path remark"):
         run_job(job, GalvoDriver(HEAD), board, prog, resume=True)
     assert board.commands == []
 
@@ -121,8 +121,8 @@ def test_an_interrupted_job_is_not_run_again_without_resume_or_restart(tmp_path)
     job = job_of()
     prog, _ = cut_run(tmp_path, job, 40)
     board = Board()
-    with pytest.raises(SafetyError, match="interrupted after 2 of 5 paths: --resume to "
-                                          "continue it or --restart"):
+    with pytest.raises(SafetyError, match="interrupted after 2 of 5 paths: resume it, or restart "
+                                          "it"):
         run_job(job, GalvoDriver(HEAD), board, prog)
     assert board.commands == []
     n_lines = len(events(prog))
@@ -296,7 +296,7 @@ def test_sigterm_and_sighup_leave_the_laser_off_and_the_record_interrupted(tmp_p
     assert tail[-1] == "O"                              # the sim controller's laser-off
     res = _cli("job", "run", job_path)
     out, err = res.communicate(timeout=60)
-    assert res.returncode == 1 and "--resume to continue it or --restart" in err
+    assert res.returncode == 1 and "resume it, or restart it" in err
     shown = _cli("job", "show", job_path).communicate(timeout=60)[0]
     assert "interrupted" in shown and f"{len(s.done)} of 400 paths done" in shown
 

@@ -13,7 +13,8 @@ from insitu.geometry.beams import TwoMirrorHead
 from insitu.marking import GalvoDriver, make_job, progress_path_for, read_progress, write_job
 from insitu.services import Cancelled
 from insitu.marking import Placement
-from insitu.services.mark import mark, mark_on_station, plan_all
+from insitu.services.mark import mark, mark_on_station
+from insitu.services.plan import plan_placements
 from insitu.services.station import connect
 
 HEAD = TwoMirrorHead(350.0, 12.0)
@@ -54,7 +55,7 @@ def test_each_placement_is_planned_and_a_refusal_kept_where_it_is(tmp_path):
     with connect(binning=4) as station:
         xs, ys = np.meshgrid(np.linspace(80, 120, 60), np.linspace(-10, 10, 30))
         cloud = PointCloud(np.c_[xs.ravel(), ys.ravel(), np.zeros(xs.size)])
-        out = plan_all(cloud, [Placement('text:"A"', (99.0, 0.0), 8.0),
+        out = plan_placements(cloud, [Placement('text:"A"', (99.0, 0.0), 8.0),
                                Placement(str(tmp_path / "gone.svg"), (90.0, 0.0), 4.0),
                                Placement('text:"A"', (90.0, 0.0), 4.0)], station.driver)
     assert out[0].plan is None and "outside the scan field" in out[0].error

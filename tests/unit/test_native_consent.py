@@ -18,7 +18,7 @@ from insitu.devices.native import allowed_library, read_station, station_path
 from insitu.devices.rtc import RtcLibrary
 from insitu.errors import ConfigError, DeviceError
 from insitu.marking import make_job
-from insitu.services.mark import save_job
+from insitu.services.serials import save_job
 from insitu.services.project import open_project
 
 SRC = Path(__file__).parents[2] / "src"

@@ -94,7 +94,7 @@ def test_faults_and_aborts_resume_with_each_serial_exactly_once(recipe, tmp_path
     records = read_log(log)
     assert [(r.part, r.outcome, r.serial) for r in records] == [(1, "marked", 1),
                                                                 (2, "fault", None)]
-    with pytest.raises(Exception, match="holds 2 records of an earlier run: --resume"):
+    with pytest.raises(Exception, match="holds 2 records of an earlier run: resume it"):
         with connect(None, "step-block", 0, BINNING) as station:
             production.produce(_run(recipe, log, 4, station)[0])
 
@@ -298,7 +298,7 @@ def test_produce_command_logs_a_part_set_aside_and_refuses_to_overwrite_a_log(re
     assert not (tmp_path / "serial.counter.json").exists()
     res = CliRunner().invoke(app, args)
     assert res.exit_code == 1 and isinstance(res.exception, SystemExit)
-    assert "holds 1 records of an earlier run: --resume to continue it" in res.output
+    assert "holds 1 records of an earlier run: resume it, or give another log" in res.output
     res = CliRunner().invoke(app, args + ["--resume"])
     assert res.exit_code == 0 and len(read_log(log)) == 1       # the run was complete
 

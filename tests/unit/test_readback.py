@@ -20,7 +20,8 @@ from insitu.marking.rectify import mark_frame, occluded, rectify, surface_points
 from insitu.marking.surface import Surface
 from insitu.patterns.model import Pattern
 from insitu.services.inspect import raw_path, read_back_image, save_read_back
-from insitu.services.mark import plan_mark, save_image
+from insitu.services.mark import save_image
+from insitu.services.plan import plan_mark
 from insitu.services.station import simulated
 from insitu.sim.devices import SimController
 from insitu.sim.marks import RoomLightView, render_inspection

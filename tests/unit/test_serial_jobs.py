@@ -91,7 +91,7 @@ def test_the_marks_decode_to_the_rendered_serial(cloud, tmp_path):
 def test_refusals_take_no_serial_and_write_nothing(cloud, tmp_path):
     out, counter = tmp_path / "job.json", tmp_path / "serial.counter.json"
     res = _mark(cloud, out)
-    assert res.exit_code == 1 and "no such serial counter (--serial-start N creates one)" \
+    assert res.exit_code == 1 and "no such serial counter (a first serial creates one)" \
         in res.output and len(res.output.strip().splitlines()) == 1
     assert not out.exists() and not counter.exists()
     assert _mark(cloud, out, QR, "--serial-start", 1).exit_code == 0
@@ -99,7 +99,7 @@ def test_refusals_take_no_serial_and_write_nothing(cloud, tmp_path):
     for pattern, more, message in (
             (QR, ("--serial-start", 5), "a serial counter exists (next 2)"),
             ('datamatrix:"(01){gtin}(21){serial}"', (), "field {gtin} has no value (give "
-                                                        "--var gtin=VALUE)"),
+                                                        "it a value: gtin=VALUE)"),
             ('datamatrix:"(01){gtin}(21){serial}"', ("--var", "gtin=09506000134353"),
              "wrong check digit 3 (expected 2)"),
             ('qr:"{serial:.2f}"', (), "format spec '.2f' does not fit"),
@@ -219,15 +219,16 @@ def test_a_bad_variable_data_record_is_one_line(tmp_path, record, message):
 
 def test_the_screen_plans_with_the_next_serial_and_refuses_a_bad_template(cloud, tmp_path):
     from insitu.formats.pointcloud import read_ply
-    from insitu.ui.model.operations import plan_preview
+    from insitu.services.mark_job import preview_plans
+    from insitu.services.station import connect
 
     with locked(tmp_path / "serial.counter.json") as c:
         c.create(12)
     items = (Placement('qr:"{serial"', (0.0, -36.0), 4.0),
              Placement('qr:"{serial}";ec=H', (0.0, -28.0), 6.0),
              Placement("qr:PLAIN", (7.0, -36.0), 4.0))
-    out = plan_preview(read_ply(cloud), items, GalvoDriver(TwoMirrorHead(350.0, 12.0)),
-                       tmp_path / "p.job.json")
+    with connect(None) as station:
+        out = preview_plans(station, read_ply(cloud), items, job_path=tmp_path / "p.job.json")
     assert out[0].plan is None and "expected '}' before end of string" in out[0].error
     assert out[1].plan.pattern.code.text == "12" and out[2].plan.pattern.code.text == "PLAIN"
     assert read_counter(tmp_path / "serial.counter.json").next == 12    # a preview takes none

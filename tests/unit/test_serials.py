@@ -33,7 +33,7 @@ def test_templates_render(text, rendered):
 
 
 @pytest.mark.parametrize("text, message", [
-    ("{gtinn}", "field {gtinn} has no value (give --var gtinn=VALUE)"),
+    ("{gtinn}", "field {gtinn} has no value (give it a value: gtinn=VALUE)"),
     ("{serial:%Y}", "field {serial:%Y}: format spec '%Y' does not fit a serial number"),
     ("{lot:05d}", "field {lot:05d}: format spec '05d' does not fit a text field"),
     ("SN {serial", "expected '}' before end of string"),
@@ -75,7 +75,7 @@ def test_user_fields_from_the_command_line():
         "gtin": "09506000134352", "note": "a=b", "e": ""}
     for items, message in ((["gtin"], "expected NAME=VALUE"), (["1x=2"], "expected NAME=VALUE"),
                            (["serial=5"], "{serial} is built in"),
-                           (["a=1", "a=2"], "--var a: given twice")):
+                           (["a=1", "a=2"], "var a: given twice")):
         with pytest.raises(FormatError, match=message.replace("{", r"\{").replace("}", r"\}")):
             parse_fields(items)
 
@@ -106,7 +106,7 @@ def _take(path) -> int:
 
 def test_counter_is_created_issued_and_set(tmp_path):
     path = tmp_path / "serial.counter.json"
-    with pytest.raises(FormatError, match="no such serial counter .--serial-start N creates"):
+    with pytest.raises(FormatError, match="no such serial counter .a first serial creates"):
         _take(path)
     with locked(path) as c:
         c.create(7)

@@ -107,9 +107,9 @@ def test_project_files_take_the_projection_modes(tmp_path):
 
 def test_placements_and_project_refuse_an_unknown_mode():
     cloud = _flat(-5, 5, -5, 5)
-    with pytest.raises(FormatError, match=rf"--mode 'cone': expected {one_of(PROJECTIONS)}"):
+    with pytest.raises(FormatError, match=rf"mode 'cone': expected {one_of(PROJECTIONS)}"):
         Placement('qr:"a"', (0.0, 0.0), 5.0, mode="cone").placed()
-    with pytest.raises(FormatError, match="--mode 'cone'"):
+    with pytest.raises(FormatError, match="mode 'cone'"):
         project([np.array([[0.0, 0.0], [1.0, 0.0]])], cloud, "cone")
     for name, mode in PROJECTIONS.items():
         proj = project([np.array([[-2.0, 0.0], [2.0, 0.0]])], cloud, name, anchor=(0.0, 0.0))

@@ -28,14 +28,15 @@ def parse_board(text: str, charuco: str | None = None) -> BoardSpec:
     ``"DICT_4X4_50[:MARKER_MM]"`` for a ChArUco board. CalibrationError naming the text."""
     m = _BOARD.match(text)
     if not m:
-        raise CalibrationError(f"--board {text!r}: expected COLSxROWSxSQUARE_MM, e.g. 9x6x25 "
-                               "(inner corners across, inner corners down, square side in mm)")
+        raise CalibrationError(f"board {text!r}: expected COLSxROWSxSQUARE_MM, e.g. 9x6x25 "
+                               "(inner corners across, inner corners down, square side in mm)",
+                               field="board")
     cols, rows, square = int(m[1]), int(m[2]), float(m[3])
     for what, value, bound in (("columns", cols, "board_corners"), ("rows", rows, "board_corners"),
                                ("square side", square, "length_mm")):
         why = BOUNDS[bound].problem(value)
         if why is not None:
-            raise CalibrationError(f"--board {text!r}: {what} {why}")
+            raise CalibrationError(f"board {text!r}: {what} {why}", field="board")
     spec: dict = {"cols": cols, "rows": rows, "square_mm": square}
     if charuco is not None:
         name, _, marker = charuco.partition(":")
@@ -44,11 +45,12 @@ def parse_board(text: str, charuco: str | None = None) -> BoardSpec:
             try:
                 spec["charuco"]["marker_mm"] = float(marker)
             except ValueError:
-                raise CalibrationError(f"--charuco {charuco!r}: expected DICT[:MARKER_MM], "
-                                       "e.g. DICT_4X4_50:7") from None
+                raise CalibrationError(f"charuco {charuco!r}: expected DICT[:MARKER_MM], "
+                                       "e.g. DICT_4X4_50:7", field="charuco") from None
             why = BOUNDS["length_mm"].problem(spec["charuco"]["marker_mm"])
             if why is not None:
-                raise CalibrationError(f"--charuco {charuco!r}: marker side {why}")
+                raise CalibrationError(f"charuco {charuco!r}: marker side {why}",
+                                       field="charuco")
     return BoardSpec.from_spec(spec)
 
 

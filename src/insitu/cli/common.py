@@ -84,8 +84,18 @@ def one_line_errors(command: Callable) -> Callable:
         try:
             return command(*args, **kwargs)
         except InsituError as e:
-            fail(str(e))
+            fail(as_option(e))
     return wrapper
+
+
+def as_option(e: InsituError) -> str:
+    """The error's line with the field it names shown as this command's option
+    (``cut path 'x': …`` → ``--cut-path 'x': …``)."""
+    text = str(e)
+    words = (e.field or "").replace("_", " ")
+    if words and text.startswith(words):
+        return "--" + e.field.replace("_", "-") + text[len(words):]
+    return text
 
 
 PLAIN_EVERY_S = 2.0       # without a terminal: a progress line at most this often …

@@ -9,7 +9,8 @@ from typing import Annotated
 import typer
 
 from insitu.cli.common import bounded, check_output, console, one_line_errors
-from insitu.cli.job import Field, Rig, Seed, Workpiece, print_read_back
+from insitu.cli.job import print_read_back
+from insitu.cli.options import Field, Rig, Seed, Workpiece
 from insitu.errors import ConfigError, FormatError
 from insitu.marking.modes import PROJECTIONS, projection_mode
 from insitu.patterns.load import sources_help
@@ -60,7 +61,8 @@ def inspect(
     from insitu.marking import Placement, read_job
     from insitu.patterns.fields import is_template
     from insitu.services.inspect import read_back
-    from insitu.services.mark import plan_mark, save_image
+    from insitu.services.mark import save_image
+    from insitu.services.plan import plan_mark
     from insitu.services.serials import job_variables, render_placement
     from insitu.services.station import connect
 

@@ -12,47 +12,14 @@ import typer
 from rich.table import Table
 from rich.text import Text
 
-from insitu.cli.common import (bounded, bounded_each, check_output, console, one_line_errors,
+from insitu.cli.common import (check_output, console, one_line_errors,
                                progress_bar, warn)
+from insitu.cli.options import (CutPath, Field, Inspect, PartPose, Preview, Restart, Resume,
+                                Rig, Seed, Workpiece)
 from insitu.errors import InsituError
 
 app = typer.Typer(help="Mark jobs: show one, or mark it on the rig.", no_args_is_help=True,
                   rich_markup_mode="markdown")
-
-# options of every command that marks on the rig (``insitu job run``, ``insitu mark --run``)
-Resume = Annotated[bool, typer.Option(help="Continue an interrupted job: the paths its "
-                                           "journal does not record as done.")]
-Restart = Annotated[bool, typer.Option(help="Mark an interrupted job again from its first "
-                                            "path (the journal keeps the earlier runs).")]
-CutPath = Annotated[str | None, typer.Option(
-    help="With --resume, the path started but not confirmed: remark (mark it again whole), "
-         "skip (leave it as it is) or continue (from where the board reported it stopped).")]
-Preview = Annotated[bool, typer.Option(help="First draw the outline with the pilot laser.")]
-Inspect = Annotated[Path | None, typer.Option(help="Write the camera's image of the marked "
-                                                   "part (.png).")]
-Rig = Annotated[Path | None, typer.Option(help="Rig file (default: the simulated rig).")]
-Field = Annotated[Path | None, typer.Option(help="Field correction (FIELD.json) to apply "
-                                                 "(default: the rig file's).")]
-Workpiece = Annotated[str, typer.Option(help="Simulated rig: the part on the table.")]
-Seed = Annotated[int, typer.Option(help="Simulated rig: seed.", callback=bounded("seed"))]
-PartPose = Annotated[tuple[float, float, float], typer.Option(
-    "--pose", metavar="X Y ANGLE_DEG",
-    callback=bounded_each("position_mm", "position_mm", "angle_deg"),
-    help="Simulated rig: where the part lies — its origin at X Y, mm, turned ANGLE_DEG "
-         "about +z (a cloud measured at another pose is another placement).")]
-CrossScan = Annotated[bool, typer.Option(
-    help="Scan a second, crossed pass over the same region (lines at 45° to x), so edges "
-         "that run along the first pass's lines are measured too; with a height calibration "
-         "it must have been recorded with crossed lines.")]
-CrossSpacing = Annotated[float | None, typer.Option(
-    callback=bounded("spacing_mm"),
-    help="With --cross: the crossed lines' spacing, mm (default: --spacing; the crossed "
-         "pass only has to cross the edges, so it may be coarser).")]
-RecordCross = Annotated[bool | None, typer.Option(
-    "--cross/--no-cross",
-    help="Scan: a second, crossed pass (lines at 45° to x; default off). Height calibration: "
-         "also the crossed lines a crossed scan needs (default on).")]
-
 
 class Stopped(InsituError):
     """A signal (SIGTERM, SIGHUP) stopped the marking."""

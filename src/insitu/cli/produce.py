@@ -11,7 +11,8 @@ import typer
 from rich.text import Text
 
 from insitu.cli.common import bounded, check_output, console, fail, one_line_errors, progress_bar
-from insitu.cli.job import Field, Rig, Seed, on_signals
+from insitu.cli.job import on_signals
+from insitu.cli.options import Field, Rig, Seed
 from insitu.errors import InsituError
 from insitu.formats.production_log import STAGES
 from insitu.formats.project import SIM_BINNING

@@ -9,6 +9,7 @@ from typing import Annotated
 
 import typer
 from rich.table import Table
+from rich.text import Text
 
 from insitu.cli.common import bounded, check_output, console, fail, one_line_errors
 from insitu.marking.modes import PROJECTIONS
@@ -198,7 +199,7 @@ def mark_recipe(recipe_path: Path, cloud: Path, out: Path, run: bool, preview: b
     """``insitu mark --recipe``: locate the recipe's part in ``cloud``, plan every placement
     where it lies as one job at ``out`` (the serial issued from the recipe's counter), show
     it, and with ``run`` mark it."""
-    from insitu.cli.common import progress_bar, warn
+    from insitu.cli.common import progress_bar
     from insitu.cli.job import run_on_station
     from insitu.cli.mark import record_rows
     from insitu.formats.pointcloud import read_ply
@@ -212,14 +213,13 @@ def mark_recipe(recipe_path: Path, cloud: Path, out: Path, run: bool, preview: b
     r = read(recipe_path)
     measured = read_ply(cloud)
     with connect(rig, r.workpiece or workpiece, seed, field=field) as station:
-        if run and (warning := station.check_source(cloud, measured.rig, "cloud")):
-            warn(warning)
         with progress_bar("locating") as progress:
             progress(0, 1)
             located = production.recipe_locator(r)(measured)
         with progress_bar("projecting") as progress:
             progress(0, 1)
-            planned = production.plan_recipe(r, measured, located, station.driver, out)
+            planned = production.plan_recipe(station, r, measured, located, out, cloud,
+                                             marking=run)
         x, y, a = located.pose()
         table = Table(title=f"mark job → {out}", show_header=False)
         table.add_row("part located", f"x {x:.3f} mm, y {y:.3f} mm, turned {a:.3f}° "
@@ -229,9 +229,12 @@ def mark_recipe(recipe_path: Path, cloud: Path, out: Path, run: bool, preview: b
             w = p.in_world(located.T_world_part)
             table.add_row(f"placement {i}", f"{p.pattern} at ({w.at_mm[0]:.3f}, "
                                             f"{w.at_mm[1]:.3f}) mm, {w.rotate_deg:.2f}°")
+        for f in {f: None for o in planned.outcomes for f in o.findings}:
+            if f.level == "warning":
+                table.add_row(Text("warning", "yellow"), f.text)
         record_rows(table, planned.record)
         table.add_row("marks", f"{len(planned.job.paths):,} paths")
         console.print(table)
         if run:
             run_on_station(station, planned.job, out, False, preview, inspect,
-                           read=([o.plan for o in planned.result], measured))
+                           read=([o.plan for o in planned.outcomes], measured))

@@ -10,7 +10,7 @@ import typer
 from rich.table import Table
 
 from insitu.cli.common import bounded, check_output, console, fail, one_line_errors, progress_bar
-from insitu.cli.job import CrossScan, CrossSpacing, PartPose
+from insitu.cli.options import CrossScan, CrossSpacing, PartPose
 from insitu.formats.atomic import atomic_write_bytes
 from insitu.formats.project import SIM_BINNING
 from insitu.formats.validation import one_of

@@ -68,7 +68,7 @@ class Counter(BaseModel):
 def read_counter(path: str | Path) -> Counter:
     """Read and validate a counter; FormatError ``file: field: problem``."""
     path = Path(path)
-    data = read_json(path, missing="no such serial counter (--serial-start N creates one)")
+    data = read_json(path, missing="no such serial counter (a first serial creates one)")
     if not isinstance(data, dict):
         raise FormatError(f"{path}: expected a JSON object (a serial counter), got "
                           f"{type(data).__name__}")
@@ -107,8 +107,8 @@ class LockedCounter:
         """A new counter whose first serial is ``start``; FormatError if one exists."""
         if self.counter is not None:
             raise FormatError(f"{self.path}: a serial counter exists (next {self.counter.next}); "
-                              "drop --serial-start, or change it with insitu serial set")
-        self._write(Counter(next=_serial(start, "--serial-start")))
+                              "give no first serial, or change it with insitu serial set")
+        self._write(Counter(next=_serial(start, "serial start", "serial_start")))
 
     def issue(self, serial: int, job: str | None = None, digest: str | None = None) -> None:
         """Hand out ``serial`` (it must be :attr:`next`): the counter moves on to the next one
@@ -131,7 +131,7 @@ class LockedCounter:
         last = self.counter.last
         if last is not None and value <= last and not force:
             raise FormatError(f"{self.path}: serial {last} was issued already; next {value} would "
-                              "hand out serials twice (--force to do it anyway)")
+                              "hand out serials twice (force it to do it anyway)")
         self._write(self.counter.model_copy(update={"next": value}))
 
     def _write(self, counter: Counter) -> None:
@@ -139,9 +139,10 @@ class LockedCounter:
         self.counter = counter
 
 
-def _serial(value: int, what: str) -> int:
+def _serial(value: int, what: str, field: str | None = None) -> int:
     if isinstance(value, bool) or not isinstance(value, int) or not 0 <= value <= MAX_SERIAL:
-        raise FormatError(f"{what} {value!r}: expected a whole number 0 … {MAX_SERIAL}")
+        raise FormatError(f"{what} {value!r}: expected a whole number 0 … {MAX_SERIAL}",
+                          field=field)
     return value
 
 

@@ -147,7 +147,8 @@ class PenTable(_Strict):
         for p in self.pens:
             if p.name == name:
                 return p
-        raise FormatError(f"{where}: no pen {name!r}; the pens are {one_of(self.names)}")
+        raise FormatError(f"{where}: no pen {name!r}; the pens are {one_of(self.names)}",
+                          field="pen" if where == "pen" else None)
 
     def replaced(self, pen: Pen, old_name: str | None = None) -> "PenTable":
         """The table with ``pen`` in place of ``old_name`` (default: ``pen.name``), or added."""

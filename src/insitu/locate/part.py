@@ -424,7 +424,7 @@ def _choose(sols: list[Solution], n: int, where: str, s: LocateSettings,
     if len(near) > 1:
         raise LocateRefused("ambiguous", f"ambiguous: {near[0].describe()} and "
                             f"{near[1].describe()} fit nearly equally (a symmetric part?): "
-                            "say which with --prefer-angle LO HI")
+                            "say which with a preferred angle range LO HI")
     best = near[0]
     second = next((o for o in sols if o is not best), None)
     if best.fitness < s.min_fitness or best.rmse_mm > s.max_rmse_mm:

@@ -35,7 +35,7 @@ PROJECTIONS: dict[str, ProjectionMode] = {
 def projection_mode(name: str) -> ProjectionMode:
     """The mode called ``name``; FormatError naming the choices for another."""
     if name not in PROJECTIONS:
-        raise FormatError(f"--mode {name!r}: expected {one_of(PROJECTIONS)}")
+        raise FormatError(f"mode {name!r}: expected {one_of(PROJECTIONS)}", field="mode")
     return PROJECTIONS[name]
 
 

@@ -102,8 +102,8 @@ def history(job: MarkJob, progress_path: str | Path | None,
                            updated=rec.get("updated", ""))
     if s.job_sha256 != sha:
         if strict:
-            raise FormatError(f"{jpath}: job_sha256: records another job; run without "
-                              "--resume to start this job from the beginning")
+            raise FormatError(f"{jpath}: job_sha256: records another job; start this job from "
+                              "the beginning instead of resuming it")
         return None
     if s.paths_total != total:
         raise FormatError(f"{journal_beside(ppath)}: paths_total: {s.paths_total}, but the "
@@ -137,17 +137,18 @@ def _plan(job, driver, controller, s: JournalSummary | None, choice: str | None,
         pos = f" (the board reported {marks} marks done)" if marks is not None else ""
         if choice is None:
             raise SafetyError(f"{where}: path {k + 1} of {total} was started but not confirmed"
-                              f"{pos}: choose --cut-path remark (mark it again whole), skip "
-                              "(leave it) or continue (from where the board stopped)")
+                              f"{pos}: choose for the cut path remark (mark it again whole), "
+                              "skip (leave it) or continue (from where the board stopped)")
         if choice not in CUT_CHOICES:
-            raise ConfigError(f"--cut-path {choice!r}: expected one of {', '.join(CUT_CHOICES)}")
+            raise ConfigError(f"cut path {choice!r}: expected one of {', '.join(CUT_CHOICES)}",
+                              field="cut_path")
         if choice == "remark":
             todo = sorted([k, *todo])
         elif choice == "skip":
             settled = (k, "skipped")
         else:
             if marks is None:
-                raise SafetyError(f"--cut-path continue: the board did not report how far path "
+                raise SafetyError(f"cut path continue: the board did not report how far path "
                                   f"{k + 1} got; choose remark or skip")
             rest = resume_list(driver.compile(job, first_path=k)[0], marks)
             if rest:
@@ -185,15 +186,14 @@ def run_job(job: MarkJob, driver: GalvoDriver, controller, progress_path: str | 
     records the cut path and "interrupted", and the exception propagates.
     """
     if resume and restart:
-        raise ConfigError("--resume and --restart: choose one")
+        raise ConfigError("resume and restart: choose one", field="resume")
     ppath = Path(progress_path) if progress_path is not None else None
     jpath = journal_beside(ppath) if ppath is not None else None
     total, sha = len(job.paths), job.digest()
     s = history(job, ppath, strict=resume)
     if not (resume or restart) and s is not None and s.state != "done" and not s.finished:
         raise SafetyError(f"{jpath}: the last run was {s.state} after {len(s.done)} of {total} "
-                          "paths: --resume to continue it or --restart to mark it again from "
-                          "the start")
+                          "paths: resume it, or restart it to mark it again from the start")
     s = s if resume else None
     items, settled = _plan(job, driver, controller, s, cut_path, jpath)
     check_lists(controller, [cmds for _, cmds, _, _ in items])

@@ -110,8 +110,8 @@ def render_text(text: str, values: Variables, where: str = "pattern") -> str:
         elif name in values.fields:
             value, kind = values.fields[name], "a text field (e.g. {NAME:>8})"
         else:
-            raise FormatError(f"{where}: field {shown} has no value (give --var "
-                              f"{name}=VALUE)")
+            raise FormatError(f"{where}: field {shown} has no value (give it a "
+                              f"value: {name}=VALUE)")
         try:
             out.append(format(value, spec))
         except (ValueError, TypeError):
@@ -138,11 +138,12 @@ def parse_fields(items: list[str] | tuple[str, ...]) -> dict[str, str]:
         name, eq, value = item.partition("=")
         name = name.strip()
         if not eq or not _NAME.fullmatch(name):
-            raise FormatError(f"--var {item!r}: expected NAME=VALUE, e.g. gtin=09506000134352")
+            raise FormatError(f"var {item!r}: expected NAME=VALUE, e.g. gtin=09506000134352",
+                              field="var")
         if name in BUILTIN:
-            raise FormatError(f"--var {name}: {{{name}}} is built in (serial from the counter, "
-                              "date and time of planning)")
+            raise FormatError(f"var {name}: {{{name}}} is built in (serial from the counter, "
+                              "date and time of planning)", field="var")
         if name in out:
-            raise FormatError(f"--var {name}: given twice")
+            raise FormatError(f"var {name}: given twice", field="var")
         out[name] = value
     return out

@@ -218,7 +218,7 @@ def _spec(kind: str, rest: str, defaults: dict) -> Pattern:
 
 def _file(spec: str, defaults: dict) -> Pattern:
     if any(ord(c) < 32 for c in spec):
-        raise FormatError(f"--pattern {spec!r}: no such pattern file")
+        raise FormatError(f"pattern {spec!r}: no such pattern file", field="pattern")
     path, opts = Path(spec), ""
     if not path.is_file():
         m = re.match(rf"^(?P<file>.*?){_OPTS}$", spec, re.S)
@@ -240,7 +240,8 @@ def load_pattern(spec: str | Path, **defaults) -> Pattern:
     docstring). Raises FormatError with a one-line message."""
     spec_s = str(spec)
     if not spec_s.strip():
-        raise FormatError("--pattern: empty (give a file, text:\"...\" or qr:\"...\")")
+        raise FormatError("pattern: empty (give a file, text:\"...\" or qr:\"...\")",
+                          field="pattern")
     kind = next((k for k, src in SOURCES.items() if src.prefix and spec_s.startswith(src.prefix)),
                 None) if not isinstance(spec, Path) else None
     if kind is not None and not Path(spec_s).is_file():

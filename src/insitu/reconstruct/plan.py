@@ -50,7 +50,8 @@ def check_region(region: Sequence[float], field_size_mm: Sequence[float]) -> Non
     x0, x1, y0, y1 = region
     half = np.asarray(field_size_mm, float) / 2
     if not (x0 < x1 and y0 < y1):
-        raise MeasurementError(f"--region {x0:g} {x1:g} {y0:g} {y1:g}: expected X0 < X1 and Y0 < Y1")
+        raise MeasurementError(f"region {x0:g} {x1:g} {y0:g} {y1:g}: expected X0 < X1 and Y0 < Y1",
+                               field="region")
     if max(abs(x0), abs(x1)) > half[0] or max(abs(y0), abs(y1)) > half[1]:
-        raise MeasurementError(f"--region {x0:g} {x1:g} {y0:g} {y1:g}: outside the scan field "
-                               f"±{half[0]:g} × ±{half[1]:g} mm")
+        raise MeasurementError(f"region {x0:g} {x1:g} {y0:g} {y1:g}: outside the scan field "
+                               f"±{half[0]:g} × ±{half[1]:g} mm", field="region")

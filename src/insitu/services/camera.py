@@ -158,11 +158,11 @@ def calibrate_photos(folder: str | Path, board: BoardSpec | None,
     extrinsics stay R = I, t = 0. CalibrationError (one line) on bad input."""
     files = image_files(folder)
     if board is None:
-        raise CalibrationError(f"{folder}: no sequence.json; give the board as --board "
+        raise CalibrationError(f"{folder}: no sequence.json; give the board as "
                                "COLSxROWSxSQUARE_MM (e.g. 9x6x25)")
     dets, size = _detect_all(((f, read_grey(f)) for f in files), board, len(files), progress)
     intr = _intrinsics(folder, dets, [p.name for p in files], size, board, outlier_factor,
-                       "--board", "images")
+                       "the board", "images")
     return _result(folder, board, intr, size, None)
 
 
@@ -183,8 +183,9 @@ def calibrate_camera(folder: str | Path, progress: Progress | None = None,
     except CalibrationError as e:
         raise _prefixed(seq.folder / "sequence.json", e) from None
     if board is not None and board != recorded:
-        raise CalibrationError(f"--board: {board.describe()}, but {seq.folder / 'sequence.json'}"
-                               f" records a {recorded.describe()}; leave --board out")
+        raise CalibrationError(f"board: {board.describe()}, but {seq.folder / 'sequence.json'}"
+                               f" records a {recorded.describe()}; leave the board out",
+                               field="board")
     board = recorded
     idx, dets, size = detect_views(seq, board, progress)
     if not idx:
@@ -325,7 +326,8 @@ def calibrate_camera_recording(folder: str | Path, intrinsics: str | Path | None
     if seq.kind == "camera-calibration":
         return calibrate_camera(folder, progress, board=board)
     if board is not None:
-        raise CalibrationError(f"--board: {folder} is a '{seq.kind}' sequence, not board views")
+        raise CalibrationError(f"board: {folder} is a '{seq.kind}' sequence, not board views",
+                               field="board")
     if any(f.spot is not None for f in seq.frames):
         return recalibrate_camera_pose(folder, intrinsics, scan_head, field, progress)
     raise CalibrationError(f"{folder}: a '{seq.kind}' sequence without spots: expected a "

@@ -172,7 +172,7 @@ def crossed_model(cal: HeightCalibration) -> TurnedSheetModel:
             f"{where}: this height calibration has no crossed lines (sheet_cross), so it "
             "cannot scan crossed: record the height calibration with crossed lines (the "
             "default of 'insitu record height-calibration') and calibrate again, or scan "
-            "without --cross")
+            "without the crossed pass")
     return TurnedSheetModel.from_dict(cal.sheet_cross.model_dump())
 
 

@@ -19,7 +19,8 @@ from insitu.marking.readback import MarkReading, read_mark
 from insitu.marking.readback_picture import readback_picture
 from insitu.marking.surface import Surface
 from insitu.patterns.vector import BEAM_MM
-from insitu.services.mark import MarkPlan, save_image
+from insitu.services.mark import save_image
+from insitu.services.plan import MarkPlan
 from insitu.services.room_light import station_room_light
 
 if TYPE_CHECKING:

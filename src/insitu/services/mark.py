@@ -1,6 +1,6 @@
-"""Marking use cases: place a pattern on a measured cloud, make the checked job, preview it
-with the pilot laser, mark it (the board stopped at once when cancelled) and image the
-result."""
+"""Marking a written job on the station: previewed with the pilot laser, marked (the board
+stopped at once when cancelled) and the result imaged. Planning is
+:mod:`insitu.services.plan`, the job file with its serial :mod:`insitu.services.mark_job`."""
 
 from __future__ import annotations
 
@@ -13,16 +13,10 @@ import cv2
 import numpy as np
 
 from insitu.devices.galvo import check_lists
-from insitu.errors import FormatError, InsituError, SafetyError
+from insitu.errors import FormatError
 from insitu.formats.atomic import atomic_write_bytes
-from insitu.formats.pens import DEFAULT_PENS, PenTable
-from insitu.formats.pointcloud import PointCloud, read_ply
-from insitu.marking import (GalvoDriver, JournalSummary, LaserParams, MarkJob, Placement,
-                            Projection, RunResult, TimeEstimate, estimate_time, history,
-                            plan_job, progress_path_for, run_job, run_preview, with_pen,
-                            write_job)
-from insitu.marking.verify import CodeCheck, check_code, unrolled
-from insitu.patterns import Pattern
+from insitu.marking import (GalvoDriver, JournalSummary, MarkJob, RunResult, history,
+                            progress_path_for, run_job, run_preview)
 from insitu.services.common import Progress
 from insitu.services.scan import Cancelled
 from insitu.services.room_light import station_room_light
@@ -31,146 +25,11 @@ if TYPE_CHECKING:
     from insitu.services.station import Station
 
 
-@dataclass(frozen=True)
-class MarkPlan:
-    """A checked job and how it came about: ``pattern`` placed (world x, y before
-    projection), ``projection`` (support, stretch), ``estimate`` of the marking time,
-    ``codes``: whether each code reads from the job's marks."""
-
-    job: MarkJob
-    pattern: Pattern
-    projection: Projection
-    estimate: TimeEstimate
-    codes: tuple[CodeCheck, ...] = ()
-
-
-def check_codes(job: MarkJob, pattern: Pattern, projection: Projection,
-                beam_mm: float) -> tuple[CodeCheck, ...]:
-    """Decode the code of ``pattern`` (if any) from the job's marks: their x, y, or unrolled
-    along the surface when the projection has an unroll direction (wrap)."""
-    if pattern.code is None or pattern.frame is None:
-        return ()
-    paths3d = [p.points for p in job.paths]
-    if projection.direction_deg is not None and projection.anchor is not None:
-        paths_xy = unrolled(paths3d, projection.anchor, projection.direction_deg)
-    else:
-        paths_xy = [p[:, :2] for p in paths3d]
-    return (check_code(pattern, paths_xy, beam_mm)[0],)
-
-
-def plan_mark(cloud: PointCloud | str | Path, placement: Placement, driver: GalvoDriver,
-              laser: LaserParams | None = None, force: bool = False,
-              pens: PenTable | None = None) -> MarkPlan:
-    """Place, project and check: SafetyError (naming the place) for a pattern outside the
-    field or focus range, over a hole or a wall, or whose corrected commands leave the field;
-    FormatError for a bad pattern, a pen not in ``pens``, or a code that would not decode from
-    the planned marks (unless ``force``). With ``pens`` (or a placement naming a pen: then of
-    :data:`DEFAULT_PENS`) every path carries its pen's settings. Nothing is written or
-    fired."""
-    pen = None
-    if pens is not None or placement.pen is not None:
-        pen = (pens or DEFAULT_PENS).pen(placement.pen, f"placement {placement.pattern}")
-    pattern = placement.placed()
-    polylines = placement.polylines(pattern)
-    if not isinstance(cloud, PointCloud):
-        cloud = read_ply(cloud)
-    job, proj = plan_job(polylines, cloud, driver.limits, placement.mode, laser,
-                         anchor=placement.at_mm)
-    job = job.model_copy(update={"rig": cloud.rig})     # the job records the cloud's rig
-    if pen is not None:
-        job = with_pen(job, pen)
-    driver.check(job)
-    codes = check_codes(job, pattern, proj, placement.beam_mm)
-    bad = [c for c in codes if not c.ok]
-    if bad and not force:
-        c = bad[0]
-        wall = (f", {proj.unmarked_fraction:.1%} of its path left unmarked at a step's wall: "
-                "place it off the step" if proj.unmarked_mm > 0 else "")
-        raise FormatError(f"{c.name}: does not decode from the planned marks (read "
-                          f"{c.decoded!r}, module {c.module_mm:.3g} mm{wall}); nothing written "
-                          "(--force to mark it anyway)")
-    return MarkPlan(job, pattern, proj, estimate_time(job, driver.timing), codes)
-
-
-@dataclass(frozen=True)
-class PlanOutcome:
-    """The plan of one placement: ``plan`` when it passed the checks, else the one-line
-    ``error`` and, when the refusal knows one, the place ``where`` (x, y) mm."""
-
-    plan: MarkPlan | None = None
-    error: str | None = None
-    where: tuple[float, float] | None = None
-
-
-def plan_all(cloud: PointCloud, placements, driver: GalvoDriver,
-             laser: LaserParams | None = None, pens: PenTable | None = None
-             ) -> list[PlanOutcome]:
-    """:func:`plan_mark` of each placement; a refusal is kept as its message (and place).
-    A code whose quiet zone another placement's marks enter is refused, and so is the
-    placement whose marks enter it (each naming the other, the place where they meet)."""
-    out = []
-    for p in placements:
-        try:
-            out.append(PlanOutcome(plan=plan_mark(cloud, p, driver, laser, pens=pens)))
-        except SafetyError as e:
-            out.append(PlanOutcome(error=str(e), where=e.where_mm))
-        except InsituError as e:
-            out.append(PlanOutcome(error=str(e)))
-    return _quiet_zones_clear(out)
-
-
-def joined(outcomes: list[PlanOutcome]) -> MarkJob | None:
-    """One job marking every planned placement in order (None: none, or one refused)."""
-    if not outcomes or any(o.plan is None for o in outcomes):
-        return None
-    first = outcomes[0].plan.job
-    return first.model_copy(update={"paths": [path for o in outcomes
-                                              for path in o.plan.job.paths]})
-
-
-def _quiet_zones_clear(outcomes: list[PlanOutcome]) -> list[PlanOutcome]:
-    """``outcomes`` with a refusal for each code whose frame — symbol and quiet zone —
-    another planned pattern's marks (world x, y, as placed) reach into, and for that
-    pattern."""
-    import shapely
-
-    out = list(outcomes)
-    marks = [None if o.plan is None else shapely.union_all(
-        [o.plan.pattern.to_shapely(), *map(shapely.LineString, o.plan.pattern.paths)])
-        for o in outcomes]
-    for i, o in enumerate(outcomes):
-        code = None if o.plan is None else o.plan.pattern
-        if code is None or code.code is None or code.frame is None:
-            continue
-        zone = shapely.Polygon(code.frame)
-        for j, m in enumerate(marks):
-            if j == i or m is None or not m.intersects(zone):
-                continue
-            c = m.intersection(zone).representative_point()
-            out[i] = PlanOutcome(error=f"{code.name}: placement {j + 1}'s marks enter its "
-                                       "quiet zone (a reader needs it clear)", where=(c.x, c.y))
-            if out[j].plan is not None:
-                out[j] = PlanOutcome(error=f"{outcomes[j].plan.pattern.name}: its marks enter "
-                                           f"the quiet zone of placement {i + 1} "
-                                           f"({code.name})", where=(c.x, c.y))
-            break
-    return out
-
-
 def unfinished(job: MarkJob, job_path: str | Path) -> JournalSummary | None:
     """The record of an earlier run of ``job`` at ``job_path`` that did not finish (None:
     none, finished, or another job's)."""
     s = history(job, progress_path_for(job_path))
     return None if s is None or s.state == "done" or s.finished else s
-
-
-def save_job(path: str | Path, job: MarkJob) -> Path:
-    """Write ``job`` atomically and drop a progress record of an older job at the same place
-    (a new job starts from its first path). Returns the progress file's path."""
-    ppath = progress_path_for(path)
-    write_job(path, job)
-    ppath.unlink(missing_ok=True)
-    return ppath
 
 
 class _Abortable:

@@ -2,7 +2,7 @@
 recipe's placements where the part lies, mark them as one job, read the mark back and log one
 record (:mod:`insitu.formats.production_log`).
 
-Serials: the job of a part is planned with :func:`insitu.services.serials.plan_and_save`, so
+Serials: the job of a part is written by :func:`insitu.services.mark_job.write_mark_job`, so
 a part refused while locating or planning takes no serial, and a part whose marking faults or
 is aborted keeps the one it was issued (logged with it). ``resume`` finishes that part with
 its own job — its journal decides what is marked again (the paths not done, the cut path
@@ -30,10 +30,11 @@ from insitu.formats.production_log import PartRecord, append_record, read_log
 from insitu.formats.recipe import Recipe
 from insitu.geometry.camera import CameraModel
 from insitu.geometry.pose import flat_pose, pose_matrix
-from insitu.marking import LaserParams, MarkJob, read_job
+from insitu.marking import LaserParams, MarkJob, history, progress_path_for, read_job
 from insitu.locate.part import LocateRefused
 from insitu.services import mark as mark_svc
 from insitu.services import serials
+from insitu.services.mark_job import JobRequest, WrittenJob, write_mark_job
 from insitu.services.height import crossed_model
 from insitu.services.scan import Cancelled, ScanResult, scan_live
 from insitu.services.station import Station
@@ -208,7 +209,7 @@ def produce(run: Production, resume: bool = False) -> list[PartRecord]:
     records = read_log(run.log)
     if records and not resume:
         raise FormatError(f"{run.log}: holds {len(records)} records of an earlier run: "
-                          "--resume to continue it, or another --log")
+                          "resume it, or give another log")
     first, pending = resume_point(records)
     out = []
     for number in range(first, run.count + 1):
@@ -272,7 +273,7 @@ def _run_part(run: Production, part: _Part) -> PartRecord:
             raise
         return part.record("refused", _text(e))
     _stage(run, part, "mark", lambda: _mark(run, planned.job, part.job))
-    return _read(run, part, planned.result, cloud)
+    return _read(run, part, planned.outcomes, cloud)
 
 
 def _scan_part(run: Production, part: _Part, stage: str, region, cross: bool) -> ScanResult:
@@ -334,46 +335,43 @@ def _mark(run: Production, job: MarkJob, path: Path, **resume) -> None:
 
 
 def plan_part(run: Production, part: _Part, cloud: PointCloud,
-              located: Located) -> serials.Planned:
+              located: Located) -> WrittenJob:
     """The recipe's job for this part (its serial and job file noted as soon as written)."""
     def save(p: Path, job: MarkJob):
         part.job = p
         part.serial = ((job.model_extra or {}).get("variable_data") or {}).get("serial")
-        return mark_svc.save_job(p, job)
+        return serials.save_job(p, job)
 
-    return plan_recipe(run.recipe, cloud, located, run.station.driver,
-                       run.job_path(part.number), save)
-
-
-def _planner(recipe: Recipe, cloud: PointCloud, located: Located, driver):
-    """(placements in the world, ``plan(rendered placements) -> outcomes``, ``job_of``)."""
-    laser = LaserParams(**recipe.laser)
-    placements = [p.in_world(located.T_world_part) for p in recipe.placements]
-
-    def job_of(outcomes) -> MarkJob:
-        job = mark_svc.joined(outcomes)
-        if job is None:
-            i, o = next((i, o) for i, o in enumerate(outcomes) if o.plan is None)
-            raise InsituError(f"placement {i + 1}: {o.error}")
-        return job.model_copy(update={"laser": laser})
-
-    return placements, lambda ps: mark_svc.plan_all(cloud, ps, driver, laser), job_of
+    return plan_recipe(run.station, run.recipe, cloud, located, run.job_path(part.number),
+                       save=save)
 
 
-def plan_recipe(recipe: Recipe, cloud: PointCloud, located: Located, driver,
-                job_path: Path, save: Callable[[Path, MarkJob], Any] = mark_svc.save_job
-                ) -> serials.Planned:
-    """Every placement of ``recipe`` moved where the part lies, planned on its ``cloud`` and
-    written to ``job_path`` as one job, with the serial the recipe's counter issues (created
-    with its first serial when missing); InsituError naming the first placement refused.
-    ``result``: each placement's :class:`~insitu.services.mark.PlanOutcome`."""
-    placements, plan, job_of = _planner(recipe, cloud, located, driver)
+def recipe_request(recipe: Recipe, cloud: PointCloud, located: Located, job_path: Path,
+                   cloud_path: Path | None = None, resume: bool = False,
+                   marking: bool = False) -> JobRequest:
+    """The job request of ``recipe`` for a part located at ``located`` on ``cloud``: every
+    placement moved where the part lies, the recipe's laser and fields, its counter (default
+    beside the job, created with its first serial when missing)."""
     counter = (recipe.counter if recipe.counter is not None
                else Path(job_path).parent / serials.COUNTER_NAME)
     start = (recipe.serial_start if recipe.serial_start is not None and not counter.exists()
              else None)
-    return serials.plan_and_save(job_path, placements, plan, job_of, counter=counter,
-                                 fields=recipe.fields, start=start, save=save)
+    return JobRequest(Path(job_path), tuple(p.in_world(located.T_world_part)
+                                            for p in recipe.placements),
+                      cloud, cloud_path, LaserParams(**recipe.laser), fields=recipe.fields,
+                      counter=None if resume else counter,
+                      serial_start=None if resume else start, resume=resume, marking=marking)
+
+
+def plan_recipe(station: Station, recipe: Recipe, cloud: PointCloud, located: Located,
+                job_path: Path, cloud_path: Path | None = None, marking: bool = False,
+                save: Callable[[Path, MarkJob], Any] = serials.save_job) -> WrittenJob:
+    """Every placement of ``recipe`` moved where the part lies, planned on its ``cloud`` and
+    written to ``job_path`` as one job with the serial the recipe's counter issues
+    (:func:`insitu.services.mark_job.write_mark_job`); InsituError naming the first placement
+    refused."""
+    return write_mark_job(station, recipe_request(recipe, cloud, located, job_path, cloud_path,
+                                                  marking=marking), save)
 
 
 def _read(run: Production, part: _Part, outcomes, cloud: PointCloud,
@@ -401,7 +399,7 @@ def _finish(run: Production, part: _Part, last: PartRecord) -> PartRecord:
     part.fields.update({k: getattr(last, k) for k in ("x_mm", "y_mm", "angle_deg", "fitness",
                                                       "rmse_mm")})
     left = mark_svc.unfinished(job, path)
-    done = left is None and mark_svc.history(job, mark_svc.progress_path_for(path)) is not None
+    done = left is None and history(job, progress_path_for(path)) is not None
     if not done:
         _stage(run, part, "mark", lambda: _mark(
             run, job, path, resume=left is not None,
@@ -409,7 +407,7 @@ def _finish(run: Production, part: _Part, last: PartRecord) -> PartRecord:
     cloud = read_ply(run.cloud_path(part.number))
     located = Located(pose_matrix(last.x_mm, last.y_mm, last.angle_deg), last.fitness or 0.0,
                       last.rmse_mm or 0.0)
-    placements, plan, _ = _planner(run.recipe, cloud, located, run.station.driver)
-    return _read(run, part, serials.replan(path, placements, plan, run.recipe.fields), cloud,
-                 resumed=True)
+    again = write_mark_job(run.station, recipe_request(run.recipe, cloud, located, path,
+                                                       resume=True))
+    return _read(run, part, again.outcomes, cloud, resumed=True)
 

@@ -12,7 +12,7 @@ from insitu.marking import PROJECTIONS, MarkJob, Placement
 from insitu.formats.calibration import HeightCalibration
 from insitu.services.common import Progress
 from insitu.services.height import load_height_calibration
-from insitu.services.mark import save_job
+from insitu.services.serials import save_job
 
 
 @dataclass(frozen=True)

@@ -27,14 +27,22 @@ from pydantic import BaseModel, ConfigDict, ValidationError
 from insitu.errors import FormatError
 from insitu.formats.counter import locked, read_counter
 from insitu.formats.validation import validation_message
-from insitu.marking import MarkJob, Placement
+from insitu.marking import MarkJob, Placement, progress_path_for, write_job
 from insitu.patterns.fields import (Variables, is_template, render_spec, template_fields,
                                     uses_serial)
 from insitu.patterns.load import spec_parts
-from insitu.services.mark import save_job
 
 COUNTER_NAME = "serial.counter.json"
 T = TypeVar("T")
+
+
+def save_job(path: str | Path, job: MarkJob) -> Path:
+    """Write ``job`` atomically and drop a progress record of an older job at the same place
+    (a new job starts from its first path). Returns the progress file's path."""
+    ppath = progress_path_for(path)
+    write_job(path, job)
+    ppath.unlink(missing_ok=True)
+    return ppath
 
 
 class _Text(BaseModel):
@@ -135,7 +143,7 @@ def plan_and_save(job_path: str | Path, placements: Sequence[Placement],
     values = Variables(None, dict(fields or {}), now or datetime.now().astimezone())
     if not any(uses_serial(p.pattern) for p in placements):
         if start is not None:
-            raise FormatError("--serial-start: no pattern uses {serial}")
+            raise FormatError("serial start: no pattern uses {serial}", field="serial_start")
         return _plan(job_path, placements, plan, job_of, values, None, save)
     counter = Path(counter) if counter is not None else default_counter(job_path)
     with locked(counter) as c:

@@ -112,8 +112,8 @@ class Station:
         """Where to scan when no region is given: the simulated parts' footprint; a real rig
         does not know where its part is (ConfigError)."""
         if self.world is None:
-            raise ConfigError("a scan on a real rig needs a region (--region X0 X1 Y0 Y1, mm): "
-                              "insitu does not know where the part lies")
+            raise ConfigError("region: a scan on a real rig needs one (X0 X1 Y0 Y1, mm): insitu "
+                              "does not know where the part lies", field="region")
         return self.world.footprint()
 
 

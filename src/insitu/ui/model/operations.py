@@ -101,31 +101,14 @@ def preview_serial(job_path: Path | None) -> int:
     return 1 if nxt is None else nxt
 
 
-def plan_preview(cloud, items, driver, job_path: Path | None, pens=None) -> list:
-    """:func:`insitu.services.mark.plan_all` of ``items`` with their texts rendered for the
-    screen: the next serial (a preview — marking takes it), the date and time now; a text that
-    cannot be rendered is refused with its one-line message. ``pens``: the pen table."""
-    from insitu.patterns.fields import Variables
-    from insitu.services.serials import is_templated, render_placement
-
-    if not is_templated(items):
-        return mark_svc.plan_all(cloud, items, driver, pens=pens)
-    values, rendered, errors = Variables(preview_serial(job_path)), [], {}
-    for i, p in enumerate(items):
-        try:
-            rendered.append(render_placement(p, values))
-        except InsituError as e:
-            errors[i] = mark_svc.PlanOutcome(error=str(e))
-    planned = iter(mark_svc.plan_all(cloud, rendered, driver, pens=pens))
-    return [errors[i] if i in errors else next(planned) for i in range(len(items))]
-
-
 def mark_serial(items, cloud, laser, station: Station, job_path: Path | None,
                 progress: Progress, cancel: threading.Event, pens=None) -> mark_svc.StationRun:
     """Plan ``items`` (with variable data) again with the serial taken from the counter
     beside the job — issued once every placement passed its checks, before the job is
-    written — then mark it as :func:`mark` does."""
-    from insitu.services.serials import default_counter, plan_and_save
+    written (:func:`insitu.services.mark_job.write_mark_job`) — then mark it as :func:`mark`
+    does."""
+    from insitu.services.mark_job import JobRequest, write_mark_job
+    from insitu.services.serials import default_counter
 
     if job_path is None:
         raise InsituError("save the project first: the serial counter is kept beside it")
@@ -133,19 +116,11 @@ def mark_serial(items, cloud, laser, station: Station, job_path: Path | None,
     if not counter.exists():
         raise InsituError(f"no serial counter beside the project: in its folder, insitu serial "
                           f"set {counter.name} FIRST_SERIAL creates it")
-
-    def job_of(outcomes) -> MarkJob:
-        job = mark_svc.joined(outcomes)
-        if job is None:
-            raise InsituError(next(o.error for o in outcomes if o.plan is None))
-        return job.model_copy(update={"laser": laser})
-
-    done = plan_and_save(job_path, items,
-                         lambda ps: mark_svc.plan_all(cloud, ps, station.driver, laser, pens),
-                         job_of, counter=counter)
+    done = write_mark_job(station, JobRequest(job_path, tuple(items), cloud, laser=laser,
+                                              pens=pens, counter=counter, marking=True))
     run = mark_svc.mark_on_station(station, done.job, job_path, image=True, cancel=cancel,
                                    progress=progress)
-    return read_back(run, station, done.result, cloud)
+    return read_back(run, station, done.outcomes, cloud)
 
 
 def unfinished(job: MarkJob, job_path: Path | None):

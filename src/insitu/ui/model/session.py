@@ -14,7 +14,7 @@ from insitu.formats.pointcloud import PointCloud
 from insitu.formats.project import RigChoice
 from insitu.marking import MarkJob
 from insitu.marking import Placement
-from insitu.services.mark import PlanOutcome
+from insitu.services.plan import PlanOutcome
 from insitu.ui.model.scene_data import follow_code_hatch
 
 
@@ -201,11 +201,13 @@ class Session:
 
     def job(self) -> MarkJob | None:
         """The opened job file's job, else one job marking every placement in order (each
-        was checked by ``plan_mark``), or None while any is refused or not yet planned."""
-        from insitu.services.mark import joined
+        was checked by :func:`insitu.services.plan.plan_placements`), or None while any is
+        refused or not yet planned."""
+        from insitu.services.plan import joined
 
         if self.job_file is not None:
             return self.job_file.job
-        if len(self.plans) != len(self.placements.items):
+        if (not self.plans or len(self.plans) != len(self.placements.items)
+                or any(o.plan is None for o in self.plans)):
             return None
         return joined(self.plans)

@@ -17,7 +17,8 @@ from insitu.errors import InsituError
 from insitu.formats.project import SUFFIX, Project, RigChoice, beside
 from insitu.patterns import FILE_SUFFIXES
 from insitu.services import load_height_calibration
-from insitu.services.mark import PlanOutcome
+from insitu.services.mark_job import preview_plans
+from insitu.services.plan import PlanOutcome
 from insitu.services.project import OpenedProject, open_project, save_project
 from insitu.services.serials import is_templated
 from insitu.services.station import Station
@@ -312,14 +313,14 @@ class MainWindow(QMainWindow):
             return
         if cloud is None or self.station is None:
             why = "no point cloud: scan or open one" if cloud is None else "connect the rig"
-            s.set_plans([PlanOutcome(error=why) for _ in items])
+            s.set_plans([PlanOutcome.refused("station", why) for _ in items])
             return
         if self.runner.running("plan"):
             self._plan_again = True
             return
-        driver, path, pens = self.station.driver, self.job_path(), s.pens
-        self.runner.start("plan", lambda p, c, f: (items, pens, ops.plan_preview(
-            cloud, items, driver, path, pens)),
+        station, path, pens, source = self.station, self.job_path(), s.pens, s.cloud_path
+        self.runner.start("plan", lambda p, c, f: (items, pens, preview_plans(
+            station, cloud, items, pens, path, source)),
                           self._planned, lambda m, _c: self.show_error(m))
 
     def _planned(self, result) -> None:

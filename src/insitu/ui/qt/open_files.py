@@ -80,7 +80,7 @@ def show_job_file(window) -> None:
 def export_job(window, path: Path) -> bool:
     """Write the current plan as a mark job at ``path`` (atomically); False and one line
     when there is none."""
-    from insitu.services.mark import save_job
+    from insitu.services.serials import save_job
     from insitu.services.serials import is_templated
 
     job = window.mark_panel.job()
