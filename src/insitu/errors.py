@@ -12,6 +12,9 @@ class InsituError(Exception):
     (``cut_path``); the message then starts with its name in words (``cut path 'x': expected
     one of …``), which the commands show as their option (``--cut-path 'x': …``)."""
 
+    warnings: tuple[str, ...] = ()
+    """Lines the operator should read with the error (what was found before the refusal)."""
+
     def __init__(self, *args, field: str | None = None):
         super().__init__(*args)
         self.field = field

@@ -263,13 +263,16 @@ def test_checkerboard_out_of_bounds():
     ("9x6x25", "DICT_4X4_50:1e300", "--charuco 'DICT_4X4_50:1e300': marker side 1e+300 is outside"),
 ])
 def test_board_text_out_of_bounds(board, charuco, words):
+    """The core names the field in words; the command shows its option."""
     from insitu.calibrate.photos import parse_board
+    from insitu.cli.common import as_option
     from insitu.errors import CalibrationError
 
     assert parse_board("9x6x25").cols == 9
     with pytest.raises(CalibrationError) as info:
         parse_board(board, charuco)
-    assert str(info.value).startswith(words), str(info.value)
+    assert str(info.value).startswith(words.removeprefix("--")), str(info.value)
+    assert as_option(info.value).startswith(words), as_option(info.value)
 
 
 def test_camera_options_out_of_bounds_before_anything_opens(tmp_path):

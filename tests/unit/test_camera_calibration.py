@@ -312,7 +312,7 @@ def test_a_plain_folder_of_photos_calibrates_with_board(rec, tmp_path):
 @pytest.mark.parametrize("case, board, message", [
     ("no-images", "9x6x10", "no images"),
     ("unreadable", "9x6x10", "bad.png: not a readable image"),
-    ("no-board", None, "no sequence.json; give the board as --board"),
+    ("no-board", None, "no sequence.json; give the board (COLSxROWSxSQUARE_MM"),
     ("board-text", "9x6", "--board '9x6': expected COLSxROWSxSQUARE_MM"),
     ("few-views", "9x6x10", "only 3 good views of 3, need at least 4"),
     ("not-found", "8x5x10", "no chessboard of 8×5 inner corners, 10 mm squares found in any"),

@@ -220,11 +220,13 @@ def test_the_summary_says_what_a_step_left_unmarked(files, tmp_path):
 
 def test_a_code_the_unmarked_strip_breaks_is_refused(tmp_path):
     """A QR code whose middle module row the unmarked strip runs through does not decode: it
-    is refused, naming the wall, and nothing is written."""
+    is refused, naming the wall, after the warning of what the step leaves unmarked (the
+    lines the application's Place dock shows too); nothing is written."""
     _gapped_step(tmp_path / "step.ply")
     out = tmp_path / "qr.json"
     res = _run("mark", "--cloud", tmp_path / "step.ply", "--pattern", "qr:HELLO;module=0.5",
                "--at", 0, -20, "-o", out)
     assert res.exit_code == 1 and not out.exists()
-    assert len(res.output.strip().splitlines()) == 1
-    assert "does not decode" in res.output and "left unmarked at a step's wall" in res.output
+    lines = res.output.strip().splitlines()
+    assert len(lines) == 2 and lines[0].startswith("warning: unmarked at walls"), lines
+    assert "does not decode" in lines[1] and "left unmarked at a step's wall" in lines[1]

@@ -245,12 +245,12 @@ def test_a_recipe_job_marks_every_placement_where_the_part_lies(recipe, tmp_path
         r = replace(r, placements=r.placements + (Placement('qr:"{serial:05d}"', (0.0, 30.0),
                                                             7.35),))
         located = production.Located(pose_matrix(x, y, a), 1.0, 0.0)
-        done = production.plan_recipe(r, cloud, located, station.driver, tmp_path / "j.json")
+        done = production.plan_recipe(station, r, cloud, located, tmp_path / "j.json")
     job = read_job(tmp_path / "j.json")
     assert job_variables(job).serial == 1 and [t.text for t in job_variables(job).texts] == [
         "001", "00001"]
-    assert len(job.paths) == sum(len(o.plan.job.paths) for o in done.result)
-    for p, o in zip(r.placements, done.result):
+    assert len(job.paths) == sum(len(o.plan.job.paths) for o in done.outcomes)
+    for p, o in zip(r.placements, done.outcomes):
         rendered = render_placement(p.in_world(located.T_world_part), Variables(1))
         plan = np.vstack(rendered.polylines(rendered.placed()))
         got = np.vstack([q.points for q in o.plan.job.paths])[:, :2]

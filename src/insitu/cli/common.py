@@ -84,6 +84,8 @@ def one_line_errors(command: Callable) -> Callable:
         try:
             return command(*args, **kwargs)
         except InsituError as e:
+            for line in e.warnings:
+                warn(line)
             fail(as_option(e))
     return wrapper
 

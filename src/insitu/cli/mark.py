@@ -9,7 +9,8 @@ import typer
 from rich.table import Table
 from rich.text import Text
 
-from insitu.cli.common import check_output, console, fail, missing, one_line_errors, progress_bar
+from insitu.cli.common import (check_output, console, fail, missing, one_line_errors,
+                               progress_bar, warn)
 from insitu.cli.job import check_run_options, pen_text, run_on_station
 from insitu.cli.options import (At, Beam, CounterPath, Cross, CutPath, Field, Fill, Force,
                                 Frequency, Hatch, HatchAngle, JumpSpeed, Mode, Paint, PartPose,
@@ -186,6 +187,9 @@ def _summary(out: Path, placement, written, field: Path | None,
     table.add_row("pattern", f"{plan.pattern.name}: {w:.3f} × {h:.3f} mm, centre "
                              f"({cx:.3f}, {cy:.3f})")
     for f in outcome.findings:
+        if f.check == "rig":            # the station's word on the cloud, before the job's
+            warn(f.text)
+            continue
         table.add_row(Text("warning", "yellow") if f.level == "warning" else
                       LABELS.get(f.check, f.check), f.text)
     record_rows(table, written.record)

@@ -199,7 +199,7 @@ def mark_recipe(recipe_path: Path, cloud: Path, out: Path, run: bool, preview: b
     """``insitu mark --recipe``: locate the recipe's part in ``cloud``, plan every placement
     where it lies as one job at ``out`` (the serial issued from the recipe's counter), show
     it, and with ``run`` mark it."""
-    from insitu.cli.common import progress_bar
+    from insitu.cli.common import progress_bar, warn
     from insitu.cli.job import run_on_station
     from insitu.cli.mark import record_rows
     from insitu.formats.pointcloud import read_ply
@@ -230,7 +230,9 @@ def mark_recipe(recipe_path: Path, cloud: Path, out: Path, run: bool, preview: b
             table.add_row(f"placement {i}", f"{p.pattern} at ({w.at_mm[0]:.3f}, "
                                             f"{w.at_mm[1]:.3f}) mm, {w.rotate_deg:.2f}°")
         for f in {f: None for o in planned.outcomes for f in o.findings}:
-            if f.level == "warning":
+            if f.level == "warning" and f.check == "rig":
+                warn(f.text)
+            elif f.level == "warning":
                 table.add_row(Text("warning", "yellow"), f.text)
         record_rows(table, planned.record)
         table.add_row("marks", f"{len(planned.job.paths):,} paths")

@@ -158,8 +158,8 @@ def calibrate_photos(folder: str | Path, board: BoardSpec | None,
     extrinsics stay R = I, t = 0. CalibrationError (one line) on bad input."""
     files = image_files(folder)
     if board is None:
-        raise CalibrationError(f"{folder}: no sequence.json; give the board as "
-                               "COLSxROWSxSQUARE_MM (e.g. 9x6x25)")
+        raise CalibrationError(f"{folder}: no sequence.json; give the board "
+                               "(COLSxROWSxSQUARE_MM, e.g. 9x6x25)")
     dets, size = _detect_all(((f, read_grey(f)) for f in files), board, len(files), progress)
     intr = _intrinsics(folder, dets, [p.name for p in files], size, board, outlier_factor,
                        "the board", "images")

@@ -64,8 +64,8 @@ def write_mark_job(station: Station, req: JobRequest,
     is raised, naming its placement when there are several). Resuming, the job is planned
     again with the file's own variable data and must be the job that file holds
     (ConfigError otherwise)."""
-    rig = None if req.cloud_path is None else rig_finding(station, req.cloud_path,
-                                                          req.cloud.rig, req.marking)
+    rig = (rig_finding(station, req.cloud_path, req.cloud.rig)
+           if req.marking and req.cloud_path is not None else None)
 
     def plan(placements: list[Placement]) -> list[PlanOutcome]:
         return plan_placements(req.cloud, placements, station.driver, req.laser, req.pens,
@@ -105,7 +105,7 @@ def preview_plans(station: Station, cloud: PointCloud, placements: Sequence[Plac
             rendered.append(serials.render_placement(p, values))
         except InsituError as e:
             errors[i] = PlanOutcome.refused("text", str(e))
-    rig = None if cloud_path is None else rig_finding(station, cloud_path, cloud.rig, True)
+    rig = None if cloud_path is None else rig_finding(station, cloud_path, cloud.rig)
     planned = iter(plan_placements(cloud, rendered, station.driver, pens=pens, rig=rig))
     return [errors[i] if i in errors else next(planned) for i in range(len(placements))]
 

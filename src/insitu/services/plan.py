@@ -189,14 +189,15 @@ def plan_placements(cloud: PointCloud, placements: Sequence[Placement], driver: 
 
 def raise_refusal(outcome: PlanOutcome, what: str = "") -> MarkPlan:
     """The plan of ``outcome``, or its first refusal raised as the error that refused it
-    (SafetyError with its place for the surface, FormatError otherwise), prefixed by
-    ``what``."""
+    (SafetyError with its place for the surface and the rig, FormatError otherwise),
+    prefixed by ``what``; the error's ``warnings`` are the outcome's warning lines."""
     if outcome.plan is not None:
         return outcome.plan
     f = next(f for f in outcome.findings if f.level == "refused")
-    if f.check in ("surface", "rig"):
-        raise SafetyError(what + f.text, f.where_mm)
-    raise FormatError(what + f.text)
+    e = (SafetyError(what + f.text, f.where_mm) if f.check in ("surface", "rig") else
+         FormatError(what + f.text))
+    e.warnings = tuple(what + w for w in outcome.warnings)
+    raise e
 
 
 def joined(outcomes: Sequence[PlanOutcome], laser: LaserParams | None = None) -> MarkJob:
@@ -242,13 +243,12 @@ def _quiet_zones_clear(outcomes: list[PlanOutcome]) -> list[PlanOutcome]:
     return out
 
 
-def rig_finding(station: Station, source: Path | str, record, marking: bool) -> Finding | None:
-    """The station's check of a cloud's rig record (:meth:`Station.check_source`) as a
-    finding: another rig or workpiece is refused when the job is to be ``marking`` on this
-    station, else a warning (the job records the cloud's rig: a run checks it again); a cloud
-    without a record is a warning."""
+def rig_finding(station: Station, source: Path | str, record) -> Finding | None:
+    """The station's check of a cloud's rig record (:meth:`Station.check_source`) before
+    marking on it: another rig or workpiece is refused, a cloud without a record is a
+    warning, None when it is this station's."""
     try:
         warning = station.check_source(Path(source), record, "cloud")
     except SafetyError as e:
-        return Finding("refused" if marking else "warning", "rig", str(e))
+        return Finding("refused", "rig", str(e))
     return None if warning is None else Finding("warning", "rig", warning)

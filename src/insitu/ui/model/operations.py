@@ -20,6 +20,7 @@ from insitu.formats.project import RigChoice, ScanSettings
 from insitu.marking import MarkJob
 from insitu.services import mark as mark_svc
 from insitu.services.common import Progress
+from insitu.services.serials import save_job
 from insitu.services.station import Station
 from insitu.services.station import connect as connect_station
 
@@ -73,7 +74,7 @@ def mark(job: MarkJob, station: Station, job_path: Path | None, progress: Progre
     (SafetyError), nothing written or fired."""
     station.check_source(job_path or Path("the job"), job.rig, "job")
     if job_path is not None and write and not resume:
-        mark_svc.save_job(job_path, job)
+        save_job(job_path, job)
     run = mark_svc.mark_on_station(station, job, job_path, resume=resume, restart=restart,
                                    cut_path=cut_path, image=True, cancel=cancel,
                                    progress=progress)

@@ -9,7 +9,7 @@ from pathlib import Path
 
 from PySide6.QtCore import Qt
 from PySide6.QtGui import QBrush, QColor
-from PySide6.QtWidgets import QFileDialog, QInputDialog, QVBoxLayout, QWidget
+from PySide6.QtWidgets import QFileDialog, QInputDialog, QSizePolicy, QVBoxLayout, QWidget
 
 from insitu.errors import InsituError
 from insitu.marking import PROJECTIONS
@@ -25,6 +25,9 @@ PATTERN_FILES = f"Patterns ({' '.join('*' + s for s in FILE_SUFFIXES)})"
 
 def short_name(spec: str) -> str:
     return spec if is_spec(spec) else Path(spec).name
+
+STATUS_LINES = 6
+"""Lines of the verdict the Place dock shows; its tooltip holds them all."""
 
 
 class PlacePanel(QWidget):
@@ -56,6 +59,10 @@ class PlacePanel(QWidget):
         self.session.placements.changed.connect(self.refresh)
         self.session.selection_changed.connect(self.refresh)
         self.session.plans_changed.connect(self.show_outcome)
+        label = ui.statusLabel      # a verdict of any length (a long path in it) moves nothing
+        label.setSizePolicy(QSizePolicy.Policy.Ignored, QSizePolicy.Policy.Fixed)
+        label.setFixedHeight(label.fontMetrics().lineSpacing() * STATUS_LINES + 4)
+        label.setAlignment(Qt.AlignmentFlag.AlignTop | Qt.AlignmentFlag.AlignLeft)
         self._refreshing = False
         self.refresh()
 
@@ -138,21 +145,24 @@ class PlacePanel(QWidget):
         self.show_outcome()
 
     def show_outcome(self) -> None:
-        """The selected placement's plan: its size and time and the loader's warnings, or
-        why it is refused (a code's quiet zone entered: on both placements)."""
+        """The selected placement's verdict as ``insitu mark`` gives it: its size and time, or
+        why it is refused, then every finding (walls, codes, the loader's warnings, the rig;
+        :meth:`insitu.services.plan.PlanOutcome.lines`)."""
         s, label = self.session, self.ui.statusLabel
         i = s.selected
         if not 0 <= i < len(s.plans):
             text, warn = ("" if s.current() is None else "checking…"), False
-        elif s.plans[i].error:
-            text, warn = f"refused: {s.plans[i].error}", True
         else:
-            plan = s.plans[i].plan
-            z = plan.projection.points[:, 2]
-            text, warn = (f"OK: {len(plan.job.paths)} paths on z {z.min():.2f} … {z.max():.2f} "
-                          f"mm, about {plan.estimate.total_s:.1f} s"), False
-            text += "".join(f"\n{n}" for n in plan.pattern.notes if n.startswith("warning:"))
+            outcome = s.plans[i]
+            lines = outcome.lines()
+            if outcome.plan is not None:
+                plan = outcome.plan
+                z = plan.projection.points[:, 2]
+                lines.insert(0, f"OK: {len(plan.job.paths)} paths on z {z.min():.2f} … "
+                                f"{z.max():.2f} mm, about {plan.estimate.total_s:.1f} s")
+            text, warn = "\n".join(lines), outcome.plan is None or bool(outcome.warnings)
         label.setText(text)
+        label.setToolTip(text)                  # every line, where the label clips them
         for row in range(self.ui.patternList.count()):      # each refusal on its row
             item = self.ui.patternList.item(row)
             error = s.plans[row].error if row < len(s.plans) else None
