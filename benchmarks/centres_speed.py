@@ -3,9 +3,10 @@
 Frames: the simulated camera's line frames (speckle, ambient light, shot and read noise,
 saturation, secondary reflections) on the step block and the freeform part. Prints a table:
 method, frames/s, MPix/s, ms/frame (median over all frames and rounds). Target: the gray
-centroid and Steger ≥ 100 frames/s. "before" is the previous gray_centroid, kept here for
-comparison. line_direction (a top-hat's structure tensor) should take a few ms; the colour row
-includes making the BGR frame.
+centroid and Steger ≥ 100 frames/s. "plain" rows are a gray centroid without the shared
+detection stage (the column's maximum, a fixed threshold), for comparison. line_direction (a
+top-hat's structure tensor) should take a few ms; the colour row includes making the BGR
+frame.
 Run: .venv/bin/python benchmarks/centres_speed.py
 """
 
@@ -32,7 +33,8 @@ cv2.setNumThreads(1)
 
 
 def before_gray_centroid(image, k=0.5, min_peak=40.0, window=12, median=3):
-    """The gray_centroid this module replaced, verbatim but for returning a tuple."""
+    """A plain gray centroid: the column's maximum, a threshold k × peak, no shared detection
+    stage (a baseline for the table)."""
     img = cv2.medianBlur(image, median) if median and median > 1 else image
     H, W = img.shape
     row = np.argmax(img, axis=0)
@@ -71,8 +73,8 @@ METHODS = {
     "gray_centroid, background=True": lambda f: gray_centroid(f, background=True),
     "gray_centroid, continuity=False": lambda f: gray_centroid(f, continuity=False),
     "gray_centroid, window=None": lambda f: gray_centroid(f, window=None),
-    "before: gray_centroid": before_gray_centroid,
-    "before: gray_centroid, window=None": lambda f: before_gray_centroid(f, window=None),
+    "plain gray_centroid": before_gray_centroid,
+    "plain gray_centroid, window=None": lambda f: before_gray_centroid(f, window=None),
     "gaussian_peak": gaussian_peak,
     "steger": steger,
     "line_centres(gray, auto direction)": line_centres,

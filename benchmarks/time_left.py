@@ -1,4 +1,4 @@
-"""The Mark dock's time left: the old estimate (elapsed / paths done × paths left) against
+"""The Mark dock's time left: the naive estimate (elapsed / paths done × paths left) against
 :class:`insitu.ui.model.time_left.TimeLeft` (planned time left × the board's recent speed
 ratio, smoothed, counting down), on the planned path times of a real job — a QR code hatched
 along its modules, then a text, planned on the simulated step block's recorded scan — marked
@@ -39,7 +39,7 @@ def planned_path_times() -> np.ndarray:
 
 
 def run(planned: np.ndarray, actual: np.ndarray):
-    """(largest rise s, errors at 25/50/75 %) of the old and the new estimate."""
+    """(largest rise s, errors at 25/50/75 %) of the naive estimate and TimeLeft."""
     n, elapsed = len(planned), np.cumsum(actual)
     truth = actual.sum() - elapsed
     new, shown_new, shown_old = TimeLeft(planned), [], []
@@ -64,7 +64,7 @@ def main() -> None:
     for col in ("run", "estimate", "largest rise", "error at 25 %", "at 50 %", "at 75 %"):
         table.add_column(col, justify="right" if col != "run" else "left")
     for name, actual in (("1.3× the plan, ±20 %", steady), ("slows to 3× half-way", slow)):
-        for label, (rise, errs) in zip(("elapsed/done (old)", "TimeLeft"), run(planned, actual)):
+        for label, (rise, errs) in zip(("elapsed/done (naive)", "TimeLeft"), run(planned, actual)):
             table.add_row(name, label, f"{rise:.2f} s", *(f"{e:.2f} s" for e in errs))
     Console().print(table)
 

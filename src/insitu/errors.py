@@ -21,7 +21,7 @@ class InsituError(Exception):
 
 
 class FormatError(InsituError):
-    """A file is missing, unreadable or does not match its format (spec/formats.md)."""
+    """A file is missing, unreadable or does not match its format (docs/formats.md)."""
 
 
 class ConfigError(InsituError):

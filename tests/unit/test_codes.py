@@ -55,7 +55,7 @@ def test_code_sources_encode_exactly_and_size_without_quiet_zone():
     c128 = load_pattern("code128:SN-0042")
     assert c128.code.quiet == 10 and c128.code.rows == round(0.25 * c128.code.cols)
     qr = load_pattern('qr:"HELLO WORLD"').placed((0, 0), 10.0)
-    assert qr.mark_width == pytest.approx(10.0)                      # was 7.24 mm with 4+4
+    assert qr.mark_width == pytest.approx(10.0)                      # without its quiet zone
     assert qr.size[0] == pytest.approx(10.0 * 29 / 21)
     with pytest.raises(FormatError, match=r"microqr:.*cannot encode"):
         load_pattern("microqr:" + "x" * 60)

@@ -259,7 +259,7 @@ def test_time_left_counts_down_without_jumps_and_rises_on_a_real_slowdown():
     assert np.all(np.diff(shown) <= 1e-9)                   # monotone: never up
     assert shown[-1] == pytest.approx(0.13, abs=0.05)
     naive = [elapsed[d - 1] / d * (100 - d) for d in (1, 2)]
-    assert naive[1] / naive[0] > 3                          # what the old estimate did
+    assert naive[1] / naive[0] > 3                          # what elapsed / done × left does
     # the board slows to 3× the plan half-way: the estimate rises to the truth
     t = TimeLeft(np.full(100, 0.1))
     now = 0.0

@@ -41,7 +41,7 @@ def test_method_2_holds_on_an_independent_recording(measured):
     result, part = measured
     e = _top_errors(part, result.cloud.points, 0.3)
     assert len(e) > 10000
-    assert np.sqrt(np.mean(e**2)) <= 0.03          # README before: 0.035 on these frames
-    assert np.abs(e).max() <= 0.15                 # issue 11; 0.163 before the pieces between
-    # speckle blotches were smoothed (a ghost, a wrong line, is millimetres off)
+    assert np.sqrt(np.mean(e**2)) <= 0.03          # docs/accuracy.md: 0.027
+    assert np.abs(e).max() <= 0.15                 # docs/accuracy.md: 0.100 (a ghost, a wrong
+    # line, is millimetres off)
     assert result.summary.frames_with_line == 16

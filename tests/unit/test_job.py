@@ -1,4 +1,4 @@
-"""The mark job file (formats.md §3): round trip, validation errors, time estimate."""
+"""The mark job file (docs/formats.md, mark job): round trip, validation errors, time estimate."""
 
 import json
 

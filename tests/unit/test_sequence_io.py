@@ -1,5 +1,5 @@
-"""Recorded sequences (formats.md §1): round trip, atomic writes, and one-line errors naming the
-problem for every kind of bad input."""
+"""Recorded sequences (docs/formats.md, recorded sequence): round trip, atomic writes, and
+one-line errors naming the problem for every kind of bad input."""
 
 from __future__ import annotations
 

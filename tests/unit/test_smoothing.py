@@ -31,7 +31,8 @@ def test_an_unbroken_line_is_savitzky_golay():
 
 def test_pieces_between_dark_blotches_are_smoothed():
     """Dark speckle blotches take 3 columns out every 20: each piece is shorter than the
-    31-column window. The old smoothing left them raw (error RMS = the 0.15 px noise)."""
+    31-column window. Smoothing that skips pieces shorter than its window leaves them raw
+    (error RMS = the 0.15 px noise)."""
     rng = np.random.default_rng(2)
     u = np.arange(W)
     u = u[(u % 20) >= 3].astype(np.float64)
@@ -68,8 +69,8 @@ def test_a_step_across_a_gap_stays_sharp():
 
 def test_a_steep_line_is_kept_whole_and_its_steps_cut():
     """A crossed pass's line climbs 0.85 px a column: speckle's wobble (0.2 px) on top of
-    that is no jump — the old rule (|Δv| > 1 px) cut it into pieces too short to keep and
-    lost a fifth of its centres, its last columns on a top among them. A step of 1.2 px
+    that is no jump — a rule of |Δv| > 1 px would cut it into pieces too short to keep and
+    lose a fifth of its centres, its last columns on a top among them. A step of 1.2 px
     against the slope (Δv = −0.35 px) is one."""
     rng = np.random.default_rng(4)
     u = np.arange(200, dtype=np.float64)

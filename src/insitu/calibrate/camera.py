@@ -47,7 +47,8 @@ class BoardSpec:
 
     @classmethod
     def from_spec(cls, spec) -> "BoardSpec":
-        """From a ``CheckerboardSpec`` (formats.md) or a dict, reading the optional ``charuco``."""
+        """From a ``CheckerboardSpec`` (docs/formats.md) or a dict, reading the optional
+        ``charuco``."""
         d = spec if isinstance(spec, dict) else {**spec.model_dump(), **(spec.model_extra or {})}
         charuco = d.get("charuco")
         if charuco is not None:

@@ -1,1 +1,1 @@
-"""The headless commands (shared/spec/cli.md): thin layers over insitu.services."""
+"""The headless commands (docs/cli.md): thin layers over insitu.services."""

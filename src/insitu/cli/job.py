@@ -1,4 +1,4 @@
-"""``insitu job``: show or run a mark job file (formats.md §3) on the rig."""
+"""``insitu job``: show or run a mark job file (docs/formats.md, mark job) on the rig."""
 
 from __future__ import annotations
 

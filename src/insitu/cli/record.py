@@ -39,7 +39,7 @@ def record(
         callback=bounded("count"), help="Camera calibration: checkerboard views (the "
                                         "operator moves the board between them).")] = 15,
 ) -> None:
-    """Record a sequence (formats.md) on the station a rig file names: a scan, the height
+    """Record a sequence (docs/formats.md) on the station a rig file names: a scan, the height
     calibration on the plate (Z stage), the field calibration (pilot spots or marked
     circles) or the camera calibration (checkerboard views, the operator moving the board
     when asked). The folder appears complete or not at all."""

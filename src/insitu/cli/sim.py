@@ -63,7 +63,7 @@ def record_cmd(
         help="Knock the camera after its calibration: move it by this distance, mm, in a "
              "random direction (from --seed).")] = 0.0,
 ) -> None:
-    """Write a recorded sequence (formats.md) from the simulated rig, with truth.json.
+    """Write a recorded sequence (docs/formats.md) from the simulated rig, with truth.json.
 
     To try the recalibration after a camera move: record and fit a field calibration
     (`insitu calibrate field`), then record spots at two heights with the camera moved

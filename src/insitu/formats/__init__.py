@@ -1,1 +1,1 @@
-"""The files of shared/spec/formats.md (recorded sequences, point clouds, jobs), with validation."""
+"""The files insitu reads and writes (docs/formats.md), with validation."""

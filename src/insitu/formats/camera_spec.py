@@ -1,5 +1,6 @@
-"""The camera as a recording or a rig file holds it (formats.md §1 ``camera``): intrinsics,
-OpenCV distortion and the world → camera pose, each value checked against its range."""
+"""The camera as a recording or a rig file holds it (docs/formats.md, recorded sequence
+``camera``): intrinsics, OpenCV distortion and the world → camera pose, each value checked
+against its range."""
 
 from __future__ import annotations
 

@@ -1,7 +1,7 @@
-"""Point clouds (formats.md §2): binary little-endian PLY written with Open3D, world frame, mm,
-with optional per-point intensity, line index, quality and ambient (the room-light grey
-value of the camera's pixel where the point was measured, 0..1 of full scale), and the rig it was measured on in a
-header comment (:mod:`insitu.formats.rig_record`).
+"""Point clouds (docs/formats.md, point cloud): binary little-endian PLY written with Open3D,
+world frame, mm, with optional per-point intensity, line index, quality and ambient (the
+room-light grey value of the camera's pixel where the point was measured, 0..1 of full
+scale), and the rig it was measured on in a header comment (:mod:`insitu.formats.rig_record`).
 
 Reading does not go through Open3D: its reader fills a short file with zeros or whatever memory
 held, prints its complaints from C++ and crashes on some headers. :func:`read_ply` parses the

@@ -50,7 +50,7 @@ letter ``C:`` is one character)."""
 
 SIM_BINNING = 1
 """The simulated rig's binning wherever none is given: the commands, the GUI, a new project
-(README's recordings and calibrations are made at it)."""
+(the demo's and the docs' recordings and calibrations are made at it)."""
 
 
 @dataclass(frozen=True)

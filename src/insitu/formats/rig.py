@@ -26,7 +26,7 @@ class ScanHeadGeometry(ScanHeadSpec):
     mirror_separation_mm: MirrorSeparation
 
     def spec(self, mirrors: bool = False) -> dict:
-        """The ``scan_head`` object of a recorded sequence (formats.md §1); with ``mirrors``
+        """The ``scan_head`` object of a recorded sequence (docs/formats.md); with ``mirrors``
         also d and e (a field calibration's recording carries them)."""
         keys = set(ScanHeadSpec.model_fields) | (
             {"mirror_distance_mm", "mirror_separation_mm"} if mirrors else set())

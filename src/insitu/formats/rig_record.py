@@ -1,4 +1,4 @@
-"""Which rig a cloud was measured on and a job planned for (formats.md §2, §3 ``rig``): a flat
+"""Which rig a cloud was measured on and a job planned for (docs/formats.md, rig record): a flat
 JSON object — the simulated rig's ``workpiece``, ``seed`` and ``binning``, or a real rig's
 ``rig_file`` (its name; with simulated devices also ``workpiece`` and ``seed``), and on the
 simulated rig the part's ``pose`` [x mm, y mm, turn °] when it is not at the origin. The

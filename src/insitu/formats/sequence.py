@@ -1,8 +1,9 @@
-"""Recorded sequences (formats.md §1): a folder with ``sequence.json`` and ``frames/%05d.png``.
+"""Recorded sequences (docs/formats.md, recorded sequence): a folder with ``sequence.json``
+and ``frames/%05d.png``.
 
 :class:`Sequence` reads one (validated, frames streamed one at a time); :class:`SequenceWriter`
 records one atomically. Models keep fields they don't know (other tools may add some).
-Our optional extension (docs/conventions.md): a scan may hold one laser-off frame under the
+The optional ``ambient`` (docs/formats.md): a scan may hold one laser-off frame under the
 room light, ``ambient.png``, named by the top-level ``"ambient": {"file", "exposure_ms"}``.
 """
 
@@ -103,7 +104,7 @@ class CheckerboardSpec(BaseModel):
 
 
 def frame_problems(kind: str, frame: FrameSpec) -> list[tuple[str, str]]:
-    """(field, message) for each per-kind rule of formats.md that ``frame`` breaks."""
+    """(field, message) for each per-kind rule of docs/formats.md that ``frame`` breaks."""
     need = {"scan": ("line",), "height-calibration": ("line", "plate_z_mm"),
             "field-calibration": ("spot", "plate_z_mm")}.get(kind, ())
     if kind == "field-calibration" and frame.fiducials is not None:    # marked circles

@@ -118,7 +118,7 @@ class CameraModel:
         return CameraModel(self.width, self.height, self.K, self.dist, R, t)
 
     def to_dict(self) -> dict:
-        """The ``camera`` object of formats.md (lists of floats)."""
+        """The ``camera`` object of a recorded sequence (docs/formats.md) (lists of floats)."""
         return {
             "width": int(self.width), "height": int(self.height),
             "K": self.K.tolist(), "dist": self.dist.tolist(),

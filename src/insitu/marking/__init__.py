@@ -1,5 +1,5 @@
 """Marking: project placed patterns onto the measured surface, check them, make the mark job
-(formats.md §3) and drive the scan head with it.
+(docs/formats.md, mark job) and drive the scan head with it.
 
     job, proj = plan_job(polylines, cloud, Limits.of(head_config), mode="planar")
     write_job("job.json", job)

@@ -1,4 +1,4 @@
-"""The mark job (formats.md §3): 3-D paths on the workpiece with laser parameters.
+"""The mark job (docs/formats.md, mark job): 3-D paths on the workpiece with laser parameters.
 
 Each path: jump (laser off) to its first point, then mark (laser on) through the rest. Points:
 (N, 3) float64 arrays, world frame, mm, stored to 1 nm. A path's own ``laser`` overrides the
@@ -129,9 +129,10 @@ class MarkPath(_Model):
 
 
 class MarkJob(_Model):
-    """formats.md §3. ``paths`` is the only field a file must have. ``rig``: the rig the
-    cloud it was planned on was measured on (:mod:`insitu.formats.rig_record`), None when
-    unknown; not part of what is marked (:meth:`digest`)."""
+    """The mark job of docs/formats.md. ``paths`` is the only field a file must have.
+    ``rig``: the rig the cloud it was planned on was measured on
+    (:mod:`insitu.formats.rig_record`), None when unknown; not part of what is marked
+    (:meth:`digest`)."""
 
     format: Literal["insitu-job/1"] = JOB_FORMAT
     frame: Literal["scan-head"] = "scan-head"

@@ -21,7 +21,8 @@ class ScanReconstructor:
     """Accumulates points frame by frame.
 
     camera: the calibrated camera (for a height model: the one it was fitted through).
-    pivot_height_mm, telecentric: the scan head's nominal geometry (formats.md ``scan_head``).
+    pivot_height_mm, telecentric: the scan head's nominal geometry (a recorded sequence's
+    ``scan_head``, docs/formats.md).
     height_model: None for Method 1 (light plane, Li et al. §2.1; any line direction), else
     Method 2 with that height calibration (Li et al. §2.2, or ours) for lines along y, and
     ``cross_model`` (None: none) for the crossed lines at its angle to x. settings: the

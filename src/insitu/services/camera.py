@@ -2,7 +2,7 @@
 camera-calibration folder; the pose alone, after the camera moved, from laser spots; the
 calibration file with its picture beside it.
 
-A camera-calibration sequence (formats.md) holds checkerboard views (frames with only
+A camera-calibration sequence (docs/formats.md) holds checkerboard views (frames with only
 ``file``). It may also hold alignment frames — the board lying on the plate, frames carrying
 ``plate_z_mm`` — as :func:`insitu.services.record.record_camera_calibration` records them:
 one laser-off frame (no ``line``; it is also a calibration view) and frames of the head's

@@ -29,6 +29,6 @@ def save_with_picture(out: str | Path, result: BaseModel, draw: Callable[[Path],
 
 
 def camera_model(spec: CameraSpec) -> CameraModel:
-    """The camera of a file (formats.md ``camera``) as a model."""
+    """The camera of a file (docs/formats.md, recorded sequence ``camera``) as a model."""
     return CameraModel(spec.width, spec.height, spec.K_array, spec.dist_array, spec.R_array,
                        spec.t_array)

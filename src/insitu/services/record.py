@@ -1,7 +1,7 @@
-"""Recording sequences (formats.md §1) on any station: the same four kinds on a real rig as
-on the simulated one, frames grabbed exactly as a live run grabs them. ``sequence.json``
-carries the operator's rig model; on the simulated rig, ``truth.json`` the true rig and
-workpiece beside it (for scoring)."""
+"""Recording sequences (docs/formats.md, recorded sequence) on any station: the same four
+kinds on a real rig as on the simulated one, frames grabbed exactly as a live run grabs them.
+``sequence.json`` carries the operator's rig model; on the simulated rig, ``truth.json`` the
+true rig and workpiece beside it (for scoring)."""
 
 from __future__ import annotations
 

@@ -20,7 +20,7 @@ from insitu.services.station import Station
 TARGET = 0.70             # the bright end of the part: 70 % of full scale
 BRIGHT = 99.95
 """The bright end of the part: this percentile of the frame (the insert's top is 0.4 % of a
-frame: at the 99.5th it was clipped, its edges with it)."""
+frame: at the 99.5th it clips, its edges with it)."""
 ACCEPT = (0.45, 0.90)     # ... anywhere in here is kept
 SATURATED = 0.005         # more than 0.5 % of the pixels at full scale is saturated
 MAX_GRABS = 4

@@ -150,8 +150,8 @@ def scan_replay(folder: str | Path, height_cal: HeightCalibration | None = None,
                 model: str | None = None, progress: Progress | None = None,
                 cancel: threading.Event | None = None,
                 on_frame: FrameCallback | None = None) -> ScanResult:
-    """Reconstruct a recorded scan sequence (formats.md §1): Method 1, or Method 2 when a
-    height calibration is given. The recording is a camera like any other
+    """Reconstruct a recorded scan sequence (docs/formats.md, recorded sequence): Method 1,
+    or Method 2 when a height calibration is given. The recording is a camera like any other
     (:class:`~insitu.devices.replay.ReplayCamera`): the same loop as a live scan. Its
     ambient frame, when it has one, gives each point its ``ambient`` grey value."""
     t0 = time.perf_counter()

@@ -1,7 +1,7 @@
 """Variable data of mark jobs: the placements' texts rendered (``{serial}``, ``{date}``, the
 user's fields), the serial taken from the counter when the job is planned, and the record the
-job file keeps of it — its optional ``variable_data`` field (formats.md §3 lets a job carry
-fields of its own):
+job file keeps of it — its optional ``variable_data`` field (the mark job of
+docs/formats.md lets a job carry fields of its own):
 
     "variable_data": {"serial": 42, "counter": "serial.counter.json",
                       "time": "2026-12-02T01:02:03+01:00", "fields": {"gtin": "0950…"},

@@ -36,7 +36,7 @@ class CentreSettings:
     of the frame's wander (0: fixed ``smooth_half_window``). ``extend_ends``: a line's
     ends carried on where its peak, filtered along the row, still passes the detector's
     thresholds (:func:`~insitu.vision.detect.carry_ends`; not in the paper's mode, nor in
-    calibrations made before). A height calibration stores the settings it was made with; a
+    a version-1 height calibration). A height calibration stores the settings it was made with; a
     scan uses the same."""
 
     method: str = "steger"
@@ -141,7 +141,7 @@ def smooth_centres(c: LineCentres, half_window: int = 7, jump_px: float = 1.0,
     Pieces: columns that follow each other with v not stepping off the line by more than
     ``jump_px`` (its slope in the frame allowed for: :func:`_jumps`). At each
     end of a piece, columns whose peak is below ``end_fraction`` of its median peak are
-    dropped (0, the default: none; height calibrations made before it dropped them at 0.5 as
+    dropped (0, the default: none; a version-1 height calibration drops them at 0.5 as
     the blurred tail beyond an edge). Speckle dims a line's last columns as often as blur
     does, and a line clipped by an oblique edge fades over several columns still on the top:
     the dropped ends jumped inwards by 0 to 7 px, the edges a part is located by with them.
