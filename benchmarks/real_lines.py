@@ -1,100 +1,128 @@
-"""Line centres on real laser-line photographs: the automatic direction, and each centre
-method's RMS distance to the fitted laser plane against a plain threshold centre of mass.
+"""Line centres on real laser-line photographs (benchmarks/real_sets.py): how often the stripe is
+found where it crosses the board, how often a centre lies elsewhere, and each method's RMS
+distance to its own laser plane against a naive centre of mass on the same scan lines.
 
-Data (not in this repository; the source repository has no licence): the desktop 3-D scanner
-of github.com/srv/desktop_3d_scanner, folder ``python/calib_images/Laser/Calibracio17_07``:
-121 colour JPEGs, 640 × 480, a green laser line on a hand-held checkerboard (8 × 6 inner
-corners, 40 mm squares) in front of a cluttered room; the board is found in 91. Camera: that
-repository's ``python/calibration4.yaml`` (copied below).
+Each photograph is measured as ``insitu centres`` measures anyone's photograph
+(:func:`~insitu.vision.centres.photo_centres`: the method's defaults, the channel and the
+direction found from the image, no geometry given); with
+``--background`` the set's laser-off photograph is subtracted (sets that have one).
 
-Per image where the board is found: its pose (solvePnP); each method's centres on the board
-(the line runs down the rows: one centre per image row, direction given) are cast as rays
-onto the board plane, in mm in the camera frame. The laser is fixed to the camera, so every
-point of every image lies on one plane: fitted (least squares after dropping points > 5
-robust σ, counted as outliers, iterated) per method, the RMS of the kept points' distances
-is the method's figure. Baseline, on the same scan lines as each method: the centre of mass
-of the gray values above half-way between the line's background and its peak, within ±12 px
-of the shared detection's peak (:func:`insitu.vision.detect.detect`). The true direction of an
-image: that of the laser plane's intersection with its board plane, projected.
+Truth. The board's pose in each photograph (found, or published) and the laser plane (the
+published one, else fitted robustly to every method's points on the boards,
+in mm in the camera frame: the laser is fixed to the camera) give the stripe's true course in
+the image: the plane ∩ the board's plane, projected through the camera's distortion. A scan
+line (a column of an image whose stripe runs along the rows, a row where it runs down) crosses
+the board where that course lies inside the board's ``area``.
 
-Run: .venv/bin/python benchmarks/real_lines.py FOLDER
+Per method, over the board's scan lines: found — a centre within 5 px of the true course;
+wrong — a centre more than 5 px off it. RMS at equal coverage: on the (photograph, scan line)
+pairs where both the method and the baseline found the stripe, each one's points are cast onto
+the board plane and fitted with their own least-squares plane; the figure is the RMS distance
+to it (the boards' pose errors are in both alike) and the ratio method / baseline.
+
+Baseline, the naive centre of mass: per scan line of the laser's own channel (the set says
+which), the pixels within ±8 px of the line's maximum that reach 0.8 of it, weighted by their
+value. Nothing else: no validity test, no filter.
+
+Run: .venv/bin/python benchmarks/real_lines.py DATA [--sets desktop,…] [--background]
 """
 
 from __future__ import annotations
 
 import argparse
-import glob
 import os
+import sys
 
 import cv2
 import numpy as np
 from rich.console import Console
 from rich.table import Table
 
-from insitu.vision.centres import as_gray, line_centres, line_direction
-from insitu.vision.detect import detect, gather
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from real_sets import SETS, TUNING, PhotoSet  # noqa: E402
 
-K = np.array([[620.2678375549896, 0.0, 322.94579652113293],
-              [0.0, 618.61305587237, 239.42135627438046], [0.0, 0.0, 1.0]])
-DIST = np.array([0.11369913583372294, -0.193716412669678, -0.0011143493279290875,
-                 -0.0021599136353324592, -0.03519351082447173])
-PATTERN, SQUARE = (8, 6), 40.0          # inner corners (cols, rows); mm
-MARGIN = 3 * SQUARE                     # the board's white margin (not published), mm
-AREA = (-MARGIN, (PATTERN[0] - 1) * SQUARE + MARGIN, -MARGIN, (PATTERN[1] - 1) * SQUARE + MARGIN)
-WINDOW = 12
-GATE = 3.0              # mm off the reference plane: not on the board (room, hand), dropped
+from insitu.vision.centres import CENTRE_METHODS, photo_centres  # noqa: E402
 
-METHODS = {                               # name: (method, keywords)
-    "gray, Eq. 7 (paper, k = 0.5)": ("gray", {"k": 0.5, "extend_ends": False}),
-    "gray, background (k = 0.5)": ("gray", {"k": 0.5, "background": True}),
-    "gaussian": ("gaussian", {}),
-    "steger": ("steger", {}),
-}
+NAIVE_FRACTION, NAIVE_WINDOW = 0.8, 8
+RIGHT_PX = 5.0
+METHODS = tuple(CENTRE_METHODS)
 
 
-def board_pose(bgr):
-    """(R (3, 3), t (3,) mm) of the board in the camera frame, or None if not found."""
-    gray = cv2.cvtColor(bgr, cv2.COLOR_BGR2GRAY)
-    ok, corners = cv2.findChessboardCorners(gray, PATTERN, None)
-    if not ok:
-        return None
-    corners = cv2.cornerSubPix(gray, corners, (11, 11), (-1, -1),
-                               (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_MAX_ITER, 30, 1e-3))
-    obj = np.zeros((PATTERN[0] * PATTERN[1], 3), np.float32)
-    obj[:, :2] = np.mgrid[0:PATTERN[0], 0:PATTERN[1]].T.reshape(-1, 2) * SQUARE
-    _, rvec, tvec = cv2.solvePnP(obj, corners, K, DIST)
-    return cv2.Rodrigues(rvec)[0], tvec.ravel()
+def naive_com(channel: np.ndarray, along_rows: bool) -> np.ndarray:
+    """(n_scan_lines,) centre of mass per scan line (NAIVE_FRACTION of the line's maximum,
+    ±NAIVE_WINDOW px), across the line: per column for a stripe along the rows."""
+    g = channel.astype(np.float64)
+    g = g if along_rows else g.T                                 # (cross, scan)
+    peak = np.argmax(g, axis=0)
+    offs = np.arange(-NAIVE_WINDOW, NAIVE_WINDOW + 1)[:, None]
+    rows = np.clip(peak[None, :] + offs, 0, g.shape[0] - 1)
+    vals = g[rows, np.arange(g.shape[1])[None, :]]
+    vals[vals < NAIVE_FRACTION * vals.max(axis=0)] = 0
+    return (vals * rows).sum(axis=0) / np.maximum(vals.sum(axis=0), 1e-9)
 
 
-def on_board(uv, R, t):
-    """Rays through pixels uv (N, 2) onto the board plane: (N, 3) mm camera frame, and the
-    (N,) mask of points inside the board's area (checkers and margin, AREA)."""
+def rays_to_board(uv, K, dist, R, t) -> np.ndarray:
+    """Pixels uv (N, 2) cast onto the board plane: (N, 3) mm, camera frame."""
     if len(uv) == 0:
-        return np.zeros((0, 3)), np.zeros(0, bool)
-    ray = cv2.undistortPoints(uv.reshape(-1, 1, 2).astype(np.float64), K, DIST).reshape(-1, 2)
+        return np.zeros((0, 3))
+    ray = cv2.undistortPoints(uv.reshape(-1, 1, 2).astype(np.float64), K, dist).reshape(-1, 2)
     ray = np.column_stack([ray, np.ones(len(ray))])
     n = R[:, 2]
-    X = ray * ((n @ t) / (ray @ n))[:, None]
-    b = (X - t) @ R                                              # board coordinates, mm
-    inside = (b[:, 0] > AREA[0]) & (b[:, 0] < AREA[1]) & (b[:, 1] > AREA[2]) & (b[:, 1] < AREA[3])
-    return X, inside
+    return ray * ((n @ t) / (ray @ n))[:, None]
 
 
-def threshold_com(gray_t):
-    """Plain threshold centre of mass per scan line of ``gray_t`` (line along its rows):
-    (scan lines (n,), centre (n,) px) — weights g above (bg + peak)/2 within ±WINDOW."""
-    det = detect(gray_t, window=WINDOW)
-    rows = np.arange(-WINDOW, WINDOW + 1)[:, None]
-    g, inside = gather(det.pre, det.row[None, :] + rows, det.cols)
-    g[(g <= (det.bg + det.gmax) / 2) | ~inside] = 0
-    return det.cols, det.row + (g * rows).sum(axis=0) / np.maximum(g.sum(axis=0), 1e-9)
+def true_course(s: PhotoSet, R, t, plane, shape):
+    """The stripe's true course in one photograph: (along_rows, scan lines (m,) int, true
+    cross coordinate (m,) px) over the scan lines where it crosses the board's area; None
+    when it does not cross it."""
+    n, d = plane
+    nb = R[:, 2]
+    a = np.cross(n, nb)
+    if np.linalg.norm(a) < 1e-9:
+        return None
+    p0 = np.linalg.lstsq(np.stack([n, nb]), np.array([d, nb @ t]), rcond=None)[0]
+    # the course in board coordinates: p0 + s·a → b = Rᵀ(x − t); keep s inside the area
+    b0, b1 = R.T @ (p0 - t), R.T @ a
+    x0, x1, y0, y1 = s.area
+    lo, hi = -np.inf, np.inf
+    for k, (c0, c1) in enumerate(((x0, x1), (y0, y1))):
+        if abs(b1[k]) < 1e-12:
+            if not c0 <= b0[k] <= c1:
+                return None
+            continue
+        e = sorted(((c0 - b0[k]) / b1[k], (c1 - b0[k]) / b1[k]))
+        lo, hi = max(lo, e[0]), min(hi, e[1])
+    if not hi > lo:
+        return None
+    X = p0 + np.linspace(lo, hi, 2000)[:, None] * a
+    uv = cv2.projectPoints(X, np.zeros(3), np.zeros(3), s.K, s.dist)[0].reshape(-1, 2)
+    du, dv = np.ptp(uv, axis=0)
+    along_rows = du >= dv
+    scan, cross = (uv[:, 0], uv[:, 1]) if along_rows else (uv[:, 1], uv[:, 0])
+    order = np.argsort(scan)
+    lines = np.arange(int(np.ceil(scan.min())), int(np.floor(scan.max())) + 1)
+    true = np.interp(lines, scan[order], cross[order])
+    H, W = shape
+    inside = (lines >= 0) & (lines < (W if along_rows else H)) & (true >= 3) & \
+        (true <= (H if along_rows else W) - 4)
+    return along_rows, lines[inside], true[inside]
+
+
+def per_scan_line(uv: np.ndarray, along_rows: bool) -> dict[int, float]:
+    """{scan line: cross coordinate} of centres uv (N, 2); a scan line with several keeps the
+    first."""
+    scan, cross = (uv[:, 0], uv[:, 1]) if along_rows else (uv[:, 1], uv[:, 0])
+    out: dict[int, float] = {}
+    for k, x in zip(np.round(scan).astype(int).tolist(), cross.tolist()):
+        out.setdefault(k, x)
+    return out
 
 
 def plane_fit(X, sigmas=5.0):
-    """Plane through X (N, 3) mm by least squares, points > sigmas robust σ off dropped
-    (iterated): (unit normal (3,), offset mm), n·x = offset."""
+    """Robust least-squares plane of X (N, 3) (points > sigmas robust σ off dropped,
+    iterated): (unit normal, offset mm)."""
     keep = np.ones(len(X), bool)
-    for _ in range(20):
+    for _ in range(30):
         c = X[keep].mean(axis=0)
         n = np.linalg.svd(X[keep] - c, full_matrices=False)[2][2]
         d = np.abs((X - c) @ n)
@@ -105,73 +133,127 @@ def plane_fit(X, sigmas=5.0):
     return n, float(n @ c)
 
 
-def rms_to_plane(X):
-    """RMS distance (mm) of X (N, 3) to its least-squares plane."""
+def rms_to_own_plane(X) -> float:
     return float(np.linalg.svd(X - X.mean(axis=0), full_matrices=False)[1][2] / np.sqrt(len(X)))
 
 
-def true_direction(R, t, n, d):
-    """"rows"/"cols": the projected direction of the laser plane ∩ board plane."""
-    nb = R[:, 2]
-    a = np.cross(n, nb)
-    p0 = np.linalg.lstsq(np.stack([n, nb]), np.array([d, nb @ t]), rcond=None)[0]
-    centre = t + R @ np.array([AREA[1] / 2, AREA[3] / 2, 0.0])
-    p0 = p0 + a * ((centre - p0) @ a) / (a @ a)                  # near the board's centre
-    uv = cv2.projectPoints(np.stack([p0 - 50 * a, p0 + 50 * a]), np.zeros(3), np.zeros(3), K,
-                           DIST)[0].reshape(2, 2)
-    du, dv = np.abs(uv[1] - uv[0])
-    return "rows" if du >= dv else "cols"
+def measure(s: PhotoSet, root: str, background: bool):
+    """Centres of every photograph with a board pose: [(file, pose, shape, {name: uv})], the
+    naive baseline under "naive" (its uv for both directions: "naive rows", "naive cols")."""
+    out = []
+    for f in s.files(root):
+        bgr = cv2.imread(f, cv2.IMREAD_COLOR)
+        pose = s.pose(f, bgr)
+        if pose is None:
+            continue
+        bg = None
+        if background and s.background(f) is not None:
+            bg = cv2.imread(s.background(f), cv2.IMREAD_COLOR)
+        found = {m: photo_centres(bgr, m, laser_off=bg).uv for m in METHODS}
+        ch = bgr[:, :, "bgr".index(s.laser)]
+        for along_rows in (True, False):
+            cen = naive_com(ch, along_rows)
+            k = np.arange(len(cen), dtype=np.float64)
+            found["naive rows" if along_rows else "naive cols"] = (
+                np.column_stack([k, cen]) if along_rows else np.column_stack([cen, k]))
+        out.append((f, pose, bgr.shape[:2], found))
+    return out
+
+
+def reference_plane(s: PhotoSet, shots):
+    """The published plane, else one fitted to every method's points inside the boards'
+    areas."""
+    if s.plane is not None:
+        return s.plane
+    pts = []
+    for _, (R, t), _, found in shots:
+        for uv in (found[m] for m in METHODS):
+            X = rays_to_board(uv, s.K, s.dist, R, t)
+            b = (X - t) @ R
+            x0, x1, y0, y1 = s.area
+            pts.append(X[(b[:, 0] > x0) & (b[:, 0] < x1) & (b[:, 1] > y0) & (b[:, 1] < y1)])
+    return plane_fit(np.concatenate(pts))
+
+
+def score(s: PhotoSet, shots, plane):
+    """Per method: (board scan lines, found, wrong, {method: [(file, R, t, uv of method,
+    uv of baseline)] on the pairs both found})."""
+    rows = {m: [0, 0, 0] for m in (*METHODS, "naive")}
+    pairs = {m: [] for m in METHODS}
+    for f, (R, t), shape, found in shots:
+        course = true_course(s, R, t, plane, shape)
+        if course is None:
+            continue
+        along_rows, lines, true = course
+        truth = dict(zip(lines.tolist(), true.tolist()))
+        naive = per_scan_line(found["naive rows" if along_rows else "naive cols"], along_rows)
+        naive_ok = {k: x for k, x in naive.items() if k in truth and
+                    abs(x - truth[k]) <= RIGHT_PX}
+        for m in (*METHODS, "naive"):
+            got = naive if m == "naive" else per_scan_line(found[m], along_rows)
+            on = {k: x for k, x in got.items() if k in truth}
+            right = {k: x for k, x in on.items() if abs(x - truth[k]) <= RIGHT_PX}
+            r = rows[m]
+            r[0] += len(truth)
+            r[1] += len(right)
+            r[2] += len(on) - len(right)
+            if m != "naive":
+                both = sorted(set(right) & set(naive_ok))
+                uv = np.array([(k, right[k]) if along_rows else (right[k], k) for k in both],
+                              float).reshape(-1, 2)
+                uvb = np.array([(k, naive_ok[k]) if along_rows else (naive_ok[k], k)
+                                for k in both], float).reshape(-1, 2)
+                pairs[m].append((R, t, uv, uvb))
+    return rows, pairs
+
+
+def report(s: PhotoSet, root: str, background: bool, console: Console) -> None:
+    shots = measure(s, root, background)
+    if not shots:
+        console.print(f"{s.name}: no photographs with a board under {root} (see real_sets.py)")
+        return
+    plane = reference_plane(s, shots)
+    rows, pairs = score(s, shots, plane)
+    role = "tuning set" if s.name == TUNING else "held out"
+    table = Table(title=f"{s.name} ({s.repo}, {role}): {len(shots)} photographs with the "
+                        f"board{', laser-off frame subtracted' if background else ''}")
+    for col in ("method", "board scan lines", "found %", "wrong %", "pairs", "RMS mm",
+                "naive RMS mm", "ratio"):
+        table.add_column(col, justify="left" if col == "method" else "right")
+    for m in (*METHODS, "naive"):
+        n, right, wrong = rows[m]
+        cells = [m, str(n), f"{100 * right / max(n, 1):.1f}", f"{100 * wrong / max(n, 1):.2f}"]
+        if m == "naive":
+            table.add_row(*cells, "", "", "", "")
+            continue
+        X = np.concatenate([rays_to_board(uv, s.K, s.dist, R, t) for R, t, uv, _ in pairs[m]])
+        Xb = np.concatenate([rays_to_board(b, s.K, s.dist, R, t) for R, t, _, b in pairs[m]])
+        r, rb = (rms_to_own_plane(X), rms_to_own_plane(Xb)) if len(X) > 3 else (np.nan,) * 2
+        table.add_row(*cells, str(len(X)), f"{r:.3f}", f"{rb:.3f}", f"{r / rb:.2f}")
+    console.print(table)
+    if s.plane is not None:
+        own = reference_plane(PhotoSet(**{**s.__dict__, "plane": None}), shots)
+        angle = np.degrees(np.arccos(min(1.0, abs(float(own[0] @ s.plane[0])))))
+        console.print(f"the published plane and one fitted to the points: {angle:.2f}° apart")
 
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("folder", help="folder of the photographs (*.jpg)")
-    folder = ap.parse_args().folder
-    files = sorted(glob.glob(os.path.join(folder, "*.jpg")))
-    if not files:
-        raise SystemExit(f"{folder}: no *.jpg (see this script's docstring for the data)")
-    views, pts, base = [], {m: [] for m in METHODS}, {m: [] for m in METHODS}
-    for f in files:
-        bgr = cv2.imread(f)
-        pose = board_pose(bgr)
-        if pose is None:
-            continue
-        gray = as_gray(bgr)                                        # channel "auto"
-        views.append((f, pose, line_direction(gray)))
-        rows_b, cen_b = threshold_com(cv2.transpose(gray))
-        ref = dict(zip(rows_b.tolist(), cen_b))
-        for name, (method, kw) in METHODS.items():
-            c = line_centres(gray, method, "cols", **kw)
-            common = np.array([r in ref for r in np.round(c.v).astype(int).tolist()], bool)
-            uv = c.uv[common]
-            uvb = np.column_stack([[ref[int(r)] for r in np.round(uv[:, 1])], uv[:, 1]])
-            X, ok = on_board(uv, *pose)
-            Xb, okb = on_board(uvb, *pose)
-            both = ok & okb
-            pts[name].append(X[both])
-            base[name].append(Xb[both])
-    ref = plane_fit(np.concatenate([np.concatenate(p[m]) for p in (pts, base) for m in METHODS]))
-    console = Console(width=120)
-    table = Table(title=f"{len(views)} of {len(files)} photographs with the board found "
-                        f"({folder}); RMS distance to the fitted laser plane, mm")
-    for col in ("method", "scan lines", "off the board", "RMS mm", "threshold CoM RMS mm",
-                "better by"):
-        table.add_column(col, justify="left" if col == "method" else "right")
-    for name in METHODS:
-        X, Xb = np.concatenate(pts[name]), np.concatenate(base[name])
-        near = ((np.abs(X @ ref[0] - ref[1]) <= GATE) & (np.abs(Xb @ ref[0] - ref[1]) <= GATE))
-        r, rb = rms_to_plane(X[near]), rms_to_plane(Xb[near])
-        table.add_row(name, str(near.sum()), str((~near).sum()), f"{r:.3f}", f"{rb:.3f}",
-                      f"{100 * (1 - r / rb):.0f} %")
-    console.print(table)
-    right = sum(true_direction(*pose, *ref) == auto for _, pose, auto in views)
-    truths = {true_direction(*pose, *ref) for _, pose, _ in views}
-    console.print(f"automatic direction right on {right} of {len(views)} "
-                  f"({100 * right / max(len(views), 1):.1f} %); true directions: "
-                  f"{', '.join(sorted(truths))} (laser plane ∩ board plane, projected)")
-    console.print(f"points: centres on the board's area whose method and baseline points are "
-                  f"both ≤ {GATE} mm from the laser plane fitted to all (else off the board); "
-                  "RMS: each set about its own least-squares plane")
+    ap.add_argument("data", help="folder holding the sets' repositories (real_sets.py)")
+    ap.add_argument("--sets", default=",".join(SETS), help="comma-separated: "
+                    + ", ".join(SETS))
+    ap.add_argument("--background", action="store_true",
+                    help="subtract the set's laser-off photograph (sets that have one)")
+    a = ap.parse_args()
+    console = Console(width=130)
+    for name in a.sets.split(","):
+        if name not in SETS:
+            raise SystemExit(f"--sets: {name!r}: expected one of {', '.join(SETS)}")
+        report(SETS[name], a.data, a.background, console)
+    console.print(f"found: a centre within {RIGHT_PX:g} px of the true course on a scan line "
+                  f"where it crosses the board; wrong: farther. RMS: on the pairs both the "
+                  f"method and the naive centre of mass ({NAIVE_FRACTION:g} of the line's "
+                  f"maximum, ±{NAIVE_WINDOW} px) found, each about its own plane.")
 
 
 if __name__ == "__main__":

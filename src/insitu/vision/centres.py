@@ -4,9 +4,9 @@ one of the methods of :data:`CENTRE_METHODS`.
 Every method uses the detection stage and keywords of :mod:`insitu.vision.detect`.
 :func:`gray_centroid` (Li et al. §2.3, Eq. 7) is here; :func:`~insitu.vision.steger.gaussian_peak`
 and :func:`~insitu.vision.steger.steger` in :mod:`insitu.vision.steger`; :func:`line_centres`
-dispatches on the table, picks the laser's channel of a colour image (:func:`as_gray`) and
-handles lines that run along the columns, found from the image's structure when not given
-(:func:`line_direction`).
+dispatches on the table, takes the laser's light out of a colour image or a frame with a
+laser-off frame (:mod:`insitu.vision.laser_image`) and handles lines that run along the
+columns, found from the image's structure when not given (:func:`line_direction`).
 """
 
 from __future__ import annotations
@@ -17,10 +17,14 @@ from dataclasses import dataclass, field
 import cv2
 import numpy as np
 
-from insitu.errors import MeasurementError
-from insitu.vision.detect import (LineCentres, as_image, band_background, detect, gather,
+from insitu.vision.detect import (LineCentres, as_image, band_background, detect, fwhm, gather,
                                   raw_saturated, saturation_level)
+from insitu.vision.laser_image import CHANNELS, ImageInputError, laser_image, ridges, shrink
 from insitu.vision.steger import gaussian_peak, steger
+
+__all__ = ["CENTRE_METHODS", "CHANNELS", "CentreMethod", "ImageInputError", "LineCentres",
+           "as_gray", "gaussian_peak", "gray_centroid", "line_centres", "line_direction",
+           "photo_centres", "steger"]
 
 
 def gray_centroid(image: np.ndarray, k: float = 0.5, min_peak: float = 40.0,
@@ -28,7 +32,8 @@ def gray_centroid(image: np.ndarray, k: float = 0.5, min_peak: float = 40.0,
                   min_contrast: float = 20.0, snr: float = 6.0, continuity: bool = True,
                   saturation: float | None = None, subtract: bool = False,
                   background: bool = False, extend_ends: bool = True,
-                  upper: int = 0) -> LineCentres:
+                  upper: int = 0, pixel_bits: int | None = None, allow=None,
+                  min_run: int = 0, ridge: bool = False) -> LineCentres:
     """Gray-centroid centres of a line running along the rows: Li et al.'s (§2.3, Eq. 7), or
     above the local background.
 
@@ -40,18 +45,20 @@ def gray_centroid(image: np.ndarray, k: float = 0.5, min_peak: float = 40.0,
     subtract: weights g_i − K instead of Eq. 7's g_i (not the paper; removes most of Eq. 7's
     phase-dependent bias of ≈ 0.15 px at k = 0.3, which comes from pixels entering the sum
     with weight K as the line moves).
-    background: K = bg + k · (g_max − bg) with bg the column's local background, running
-    linearly between the ends of the ±window band (window None: the detection's ``bg``),
-    weights g_i − K (``subtract`` implied): a bright or sloping surface under the line no
+    background: K above the column's local background (:func:`_above_background`; window
+    None: K = bg + k · (g_max − bg), bg the detection's), weights g_i − K (``subtract``
+    implied): a bright or sloping surface under the line, or a bright area beside it, no
     longer enters the sum. False: Eq. 7, the paper mode that
     :data:`~insitu.vision.extract.PAPER_SETTINGS` reproduces.
     """
     img = as_image(image)
     det = detect(img, median, band, window, min_peak, min_contrast, snr, continuity,
-                 extend_ends=extend_ends, upper=upper)
+                 extend_ends=extend_ends, upper=upper, pixel_bits=pixel_bits, allow=allow,
+                 min_run=min_run, ridge=ridge)
     c, r, gmax = det.cols, det.row, det.gmax
+    level = saturation_level(img, saturation, pixel_bits)
     if background and window is not None:
-        return _above_background(img, det, k, window, saturation)
+        return _above_background(img, det, k, level)
     K = (det.bg + k * (gmax - det.bg) if background else k * gmax).astype(np.float32)
     subtract = subtract or background
     if window is None:                                             # whole columns, (n, H)
@@ -63,6 +70,7 @@ def gray_centroid(image: np.ndarray, k: float = 0.5, min_peak: float = 40.0,
         total = g.sum(axis=1, dtype=np.float64)
         v = (g @ np.arange(img.shape[0], dtype=np.float32)) / np.where(total > 0, total, 1)
     else:
+        window = det.window
         rows = np.arange(-window, window + 1)[:, None]
         g, inside = gather(det.pre, r[None, :] + rows, c)
         g[(g <= K) | ~inside] = 0
@@ -72,89 +80,51 @@ def gray_centroid(image: np.ndarray, k: float = 0.5, min_peak: float = 40.0,
         total = g.sum(axis=0, dtype=np.float64)
         v = r + (g * rows).sum(axis=0, dtype=np.float64) / np.where(total > 0, total, 1)
     return LineCentres(c.astype(np.float64), v.astype(np.float64), gmax.astype(np.float64),
-                       width, det.contrast.astype(np.float64),
-                       raw_saturated(img, det, saturation_level(img, saturation)), det.ambiguous)
+                       width, det.contrast.astype(np.float64), raw_saturated(img, det, level),
+                       det.ambiguous, det.full_scale)
 
 
-def _above_background(img, det, k, window, saturation) -> LineCentres:
+def _above_background(img, det, k, level) -> LineCentres:
     """Gray centroid above the local background of each column (see gray_centroid): the
-    background runs linearly between the medians of the 3 px at each end of the ±window band,
-    K = k · (g_max − that background at the peak); weights g − background − K."""
-    c, r, gmax = det.cols, det.row, det.gmax
-    rows = np.arange(-window, window + 1)[:, None]
+    band's background, running linearly between the medians of the 3 px at each end of the
+    ±window band, taken away; then K = base + k · (peak − base), base the brighter of the two
+    sides just off the line (d = FWHM/2 + 1 px from the peak, ≥ 0); weights g − K over the
+    pixels above K contiguous with the peak. A bright area beside the line (a white square
+    beside a black one, a lit top beside a dark wall) neither lowers K nor enters the sum."""
+    c, r, gmax, w = det.cols, det.row, det.gmax, det.window
+    rows = np.arange(-w, w + 1)[:, None]
     g, inside = gather(det.pre, r[None, :] + rows, c)
-    bg = band_background(g)
-    g -= bg + k * (gmax - bg[window])
-    g[(g <= 0) | ~inside] = 0
-    total = g.sum(axis=0, dtype=np.float64)
-    v = r + (g * rows).sum(axis=0, dtype=np.float64) / np.where(total > 0, total, 1)
+    d = np.clip(np.ceil(fwhm(g, inside, gmax - det.contrast, gmax) / 2) + 1, 2, w - 3)
+    h = g - band_background(g)
+    side = np.take_along_axis(h, (w + np.stack([-d, d])).astype(np.int64), axis=0)
+    base = np.maximum(side.max(axis=0), 0)
+    h -= base + k * (h[w] - base)
+    above = (h > 0) & inside
+    near = np.r_[np.cumprod(above[w::-1], axis=0)[::-1][:-1], np.cumprod(above[w:], axis=0)]
+    h = np.where(near.astype(bool), h, 0)
+    total = h.sum(axis=0, dtype=np.float64)
+    v = r + (h * rows).sum(axis=0, dtype=np.float64) / np.where(total > 0, total, 1)
     return LineCentres(c.astype(np.float64), v, gmax.astype(np.float64),
-                       (g > 0).sum(axis=0).astype(np.float64), det.contrast.astype(np.float64),
-                       raw_saturated(img, det, saturation_level(img, saturation)),
-                       det.ambiguous)
-
-
-class ImageInputError(MeasurementError, ValueError):
-    """An image, channel or direction the centres cannot use (one line naming it)."""
-
-
-CHANNELS = {"b": 0, "g": 1, "r": 2}                  # BGR, as OpenCV reads colour images
-_SIDE = 640         # the structure of the line is judged on the frame shrunk to ≤ this, px
-_HAT = 7            # top-hat structuring element, px of the shrunk frame (> the line's width)
-
-
-def _shrink(img: np.ndarray) -> np.ndarray:
-    """``img`` (H, W[, C]) shrunk by the integer factor (area mean, float32) that brings its
-    longer side to ≤ _SIDE px: a thin line stays a (weaker) ridge."""
-    f = max(1, -(-max(img.shape[:2]) // _SIDE))
-    if f > 1 and min(img.shape[:2]) >= f:
-        img = cv2.resize(img, (img.shape[1] // f, img.shape[0] // f),
-                         interpolation=cv2.INTER_AREA)
-    return img.astype(np.float32)
-
-
-def _ridges(small: np.ndarray) -> np.ndarray:
-    """White top-hat (H, W) float32 of a shrunk frame: thin bright lines stay, areas wider
-    than _HAT px (a white board, lit background) and their edges go."""
-    kernel = cv2.getStructuringElement(cv2.MORPH_RECT, (_HAT, _HAT))
-    return cv2.morphologyEx(small, cv2.MORPH_TOPHAT, kernel, borderType=cv2.BORDER_REPLICATE)
-
-
-def _line_contrast(hat: np.ndarray) -> float:
-    """How strongly a line stands out of a top-hat image (H, W): the mean over the scan lines
-    (rows or columns, whichever the line crosses more strongly) of their top-hat maximum."""
-    return float(max(hat.max(axis=0).mean(), hat.max(axis=1).mean()))
+                       (h > 0).sum(axis=0).astype(np.float64), det.contrast.astype(np.float64),
+                       raw_saturated(img, det, level), det.ambiguous, det.full_scale)
 
 
 def as_gray(image, channel: str = "auto") -> np.ndarray:
-    """The (H, W) image the centres are found in: ``image`` itself if gray, else one channel of
-    an (H, W, 3) BGR (or (H, W, 1)) image. channel: "r", "g", "b", or "auto": the channel
-    whose line stands out most over its own background (mean top-hat maximum per scan line).
-    ImageInputError (one line) for any other shape or channel name."""
-    img = np.asarray(image)
-    if channel != "auto" and channel not in CHANNELS:
-        raise ImageInputError(f"channel {channel!r}: expected auto, r, g or b")
-    if img.ndim == 3 and img.shape[2] == 1:
-        img = img[:, :, 0]
-    elif img.ndim == 3 and img.shape[2] == 3 and img.size:
-        if channel == "auto":
-            small = _shrink(img)
-            channel = "bgr"[int(np.argmax([_line_contrast(_ridges(
-                np.ascontiguousarray(small[:, :, c]))) for c in range(3)]))]
-        img = cv2.extractChannel(np.ascontiguousarray(img), CHANNELS[channel])
-    if img.ndim != 2 or img.size == 0:
-        raise ImageInputError(f"image of shape {img.shape}: expected a non-empty gray (H, W) "
-                              "or colour (H, W, 3) image")
-    return as_image(img)
+    """The (H, W) image the centres are found in: ``image`` itself if gray, else the laser's
+    channel of an (H, W, 3) BGR (or (H, W, 1)) image: "r", "g", "b", or "auto", the channel
+    whose excess over the other two forms the strongest thin ridges
+    (:func:`~insitu.vision.laser_image.laser_image`). ImageInputError (one line) for any
+    other shape or channel name."""
+    return laser_image(image, channel).gray
 
 
 def line_direction(image: np.ndarray) -> str:
     """"rows" if the line runs mostly along the rows (crosses more columns than rows), else
     "cols", from the image's structure: the orientation of the gradient energy (structure
-    tensor) of the white top-hat of the shrunk frame (:func:`_ridges`), where a bright board or
+    tensor) of the white top-hat of the shrunk frame (:func:`~insitu.vision.laser_image.ridges`), where a bright board or
     background has gone and only thin ridges stay. A line along the rows has its gradients
     across them (along y). ≈ 2 ms a 5 MPix uint8 frame (benchmarks/centres_speed.py)."""
-    hat = _ridges(_shrink(as_image(image)))
+    hat = ridges(shrink(as_image(image)))
     if min(hat.shape) < 3:
         return "rows" if hat.shape[1] >= hat.shape[0] else "cols"
     gx = cv2.Sobel(hat, cv2.CV_32F, 1, 0, ksize=3)
@@ -187,11 +157,18 @@ CENTRE_METHODS: dict[str, CentreMethod] = {
 }
 
 
+PHOTO_RUN = 20
+"""Least columns (or rows) of a stripe in anyone's photograph (:func:`photo_centres`)."""
+
+
 def line_centres(image: np.ndarray, method: str = "gray", direction: str | None = None,
-                 band=None, channel: str = "auto", **kw) -> LineCentres:
+                 band=None, channel: str = "auto", laser_off=None,
+                 pixel_bits: int | None = None, **kw) -> LineCentres:
     """Centres by ``method`` (a key of :data:`CENTRE_METHODS`) in image coordinates.
 
-    image: (H, W) gray or (H, W, 3) BGR (``channel``: :func:`as_gray`). direction: "rows" (one
+    image: (H, W) gray or (H, W, 3) BGR; channel, laser_off (the frame with the laser off,
+    subtracted), pixel_bits: :func:`~insitu.vision.laser_image.laser_image` (a colour image's
+    peaks are taken only where laser-coloured light lies within reach). direction: "rows" (one
     point per column), "cols" (one per row: the frame is transposed and u, v swapped back) or
     None (auto, :func:`line_direction`). band: (lo, hi) allowed range of the cross coordinate
     per scan line (v per column, or u per row for "cols"). kw: passed to the method.
@@ -203,9 +180,25 @@ def line_centres(image: np.ndarray, method: str = "gray", direction: str | None 
     if direction not in (None, "rows", "cols"):
         raise ImageInputError(f"direction {direction!r}: expected rows, cols or auto")
     fn = CENTRE_METHODS[method].find
-    img = as_gray(image, channel)
-    direction = direction or line_direction(img)
+    li = laser_image(image, channel, laser_off, pixel_bits)
+    img, allow = li.gray, li.allow
+    if direction is None:
+        direction = line_direction(img if li.ridge is None else li.ridge)
+    kw = dict(kw, pixel_bits=pixel_bits) if pixel_bits is not None else kw
     if direction == "rows":
-        return fn(img, band=band, **kw)
-    t = fn(cv2.transpose(img), band=band, **kw)
-    return LineCentres(t.v, t.u, t.peak, t.width, t.contrast, t.saturated, t.ambiguous)
+        return fn(img, band=band, allow=allow, **kw)
+    t = fn(cv2.transpose(img), band=band, allow=None if allow is None else allow.T, **kw)
+    return LineCentres(t.v, t.u, t.peak, t.width, t.contrast, t.saturated, t.ambiguous,
+                       t.full_scale)
+
+
+def photo_centres(image: np.ndarray, method: str = "steger", direction: str | None = None,
+                  channel: str = "auto", laser_off=None,
+                  pixel_bits: int | None = None) -> LineCentres:
+    """Centres of a laser line in anyone's photograph, as ``insitu centres`` finds them: the
+    method's :attr:`~CentreMethod.defaults`, each scan line's strongest thin ridge taken
+    (``ridge``, :mod:`insitu.vision.detect`), and stripes shorter than :data:`PHOTO_RUN` scan
+    lines dropped (a glint, a lamp, a short edge). Arguments: :func:`line_centres`."""
+    kw = dict(CENTRE_METHODS[method].defaults) if method in CENTRE_METHODS else {}
+    return line_centres(image, method, direction, channel=channel, laser_off=laser_off,
+                        pixel_bits=pixel_bits, min_run=PHOTO_RUN, ridge=True, **kw)

@@ -29,7 +29,23 @@ peaks. Common keyword arguments of the methods:
   rows (a small step), where they are one peak per column, by :func:`carry_ends`. The
   brighter peak lost a step block's top one or two columns at its step walls when the lower
   line began first in the image (its samples 0.15–0.26 mm inside those edges at binning 2).
-* saturation: gray value counted as saturated (None: the dtype's maximum).
+* saturation: gray value counted as saturated (None: the full scale; float frames: none).
+* pixel_bits: the frame's significant bits (a Mono12 camera's frames: 12, values 0 … 4095 in
+  16 bits); None: the dtype's (:func:`~insitu.vision.laser_image.full_scale`). min_peak and
+  min_contrast are fractions of that full scale, written on the 8-bit scale: 40 is 40/255 of
+  it, 655 in a Mono12 frame — a scan measures alike at 8, 10, 12 or 16 bits.
+* allow: (H, W) bool, where a peak may be taken (laser-coloured light within reach,
+  :mod:`insitu.vision.laser_image`); None: everywhere.
+* min_run: a ridge of fewer valid columns is no stripe (a glint, a lamp, a short edge):
+  dropped (:func:`~insitu.vision.chains.short_ridges`; 0: none is).
+* ridge: each column's candidates are the peaks of its white top-hat over ±window rows,
+  not of its values, and a peak's contrast is over its own sides (the least of 3 px, 3 to
+  5 px off), not over the band's ends: a line on a black square beside a white one is a
+  ridge, though the white square is brighter (photographs of a board; False: the values).
+
+A stripe's clipped core is a plateau: its row is the plateau's middle, its background is
+taken beyond the plateau, and the band the methods work in (``Detection.window``) grows by
+half the longest plateaus, so that their flanks stay inside it.
 """
 
 from __future__ import annotations
@@ -38,12 +54,12 @@ from dataclasses import dataclass
 
 import cv2
 import numpy as np
-from scipy.sparse import coo_matrix
-from scipy.sparse.csgraph import connected_components
+
+from insitu.vision.chains import carry_ends, continuity as chain_support, junction, median3, \
+    short_ridges
+from insitu.vision.laser_image import full_scale, noise_sigma
 
 FWHM_PER_SIGMA = 2.0 * np.sqrt(2.0 * np.log(2.0))
-OWN_COLUMNS = 8
-"""Columns of its own (no second peak there) that make a chain a line, not a ghost's tail."""
 
 
 @dataclass(frozen=True)
@@ -56,6 +72,7 @@ class LineCentres:
     ±window rows from the peak, median-filtered image), gray values. saturated: (N,) bool, the
     raw peak reached the sensor's saturation. ambiguous: (N,) bool, the column (inside the band,
     if one was given) had a second valid peak more than window rows away; continuity chose.
+    full_scale: the frame's full scale in the same gray values (peak / full_scale: 0 … 1).
     """
 
     u: np.ndarray
@@ -65,6 +82,7 @@ class LineCentres:
     contrast: np.ndarray
     saturated: np.ndarray | None = None
     ambiguous: np.ndarray | None = None
+    full_scale: float = 255.0
 
     def __post_init__(self):
         for name in ("saturated", "ambiguous"):
@@ -84,7 +102,9 @@ class LineCentres:
 class Detection:
     """Detection result for the n valid columns: cols, row (int, plateau-centred), gmax, bg,
     contrast, ambiguous: (n,). pre: the filtered image. noise: its noise sigma (gray values).
-    carried: (n,) the columns a line's end was carried on to (``extend_ends``)."""
+    carried: (n,) the columns a line's end was carried on to (``extend_ends``). window: the
+    half-band, rows, the methods work in (the given window, grown for long plateaus).
+    full_scale: the frame's (gray values)."""
 
     cols: np.ndarray
     row: np.ndarray
@@ -95,6 +115,8 @@ class Detection:
     pre: np.ndarray
     noise: float
     carried: np.ndarray
+    window: int
+    full_scale: float
 
 
 def as_image(image) -> np.ndarray:
@@ -106,10 +128,12 @@ def as_image(image) -> np.ndarray:
     return np.ascontiguousarray(img)
 
 
-def saturation_level(img: np.ndarray, saturation: float | None) -> float:
+def saturation_level(img: np.ndarray, saturation: float | None,
+                     pixel_bits: int | None = None) -> float:
+    """``saturation``, else the full scale of an integer frame; a float frame has none."""
     if saturation is not None:
         return float(saturation)
-    return float(np.iinfo(img.dtype).max) if img.dtype.kind == "u" else np.inf
+    return full_scale(img.dtype, pixel_bits) if img.dtype.kind == "u" else np.inf
 
 
 def gather(img: np.ndarray, rows: np.ndarray, cols: np.ndarray):
@@ -119,147 +143,40 @@ def gather(img: np.ndarray, rows: np.ndarray, cols: np.ndarray):
     return img[np.clip(rows, 0, H - 1), cols].astype(np.float32), inside
 
 
-def _noise(pre: np.ndarray) -> float:
-    """Robust noise sigma (gray values) from differences of rows 8 apart, ≤ 32 row pairs."""
-    H = pre.shape[0]
-    d = min(8, H - 1)
-    if d < 1:
-        return 0.0
-    idx = np.arange(0, H - d, max(1, (H - d) // 32))
-    diff = pre[idx, ::2].astype(np.float32) - pre[idx + d, ::2].astype(np.float32)
-    return float(1.4826 / np.sqrt(2.0) * np.median(np.abs(diff)))
-
-
-def median3(a, b, c):
-    """The element-wise median of three arrays."""
-    return np.maximum(np.minimum(a, b), np.minimum(np.maximum(a, b), c))
-
-
-def _stats(pre, row, w):
-    """Plateau-centred rows, peak, background and contrast for all columns. Background: the
-    mean of the medians of 3 px at each end of the ±w band; contrast: peak minus the brighter
-    end's (an edge of a bright region is no line)."""
+def _stats(pre, row, w, near=False):
+    """Plateau-centred rows, peak, background, contrast and plateau length for all columns.
+    Background: the mean of the medians of 3 px at each end of the band ±w rows about it,
+    widened by half of a plateau longer than 2 px (near: of the least of the 3 px 3 to 5 px
+    beyond the plateau's ends, the line's own sides); contrast: peak minus the brighter
+    side's (an edge of a bright region is no line)."""
     cols = np.arange(pre.shape[1])
-    below, inside = gather(pre, row[None, :] + np.arange(0, w + 1)[:, None], cols)
+    below, inside = gather(pre, row[None, :] + np.arange(0, 2 * w + 1)[:, None], cols)
     gmax = below[0]
     same = (below == gmax) & inside
-    run = np.where(same.all(axis=0), w + 1, np.argmin(same, axis=0))  # plateau from 1st max
+    run = np.where(same.all(axis=0), 2 * w + 1, np.argmin(same, axis=0))  # plateau, 1st max
     row = row + (run - 1) // 2
-    above, _ = gather(pre, row[None, :] + np.arange(-w, -w + 3)[:, None], cols)
-    below, _ = gather(pre, row[None, :] + np.arange(w - 2, w + 1)[:, None], cols)
-    (a0, a1, a2), (b0, b1, b2) = above, below
-    top, bot = median3(a0, a1, a2), median3(b0, b1, b2)
-    return row, gmax, (top + bot) / 2, gmax - np.maximum(top, bot)
+    if near:
+        reach, pick = np.maximum(run - 2, 0) // 2 + 5, lambda a: a.min(axis=0)
+    else:
+        reach, pick = w + np.maximum(run - 2, 0) // 2, lambda a: median3(*a)
+    above, _ = gather(pre, row[None, :] - reach[None, :] + np.arange(3)[:, None], cols)
+    below, _ = gather(pre, row[None, :] + reach[None, :] - np.arange(3)[:, None], cols)
+    top, bot = pick(above), pick(below)
+    return row, gmax, (top + bot) / 2, gmax - np.maximum(top, bot), run
 
 
-def _continuity(v1, v2, ok1, ok2, weight1, weight2, max_jump):
-    """(W,) supports of the chains of peaks the first and the second candidate of each column
-    belong to (0 where a candidate is not valid).
-
-    Chains link candidates of columns 1 or 2 apart whose rows differ ≤ max_jump px per column;
-    a chain's support is the summed contrast of its members. Also the chain labels (W,) of
-    the first and second candidates.
-    """
-    W = len(v1)
-    V, OK, Wt = np.r_[v1, v2].astype(np.float64), np.r_[ok1, ok2], np.r_[weight1, weight2]
-    src, dst = [], []
-    for d in (1, 2):
-        for s in (0, W):
-            for t in (0, W):
-                a, b = s + np.arange(W - d), t + np.arange(d, W)
-                m = OK[a] & OK[b] & (np.abs(V[a] - V[b]) <= max_jump * d)
-                src.append(a[m])
-                dst.append(b[m])
-    src, dst = np.concatenate(src), np.concatenate(dst)
-    graph = coo_matrix((np.ones(len(src)), (src, dst)), shape=(2 * W, 2 * W))
-    n, lab = connected_components(graph, directed=False)
-    support = np.bincount(lab[OK], weights=Wt[OK], minlength=n)
-    return (np.where(ok1, support[lab[:W]], 0.0), np.where(ok2, support[lab[W:]], 0.0),
-            lab[:W], lab[W:])
-
-
-def _junction(lab1, lab2, own1, own2) -> np.ndarray:
-    """(W,) bool: columns where one candidate's chain has at least ``OWN_COLUMNS`` columns of
-    its own (``own1``, ``own2``: where only the first or the second candidate is valid), all
-    before the column, and the other's as many, all after it — one line ends and the next
-    begins there, as at a step. A ghost has few columns of its own, or lies within the real
-    line's span, which then has own columns on both sides."""
-    W = len(lab1)
-    cols = np.arange(W)
-    lo, hi, n = np.full(2 * W, W), np.full(2 * W, -1), np.zeros(2 * W, int)
-    for lab, own in ((lab1, own1), (lab2, own2)):
-        np.minimum.at(lo, lab[own], cols[own])
-        np.maximum.at(hi, lab[own], cols[own])
-        np.add.at(n, lab[own], 1)
-    a, b = lab1, lab2
-    line = (n[a] >= OWN_COLUMNS) & (n[b] >= OWN_COLUMNS)
-    return line & (((hi[a] < cols) & (lo[b] > cols)) | ((hi[b] < cols) & (lo[a] > cols)))
-
-
-RUN = 4
-"""Valid columns in a row that make a line whose ends :func:`carry_ends` carries on."""
-SHARED = 3
-"""Columns past a top's end the lower line's blurred start may share with it."""
-
-
-def carry_ends(img: np.ndarray, ok: np.ndarray, row: np.ndarray, gmax: np.ndarray,
-               bg: np.ndarray, min_peak: float, thr: float, searched: np.ndarray,
-               steps: int = 8, upper: int = 0, locked: np.ndarray | None = None
-               ) -> tuple[np.ndarray, ...]:
-    """(ok, row, gmax, bg) (W,) with each run of valid columns carried on, up to ``steps``
-    columns each way, while the median of 3 px along the row of ``img`` (H, W) — which keeps
-    a thin line's peak — stands ≥ ``min_peak`` and ≥ ``thr`` above the run's background at
-    the row the line's slope in the frame predicts (± 1): a line's end columns, which the
-    square median dims below the thresholds; nothing starts away from a line (a run of at
-    least :data:`RUN` columns). A column another line holds is carried into (its first
-    :data:`SHARED` columns) only when that line lies more than 2 px on the lower side
-    (``upper``, module docstring) and the column is not ``locked`` (W,) — where the
-    continuity of two peaks chose, a ghost beside the line does not take it back."""
-    ok, row = ok.copy(), row.copy()
-    gmax, bg = gmax.astype(np.float64), bg.astype(np.float64)
-    H, W = img.shape
-    cols = np.flatnonzero(ok)
-    if len(cols) < 2:
-        return ok, row, gmax, bg
-    near = np.diff(cols) == 1
-    slope = float(np.median(np.diff(row[cols])[near])) if near.any() else 0.0
-    gap = (np.diff(cols) > 1) | (np.abs(np.diff(row[cols]) - slope) > 2)  # or a step
-    first, last = cols[np.r_[True, gap]], cols[np.r_[gap, True]]
-    line = last - first + 1 >= RUN                     # a stray column or two is no line
-    fronts = [(c, -1) for c in first[line]] + [(c, 1) for c in last[line]]
-    for end, d in fronts:
-        for k in range(1, steps + 1):
-            c = end + d * k
-            if not 0 <= c < W or not searched[c]:
-                break
-            at = row[end] + slope * d * k
-            if ok[c] and not (k <= SHARED and upper * (row[c] - at) < -2.0
-                              and (locked is None or not locked[c])):
-                break
-            rr = np.clip(int(round(at)) + np.arange(-1, 2), 0, H - 1)
-            a, b, e = (img[rr, min(max(x, 0), W - 1)].astype(np.float64)
-                       for x in (c - 1, c, c + 1))
-            v = median3(a, b, e)
-            j = int(np.argmax(v))
-            if v[j] < min_peak or v[j] - bg[end] < thr:
-                break
-            ok[c], row[c], gmax[c], bg[c] = True, rr[j], v[j], bg[end]
-    return ok, row, gmax, bg
-
-
-def detect(image, median=3, band=None, window=12, min_peak=40.0, min_contrast=20.0,
-            snr=6.0, continuity=True, max_jump=4.0, decisive=1.25,
-            extend_ends=True, upper=0) -> Detection:
-    """Peak row per valid column of a line running along the rows (module docstring)."""
-    img = as_image(image)
-    pre = cv2.medianBlur(img, median) if median and median > 1 else img
+def _search(pre, band, allow, fill, ridge):
+    """The (W, span) array of candidate rows per column (a copy, ours to overwrite), the
+    first row of each column's span (W,) and the searched columns (W,) bool. ridge > 0: the
+    column's white top-hat over 2·ridge + 1 rows instead of its values."""
     H, W = pre.shape
-    w = max(int(window or 12), 3)
-    noise = _noise(pre)
-    fill = np.iinfo(pre.dtype).min if pre.dtype.kind == "u" else -np.inf
-    search = cv2.transpose(pre)                          # (W, H) contiguous; ours to overwrite
-    lo = np.zeros(W, np.int64)
-    searched = np.ones(W, bool)
+    search = cv2.transpose(pre)
+    if ridge:
+        search = cv2.morphologyEx(search, cv2.MORPH_TOPHAT,
+                                  np.ones((1, 2 * ridge + 1), np.uint8),
+                                  borderType=cv2.BORDER_REPLICATE)
+    blocked = None if allow is None else ~cv2.transpose(allow.astype(np.uint8)).astype(bool)
+    lo, searched = np.zeros(W, np.int64), np.ones(W, bool)
     if band is not None:
         blo, bhi = (np.broadcast_to(np.asarray(b, np.float64), (W,)) for b in band)
         with np.errstate(invalid="ignore"):
@@ -269,31 +186,56 @@ def detect(image, median=3, band=None, window=12, min_peak=40.0, min_contrast=20
         lo = np.where(searched, np.clip(flo, 0, H - 1), 0).astype(np.int64)
         hi = np.where(searched, np.clip(fhi, 0, H - 1), 0).astype(np.int64)
         span = np.arange(int((hi - lo).max()) + 1 if W else 1)
-        idx = lo[:, None] + span[None, :]
-        search = np.take_along_axis(search, np.minimum(idx, H - 1), axis=1)
-        search[idx > hi[:, None]] = fill
+        idx = np.minimum(lo[:, None] + span[None, :], H - 1)
+        search = np.take_along_axis(search, idx, axis=1)
+        search[lo[:, None] + span[None, :] > hi[:, None]] = fill
+        if blocked is not None:
+            blocked = np.take_along_axis(blocked, idx, axis=1)
+    if blocked is not None:
+        search[blocked] = fill
+    return search, lo, searched
+
+
+def detect(image, median=3, band=None, window=12, min_peak=40.0, min_contrast=20.0,
+           snr=6.0, continuity=True, max_jump=4.0, decisive=1.25,
+           extend_ends=True, upper=0, *, pixel_bits=None, allow=None,
+           min_run=0, ridge=False) -> Detection:
+    """Peak row per valid column of a line running along the rows (module docstring)."""
+    img = as_image(image)
+    fs = full_scale(img.dtype, pixel_bits)
+    min_peak, min_contrast = min_peak * fs / 255, min_contrast * fs / 255
+    pre = cv2.medianBlur(img, median) if median and median > 1 else img
+    H, W = pre.shape
+    w = max(int(window or 12), 3)
+    noise = noise_sigma(pre)
+    fill = np.iinfo(pre.dtype).min if pre.dtype.kind == "u" else -np.inf
+    search, lo, searched = _search(pre, band, allow, fill, w if ridge else 0)
     thr = max(min_contrast, snr * noise)
 
     def candidate(j):
-        row, gmax, bg, contrast = _stats(pre, lo + j, w)
-        return row, gmax, bg, contrast, searched & (gmax >= min_peak) & (contrast >= thr)
+        row, gmax, bg, contrast, run = _stats(pre, lo + j, w, ridge)
+        ok = searched & (gmax >= min_peak) & (contrast >= thr)
+        return row, gmax, bg, contrast, ok, run
 
     j1 = np.argmax(search, axis=1)
-    row, gmax, bg, contrast, ok = candidate(j1)
+    row, gmax, bg, contrast, ok, run = candidate(j1)
     ambiguous, locked = np.zeros(W, bool), np.zeros(W, bool)
     if continuity and W > 2 and search.shape[1] > 2 * w + 1:
         guard = np.clip(j1[:, None] + np.arange(-w, w + 1)[None, :], 0, search.shape[1] - 1)
         np.put_along_axis(search, guard, fill, axis=1)
-        row2, gmax2, bg2, contrast2, ok2 = candidate(np.argmax(search, axis=1))
+        row2, gmax2, bg2, contrast2, ok2, run2 = candidate(np.argmax(search, axis=1))
         ambiguous = ok & ok2
         if ambiguous.any():
-            s1, s2, lab1, lab2 = _continuity(row, row2, ok, ok2, contrast, contrast2, max_jump)
-            step = ambiguous & _junction(lab1, lab2, ok & ~ok2, ok2 & ~ok)
+            s1, s2, lab1, lab2 = chain_support(row, row2, ok, ok2, contrast, contrast2,
+                                               max_jump)
+            step = ambiguous & junction(lab1, lab2, ok & ~ok2, ok2 & ~ok)
             locked = ambiguous & ~step
             second = (ambiguous & (s2 > s1) & ~step) | (step & (upper * (row2 - row) > 0))
             ok &= ~ambiguous | step | (np.maximum(s1, s2) >= decisive * np.minimum(s1, s2))
-            pairs = ((row, row2), (gmax, gmax2), (bg, bg2), (contrast, contrast2))
-            row, gmax, bg, contrast = (np.where(second, b, a) for a, b in pairs)
+            pairs = ((row, row2), (gmax, gmax2), (bg, bg2), (contrast, contrast2), (run, run2))
+            row, gmax, bg, contrast, run = (np.where(second, b, a) for a, b in pairs)
+    if min_run > 1:
+        ok &= ~short_ridges(ok, row, min_run, max_jump)
     carried = np.zeros(W, bool)
     if extend_ends and median and median > 1:
         was, before = ok, row
@@ -301,9 +243,11 @@ def detect(image, median=3, band=None, window=12, min_peak=40.0, min_contrast=20
                                        upper=upper, locked=locked)
         carried = ok & (~was | (row != before))
         contrast = np.where(carried, gmax - bg, contrast)
+        run = np.where(carried, 1, run)
     cols = np.flatnonzero(ok)
+    wide = max(int(np.percentile(run[cols], 90)) - 2, 0) // 2 if len(cols) else 0
     return Detection(cols, row[ok], gmax[ok], bg[ok], contrast[ok], ambiguous[ok], pre, noise,
-                     carried[ok])
+                     carried[ok], w + wide, fs)
 
 
 def raw_saturated(img, det: Detection, sat: float) -> np.ndarray:
@@ -322,6 +266,12 @@ def band_background(g: np.ndarray) -> np.ndarray:
     return (top + bot) / 2 + (bot - top) / (2 * half) * (np.arange(len(g)) - half)[:, None]
 
 
-def fwhm(g, inside, bg, gmax) -> np.ndarray:
-    """Pixels of the (k, n) band above half the contrast: a FWHM in px."""
-    return ((g > (bg + gmax) / 2) & inside).sum(axis=0).astype(np.float64)
+def fwhm(g, inside, base, gmax) -> np.ndarray:
+    """Pixels of the (k, n) band centred on the peak that stand above half-way from ``base``
+    (n,) (the brighter side's background) to the peak, contiguous with the band's middle: a
+    FWHM in px. A bright area on one side of the line is not counted in its width."""
+    above = (g > (base + gmax) / 2) & inside
+    k = len(g) // 2
+    up = np.cumprod(above[k::-1], axis=0).sum(axis=0)
+    down = np.cumprod(above[k:], axis=0).sum(axis=0)
+    return np.maximum(up + down - 1, 0).astype(np.float64)

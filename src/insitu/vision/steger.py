@@ -30,7 +30,7 @@ _M = 3          # candidate rows: the detected peak ± _M
 _T_MAX = 0.6    # |t·n| ≤ 0.5 px, plus room for the Taylor step's overshoot near pixel borders
 
 
-def _flank_fit(g, inside, x, sat_mask, floor):
+def _flank_fit(g, inside, x, sat_mask, floor, unit=1.0):
     """Vertex of a log-parabola fitted (weights ∝ value) to the unsaturated flank pixels of a
     saturated plateau: those at or above ``floor`` that fall away from it without a break (the
     first pixel that rises again is the background's, not the line's). g: (k, n) values minus
@@ -45,7 +45,7 @@ def _flank_fit(g, inside, x, sat_mask, floor):
     near = np.r_[np.cumprod(above[k::-1], axis=0)[::-1][:-1], np.cumprod(above[k:], axis=0)]
     use &= near.astype(bool)
     wgt = np.where(use, g, 0.0).astype(np.float64)
-    ly = np.log(np.maximum(g, 1.0)).astype(np.float64)
+    ly = np.log(np.maximum(g, unit)).astype(np.float64)
     xs = x.astype(np.float64)
     m = np.stack([(wgt * xs**p).sum(axis=0) for p in range(5)])   # moments (5, n)
     A = np.stack([m[0:3], m[1:4], m[2:5]], axis=-1).transpose(1, 0, 2)    # (n, 3, 3)
@@ -60,15 +60,16 @@ def _flank_fit(g, inside, x, sat_mask, floor):
     return np.where(ok, vertex, np.nan)
 
 
-def _plateau_centre(raw, inside, x, sat_mask, noise):
+def _plateau_centre(raw, inside, x, sat_mask, noise, unit=1.0):
     """Offsets (n,) of saturated plateaus' centres: flank fit, else the centroid of the pixels
     above half the maximum (weights: value minus half maximum). raw: (k, n) band of the image
     centred on the peak; the fit is made above its sloping background, with pixels more than
-    3 noise sigmas and the background's change across the band above it."""
+    3 noise sigmas (at least 3 ``unit``: one gray value of the 8-bit scale) and the
+    background's change across the band above it."""
     bg = band_background(raw)
     g = np.where(inside, raw - bg, 0)
-    floor = np.maximum(max(3.0, 3.0 * noise), np.abs(bg[-1] - bg[0]))
-    vertex = _flank_fit(g, inside, x, sat_mask, floor)
+    floor = np.maximum(max(3.0 * unit, 3.0 * noise), np.abs(bg[-1] - bg[0]))
+    vertex = _flank_fit(g, inside, x, sat_mask, floor, unit)
     top = g.max(axis=0) / 2
     half = np.where(inside & (g > top), g - top, 0)
     cen = (half * x).sum(axis=0) / np.maximum(half.sum(axis=0), 1e-9)
@@ -78,7 +79,8 @@ def _plateau_centre(raw, inside, x, sat_mask, noise):
 def gaussian_peak(image: np.ndarray, min_peak: float = 40.0, window: int = 12, median: int = 3,
                   *, band=None, min_contrast: float = 20.0, snr: float = 6.0,
                   continuity: bool = True, saturation: float | None = None,
-                  extend_ends: bool = True, upper: int = 0) -> LineCentres:
+                  extend_ends: bool = True, upper: int = 0, pixel_bits: int | None = None,
+                  allow=None, min_run: int = 0, ridge: bool = False) -> LineCentres:
     """Per-column Gaussian peak: 3-point log-parabola through the raw maximum and its two
     neighbours (background subtracted). Saturated or degenerate columns: the plateau's centre
     from a log-parabola fitted to its unsaturated flanks, else the centroid of the pixels above
@@ -87,9 +89,10 @@ def gaussian_peak(image: np.ndarray, min_peak: float = 40.0, window: int = 12, m
     """
     img = as_image(image)
     det = detect(img, median, band, window, min_peak, min_contrast, snr, continuity,
-                 extend_ends=extend_ends, upper=upper)
-    c, r, bg, w = det.cols, det.row, det.bg, max(int(window), 3)
-    sat = saturation_level(img, saturation)
+                 extend_ends=extend_ends, upper=upper, pixel_bits=pixel_bits, allow=allow,
+                 min_run=min_run, ridge=ridge)
+    c, r, bg, w, unit = det.cols, det.row, det.bg, det.window, det.full_scale / 255
+    sat = saturation_level(img, saturation, pixel_bits)
     x = np.arange(-w, w + 1)[:, None]
     raw, inside = gather(img, r[None, :] + x, c)
     g = np.where(inside, raw - bg, 0)
@@ -97,7 +100,7 @@ def gaussian_peak(image: np.ndarray, min_peak: float = 40.0, window: int = 12, m
     a, b, d = (np.take_along_axis(g, (j + s)[None, :], 0)[0] for s in (-1, 0, 1))
     peak = np.take_along_axis(raw, j[None, :], 0)[0]
     saturated = peak >= sat
-    la, lb, ld = (np.log(np.maximum(t, 0.5)) for t in (a, b, d))
+    la, lb, ld = (np.log(np.maximum(t, 0.5 * unit)) for t in (a, b, d))
     den = la - 2 * lb + ld
     with np.errstate(divide="ignore", invalid="ignore"):
         delta = 0.5 * (la - ld) / den
@@ -107,11 +110,13 @@ def gaussian_peak(image: np.ndarray, min_peak: float = 40.0, window: int = 12, m
     rest = ~fit
     if rest.any():
         gs, ins = g[:, rest], inside[:, rest]
-        v[rest] = r[rest] + _plateau_centre(raw[:, rest], ins, x, raw[:, rest] >= sat, det.noise)
-        width[rest] = fwhm(gs, ins, 0.0, gs.max(axis=0))
+        v[rest] = r[rest] + _plateau_centre(raw[:, rest], ins, x, raw[:, rest] >= sat,
+                                            det.noise, unit)
+        top = gs.max(axis=0)
+        width[rest] = fwhm(gs, ins, top - det.contrast[rest], top)
     return LineCentres(c.astype(np.float64), v.astype(np.float64), peak.astype(np.float64),
                        width.astype(np.float64), det.contrast.astype(np.float64), saturated,
-                       det.ambiguous)
+                       det.ambiguous, det.full_scale)
 
 
 def gaussian_kernels(sigma: float, radius: int):
@@ -181,7 +186,8 @@ def steger(image: np.ndarray, sigma: float | None = None, min_peak: float = 40.0
            window: int = 12, median: int = 3, *, band=None, min_contrast: float = 20.0,
            snr: float = 6.0, continuity: bool = True, saturation: float | None = None,
            min_curvature: float | None = None, extend_ends: bool = True,
-           upper: int = 0) -> LineCentres:
+           upper: int = 0, pixel_bits: int | None = None, allow=None,
+           min_run: int = 0, ridge: bool = False) -> LineCentres:
     """Steger centres of a line running along the rows of ``image`` (tilts to ≈ 60° work).
 
     Per column: Gaussian derivatives at the 7 rows around the detected peak; the Hessian's
@@ -193,22 +199,24 @@ def steger(image: np.ndarray, sigma: float | None = None, min_peak: float = 40.0
 
     image: (H, W) uint8/uint16/float32. sigma: Gaussian scale, px (None: σ = max(1, FWHM/2√3)
     from the median FWHM, Steger's σ ≥ w/√3 for a bar of half-width w). min_curvature: least
-    -λ, gray values/px² (None: 0.1 · min_contrast / σ²). Other keywords as gray_centroid.
+    -λ, gray values/px² (None: 0.1 · min_contrast / σ², min_contrast of full scale as
+    detect takes it). Other keywords as gray_centroid.
     width: FWHM px of the filtered column. Within ≈ 3.5σ of the frame's border the clipped
     patch biases the centre.
     """
     img = as_image(image)
     det = detect(img, median, band, window, min_peak, min_contrast, snr, continuity,
-                 extend_ends=extend_ends, upper=upper)
-    c, r, n, w = det.cols, det.row, len(det.cols), max(int(window), 3)
+                 extend_ends=extend_ends, upper=upper, pixel_bits=pixel_bits, allow=allow,
+                 min_run=min_run, ridge=ridge)
+    c, r, n, w, unit = det.cols, det.row, len(det.cols), det.window, det.full_scale / 255
     x = np.arange(-w, w + 1)[:, None]
     g, inside = gather(det.pre, r[None, :] + x, c)
-    width = fwhm(g, inside, det.bg, det.gmax)
+    width = fwhm(g, inside, det.gmax - det.contrast, det.gmax)
     if sigma is None:
         own = width if det.carried.all() else width[~det.carried]
         sigma = max(1.0, float(np.median(own)) / (2 * np.sqrt(3))) if n else 1.0
     if min_curvature is None:
-        min_curvature = 0.1 * min_contrast / sigma**2
+        min_curvature = 0.1 * min_contrast * unit / sigma**2
     Iu, Iv, Iuu, Ivv, Iuv = _derivatives(img, r, c, sigma)
     lam, other, nu, nv = _normals(Iuu, Ivv, Iuv)
     with np.errstate(divide="ignore", invalid="ignore"):
@@ -232,13 +240,14 @@ def steger(image: np.ndarray, sigma: float | None = None, min_peak: float = 40.0
     u = np.where(refined, c, c + bt * bu)
     v = r + (k - _M - 1) + np.where(refined, s, bt * bv)
     raw, _ = gather(img, r[None, :] + x, c)
-    level = saturation_level(img, saturation)
+    level = saturation_level(img, saturation, pixel_bits)
     sat = raw[w - 2:w + 3].max(axis=0) >= level
     if sat.any():                                 # clipped plateau: the flank fit instead
         v[sat] = r[sat] + _plateau_centre(raw[:, sat], inside[:, sat], x, raw[:, sat] >= level,
-                                          det.noise)
+                                          det.noise, unit)
         u[sat], found[sat] = c[sat], True
     keep = found & np.isfinite(u) & np.isfinite(v)
     return LineCentres(u[keep].astype(np.float64), v[keep].astype(np.float64),
                        det.gmax[keep].astype(np.float64), width[keep],
-                       det.contrast[keep].astype(np.float64), sat[keep], det.ambiguous[keep])
+                       det.contrast[keep].astype(np.float64), sat[keep], det.ambiguous[keep],
+                       det.full_scale)

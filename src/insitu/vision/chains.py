@@ -1,0 +1,135 @@
+"""Chains of peaks across scan columns, for the detection stage (:mod:`insitu.vision.detect`):
+which of two candidate peaks of a column lies on the better supported chain (``continuity``),
+where one line ends and another begins (``junction``), carrying a line's dim ends on
+(``carry_ends``), and dropping ridges too short to be a stripe (``short_ridges``).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
+
+OWN_COLUMNS = 8
+"""Columns of its own (no second peak there) that make a chain a line, not a ghost's tail."""
+
+
+def median3(a, b, c):
+    """The element-wise median of three arrays."""
+    return np.maximum(np.minimum(a, b), np.minimum(np.maximum(a, b), c))
+
+
+def continuity(v1, v2, ok1, ok2, weight1, weight2, max_jump):
+    """(W,) supports of the chains of peaks the first and the second candidate of each column
+    belong to (0 where a candidate is not valid).
+
+    Chains link candidates of columns 1 or 2 apart whose rows differ ≤ max_jump px per column;
+    a chain's support is the summed contrast of its members. Also the chain labels (W,) of
+    the first and second candidates.
+    """
+    W = len(v1)
+    V, OK, Wt = np.r_[v1, v2].astype(np.float64), np.r_[ok1, ok2], np.r_[weight1, weight2]
+    src, dst = [], []
+    for d in (1, 2):
+        for s in (0, W):
+            for t in (0, W):
+                a, b = s + np.arange(W - d), t + np.arange(d, W)
+                m = OK[a] & OK[b] & (np.abs(V[a] - V[b]) <= max_jump * d)
+                src.append(a[m])
+                dst.append(b[m])
+    src, dst = np.concatenate(src), np.concatenate(dst)
+    graph = coo_matrix((np.ones(len(src)), (src, dst)), shape=(2 * W, 2 * W))
+    n, lab = connected_components(graph, directed=False)
+    support = np.bincount(lab[OK], weights=Wt[OK], minlength=n)
+    return (np.where(ok1, support[lab[:W]], 0.0), np.where(ok2, support[lab[W:]], 0.0),
+            lab[:W], lab[W:])
+
+
+def junction(lab1, lab2, own1, own2) -> np.ndarray:
+    """(W,) bool: columns where one candidate's chain has at least ``OWN_COLUMNS`` columns of
+    its own (``own1``, ``own2``: where only the first or the second candidate is valid), all
+    before the column, and the other's as many, all after it — one line ends and the next
+    begins there, as at a step. A ghost has few columns of its own, or lies within the real
+    line's span, which then has own columns on both sides."""
+    W = len(lab1)
+    cols = np.arange(W)
+    lo, hi, n = np.full(2 * W, W), np.full(2 * W, -1), np.zeros(2 * W, int)
+    for lab, own in ((lab1, own1), (lab2, own2)):
+        np.minimum.at(lo, lab[own], cols[own])
+        np.maximum.at(hi, lab[own], cols[own])
+        np.add.at(n, lab[own], 1)
+    a, b = lab1, lab2
+    line = (n[a] >= OWN_COLUMNS) & (n[b] >= OWN_COLUMNS)
+    return line & (((hi[a] < cols) & (lo[b] > cols)) | ((hi[b] < cols) & (lo[a] > cols)))
+
+
+RUN = 4
+"""Valid columns in a row that make a line whose ends :func:`carry_ends` carries on."""
+SHARED = 3
+"""Columns past a top's end the lower line's blurred start may share with it."""
+
+
+def carry_ends(img: np.ndarray, ok: np.ndarray, row: np.ndarray, gmax: np.ndarray,
+               bg: np.ndarray, min_peak: float, thr: float, searched: np.ndarray,
+               steps: int = 8, upper: int = 0, locked: np.ndarray | None = None
+               ) -> tuple[np.ndarray, ...]:
+    """(ok, row, gmax, bg) (W,) with each run of valid columns carried on, up to ``steps``
+    columns each way, while the median of 3 px along the row of ``img`` (H, W) — which keeps
+    a thin line's peak — stands ≥ ``min_peak`` and ≥ ``thr`` above the run's background at
+    the row the line's slope in the frame predicts (± 1): a line's end columns, which the
+    square median dims below the thresholds; nothing starts away from a line (a run of at
+    least :data:`RUN` columns). A column another line holds is carried into (its first
+    :data:`SHARED` columns) only when that line lies more than 2 px on the lower side
+    (``upper``, module docstring) and the column is not ``locked`` (W,) — where the
+    continuity of two peaks chose, a ghost beside the line does not take it back."""
+    ok, row = ok.copy(), row.copy()
+    gmax, bg = gmax.astype(np.float64), bg.astype(np.float64)
+    H, W = img.shape
+    cols = np.flatnonzero(ok)
+    if len(cols) < 2:
+        return ok, row, gmax, bg
+    near = np.diff(cols) == 1
+    slope = float(np.median(np.diff(row[cols])[near])) if near.any() else 0.0
+    gap = (np.diff(cols) > 1) | (np.abs(np.diff(row[cols]) - slope) > 2)  # or a step
+    first, last = cols[np.r_[True, gap]], cols[np.r_[gap, True]]
+    line = last - first + 1 >= RUN                     # a stray column or two is no line
+    fronts = [(c, -1) for c in first[line]] + [(c, 1) for c in last[line]]
+    for end, d in fronts:
+        for k in range(1, steps + 1):
+            c = end + d * k
+            if not 0 <= c < W or not searched[c]:
+                break
+            at = row[end] + slope * d * k
+            if ok[c] and not (k <= SHARED and upper * (row[c] - at) < -2.0
+                              and (locked is None or not locked[c])):
+                break
+            rr = np.clip(int(round(at)) + np.arange(-1, 2), 0, H - 1)
+            a, b, e = (img[rr, min(max(x, 0), W - 1)].astype(np.float64)
+                       for x in (c - 1, c, c + 1))
+            v = median3(a, b, e)
+            j = int(np.argmax(v))
+            if v[j] < min_peak or v[j] - bg[end] < thr:
+                break
+            ok[c], row[c], gmax[c], bg[c] = True, rr[j], v[j], bg[end]
+    return ok, row, gmax, bg
+
+
+def short_ridges(ok: np.ndarray, row: np.ndarray, min_run: int, max_jump: float) -> np.ndarray:
+    """(W,) bool: the valid columns (``ok``) on ridges of fewer than ``min_run`` columns. A
+    ridge links valid columns at most 2 apart whose rows (``row``) differ by at most
+    ``max_jump`` px per column, and carries on across a gap of up to 4 · min_run columns (a
+    stripe lost on a black square, a dark speckle blotch) where it goes on within ``max_jump``
+    plus a tenth of the gap of where the frame's slope (the median step between neighbouring
+    columns) puts it. A stripe crosses many columns; a glint, a lamp or a short edge a few."""
+    cols = np.flatnonzero(ok)
+    if min_run <= 1 or not len(cols):
+        return np.zeros(len(ok), bool)
+    gap, step = np.diff(cols), np.diff(row[cols].astype(np.float64))
+    slope = float(np.median(step[gap == 1])) if (gap == 1).any() else 0.0
+    tol = max_jump * np.minimum(gap, 2) + 0.1 * np.maximum(gap - 2, 0)
+    off = np.where(gap <= 2, np.abs(step), np.abs(step - slope * gap))
+    label = np.r_[0, np.cumsum((gap > 4 * min_run) | (off > tol))]
+    size = np.bincount(label)
+    out = np.zeros(len(ok), bool)
+    out[cols] = size[label] < min_run
+    return out

@@ -1,0 +1,171 @@
+"""The image a laser line's centres are found in, from a camera frame or anyone's photograph:
+its full scale, the laser's channel of a colour image, and a laser-off frame taken away.
+
+* Full scale: 2^pixel_bits − 1 (a Mono12 camera's frames hold 0 … 4095 in 16 bits); without
+  pixel_bits, the dtype's (255, 65535; float frames: the 8-bit scale, 255). Every threshold
+  of the detection is a fraction of it (:mod:`insitu.vision.detect`).
+* Colour: the laser's channel c, and where the light is the laser's colour: the excess
+  X = I_c − (I_a + I_b) / 2 of c over the two others (for a red line, R against G and B; the
+  mean, not the larger, because a camera's blue pixels see a green laser too), and of X its
+  thin ridges (white top-hat, 2·reach + 1 px: a red door or an orange wall is no stripe). A
+  stripe's clipped core is white (X = 0) but its halo is not, so a pixel may hold the line
+  when a ridge of laser-coloured light lies within reach of it (``allow``): at least
+  :data:`CHROMA` of full scale and :data:`CHROMA_SNR` times the excess's own noise; white
+  room light, lamps, furniture and their edges hold none. ``channel="auto"`` takes the
+  channel whose excess forms the strongest thin ridges; those ridges (``ridge``) also tell
+  which way the line runs.
+* Laser-off frame: subtracted, channel by channel; a pixel clipped in the frame stays at full
+  scale (the core of the stripe), so the clipped plateau is still found as one.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+from insitu.errors import MeasurementError
+
+CHANNELS = {"b": 0, "g": 1, "r": 2}                  # BGR, as OpenCV reads colour images
+PIXEL_BITS = (8, 10, 12, 14, 16)
+CHROMA = 12 / 255
+"""Least excess of the laser's channel over the others that counts as laser-coloured, of full
+scale."""
+CHROMA_SNR = 6.0
+"""… and least multiple of the excess's noise sigma."""
+_SIDE = 640         # the structure of the line is judged on the frame shrunk to ≤ this, px
+_HAT = 7            # top-hat structuring element, px of the shrunk frame (> the line's width)
+
+
+class ImageInputError(MeasurementError, ValueError):
+    """An image, channel or direction the centres cannot use (one line naming it)."""
+
+
+@dataclass(frozen=True)
+class LaserImage:
+    """gray: (H, W) uint8/uint16/float32, the laser's light (its channel, laser-off frame
+    taken away). allow: (H, W) bool, where laser-coloured light lies within reach (None:
+    everywhere; gray input). full_scale: the frame's full scale in gray's units. channel:
+    "r", "g", "b" or None (gray input). ridge: (H, W) float32, the thin ridges of the
+    laser's excess over the other channels (None: gray input)."""
+
+    gray: np.ndarray
+    allow: np.ndarray | None
+    full_scale: float
+    channel: str | None
+    ridge: np.ndarray | None = None
+
+
+def full_scale(dtype: np.dtype, pixel_bits: int | None = None) -> float:
+    """2^pixel_bits − 1, or the dtype's full scale (uint8 255, uint16 65535, float 255).
+    ImageInputError for bits outside :data:`PIXEL_BITS` or more than the dtype holds."""
+    dtype = np.dtype(dtype)
+    if pixel_bits is None:
+        return float(np.iinfo(dtype).max) if dtype.kind == "u" else 255.0
+    if pixel_bits not in PIXEL_BITS or (dtype == np.uint8 and pixel_bits != 8):
+        raise ImageInputError(f"pixel_bits {pixel_bits!r}: expected one of "
+                              f"{', '.join(map(str, PIXEL_BITS))} (8 for an 8-bit image)")
+    return float(2 ** pixel_bits - 1)
+
+
+def check_bits(img: np.ndarray, pixel_bits: int | None) -> float:
+    """The full scale of ``img``; ImageInputError when a pixel exceeds 2^pixel_bits − 1."""
+    fs = full_scale(img.dtype, pixel_bits)
+    if pixel_bits is not None and pixel_bits < 16 and img.dtype != np.uint8 and img.size:
+        top = float(img.max())
+        if top > fs:
+            raise ImageInputError(f"pixel_bits {pixel_bits}: the image holds {top:g}, above "
+                                  f"the {pixel_bits}-bit full scale {fs:g} (give its camera's "
+                                  "bits, or none for the file's depth)")
+    return fs
+
+
+def shrink(img: np.ndarray) -> np.ndarray:
+    """``img`` (H, W[, C]) shrunk by the integer factor (area mean, float32) that brings its
+    longer side to ≤ _SIDE px: a thin line stays a (weaker) ridge."""
+    f = max(1, -(-max(img.shape[:2]) // _SIDE))
+    if f > 1 and min(img.shape[:2]) >= f:
+        img = cv2.resize(img, (img.shape[1] // f, img.shape[0] // f),
+                         interpolation=cv2.INTER_AREA)
+    return img.astype(np.float32)
+
+
+def ridges(small: np.ndarray) -> np.ndarray:
+    """White top-hat (H, W) float32 of a shrunk frame: thin bright lines stay, areas wider
+    than _HAT px (a white board, lit background) and their edges go."""
+    kernel = cv2.getStructuringElement(cv2.MORPH_RECT, (_HAT, _HAT))
+    return cv2.morphologyEx(small, cv2.MORPH_TOPHAT, kernel, borderType=cv2.BORDER_REPLICATE)
+
+
+def line_contrast(hat: np.ndarray) -> float:
+    """How strongly a line stands out of a top-hat image (H, W): the mean over the scan lines
+    (rows or columns, whichever the line crosses more strongly) of their top-hat maximum."""
+    return float(max(hat.max(axis=0).mean(), hat.max(axis=1).mean()))
+
+
+def _excess(bgr: np.ndarray, c: int) -> np.ndarray:
+    """(H, W) float32: channel c minus the mean of the two others."""
+    a, b = (bgr[:, :, k].astype(np.float32) for k in range(3) if k != c)
+    return bgr[:, :, c].astype(np.float32) - (a + b) / 2
+
+
+def noise_sigma(img: np.ndarray) -> float:
+    """Robust noise sigma of (H, W) ``img`` from differences of rows 8 apart, ≤ 32 row
+    pairs, every second column (a line or an edge moves few of them)."""
+    H = img.shape[0]
+    d = min(8, H - 1)
+    if d < 1:
+        return 0.0
+    idx = np.arange(0, H - d, max(1, (H - d) // 32))
+    diff = img[idx, ::2].astype(np.float32) - img[idx + d, ::2].astype(np.float32)
+    return float(1.4826 / np.sqrt(2.0) * np.median(np.abs(diff)))
+
+
+def _auto_channel(bgr: np.ndarray) -> int:
+    """The channel whose excess over the others forms the strongest thin ridges."""
+    small = shrink(bgr)
+    return int(np.argmax([line_contrast(ridges(_excess(small, c))) for c in range(3)]))
+
+
+def laser_image(image, channel: str = "auto", laser_off=None,
+                pixel_bits: int | None = None) -> LaserImage:
+    """The :class:`LaserImage` of ``image``: (H, W) gray, or (H, W, 3) BGR / (H, W, 1).
+    channel: "r", "g", "b" or "auto" (colour images). laser_off: the same camera's frame with
+    the laser off (same shape), subtracted. pixel_bits: the camera's significant bits (None:
+    the dtype's). ImageInputError (one line) for another shape, channel, a laser-off frame
+    that does not match, or values beyond pixel_bits."""
+    img = np.asarray(image)
+    if channel != "auto" and channel not in CHANNELS:
+        raise ImageInputError(f"channel {channel!r}: expected auto, r, g or b")
+    if img.ndim == 3 and img.shape[2] == 1:
+        img = img[:, :, 0]
+    colour = img.ndim == 3 and img.shape[2] == 3 and img.size > 0
+    if not colour and (img.ndim != 2 or img.size == 0):
+        raise ImageInputError(f"image of shape {img.shape}: expected a non-empty gray (H, W) "
+                              "or colour (H, W, 3) image")
+    if img.dtype not in (np.uint8, np.uint16, np.float32):
+        img = img.astype(np.uint8 if img.dtype == bool else np.float32)
+    fs = check_bits(img, pixel_bits)
+    off = None
+    if laser_off is not None:
+        off = np.asarray(laser_off)
+        if off.ndim == 3 and off.shape[2] == 1:
+            off = off[:, :, 0]
+        if off.shape != img.shape:
+            raise ImageInputError(f"laser-off frame of shape {off.shape}: expected the "
+                                  f"image's {img.shape}")
+        on = img
+        img = cv2.subtract(on, off.astype(on.dtype))
+        img[on >= fs] = fs                              # a clipped core stays the brightest
+    if not colour:
+        return LaserImage(np.ascontiguousarray(img), None, fs, None)
+    img = np.ascontiguousarray(img)
+    c = _auto_channel(img) if channel == "auto" else CHANNELS[channel]
+    reach = max(3, round(min(img.shape[:2]) / 100))
+    square = np.ones((2 * reach + 1, 2 * reach + 1), np.uint8)
+    excess = _excess(img, c)
+    thin = cv2.morphologyEx(excess, cv2.MORPH_TOPHAT, square, borderType=cv2.BORDER_REPLICATE)
+    least = max(CHROMA * fs, CHROMA_SNR * noise_sigma(excess))
+    allow = cv2.dilate((thin >= least).astype(np.uint8), square) > 0
+    return LaserImage(cv2.extractChannel(img, c), allow, fs, "bgr"[c], thin)
