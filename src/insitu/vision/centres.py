@@ -17,6 +17,7 @@ from dataclasses import dataclass, field
 import cv2
 import numpy as np
 
+from insitu.vision.chains import longest_ridge
 from insitu.vision.detect import (LineCentres, as_image, band_background, detect, fwhm, gather,
                                   raw_saturated, saturation_level)
 from insitu.vision.laser_image import CHANNELS, ImageInputError, laser_image, ridges, shrink
@@ -32,7 +33,7 @@ def gray_centroid(image: np.ndarray, k: float = 0.5, min_peak: float = 40.0,
                   min_contrast: float = 20.0, snr: float = 6.0, continuity: bool = True,
                   saturation: float | None = None, subtract: bool = False,
                   background: bool = False, extend_ends: bool = True,
-                  upper: int = 0, pixel_bits: int | None = None, allow=None,
+                  upper: int = 0, scale: float | None = None, allow=None,
                   min_run: int = 0, ridge: bool = False) -> LineCentres:
     """Gray-centroid centres of a line running along the rows: Li et al.'s (§2.3, Eq. 7), or
     above the local background.
@@ -53,10 +54,10 @@ def gray_centroid(image: np.ndarray, k: float = 0.5, min_peak: float = 40.0,
     """
     img = as_image(image)
     det = detect(img, median, band, window, min_peak, min_contrast, snr, continuity,
-                 extend_ends=extend_ends, upper=upper, pixel_bits=pixel_bits, allow=allow,
+                 extend_ends=extend_ends, upper=upper, scale=scale, allow=allow,
                  min_run=min_run, ridge=ridge)
     c, r, gmax = det.cols, det.row, det.gmax
-    level = saturation_level(img, saturation, pixel_bits)
+    level = saturation_level(img, saturation, scale)
     if background and window is not None:
         return _above_background(img, det, k, level)
     K = (det.bg + k * (gmax - det.bg) if background else k * gmax).astype(np.float32)
@@ -161,18 +162,24 @@ PHOTO_RUN = 20
 """Least columns (or rows) of a stripe in anyone's photograph (:func:`photo_centres`)."""
 
 
+
 def line_centres(image: np.ndarray, method: str = "gray", direction: str | None = None,
                  band=None, channel: str = "auto", laser_off=None,
-                 pixel_bits: int | None = None, **kw) -> LineCentres:
+                 pixel_bits: int | None = None, clipped: float = 1.0, **kw) -> LineCentres:
     """Centres by ``method`` (a key of :data:`CENTRE_METHODS`) in image coordinates.
 
     image: (H, W) gray or (H, W, 3) BGR; channel, laser_off (the frame with the laser off,
     subtracted), pixel_bits: :func:`~insitu.vision.laser_image.laser_image` (a colour image's
-    peaks are taken only where laser-coloured light lies within reach). direction: "rows" (one
+    peaks are taken only where laser-coloured light lies within reach). A colour image with
+    channel "auto" is measured in its laser's channel, or in the sum of its channels when the
+    laser's channel is clipped at most of the stripe's peaks (a halo clips it; the core clips
+    white, the halo does not) or the sum holds the longer stripe. direction: "rows" (one
     point per column), "cols" (one per row: the frame is transposed and u, v swapped back) or
     None (auto, :func:`line_direction`). band: (lo, hi) allowed range of the cross coordinate
-    per scan line (v per column, or u per row for "cols"). kw: passed to the method.
-    ImageInputError for another method, direction, channel or image shape.
+    per scan line (v per column, or u per row for "cols"). clipped: the fraction of full
+    scale from which a pixel counts as clipped (a JPEG's clipped areas ring a few gray values
+    below full scale). kw: passed to the method. ImageInputError for another method,
+    direction, channel or image shape.
     """
     if method not in CENTRE_METHODS:
         raise ImageInputError(f"centre method {method!r}: expected one of "
@@ -184,7 +191,25 @@ def line_centres(image: np.ndarray, method: str = "gray", direction: str | None 
     img, allow = li.gray, li.allow
     if direction is None:
         direction = line_direction(img if li.ridge is None else li.ridge)
-    kw = dict(kw, pixel_bits=pixel_bits) if pixel_bits is not None else kw
+    def scaled(fs):
+        return dict(kw, scale=fs, **({"saturation": clipped * fs} if clipped < 1 else {}))
+
+    c = _along(fn, img, direction, band, allow, scaled(li.full_scale))
+    if li.total is not None:
+        t = _along(fn, li.total, direction, band, allow, scaled(3 * li.full_scale))
+        if (np.mean(c.saturated) > 0.5 if len(c) else False) or \
+                _stripe_length(t, direction) > _stripe_length(c, direction):
+            return t
+    return c
+
+
+def _stripe_length(c: LineCentres, direction: str) -> int:
+    """Scan lines on the longest ridge of centres ``c`` of a line running ``direction``."""
+    return longest_ridge(c.u, c.v) if direction == "rows" else longest_ridge(c.v, c.u)
+
+
+def _along(fn, img, direction, band, allow, kw) -> LineCentres:
+    """``fn``'s centres of the line in ``img`` running ``direction``, in image coordinates."""
     if direction == "rows":
         return fn(img, band=band, allow=allow, **kw)
     t = fn(cv2.transpose(img), band=band, allow=None if allow is None else allow.T, **kw)
@@ -197,7 +222,7 @@ def photo_centres(image: np.ndarray, method: str = "steger", direction: str | No
                   pixel_bits: int | None = None) -> LineCentres:
     """Centres of a laser line in anyone's photograph, as ``insitu centres`` finds them: the
     method's :attr:`~CentreMethod.defaults`, each scan line's strongest thin ridge taken
-    (``ridge``, :mod:`insitu.vision.detect`), and stripes shorter than :data:`PHOTO_RUN` scan
+    (``ridge``, :mod:`insitu.vision.detect`), stripes shorter than :data:`PHOTO_RUN` scan
     lines dropped (a glint, a lamp, a short edge). Arguments: :func:`line_centres`."""
     kw = dict(CENTRE_METHODS[method].defaults) if method in CENTRE_METHODS else {}
     return line_centres(image, method, direction, channel=channel, laser_off=laser_off,

@@ -114,22 +114,40 @@ def carry_ends(img: np.ndarray, ok: np.ndarray, row: np.ndarray, gmax: np.ndarra
     return ok, row, gmax, bg
 
 
-def short_ridges(ok: np.ndarray, row: np.ndarray, min_run: int, max_jump: float) -> np.ndarray:
-    """(W,) bool: the valid columns (``ok``) on ridges of fewer than ``min_run`` columns. A
-    ridge links valid columns at most 2 apart whose rows (``row``) differ by at most
-    ``max_jump`` px per column, and carries on across a gap of up to 4 · min_run columns (a
-    stripe lost on a black square, a dark speckle blotch) where it goes on within ``max_jump``
-    plus a tenth of the gap of where the frame's slope (the median step between neighbouring
-    columns) puts it. A stripe crosses many columns; a glint, a lamp or a short edge a few."""
-    cols = np.flatnonzero(ok)
-    if min_run <= 1 or not len(cols):
-        return np.zeros(len(ok), bool)
-    gap, step = np.diff(cols), np.diff(row[cols].astype(np.float64))
+def ridges_of(cols: np.ndarray, row: np.ndarray, bridge: int, max_jump: float) -> np.ndarray:
+    """(n,) ridge label of each point (``cols`` (n,) increasing, ``row`` (n,)): points at most
+    2 columns apart whose rows differ by at most ``max_jump`` px per column are linked, and a
+    ridge carries on across a gap of up to ``bridge`` columns where it goes on within
+    ``max_jump`` plus a tenth of the gap of where the frame's slope (the median step between
+    neighbouring columns) puts it."""
+    if not len(cols):
+        return np.zeros(0, np.int64)
+    gap, step = np.diff(cols), np.diff(np.asarray(row, np.float64))
     slope = float(np.median(step[gap == 1])) if (gap == 1).any() else 0.0
     tol = max_jump * np.minimum(gap, 2) + 0.1 * np.maximum(gap - 2, 0)
     off = np.where(gap <= 2, np.abs(step), np.abs(step - slope * gap))
-    label = np.r_[0, np.cumsum((gap > 4 * min_run) | (off > tol))]
-    size = np.bincount(label)
+    return np.r_[0, np.cumsum((gap > bridge) | (off > tol))]
+
+
+def short_ridges(ok: np.ndarray, row: np.ndarray, min_run: int, max_jump: float) -> np.ndarray:
+    """(W,) bool: the valid columns (``ok``) on ridges (:func:`ridges_of`, bridging gaps of up
+    to 4 · min_run columns: a stripe lost on a black square, a dark speckle blotch) of fewer
+    than ``min_run`` columns. A stripe crosses many columns; a glint, a lamp or a short edge
+    a few."""
+    cols = np.flatnonzero(ok)
     out = np.zeros(len(ok), bool)
-    out[cols] = size[label] < min_run
+    if min_run <= 1 or not len(cols):
+        return out
+    label = ridges_of(cols, row[cols], 4 * min_run, max_jump)
+    out[cols] = np.bincount(label)[label] < min_run
     return out
+
+
+def longest_ridge(u: np.ndarray, v: np.ndarray, bridge: int = 80, max_jump: float = 4.0) -> int:
+    """Points on the longest ridge (:func:`ridges_of`) of centres ``u``, ``v`` (n,) px, one
+    per scan column ``u``."""
+    if not len(u):
+        return 0
+    order = np.argsort(u, kind="stable")
+    return int(np.bincount(ridges_of(np.round(u[order]).astype(np.int64), v[order], bridge,
+                                     max_jump)).max())

@@ -30,10 +30,10 @@ peaks. Common keyword arguments of the methods:
   brighter peak lost a step block's top one or two columns at its step walls when the lower
   line began first in the image (its samples 0.15–0.26 mm inside those edges at binning 2).
 * saturation: gray value counted as saturated (None: the full scale; float frames: none).
-* pixel_bits: the frame's significant bits (a Mono12 camera's frames: 12, values 0 … 4095 in
-  16 bits); None: the dtype's (:func:`~insitu.vision.laser_image.full_scale`). min_peak and
-  min_contrast are fractions of that full scale, written on the 8-bit scale: 40 is 40/255 of
-  it, 655 in a Mono12 frame — a scan measures alike at 8, 10, 12 or 16 bits.
+* scale: the frame's full scale, 2^pixel_bits − 1 (a Mono12 camera's frames: 4095, in 16
+  bits); None: the dtype's (:func:`~insitu.vision.laser_image.full_scale`). min_peak and
+  min_contrast are fractions of it, written on the 8-bit scale: 40 is 40/255 of full scale,
+  642 in a Mono12 frame — a scan measures alike at 8, 10, 12 or 16 bits.
 * allow: (H, W) bool, where a peak may be taken (laser-coloured light within reach,
   :mod:`insitu.vision.laser_image`); None: everywhere.
 * min_run: a ridge of fewer valid columns is no stripe (a glint, a lamp, a short edge):
@@ -129,11 +129,14 @@ def as_image(image) -> np.ndarray:
 
 
 def saturation_level(img: np.ndarray, saturation: float | None,
-                     pixel_bits: int | None = None) -> float:
-    """``saturation``, else the full scale of an integer frame; a float frame has none."""
+                     scale: float | None = None) -> float:
+    """``saturation``, else the full scale (``scale``, or the dtype's) of an integer frame; a
+    float frame has none."""
     if saturation is not None:
         return float(saturation)
-    return full_scale(img.dtype, pixel_bits) if img.dtype.kind == "u" else np.inf
+    if img.dtype.kind != "u":
+        return np.inf
+    return float(scale) if scale is not None else full_scale(img.dtype)
 
 
 def gather(img: np.ndarray, rows: np.ndarray, cols: np.ndarray):
@@ -198,11 +201,11 @@ def _search(pre, band, allow, fill, ridge):
 
 def detect(image, median=3, band=None, window=12, min_peak=40.0, min_contrast=20.0,
            snr=6.0, continuity=True, max_jump=4.0, decisive=1.25,
-           extend_ends=True, upper=0, *, pixel_bits=None, allow=None,
+           extend_ends=True, upper=0, *, scale=None, allow=None,
            min_run=0, ridge=False) -> Detection:
     """Peak row per valid column of a line running along the rows (module docstring)."""
     img = as_image(image)
-    fs = full_scale(img.dtype, pixel_bits)
+    fs = float(scale) if scale is not None else full_scale(img.dtype)
     min_peak, min_contrast = min_peak * fs / 255, min_contrast * fs / 255
     pre = cv2.medianBlur(img, median) if median and median > 1 else img
     H, W = pre.shape

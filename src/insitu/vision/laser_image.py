@@ -48,13 +48,16 @@ class LaserImage:
     taken away). allow: (H, W) bool, where laser-coloured light lies within reach (None:
     everywhere; gray input). full_scale: the frame's full scale in gray's units. channel:
     "r", "g", "b" or None (gray input). ridge: (H, W) float32, the thin ridges of the
-    laser's excess over the other channels (None: gray input)."""
+    laser's excess over the other channels (None: gray input). total: (H, W) the sum of the
+    three channels (full scale 3 · full_scale), where a core clipped white stands out over
+    a halo that clips the laser's channel (None: gray input, or a channel given)."""
 
     gray: np.ndarray
     allow: np.ndarray | None
     full_scale: float
     channel: str | None
     ridge: np.ndarray | None = None
+    total: np.ndarray | None = None
 
 
 def full_scale(dtype: np.dtype, pixel_bits: int | None = None) -> float:
@@ -168,4 +171,7 @@ def laser_image(image, channel: str = "auto", laser_off=None,
     thin = cv2.morphologyEx(excess, cv2.MORPH_TOPHAT, square, borderType=cv2.BORDER_REPLICATE)
     least = max(CHROMA * fs, CHROMA_SNR * noise_sigma(excess))
     allow = cv2.dilate((thin >= least).astype(np.uint8), square) > 0
-    return LaserImage(cv2.extractChannel(img, c), allow, fs, "bgr"[c], thin)
+    total = None
+    if channel == "auto":
+        total = img.sum(axis=2, dtype=np.uint16 if img.dtype == np.uint8 else np.float32)
+    return LaserImage(cv2.extractChannel(img, c), allow, fs, "bgr"[c], thin, total)

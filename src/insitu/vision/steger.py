@@ -62,24 +62,33 @@ def _flank_fit(g, inside, x, sat_mask, floor, unit=1.0):
 
 def _plateau_centre(raw, inside, x, sat_mask, noise, unit=1.0):
     """Offsets (n,) of saturated plateaus' centres: flank fit, else the centroid of the pixels
-    above half the maximum (weights: value minus half maximum). raw: (k, n) band of the image
-    centred on the peak; the fit is made above its sloping background, with pixels more than
-    3 noise sigmas (at least 3 ``unit``: one gray value of the 8-bit scale) and the
+    joined to the plateau that stand above half-way from the brighter of its two sides (the
+    pixels 3 px beyond its ends) to its top (weights: value minus that half; a bright pixel
+    further off, or a bright area at the band's end, does not count). raw: (k, n) band of the
+    image centred on the peak; the fit is made above its sloping background, with pixels more
+    than 3 noise sigmas (at least 3 ``unit``: one gray value of the 8-bit scale) and the
     background's change across the band above it."""
     bg = band_background(raw)
     g = np.where(inside, raw - bg, 0)
     floor = np.maximum(max(3.0 * unit, 3.0 * noise), np.abs(bg[-1] - bg[0]))
     vertex = _flank_fit(g, inside, x, sat_mask, floor, unit)
-    top = g.max(axis=0) / 2
-    half = np.where(inside & (g > top), g - top, 0)
-    cen = (half * x).sum(axis=0) / np.maximum(half.sum(axis=0), 1e-9)
+    k, n = len(raw) // 2, raw.shape[1]
+    run = np.r_[np.cumprod(sat_mask[k::-1], axis=0)[::-1][:-1], np.cumprod(sat_mask[k:], axis=0)]
+    lo = np.clip(k - np.cumprod(sat_mask[k::-1], axis=0).sum(axis=0) - 2, 0, len(raw) - 1)
+    hi = np.clip(k + np.cumprod(sat_mask[k:], axis=0).sum(axis=0) + 2, 0, len(raw) - 1)
+    side = np.maximum(raw[lo, np.arange(n)], raw[hi, np.arange(n)])
+    half = (raw.max(axis=0) + side) / 2
+    above = (inside & (raw > half)) | run.astype(bool)
+    near = np.r_[np.cumprod(above[k::-1], axis=0)[::-1][:-1], np.cumprod(above[k:], axis=0)]
+    weight = np.where(near.astype(bool), raw - half, 0)
+    cen = (weight * x).sum(axis=0) / np.maximum(weight.sum(axis=0), 1e-9)
     return np.where(np.isfinite(vertex), vertex, cen)
 
 
 def gaussian_peak(image: np.ndarray, min_peak: float = 40.0, window: int = 12, median: int = 3,
                   *, band=None, min_contrast: float = 20.0, snr: float = 6.0,
                   continuity: bool = True, saturation: float | None = None,
-                  extend_ends: bool = True, upper: int = 0, pixel_bits: int | None = None,
+                  extend_ends: bool = True, upper: int = 0, scale: float | None = None,
                   allow=None, min_run: int = 0, ridge: bool = False) -> LineCentres:
     """Per-column Gaussian peak: 3-point log-parabola through the raw maximum and its two
     neighbours (background subtracted). Saturated or degenerate columns: the plateau's centre
@@ -89,10 +98,10 @@ def gaussian_peak(image: np.ndarray, min_peak: float = 40.0, window: int = 12, m
     """
     img = as_image(image)
     det = detect(img, median, band, window, min_peak, min_contrast, snr, continuity,
-                 extend_ends=extend_ends, upper=upper, pixel_bits=pixel_bits, allow=allow,
+                 extend_ends=extend_ends, upper=upper, scale=scale, allow=allow,
                  min_run=min_run, ridge=ridge)
     c, r, bg, w, unit = det.cols, det.row, det.bg, det.window, det.full_scale / 255
-    sat = saturation_level(img, saturation, pixel_bits)
+    sat = saturation_level(img, saturation, scale)
     x = np.arange(-w, w + 1)[:, None]
     raw, inside = gather(img, r[None, :] + x, c)
     g = np.where(inside, raw - bg, 0)
@@ -186,7 +195,7 @@ def steger(image: np.ndarray, sigma: float | None = None, min_peak: float = 40.0
            window: int = 12, median: int = 3, *, band=None, min_contrast: float = 20.0,
            snr: float = 6.0, continuity: bool = True, saturation: float | None = None,
            min_curvature: float | None = None, extend_ends: bool = True,
-           upper: int = 0, pixel_bits: int | None = None, allow=None,
+           upper: int = 0, scale: float | None = None, allow=None,
            min_run: int = 0, ridge: bool = False) -> LineCentres:
     """Steger centres of a line running along the rows of ``image`` (tilts to ≈ 60° work).
 
@@ -206,7 +215,7 @@ def steger(image: np.ndarray, sigma: float | None = None, min_peak: float = 40.0
     """
     img = as_image(image)
     det = detect(img, median, band, window, min_peak, min_contrast, snr, continuity,
-                 extend_ends=extend_ends, upper=upper, pixel_bits=pixel_bits, allow=allow,
+                 extend_ends=extend_ends, upper=upper, scale=scale, allow=allow,
                  min_run=min_run, ridge=ridge)
     c, r, n, w, unit = det.cols, det.row, len(det.cols), det.window, det.full_scale / 255
     x = np.arange(-w, w + 1)[:, None]
@@ -240,7 +249,7 @@ def steger(image: np.ndarray, sigma: float | None = None, min_peak: float = 40.0
     u = np.where(refined, c, c + bt * bu)
     v = r + (k - _M - 1) + np.where(refined, s, bt * bv)
     raw, _ = gather(img, r[None, :] + x, c)
-    level = saturation_level(img, saturation, pixel_bits)
+    level = saturation_level(img, saturation, scale)
     sat = raw[w - 2:w + 3].max(axis=0) >= level
     if sat.any():                                 # clipped plateau: the flank fit instead
         v[sat] = r[sat] + _plateau_centre(raw[:, sat], inside[:, sat], x, raw[:, sat] >= level,
