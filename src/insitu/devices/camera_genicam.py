@@ -3,7 +3,8 @@ camera maker's GenTL producer (a ``.cti`` file named in the rig file, loaded onl
 station file allows it: :mod:`.native`).
 
 Features are set by their SFNC names: PixelFormat (Mono8 → uint8 frames; Mono10/12/16 and
-their packed forms → uint16), ExposureTime (µs; ExposureTimeAbs on older cameras), Gain (dB),
+their packed forms → uint16, unscaled: ``pixel_bits`` says how many bits are significant),
+ExposureTime (µs; ExposureTimeAbs on older cameras), Gain (dB),
 TriggerSelector = FrameStart with TriggerMode and TriggerSource. Trigger modes:
 
 - ``"free"``: free-running; a grab first discards the frames already buffered, so that the
@@ -172,6 +173,11 @@ class GenICamCamera:
         finally:
             buf.queue()
         return frame if self.pixel_format == "Mono8" else frame.astype(np.uint16, copy=False)
+
+    @property
+    def pixel_bits(self) -> int:
+        """The frames' significant bits: Mono12 gives 0 … 4095 in uint16."""
+        return int("".join(ch for ch in self.pixel_format[4:6] if ch.isdigit()))
 
     def close(self) -> None:
         try:

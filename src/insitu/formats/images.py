@@ -91,3 +91,21 @@ def _check_png(path, raw: bytes, error: type[Exception]) -> None:
             return
         i += 12 + n
     raise error(f"{path}: truncated PNG (no IEND chunk)")
+
+
+PIXEL_BITS = (8, 10, 12, 14, 16)
+"""Significant bits a frame's pixels may have (formats.md ``pixel_bits``)."""
+
+
+def check_bits(where: str, img: np.ndarray, bits: int | None) -> None:
+    """FormatError unless ``img`` fits ``bits`` significant bits (formats.md ``pixel_bits``:
+    values 0 … 2^bits − 1; an 8-bit image holds 8): ``where`` names the file."""
+    if bits is None:
+        return
+    if bits not in PIXEL_BITS:
+        raise FormatError(f"{where}: pixel_bits: expected one of "
+                          f"{', '.join(map(str, PIXEL_BITS))}, got {bits!r}")
+    top = 2 ** bits - 1
+    if (img.dtype == np.uint8) != (bits == 8) or (top < 65535 and int(img.max()) > top):
+        raise FormatError(f"{where}: a {img.dtype} image holding up to {int(img.max())}, but "
+                          f"pixel_bits is {bits} (values 0 … {top})")

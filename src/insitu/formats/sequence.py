@@ -23,7 +23,7 @@ from insitu.errors import FormatError
 from insitu.formats.atomic import atomic_folder, atomic_write_text
 from insitu.formats.bounds import each_within, within
 from insitu.formats.camera_spec import CameraSpec
-from insitu.formats.images import read_image
+from insitu.formats.images import check_bits, read_image
 from insitu.formats.limits import MAX_IMAGE_BYTES, check_file, check_inside
 from insitu.formats.validation import (PositivePair, Range, Vec2, bad, dump_json, plain,
                                        read_json, show, validation_message)
@@ -124,6 +124,7 @@ class SequenceSpec(BaseModel):
     frames: list[FrameSpec]
     checkerboard: CheckerboardSpec | None = None
     ambient: AmbientSpec | None = None
+    pixel_bits: Literal[8, 10, 12, 14, 16] | None = None
 
     @field_validator("frames", mode="before")
     @classmethod
@@ -204,6 +205,7 @@ class Sequence:
     scan_head = property(lambda self: self.spec.scan_head)
     frames = property(lambda self: self.spec.frames)
     checkerboard = property(lambda self: self.spec.checkerboard)
+    pixel_bits = property(lambda self: self.spec.pixel_bits)    # None: the PNGs' own depth
 
     def __len__(self) -> int:
         return len(self.spec.frames)
@@ -244,6 +246,7 @@ class Sequence:
         if img.dtype not in (np.uint8, np.uint16):
             raise FormatError(f"{path}: expected an 8- or 16-bit image, got {img.dtype}")
         _check_size(str(path), img, self.spec.camera)
+        check_bits(str(path), img, self.spec.pixel_bits)
         return img
 
     def __iter__(self) -> Iterator[tuple[int, FrameSpec, np.ndarray]]:
@@ -270,11 +273,13 @@ class SequenceWriter:
     block (or not at all if anything raises). Images are written as they come, never held.
 
     ``scan_head``, ``camera``, ``checkerboard``: dicts or the models above; ``truth``: any
-    JSON-able dict (numpy arrays and scalars allowed), written as ``truth.json``.
+    JSON-able dict (numpy arrays and scalars allowed), written as ``truth.json``;
+    ``pixel_bits``: the camera's significant bits (formats.md; None: the PNGs' depth).
     """
 
     def __init__(self, folder: str | Path, kind: str, scan_head: Any, camera: Any = None,
-                 checkerboard: Any = None, truth: dict | None = None):
+                 checkerboard: Any = None, truth: dict | None = None,
+                 pixel_bits: int | None = None):
         self.folder = Path(folder)
         self._source = str(self.folder / "sequence.json")
         if kind not in KINDS:
@@ -290,6 +295,7 @@ class SequenceWriter:
         if checkerboard is not None:
             _validate(CheckerboardSpec, self._board, self._source, "checkerboard")
         self._truth = None if truth is None else plain(truth)
+        self._bits = pixel_bits
         self._frames: list[dict] = []
         self._ambient: dict | None = None
         self._size: tuple[int, ...] | None = None
@@ -343,6 +349,7 @@ class SequenceWriter:
                    else type(image).__name__)
             raise FormatError(f"{where}: expected a (H, W) uint8 or uint16 image, got {got}")
         _check_size(where, image, self._cam, self._size)
+        check_bits(where, image, self._bits)
         self._size = image.shape
 
     def _write_png(self, name: str, image: np.ndarray, where: str) -> None:
@@ -357,7 +364,7 @@ class SequenceWriter:
     def _finish(self) -> None:
         data = {"format": FORMAT, "kind": self.kind, "camera": self._camera,
                 "scan_head": self._head, "frames": self._frames, "checkerboard": self._board,
-                "ambient": self._ambient}
+                "ambient": self._ambient, "pixel_bits": self._bits}
         spec = _validate(SequenceSpec, data, self._source)
         atomic_write_text(self._tmp / "sequence.json",
                           dump_json(spec.model_dump(mode="json", exclude_none=True)))

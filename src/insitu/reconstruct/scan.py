@@ -30,17 +30,19 @@ class ScanReconstructor:
     heights the surface can have (the focus range); the line is only searched where its light
     plane can put it (ghosts and reflections elsewhere are ignored). None: the whole column.
     :meth:`set_ambient` before the frames gives every point the room-light grey value of the
-    pixel it was measured at (attribute ``ambient``).
+    pixel it was measured at (attribute ``ambient``). pixel_bits: the frames' significant bits
+    (a Mono12 camera's: 12; None: their dtype's), which the centres' thresholds are
+    fractions of.
     """
 
     def __init__(self, camera: CameraModel, pivot_height_mm: float, telecentric: bool = False,
                  height_model: HeightModel | None = None,
                  settings: CentreSettings = CentreSettings(),
                  z_range_mm: tuple[float, float] | None = None, min_points: int = 5,
-                 cross_model: TurnedSheetModel | None = None):
+                 cross_model: TurnedSheetModel | None = None, pixel_bits: int | None = None):
         self.camera, self.H, self.telecentric = camera, pivot_height_mm, telecentric
         self.model, self.settings, self.z_range = height_model, settings, z_range_mm
-        self.cross_model = cross_model
+        self.cross_model, self.pixel_bits = cross_model, pixel_bits
         self._angles: dict[int, float] = {}     # frame index → its line's angle to x
         self.min_points = min_points
         self._chunks: list[tuple[np.ndarray, ...]] = []
@@ -80,7 +82,7 @@ class ScanReconstructor:
             lo, hi, upper = band_and_side(self.camera, start, end, self.H, self.z_range,
                                           telecentric=self.telecentric, along_rows=rows)
             band = (lo, hi)
-        centres = extract_centres(image, self.settings, band, rows, upper)
+        centres = extract_centres(image, self.settings, band, rows, upper, self.pixel_bits)
         self.last_centres, self.last_points = centres.uv, np.zeros((0, 3))
         if len(centres) < self.min_points:
             return 0
@@ -95,7 +97,7 @@ class ScanReconstructor:
         self._angles[index] = line_angle(start, end)
         self.last_points = pts[ok]
         chunk = (pts[ok], centres.peak[ok], np.full(ok.sum(), index, np.int32),
-                 np.clip(centres.contrast[ok] / 255.0, 0, 1))
+                 np.clip(centres.contrast[ok] / centres.full_scale, 0, 1))
         if self._ambient is not None:
             chunk += (grey_at(self._ambient, centres.uv[ok]),)
         self._chunks.append(chunk)

@@ -46,7 +46,7 @@ def observations(seq: Sequence, settings: CentreSettings = CentreSettings(),
         rows = line_runs_along_rows(camera, a, b)
         band = expected_band(camera, a, b, H, (frame.plate_z_mm - 3.0, frame.plate_z_mm + 3.0),
                              along_rows=rows)
-        c = extract_centres(image, settings, band, rows)
+        c = extract_centres(image, settings, band, rows, pixel_bits=seq.pixel_bits)
         if len(c) < 20:
             raise CalibrationError(f"{seq.folder}: {frame.file}: no laser line found "
                                    f"(line {list(a)} → {list(b)} mm, plate at "

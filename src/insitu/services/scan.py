@@ -113,18 +113,22 @@ def _finish(rec: ScanReconstructor, t0: float, rig: RigRecord | None = None,
 
 def reconstructor(camera: CameraModel, pivot_height_mm: float, telecentric: bool,
                   z_range_mm: tuple[float, float], height_cal: HeightCalibration | None,
-                  model: str | None, where: str, cross: bool = False) -> ScanReconstructor:
+                  model: str | None, where: str, cross: bool = False,
+                  pixel_bits: int | None = None) -> ScanReconstructor:
     """Method 1 without a height calibration, else Method 2 with it (``model``: "sheet",
     "paper" or None for the calibration's default; with ``cross`` also its crossed lines'
     model, MeasurementError when it has none). The line is searched where the focus range
-    ``z_range_mm`` can put it."""
+    ``z_range_mm`` can put it; ``pixel_bits``: the frames' significant bits (None: their
+    dtype's)."""
     if height_cal is None:
-        return ScanReconstructor(camera, pivot_height_mm, telecentric, z_range_mm=z_range_mm)
+        return ScanReconstructor(camera, pivot_height_mm, telecentric, z_range_mm=z_range_mm,
+                                 pixel_bits=pixel_bits)
     check_same_camera(height_cal, camera.width, camera.height, where)
     cal_camera, hmodel = height_model(height_cal, model)
     return ScanReconstructor(cal_camera, pivot_height_mm, telecentric, hmodel,
                              centre_settings(height_cal), z_range_mm,
-                             cross_model=crossed_model(height_cal) if cross else None)
+                             cross_model=crossed_model(height_cal) if cross else None,
+                             pixel_bits=pixel_bits)
 
 
 def cross_angle(height_cal: HeightCalibration | None) -> float:
@@ -163,7 +167,8 @@ def scan_replay(folder: str | Path, height_cal: HeightCalibration | None = None,
              for f in seq.frames]
     rec = reconstructor(camera_model(seq.camera), head.pivot_height_mm,
                         head.lens == "telecentric", tuple(head.z_range_mm), height_cal, model,
-                        str(seq.folder), cross=any(abs(a[0] - b[0]) > 1e-9 for a, b in lines))
+                        str(seq.folder), cross=any(abs(a[0] - b[0]) > 1e-9 for a, b in lines),
+                        pixel_bits=seq.pixel_bits)
     return _scan(ReplayCamera(seq), RecordedHead(), lines, rec, t0, "frames", progress, cancel,
                  on_frame, room_light=seq.read_ambient)
 
@@ -189,7 +194,8 @@ def scan_live(station: Station, spacing: float = 0.5, region=None,
     check_region(region, rig.head.field_size_mm)
     lines = plan_lines(region, spacing, cross, height_cal, cross_spacing)
     rec = reconstructor(rig.camera, rig.head.pivot_height_mm, rig.head.lens == "telecentric",
-                        rig.head.z_range_mm, height_cal, model, "live scan", cross)
+                        rig.head.z_range_mm, height_cal, model, "live scan", cross,
+                        getattr(station.devices.camera, "pixel_bits", None))
     camera, head = station.devices.camera, station.devices.head
     if exposure_ms is not None:
         camera.set_exposure(exposure_ms)

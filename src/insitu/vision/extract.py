@@ -65,17 +65,19 @@ MAX_HALF_WINDOW = 25
 
 def extract_centres(image: np.ndarray, settings: CentreSettings = CentreSettings(),
                     band: tuple[np.ndarray, np.ndarray] | None = None,
-                    along_rows: bool = True, upper: int = 0) -> LineCentres:
+                    along_rows: bool = True, upper: int = 0,
+                    pixel_bits: int | None = None) -> LineCentres:
     """Centres of the line in ``image`` (H, W): one per column when the line runs along the
     rows, else one per row (the image is searched across the line either way). ``band``:
     (lo, hi) per column (rows) or per row (columns) where the line can be; ghosts outside it
     are ignored. ``upper``: the side of the line's cross coordinate a higher surface puts it
-    (+1 larger, −1 smaller, 0 unknown; :func:`~insitu.vision.detect.detect`). u, v are image
-    coordinates in both cases."""
+    (+1 larger, −1 smaller, 0 unknown; :func:`~insitu.vision.detect.detect`). ``pixel_bits``:
+    the frame's significant bits (a Mono12 camera's: 12; None: the dtype's), which every
+    threshold is a fraction of. u, v are image coordinates in both cases."""
     img = image if along_rows else cv2.transpose(image)
     options = {o: getattr(settings, o) for o in CENTRE_METHODS[settings.method].options}
     c = line_centres(img, settings.method, direction="rows", band=band, upper=upper,
-                     **options)
+                     pixel_bits=pixel_bits, **options)
     if settings.smooth_half_window:
         half = settings.smooth_half_window
         if settings.smooth_grains:

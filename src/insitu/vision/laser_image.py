@@ -26,9 +26,9 @@ import cv2
 import numpy as np
 
 from insitu.errors import MeasurementError
+from insitu.formats.images import PIXEL_BITS
 
 CHANNELS = {"b": 0, "g": 1, "r": 2}                  # BGR, as OpenCV reads colour images
-PIXEL_BITS = (8, 10, 12, 14, 16)
 CHROMA = 12 / 255
 """Least excess of the laser's channel over the others that counts as laser-coloured, of full
 scale."""
