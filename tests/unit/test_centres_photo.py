@@ -13,7 +13,9 @@ from __future__ import annotations
 import cv2
 import numpy as np
 import pytest
+from typer.testing import CliRunner
 
+from insitu.cli.main import app
 from insitu.sim.checkerboard import render_checkerboard
 from insitu.sim.board import board_on_plate
 from insitu.sim.render import Renderer
@@ -161,3 +163,38 @@ def test_a_clipped_core_is_centred_from_its_flanks(method):
     clipped = sat & np.isfinite(err)
     assert clipped.sum() > 0.5 * np.isfinite(true).sum()
     assert np.sqrt(np.nanmean(err[clipped] ** 2)) < 0.5
+
+
+runner = CliRunner()
+
+
+def test_centres_command_takes_a_laser_off_frame_and_the_bits(photo, tmp_path):
+    """``insitu centres`` as a user runs it: the JPEG with --background (the laser-off
+    photograph) finds the stripe on the board; a 12-bit frame needs --pixel-bits 12; a
+    laser-off frame of another size and unknown bits are refused in one line."""
+    bgr, dark, true = photo
+    cv2.imwrite(str(tmp_path / "on.png"), bgr)
+    cv2.imwrite(str(tmp_path / "off.png"), dark)
+    out = tmp_path / "c.csv"
+    res = runner.invoke(app, ["centres", str(tmp_path / "on.png"), "--background",
+                              str(tmp_path / "off.png"), "-o", str(out)])
+    assert res.exit_code == 0, res.output
+    uv = np.loadtxt(out, delimiter=",", skiprows=1, usecols=(1, 2))
+    u = np.round(uv[:, 0]).astype(int)
+    err = np.full(len(true), np.nan)
+    err[u] = uv[:, 1] - true[u]
+    on = np.isfinite(true)
+    assert (np.abs(err[on]) <= 5).mean() >= 0.9
+    mono = np.round(cv2.cvtColor(bgr, cv2.COLOR_BGR2GRAY) * (4095 / 255)).astype(np.uint16)
+    cv2.imwrite(str(tmp_path / "mono12.png"), mono)
+    args = ["centres", str(tmp_path / "mono12.png"), "-o", str(tmp_path / "m.csv")]
+    assert "no laser line found" in runner.invoke(app, args).output
+    res = runner.invoke(app, [*args, "--pixel-bits", "12"])
+    assert res.exit_code == 0 and len((tmp_path / "m.csv").read_text().splitlines()) > 300
+    cv2.imwrite(str(tmp_path / "small.png"), dark[:100])
+    for extra, message in ((["--background", str(tmp_path / "small.png")],
+                            "--background"), (["--pixel-bits", "9"], "--pixel-bits 9")):
+        res = runner.invoke(app, ["centres", str(tmp_path / "on.png"), "-o",
+                                  str(tmp_path / "x.csv"), *extra])
+        assert res.exit_code == 1 and message in res.output and not (tmp_path / "x.csv").exists()
+        assert len(res.output.strip().splitlines()) == 1

@@ -17,9 +17,23 @@ from insitu.errors import InsituError
 from insitu.formats import images
 from insitu.formats.atomic import atomic_write_bytes, atomic_write_text
 from insitu.formats.validation import one_of
-from insitu.vision.centres import CENTRE_METHODS, LineCentres, line_centres
+from insitu.vision.centres import CENTRE_METHODS, LineCentres, photo_centres
+from insitu.vision.laser_image import PIXEL_BITS
 
 COLUMNS = "file,u,v,peak,width,quality"
+
+
+def _check_options(method: str, direction: str, channel: str, pixel_bits: int | None) -> None:
+    """InsituError (one line) naming an option outside what the command takes."""
+    if method not in CENTRE_METHODS:
+        raise InsituError(f"--method {method!r}: expected {one_of(CENTRE_METHODS)}")
+    if direction not in ("auto", "rows", "cols"):
+        raise InsituError(f"--direction {direction!r}: expected 'auto', 'rows' or 'cols'")
+    if channel not in ("auto", "r", "g", "b"):
+        raise InsituError(f"--channel {channel!r}: expected 'auto', 'r', 'g' or 'b'")
+    if pixel_bits is not None and pixel_bits not in PIXEL_BITS:
+        raise InsituError(f"--pixel-bits {pixel_bits}: expected "
+                          f"{', '.join(map(str, PIXEL_BITS))}")
 
 
 def read_image(path: Path) -> np.ndarray:
@@ -48,31 +62,38 @@ def centres(
                                         f"{', '.join(CENTRE_METHODS)}.")] = "steger",
     direction: Annotated[str, typer.Option(help="auto (from the image's structure), rows (the "
                                            "line runs along the rows) or cols.")] = "auto",
-    channel: Annotated[str, typer.Option(help="Colour images: auto (the channel where the "
-                                         "line stands out most), r, g or b.")] = "auto",
+    channel: Annotated[str, typer.Option(help="Colour images: auto (the laser's colour, found "
+                                         "from the image), r, g or b.")] = "auto",
+    background: Annotated[Path | None, typer.Option(
+        help="A photograph of the same view with the laser off, taken away from each "
+             "image.")] = None,
+    pixel_bits: Annotated[int | None, typer.Option(
+        help="Significant bits of the images' pixels: 10 or 12 for a Mono10/Mono12 camera "
+             "whose 16-bit files hold 0 … 1023 / 4095 (default: the file's depth).")] = None,
     preview_dir: Annotated[Path | None, typer.Option(
         "--preview", help="Folder (created) for one PNG per image with the centres drawn.")] = None,
 ) -> None:
     """Find the laser line's sub-pixel centres in each image (one per column, or per row for a
     line running down the image) and write them all to one CSV: u, v (px, image x and y),
     peak (gray value), width (px) and quality (the line's contrast over its local
-    background, gray values). An image without a line gives no rows and is reported."""
-    if method not in CENTRE_METHODS:
-        raise InsituError(f"--method {method!r}: expected {one_of(CENTRE_METHODS)}")
-    if direction not in ("auto", "rows", "cols"):
-        raise InsituError(f"--direction {direction!r}: expected 'auto', 'rows' or 'cols'")
-    if channel not in ("auto", "r", "g", "b"):
-        raise InsituError(f"--channel {channel!r}: expected 'auto', 'r', 'g' or 'b'")
+    background, gray values). A colour image's line is taken where the light has the laser's
+    colour; a thin ridge across at least 20 columns (or rows) is a line, a glint, a lamp or
+    the edge of a bright object is not. An image without a line gives no rows and is
+    reported."""
+    _check_options(method, direction, channel, pixel_bits)
     check_output(out, ".csv")
     if preview_dir is not None and preview_dir.exists() and not preview_dir.is_dir():
         raise InsituError(f"--preview {preview_dir}: not a folder")
     frames = [(p, read_image(p)) for p in images]          # every input checked before writing
+    off = read_image(background) if background is not None else None
+    if off is not None and (odd := next((p for p, i in frames if i.shape != off.shape), None)):
+        raise InsituError(f"--background {background}: shape {off.shape}, but {odd} has "
+                          f"{dict(frames)[odd].shape} (the same camera's view, laser off)")
     rows, pictures, empty = io.StringIO(), {}, []
     rows.write(COLUMNS + "\n")
-    kw = dict(CENTRE_METHODS[method].defaults)
     for path, img in frames:
-        c = line_centres(img, method, None if direction == "auto" else direction,
-                         channel=channel, **kw)
+        c = photo_centres(img, method, None if direction == "auto" else direction, channel,
+                          off, pixel_bits)
         if not len(c):
             empty.append(str(path))
         for u, v, peak, width, q in zip(c.u, c.v, c.peak, c.width, c.contrast):
