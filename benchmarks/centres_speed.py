@@ -6,7 +6,9 @@ method, frames/s, MPix/s, ms/frame (median over all frames and rounds). Target: 
 centroid and Steger ≥ 100 frames/s. "plain" rows are a gray centroid without the shared
 detection stage (the column's maximum, a fixed threshold), for comparison. line_direction (a
 top-hat's structure tensor) should take a few ms; the colour row includes making the BGR
-frame.
+frame. "the scan's band" is what a scan runs: the band the light plane allows over the focus
+range (reconstruct.plane.band_and_side). The photograph row: the frame as a colour JPEG shrunk
+to 1920 × 1080 (insitu centres' photo_centres).
 Run: .venv/bin/python benchmarks/centres_speed.py
 """
 
@@ -22,10 +24,12 @@ import numpy as np  # noqa: E402
 from rich.console import Console  # noqa: E402
 from rich.table import Table  # noqa: E402
 
+from insitu.reconstruct.plane import band_and_side  # noqa: E402
 from insitu.sim.world import SimWorld  # noqa: E402
-from insitu.sim.rig import default_rig  # noqa: E402
+from insitu.sim.rig import NOMINAL_HEAD, default_rig  # noqa: E402
 from insitu.sim.workpieces import make_workpiece  # noqa: E402
-from insitu.vision.centres import gray_centroid, line_centres, line_direction  # noqa: E402
+from insitu.vision.centres import (gray_centroid, line_centres, line_direction,  # noqa: E402
+                                   photo_centres)
 from insitu.vision.extract import extract_centres  # noqa: E402
 from insitu.vision.steger import gaussian_peak, steger  # noqa: E402
 
@@ -59,13 +63,34 @@ def before_gray_centroid(image, k=0.5, min_peak=40.0, window=12, median=3):
     return cols[keep], v, gmax[keep], width, gmax[keep] - background
 
 
+RIG = default_rig(seed=0)
+
+
 def frames(n_per_part: int = 3) -> list[np.ndarray]:
     out = []
     for name in ("step-block", "freeform"):
-        r = SimWorld(default_rig(seed=0), parts=[make_workpiece(name)]).renderer()
+        r = SimWorld(RIG, parts=[make_workpiece(name)]).renderer()
         for x in np.linspace(-8, 8, n_per_part):
             out.append(r.line_frame([x, -45], [x, 45]))
     return out
+
+
+def scan_band(x: float = 0.0):
+    """The band and side a scan searches the line of x = const in (the operator's camera)."""
+    lo, hi, upper = band_and_side(RIG.operator.camera, [x, -45], [x, 45],
+                                  NOMINAL_HEAD.pivot_height_mm, NOMINAL_HEAD.z_range_mm)
+    return (lo, hi), upper
+
+
+def photograph(f: np.ndarray) -> np.ndarray:
+    """A frame as a colour JPEG photograph, 1920 × 1080 (red laser, warm room)."""
+    small = cv2.resize(f, (1920, 1080), interpolation=cv2.INTER_AREA).astype(np.float32)
+    bgr = cv2.merge([0.5 * small, 0.6 * small, np.minimum(1.4 * small, 255)])
+    ok, jpg = cv2.imencode(".jpg", bgr.astype(np.uint8), [cv2.IMWRITE_JPEG_QUALITY, 90])
+    return cv2.imdecode(jpg, cv2.IMREAD_COLOR)
+
+
+BAND, UPPER = scan_band()
 
 
 METHODS = {
@@ -81,6 +106,9 @@ METHODS = {
     "line_centres(steger, auto direction)": lambda f: line_centres(f, "steger"),
     "line_direction": lambda f: [line_direction(f)],
     "extract_centres (ours: steger + along-line window)": extract_centres,
+    "extract_centres, the scan's band (what a scan runs)":
+        lambda f: extract_centres(f, band=BAND, upper=UPPER),
+    "photo_centres(steger), 1920 × 1080 colour photograph": ("photo", photo_centres),
     "line_centres(steger, BGR colour, auto channel)":
         lambda f: line_centres(cv2.merge([f // 2, f, f // 3]), "steger"),
 }
@@ -88,6 +116,7 @@ METHODS = {
 
 def main(rounds: int = 10) -> None:
     imgs = frames()
+    photos = [photograph(f) for f in imgs]
     H, W = imgs[0].shape
     table = Table(title=f"line centres, {W} × {H} uint8, one core, {len(imgs)} frames")
     for col in ("method", "frames/s", "MPix/s", "ms/frame", "points/frame"):
@@ -95,14 +124,17 @@ def main(rounds: int = 10) -> None:
     for name, fn in METHODS.items():
         times, points = [], []
         n = rounds if "None" not in name else max(2, rounds // 4)
+        photo = isinstance(fn, tuple)
+        fn = fn[1] if photo else fn
         for _ in range(n):
-            for img in imgs:
+            for img in (photos if photo else imgs):
                 t = time.perf_counter()
                 res = fn(img)
                 times.append(time.perf_counter() - t)
                 points.append(len(res[0]) if isinstance(res, tuple) else len(res))
         dt = float(np.median(times))
-        table.add_row(name, f"{1 / dt:.0f}", f"{H * W / dt / 1e6:.0f}", f"{dt * 1e3:.2f}",
+        px = 1920 * 1080 if photo else H * W
+        table.add_row(name, f"{1 / dt:.0f}", f"{px / dt / 1e6:.0f}", f"{dt * 1e3:.2f}",
                       f"{np.mean(points):.0f}")
     Console(width=120).print(table)
 

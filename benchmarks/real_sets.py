@@ -91,7 +91,7 @@ DESKTOP = PhotoSet(
     _folder("srv/desktop_3d_scanner", "python/calib_images/Laser/Calibracio17_07", "*.jpg"),
     _checkerboard(_D_K, _D_DIST, (8, 6), 40.0))
 
-# ---------------------------------------------------------------- hjamal3/Light-Stripe-Calibration
+# ---------------------------------------------- hjamal3/Light-Stripe-Calibration
 _S_K = np.array([[514.41205, 0.0, 329.83671], [0.0, 685.92876, 237.71471], [0.0, 0.0, 1.0]])
 _S_DIST = np.array([-0.350373, 0.158447, 0.000735, -0.000231, 0.0])
 STRIPE = PhotoSet(
@@ -136,7 +136,7 @@ OUC = PhotoSet(
     np.array([-0.14078253, 0.20232008, -0.00551167, -0.0004342, 0.0]),
     (0.0, 169.0, 0.0, 135.2), _ouc.load, _ouc.pose)
 
-# ---------------------------------------------------------------- zhaocongyang/structured_LineLight_calib
+# ---------------------------------------------- zhaocongyang/structured_LineLight_calib
 _C_K = np.array([[1144.4393086789801, 0.0, 916.05937324175795],
                  [0.0, 1142.4883309976474, 522.04970408082136], [0.0, 0.0, 1.0]])
 _C_DIST = np.array([-2.9611559154421103e-02, -3.3507405096527815e-04, 7.8914871567435929e-03,

@@ -122,9 +122,10 @@ def as_gray(image, channel: str = "auto") -> np.ndarray:
 def line_direction(image: np.ndarray) -> str:
     """"rows" if the line runs mostly along the rows (crosses more columns than rows), else
     "cols", from the image's structure: the orientation of the gradient energy (structure
-    tensor) of the white top-hat of the shrunk frame (:func:`~insitu.vision.laser_image.ridges`), where a bright board or
-    background has gone and only thin ridges stay. A line along the rows has its gradients
-    across them (along y). ≈ 2 ms a 5 MPix uint8 frame (benchmarks/centres_speed.py)."""
+    tensor) of the white top-hat of the shrunk frame (:func:`~insitu.vision.laser_image.ridges`),
+    where a bright board or background has gone and only thin ridges stay. A line along the
+    rows has its gradients across them (along y). ≈ 2 ms a 5 MPix uint8 frame
+    (benchmarks/centres_speed.py)."""
     hat = ridges(shrink(as_image(image)))
     if min(hat.shape) < 3:
         return "rows" if hat.shape[1] >= hat.shape[0] else "cols"

@@ -153,10 +153,15 @@ def _stats(pre, row, w, near=False):
     beyond the plateau's ends, the line's own sides); contrast: peak minus the brighter
     side's (an edge of a bright region is no line)."""
     cols = np.arange(pre.shape[1])
-    below, inside = gather(pre, row[None, :] + np.arange(0, 2 * w + 1)[:, None], cols)
+    below, inside = gather(pre, row[None, :] + np.arange(0, w + 1)[:, None], cols)
     gmax = below[0]
     same = (below == gmax) & inside
-    run = np.where(same.all(axis=0), 2 * w + 1, np.argmin(same, axis=0))  # plateau, 1st max
+    run = np.where(same.all(axis=0), w + 1, np.argmin(same, axis=0))  # plateau from 1st max
+    long = np.flatnonzero(run > w)                     # a clipped core: its whole plateau
+    if len(long):
+        far, inside = gather(pre, row[None, long] + np.arange(0, 4 * w + 1)[:, None], long)
+        same = (far == gmax[long]) & inside
+        run[long] = np.where(same.all(axis=0), 4 * w + 1, np.argmin(same, axis=0))
     row = row + (run - 1) // 2
     if near:
         reach, pick = np.maximum(run - 2, 0) // 2 + 5, lambda a: a.min(axis=0)
