@@ -8,7 +8,8 @@ direction found from the image, no geometry given); with
 ``--background`` the set's laser-off photograph is subtracted (sets that have one).
 
 Truth. The board's pose in each photograph (found, or published) and the laser plane (the
-published one, else fitted robustly to every method's points on the boards,
+published one or the authors' own points', else fitted robustly to every method's points on
+the boards,
 in mm in the camera frame: the laser is fixed to the camera) give the stripe's true course in
 the image: the plane ∩ the board's plane, projected through the camera's distortion. A scan
 line (a column of an image whose stripe runs along the rows, a row where it runs down) crosses
@@ -163,8 +164,8 @@ def measure(s: PhotoSet, root: str, background: bool):
 def reference_plane(s: PhotoSet, shots):
     """The published plane, else one fitted to every method's points inside the boards'
     areas."""
-    if s.plane is not None:
-        return s.plane
+    if s.plane() is not None:
+        return s.plane()
     pts = []
     for _, (R, t), _, found in shots:
         for uv in (found[m] for m in METHODS):
@@ -231,9 +232,9 @@ def report(s: PhotoSet, root: str, background: bool, console: Console) -> None:
         r, rb = (rms_to_own_plane(X), rms_to_own_plane(Xb)) if len(X) > 3 else (np.nan,) * 2
         table.add_row(*cells, str(len(X)), f"{r:.3f}", f"{rb:.3f}", f"{r / rb:.2f}")
     console.print(table)
-    if s.plane is not None:
-        own = reference_plane(PhotoSet(**{**s.__dict__, "plane": None}), shots)
-        angle = np.degrees(np.arccos(min(1.0, abs(float(own[0] @ s.plane[0])))))
+    if s.plane() is not None:
+        own = reference_plane(PhotoSet(**{**s.__dict__, "plane": lambda: None}), shots)
+        angle = np.degrees(np.arccos(min(1.0, abs(float(own[0] @ s.plane()[0])))))
         console.print(f"the published plane and one fitted to the points: {angle:.2f}° apart")
 
 

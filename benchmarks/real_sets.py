@@ -16,7 +16,8 @@ DATA to the benchmark. Each set says where its photographs, camera and board are
   648 × 486 (``bc1`` … ``bc14``) of a green line across a checkerboard in a dark room, the
   board's aluminium frame beside it. Camera and each photograph's board pose: the
   repository's Bouguet calibration ``calibration/Calib_Results.mat`` (5 × 4 squares of
-  33.8 mm clicked in each).
+  33.8 mm clicked in each). Light plane: through the 8 points the authors clicked on the
+  stripe in photographs 1–8 (``calibration/cal_plane3.m``), cast onto those boards.
 * ``circles`` — zhaocongyang/structured_LineLight_calib: 12 pairs of full-HD colour JPEGs,
   ``light_picture/light<i>.jpg`` (a red line across a board of 7 × 7 dots 37.5 mm apart,
   standing on a glossy floor beside a steel cabinet) and ``calib_picture/calib<i>.jpg`` (the
@@ -43,7 +44,8 @@ import numpy as np
 class PhotoSet:
     """One set: ``files(root)`` → the photographs; ``pose(path, bgr)`` → (R (3, 3), t (3,)
     mm) board → camera or None; ``background(path)``: its laser-off photograph or None;
-    ``plane``: the published light plane (unit normal (3,), offset mm: n·x = d) or None."""
+    ``plane()``: the published light plane (unit normal (3,), offset mm: n·x = d) or None
+    (after ``files``)."""
 
     name: str
     repo: str
@@ -55,7 +57,7 @@ class PhotoSet:
     files: Callable[[str], list[str]]
     pose: Callable[[str, np.ndarray], tuple[np.ndarray, np.ndarray] | None]
     background: Callable[[str], str | None] = lambda path: None
-    plane: tuple[np.ndarray, float] | None = None
+    plane: Callable[[], tuple[np.ndarray, float] | None] = lambda: None
 
 
 def _checkerboard(K, dist, pattern, square, swap=False):
@@ -129,12 +131,30 @@ class _Ouc:
 
 
 _ouc = _Ouc()
+_OUC_CLICKS = {1: (118, 279), 2: (107, 225), 3: (523, 143), 4: (444, 255), 5: (109, 272),
+               6: (351, 213), 7: (351, 226), 8: (428, 222)}                # cal_plane3.m
+
+
+def _ouc_plane(K, dist):
+    """The plane through the authors' clicked stripe points (unit normal, offset mm)."""
+    X = []
+    for i, uv in _OUC_CLICKS.items():
+        R, t = _ouc.pose(f"bc{i}.BMP", None)
+        ray = cv2.undistortPoints(np.array([[uv]], np.float64), K, dist).ravel()
+        ray = np.r_[ray, 1.0]
+        X.append(ray * (R[:, 2] @ t) / (ray @ R[:, 2]))
+    X = np.array(X)
+    n = np.linalg.svd(X - X.mean(axis=0))[2][2]
+    return n, float(n @ X.mean(axis=0))
+
+
 OUC = PhotoSet(
     "ouc", "OUC-Underwater-3D/Laser3D", "62b416605ef9430a8104a9a3472f3c8b2908f50c", "g",
     np.array([[702.59357995, 0.0, 303.06241825], [0.0, 703.49340427, 227.21637754],
               [0.0, 0.0, 1.0]]),
     np.array([-0.14078253, 0.20232008, -0.00551167, -0.0004342, 0.0]),
-    (0.0, 169.0, 0.0, 135.2), _ouc.load, _ouc.pose)
+    (0.0, 169.0, 0.0, 135.2), _ouc.load, _ouc.pose,
+    plane=lambda: _ouc_plane(OUC.K, OUC.dist))
 
 # ---------------------------------------------- zhaocongyang/structured_LineLight_calib
 _C_K = np.array([[1144.4393086789801, 0.0, 916.05937324175795],
@@ -164,7 +184,7 @@ CIRCLES = PhotoSet(
     _folder("zhaocongyang/structured_LineLight_calib", "light_picture", "light*.jpg"),
     _circles_pose,
     lambda p: p.replace("light_picture", "calib_picture").replace("light", "calib"),
-    (_C_PLANE / np.linalg.norm(_C_PLANE), _C_D / np.linalg.norm(_C_PLANE)))
+    lambda: (_C_PLANE / np.linalg.norm(_C_PLANE), _C_D / np.linalg.norm(_C_PLANE)))
 
 SETS = {s.name: s for s in (DESKTOP, STRIPE, OUC, CIRCLES)}
 TUNING = "desktop"

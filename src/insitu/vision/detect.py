@@ -38,10 +38,11 @@ peaks. Common keyword arguments of the methods:
   :mod:`insitu.vision.laser_image`); None: everywhere.
 * min_run: a ridge of fewer valid columns is no stripe (a glint, a lamp, a short edge):
   dropped (:func:`~insitu.vision.chains.short_ridges`; 0: none is).
-* ridge: each column's candidates are the peaks of its white top-hat over ±window rows,
-  not of its values, and a peak's contrast is over its own sides (the least of 3 px, 3 to
-  5 px off), not over the band's ends: a line on a black square beside a white one is a
-  ridge, though the white square is brighter (photographs of a board; False: the values).
+* ridge: each column's candidates are the brightest of its pixels on a ridge (its white
+  top-hat over ±window rows passes the contrast threshold), and a peak's contrast is over its
+  own sides (the least of 3 px just beyond its half maximum), not over the band's ends: a line
+  on a black square beside a white one is a ridge, though the white square is brighter, and
+  of two ridges the brighter is the laser's (photographs; False: the brightest pixel).
 
 A stripe's clipped core is a plateau: its row is the plateau's middle, its background is
 taken beyond the plateau, and the band the methods work in (``Detection.window``) grows by
@@ -149,9 +150,9 @@ def gather(img: np.ndarray, rows: np.ndarray, cols: np.ndarray):
 def _stats(pre, row, w, near=False):
     """Plateau-centred rows, peak, background, contrast and plateau length for all columns.
     Background: the mean of the medians of 3 px at each end of the band ±w rows about it,
-    widened by half of a plateau longer than 2 px (near: of the least of the 3 px 3 to 5 px
-    beyond the plateau's ends, the line's own sides); contrast: peak minus the brighter
-    side's (an edge of a bright region is no line)."""
+    widened by half of a plateau longer than 2 px (near: of the least of the 3 px 1 to 3 px
+    beyond the line's half maximum, its own sides); contrast: peak minus the brighter side's
+    (an edge of a bright region is no line)."""
     cols = np.arange(pre.shape[1])
     below, inside = gather(pre, row[None, :] + np.arange(0, w + 1)[:, None], cols)
     gmax = below[0]
@@ -164,7 +165,8 @@ def _stats(pre, row, w, near=False):
         run[long] = np.where(same.all(axis=0), 4 * w + 1, np.argmin(same, axis=0))
     row = row + (run - 1) // 2
     if near:
-        reach, pick = np.maximum(run - 2, 0) // 2 + 5, lambda a: a.min(axis=0)
+        wide = w + min(int(run.max(initial=0)) // 2, w)
+        reach, pick = _half_width(pre, row, gmax, wide) + 1, lambda a: a.min(axis=0)
     else:
         reach, pick = w + np.maximum(run - 2, 0) // 2, lambda a: median3(*a)
     above, _ = gather(pre, row[None, :] - reach[None, :] + np.arange(3)[:, None], cols)
@@ -173,17 +175,29 @@ def _stats(pre, row, w, near=False):
     return row, gmax, (top + bot) / 2, gmax - np.maximum(top, bot), run
 
 
-def _search(pre, band, allow, fill, ridge):
+def _half_width(pre, row, gmax, w) -> np.ndarray:
+    """(W,) int: how far from ``row`` each column stays above half-way from the least of
+    its ±w band to its peak, on the wider side, px."""
+    cols = np.arange(pre.shape[1])
+    g, inside = gather(pre, row[None, :] + np.arange(-w, w + 1)[:, None], cols)
+    above = (g > (gmax + np.where(inside, g, np.inf).min(axis=0)) / 2) & inside
+    up = np.cumprod(above[w::-1], axis=0).sum(axis=0)
+    down = np.cumprod(above[w:], axis=0).sum(axis=0)
+    return np.minimum(np.maximum(up, down), w)
+
+
+def _search(pre, band, allow, fill, ridge, thr):
     """The (W, span) array of candidate rows per column (a copy, ours to overwrite), the
-    first row of each column's span (W,) and the searched columns (W,) bool. ridge > 0: the
-    column's white top-hat over 2·ridge + 1 rows instead of its values."""
+    first row of each column's span (W,) and the searched columns (W,) bool. ridge > 0: only
+    pixels whose column's white top-hat over 2·ridge + 1 rows reaches ``thr`` are
+    candidates."""
     H, W = pre.shape
     search = cv2.transpose(pre)
-    if ridge:
-        search = cv2.morphologyEx(search, cv2.MORPH_TOPHAT,
-                                  np.ones((1, 2 * ridge + 1), np.uint8),
-                                  borderType=cv2.BORDER_REPLICATE)
     blocked = None if allow is None else ~cv2.transpose(allow.astype(np.uint8)).astype(bool)
+    if ridge:
+        hat = cv2.morphologyEx(search, cv2.MORPH_TOPHAT, np.ones((1, 2 * ridge + 1), np.uint8),
+                               borderType=cv2.BORDER_REPLICATE)
+        blocked = hat < thr if blocked is None else blocked | (hat < thr)
     lo, searched = np.zeros(W, np.int64), np.ones(W, bool)
     if band is not None:
         blo, bhi = (np.broadcast_to(np.asarray(b, np.float64), (W,)) for b in band)
@@ -217,8 +231,8 @@ def detect(image, median=3, band=None, window=12, min_peak=40.0, min_contrast=20
     w = max(int(window or 12), 3)
     noise = noise_sigma(pre)
     fill = np.iinfo(pre.dtype).min if pre.dtype.kind == "u" else -np.inf
-    search, lo, searched = _search(pre, band, allow, fill, w if ridge else 0)
     thr = max(min_contrast, snr * noise)
+    search, lo, searched = _search(pre, band, allow, fill, w if ridge else 0, thr)
 
     def candidate(j):
         row, gmax, bg, contrast, run = _stats(pre, lo + j, w, ridge)

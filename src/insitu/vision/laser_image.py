@@ -14,8 +14,9 @@ its full scale, the laser's channel of a colour image, and a laser-off frame tak
   room light, lamps, furniture and their edges hold none. ``channel="auto"`` takes the
   channel whose excess forms the strongest thin ridges; those ridges (``ridge``) also tell
   which way the line runs.
-* Laser-off frame: subtracted, channel by channel; a pixel clipped in the frame stays at full
-  scale (the core of the stripe), so the clipped plateau is still found as one.
+* Laser-off frame: subtracted, channel by channel; a pixel the laser clipped (clipped in the
+  frame, not in the laser-off frame) stays at full scale (the core of the stripe), so the
+  clipped plateau is still found as one; one clipped in both is the scene's, and goes.
 """
 
 from __future__ import annotations
@@ -136,9 +137,11 @@ def _auto_channel(bgr: np.ndarray) -> int:
 
 def _laser_coloured(bgr: np.ndarray, c: int, fs: float) -> tuple[np.ndarray, np.ndarray]:
     """The thin ridges (white top-hat) of channel c's excess, and (H, W) bool: where they
-    (≥ :data:`CHROMA` · fs and :data:`CHROMA_SNR` · their noise) lie within reach (1 % of the
-    shorter side). Made on the excess max-pooled by reach // 3 (a thin ridge keeps its peak),
-    with reach // 3 ≥ 3 px left: a full-HD frame in 3 × 3 blocks."""
+    (≥ :data:`CHROMA` · fs and :data:`CHROMA_SNR` · their noise) are, or lie within reach
+    (1 % of the shorter side) on both sides — above and below, or left and right: the halo
+    round a core clipped white; a white thing beside a red one has them on one side only.
+    Made on the excess max-pooled by reach // 3 (a thin ridge keeps its peak), with
+    reach // 3 ≥ 3 px left: a full-HD frame in 3 × 3 blocks."""
     H, W = bgr.shape[:2]
     reach = max(3, round(min(H, W) / 100))
     f = max(1, reach // 3)
@@ -149,7 +152,11 @@ def _laser_coloured(bgr: np.ndarray, c: int, fs: float) -> tuple[np.ndarray, np.
     square = np.ones((2 * (reach // f) + 1,) * 2, np.uint8)
     thin = cv2.morphologyEx(excess, cv2.MORPH_TOPHAT, square, borderType=cv2.BORDER_REPLICATE)
     least = max(CHROMA * fs, CHROMA_SNR * noise_sigma(excess))
-    near = cv2.dilate((thin >= least).astype(np.uint8), square)
+    laser, r = (thin >= least).astype(np.uint8), reach // f
+    near = cv2.dilate(laser, np.ones((3, 3), np.uint8))
+    for shape, ends in (((r + 1, 1), ((0, 0), (0, r))), ((1, r + 1), ((0, 0), (r, 0)))):
+        a, b = (cv2.dilate(laser, np.ones(shape, np.uint8), anchor=e) for e in ends)
+        near |= a & b
     if f > 1:
         near = cv2.resize(near, (w * f, h * f), interpolation=cv2.INTER_NEAREST)
         near = cv2.copyMakeBorder(near, 0, H - h * f, 0, W - w * f, cv2.BORDER_REPLICATE)
@@ -185,11 +192,16 @@ def laser_image(image, channel: str = "auto", laser_off=None,
                                   f"image's {img.shape}")
         on = img
         img = cv2.subtract(on, off.astype(on.dtype))
-        img[on >= fs] = fs                              # a clipped core stays the brightest
+        img[(on >= fs) & (off < fs)] = fs               # the laser clipped it: the core
     if not colour:
         return LaserImage(np.ascontiguousarray(img), None, fs, None)
     img = np.ascontiguousarray(img)
-    c = _auto_channel(img) if channel == "auto" else CHANNELS[channel]
+    if channel != "auto":
+        c = CHANNELS[channel]
+    elif off is not None:               # the channel the laser added most light to
+        c = int(np.argmax(cv2.sumElems(img)[:3]))
+    else:
+        c = _auto_channel(img)
     thin, allow = _laser_coloured(img, c, fs)
     total = None
     if channel == "auto":
