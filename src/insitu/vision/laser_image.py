@@ -9,9 +9,9 @@ its full scale, the laser's channel of a colour image, and a laser-off frame tak
   mean, not the larger, because a camera's blue pixels see a green laser too), and of X its
   thin ridges (white top-hat, 2·reach + 1 px: a red door or an orange wall is no stripe). A
   stripe's clipped core is white (X = 0) but its halo is not, so a pixel may hold the line
-  when a ridge of laser-coloured light lies within reach of it (``allow``): at least
-  :data:`CHROMA` of full scale and :data:`CHROMA_SNR` times the excess's own noise; white
-  room light, lamps, furniture and their edges hold none. ``channel="auto"`` takes the
+  when it is on a ridge of laser-coloured light or has one within reach on both sides
+  (``allow``; a ridge: at least :data:`CHROMA` of full scale and :data:`CHROMA_SNR` times the
+  excess's own noise); white room light, lamps, furniture and their edges hold none. ``channel="auto"`` takes the
   channel whose excess forms the strongest thin ridges; those ridges (``ridge``) also tell
   which way the line runs.
 * Laser-off frame: subtracted, channel by channel; a pixel the laser clipped (clipped in the
@@ -46,8 +46,8 @@ class ImageInputError(MeasurementError, ValueError):
 @dataclass(frozen=True)
 class LaserImage:
     """gray: (H, W) uint8/uint16/float32, the laser's light (its channel, laser-off frame
-    taken away). allow: (H, W) bool, where laser-coloured light lies within reach (None:
-    everywhere; gray input). full_scale: the frame's full scale in gray's units. channel:
+    taken away). allow: (H, W) bool, where a peak may be taken (module docstring; None:
+    everywhere, gray input). full_scale: the frame's full scale in gray's units. channel:
     "r", "g", "b" or None (gray input). ridge: float32, the thin ridges of the laser's excess
     over the other channels, at a smaller scale for a large frame (None: gray input).
     total: (H, W) the sum of the three channels (full scale 3 · full_scale), where a core

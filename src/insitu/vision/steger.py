@@ -60,6 +60,13 @@ def _flank_fit(g, inside, x, sat_mask, floor, unit=1.0):
     return np.where(ok, vertex, np.nan)
 
 
+def _segment(mask, at):
+    """(k, n) bool: the run of True rows of ``mask`` (k, n) holding row ``at`` (n,) of each
+    column (none where that row is False)."""
+    label = np.cumsum(~mask, axis=0)
+    return mask & (label == label[at, np.arange(mask.shape[1])]) & mask[at, np.arange(mask.shape[1])]
+
+
 def _plateau_centre(raw, inside, x, sat_mask, noise, unit=1.0):
     """Offsets (n,) of saturated plateaus' centres: flank fit, else the centroid of the pixels
     joined to the plateau that stand above half-way from the brighter of its two sides (the
@@ -72,15 +79,14 @@ def _plateau_centre(raw, inside, x, sat_mask, noise, unit=1.0):
     g = np.where(inside, raw - bg, 0)
     floor = np.maximum(max(3.0 * unit, 3.0 * noise), np.abs(bg[-1] - bg[0]))
     vertex = _flank_fit(g, inside, x, sat_mask, floor, unit)
-    k, n = len(raw) // 2, raw.shape[1]
-    run = np.r_[np.cumprod(sat_mask[k::-1], axis=0)[::-1][:-1], np.cumprod(sat_mask[k:], axis=0)]
-    lo = np.clip(k - np.cumprod(sat_mask[k::-1], axis=0).sum(axis=0) - 2, 0, len(raw) - 1)
-    hi = np.clip(k + np.cumprod(sat_mask[k:], axis=0).sum(axis=0) + 2, 0, len(raw) - 1)
-    side = np.maximum(raw[lo, np.arange(n)], raw[hi, np.arange(n)])
-    half = (raw.max(axis=0) + side) / 2
-    above = (inside & (raw > half)) | run.astype(bool)
-    near = np.r_[np.cumprod(above[k::-1], axis=0)[::-1][:-1], np.cumprod(above[k:], axis=0)]
-    weight = np.where(near.astype(bool), raw - half, 0)
+    k, cols = len(raw) // 2, np.arange(raw.shape[1])
+    top = k - 2 + np.argmax(raw[k - 2:k + 3], axis=0)          # the clipped pixel nearest
+    run = _segment(sat_mask, top)
+    lo = np.clip(np.argmax(run, axis=0) - 3, 0, len(raw) - 1)
+    hi = np.clip(len(raw) - np.argmax(run[::-1], axis=0) + 2, 0, len(raw) - 1)
+    half = (raw[top, cols] + np.maximum(raw[lo, cols], raw[hi, cols])) / 2
+    near = _segment((inside & (raw > half)) | run, top)
+    weight = np.where(near, raw - half, 0)
     cen = (weight * x).sum(axis=0) / np.maximum(weight.sum(axis=0), 1e-9)
     return np.where(np.isfinite(vertex), vertex, cen)
 
