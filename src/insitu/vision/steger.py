@@ -63,8 +63,8 @@ def _flank_fit(g, inside, x, sat_mask, floor, unit=1.0):
 def _segment(mask, at):
     """(k, n) bool: the run of True rows of ``mask`` (k, n) holding row ``at`` (n,) of each
     column (none where that row is False)."""
-    label = np.cumsum(~mask, axis=0)
-    return mask & (label == label[at, np.arange(mask.shape[1])]) & mask[at, np.arange(mask.shape[1])]
+    label, cols = np.cumsum(~mask, axis=0), np.arange(mask.shape[1])
+    return mask & (label == label[at, cols]) & mask[at, cols]
 
 
 def _plateau_centre(raw, inside, x, sat_mask, noise, unit=1.0):
