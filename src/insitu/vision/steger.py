@@ -69,24 +69,29 @@ def _segment(mask, at):
 
 def _plateau_centre(raw, inside, x, sat_mask, noise, unit=1.0):
     """Offsets (n,) of saturated plateaus' centres: flank fit, else the centroid of the pixels
-    joined to the plateau that stand above half-way from the brighter of its two sides (the
-    pixels 3 px beyond its ends) to its top (weights: value minus that half; a bright pixel
-    further off, or a bright area at the band's end, does not count). raw: (k, n) band of the
-    image centred on the peak; the fit is made above its sloping background, with pixels more
-    than 3 noise sigmas (at least 3 ``unit``: one gray value of the 8-bit scale) and the
-    background's change across the band above it."""
+    joined to the plateau (the clipped run nearest the band's middle) that stand above half
+    its height over the band's sloping background — or, where that background changes across
+    the band by more than half the plateau's height (a bright area's edge at one end), above
+    half-way from the brighter of the plateau's own sides (3 px beyond its ends) to its top;
+    weights: value minus that level. raw: (k, n) band of the image centred on the peak; the
+    fit is made above its sloping background, with pixels more than 3 noise sigmas (at least
+    3 ``unit``: one gray value of the 8-bit scale) and the background's change across the
+    band above it."""
     bg = band_background(raw)
     g = np.where(inside, raw - bg, 0)
     floor = np.maximum(max(3.0 * unit, 3.0 * noise), np.abs(bg[-1] - bg[0]))
     vertex = _flank_fit(g, inside, x, sat_mask, floor, unit)
     k, cols = len(raw) // 2, np.arange(raw.shape[1])
-    top = k - 2 + np.argmax(raw[k - 2:k + 3], axis=0)          # the clipped pixel nearest
-    run = _segment(sat_mask, top)
+    peak = k - 2 + np.argmax(raw[k - 2:k + 3], axis=0)         # the clipped pixel nearest
+    run = _segment(sat_mask, peak)
     lo = np.clip(np.argmax(run, axis=0) - 3, 0, len(raw) - 1)
     hi = np.clip(len(raw) - np.argmax(run[::-1], axis=0) + 2, 0, len(raw) - 1)
-    half = (raw[top, cols] + np.maximum(raw[lo, cols], raw[hi, cols])) / 2
-    near = _segment((inside & (raw > half)) | run, top)
-    weight = np.where(near, raw - half, 0)
+    top = raw[peak, cols]
+    steep = np.abs(bg[-1] - bg[0]) > (top - np.maximum(bg[0], bg[-1])) / 2
+    level = np.where(steep, (top + np.maximum(raw[lo, cols], raw[hi, cols])) / 2,
+                     bg + g.max(axis=0) / 2)
+    near = _segment((inside & (raw > level)) | run, peak)
+    weight = np.where(near, raw - level, 0)
     cen = (weight * x).sum(axis=0) / np.maximum(weight.sum(axis=0), 1e-9)
     return np.where(np.isfinite(vertex), vertex, cen)
 
