@@ -25,7 +25,7 @@ import numpy as np
 from rich.console import Console
 from rich.table import Table
 
-from insitu.calibrate.field import area_table, stats
+from insitu.calibrate.field_areas import area_table, stats
 from insitu.services.station import simulated
 from insitu.sim.world import SimWorld
 from insitu.sim.devices import SimCamera, SimScanHead, SimStage

@@ -15,9 +15,9 @@ from typer.testing import CliRunner
 
 from insitu.calibrate.fiducials import find_circles
 from insitu.services.station import simulated
-from insitu.calibrate.field import (CorrectionTable, RBFNetwork, area_table, fit_rbf, fit_table,
-                                    folds, invert, ols_order, select_rbf, select_table,
-                                    table_nodes)
+from insitu.calibrate.field import (CorrectionTable, RBFNetwork, fit_rbf, fit_table, folds,
+                                    invert, ols_order, select_rbf, select_table, table_nodes)
+from insitu.calibrate.field_areas import area_table
 from insitu.calibrate.field_file import (FieldCorrection, correction_from_file,
                                          load_field_correction, model_spec,
                                          save_field_correction)

@@ -18,9 +18,9 @@ from typing import Annotated, Any, Literal
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
 
-from insitu.calibrate.field import (DEFAULT_GOALS, DEFAULT_SMOOTHING, AreaStats, CorrectionTable,
-                                    Model, RBFNetwork, Selection, invert, select_rbf,
-                                    select_table)
+from insitu.calibrate.field import (DEFAULT_GOALS, DEFAULT_SMOOTHING, CorrectionTable, Model,
+                                    RBFNetwork, Selection, invert, select_rbf, select_table)
+from insitu.calibrate.field_areas import AreaStats
 from insitu.errors import ConfigError
 from insitu.formats.sequence import CameraSpec
 from insitu.formats.bounds import each_within, within

@@ -12,7 +12,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from insitu.calibrate.field import AreaStats
+from insitu.calibrate.field_areas import AreaStats
 from insitu.errors import FormatError
 from insitu.formats.atomic import atomic_write_bytes
 

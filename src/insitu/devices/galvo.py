@@ -115,18 +115,10 @@ def list_digest(commands: Sequence[Command]) -> str:
     return hashlib.sha256("".join(c.text() + "\n" for c in commands).encode()).hexdigest()
 
 
-def check_lists(controller, lists: Sequence[Sequence[Command]]) -> None:
-    """``controller.check(lists)`` for a controller that has device limits (no-op otherwise)."""
-    check = getattr(controller, "check", None)
-    if check is not None:
-        check(lists)
-
-
-def position_of(controller, commands: Sequence[Command]) -> int | None:
+def position_of(controller: Controller, commands: Sequence[Command]) -> int | None:
     """Commands of ``commands`` the controller reports done when its last list was this one
     (None: it reports no position, or its last list was another)."""
-    get = getattr(controller, "position", None)
-    pos = get() if get is not None else None
+    pos = controller.position()
     if pos is None or pos.digest != list_digest(commands):
         return None
     return min(max(pos.done, 0), len(commands))

@@ -24,6 +24,13 @@ class Camera(Protocol):
         ...
 
 
+@runtime_checkable
+class ExposureCamera(Camera, Protocol):
+    """A camera that says the exposure its frames are taken with (a recording's does not)."""
+
+    exposure_ms: float
+
+
 def check_in_field(field_size_mm, *points) -> None:
     """What a scan head does before it draws: SafetyError naming the first of ``points``
     ((2,) mm on z = 0 each) outside the field ``field_size_mm`` (width, height) centred on the

@@ -21,8 +21,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
-from insitu.devices.galvo import (SETTINGS, WOBBLE, Command, check_lists, list_digest,
-                                  position_of)
+from insitu.devices.galvo import SETTINGS, WOBBLE, Command, list_digest, position_of
 from insitu.errors import ConfigError, DeviceError, FormatError, SafetyError
 from insitu.marking.driver import GalvoDriver
 from insitu.marking.job import MarkJob
@@ -196,7 +195,7 @@ def run_job(job: MarkJob, driver: GalvoDriver, controller, progress_path: str | 
                           "paths: resume it, or restart it to mark it again from the start")
     s = s if resume else None
     items, settled = _plan(job, driver, controller, s, cut_path, jpath)
-    check_lists(controller, [cmds for _, cmds, _, _ in items])
+    controller.check([cmds for _, cmds, _, _ in items])
     s = s or JournalSummary(sha, total)
     cut = (s.cut, cut_path) if s.cut is not None else (None, None)
     start = items[0][0] if items else total
@@ -264,7 +263,7 @@ def run_preview(job: MarkJob, driver: GalvoDriver, controller,
     """Draw the job's outline with the pilot laser (see :meth:`GalvoDriver.preview`); the
     laser is off when this returns or raises."""
     cmds = driver.preview(job, outline, speed_mm_s, repeat)
-    check_lists(controller, [cmds])
+    controller.check([cmds])
     err = None
     try:
         controller.execute(cmds)

@@ -12,7 +12,6 @@ from typing import TYPE_CHECKING
 import cv2
 import numpy as np
 
-from insitu.devices.galvo import check_lists
 from insitu.errors import FormatError
 from insitu.formats.atomic import atomic_write_bytes
 from insitu.marking import (GalvoDriver, JournalSummary, MarkJob, RunResult, history,
@@ -66,11 +65,10 @@ class _Abortable:
         self.inner.laser_off()
 
     def check(self, lists) -> None:
-        check_lists(self.inner, lists)
+        self.inner.check(lists)
 
     def position(self):
-        get = getattr(self.inner, "position", None)
-        return get() if get is not None else None
+        return self.inner.position()
 
 
 def mark(job: MarkJob, driver: GalvoDriver, controller, progress_path: str | Path | None,

@@ -10,6 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
+from insitu.devices.protocols import ExposureCamera
 from insitu.errors import ConfigError, DeviceError
 from insitu.formats.sequence import SequenceWriter
 from insitu.geometry.beams import axis_lines
@@ -39,7 +40,7 @@ def _exposure(camera, exposure_ms: float | None) -> float | None:
     """Set the camera's exposure when given; the exposure its frames are taken with."""
     if exposure_ms is not None:
         camera.set_exposure(exposure_ms)
-    return getattr(camera, "exposure_ms", exposure_ms)
+    return camera.exposure_ms if isinstance(camera, ExposureCamera) else exposure_ms
 
 
 def _on_plate(station: Station):

@@ -13,7 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from insitu.devices.protocols import Camera, ScanHead
+from insitu.devices.protocols import Camera, ExposureCamera, ScanHead
 from insitu.formats.bounds import BOUNDS
 from insitu.services.station import Station
 
@@ -65,9 +65,9 @@ def grab_room_light(camera: Camera, head: ScanHead, start_ms: float | None = Non
     one frame at whatever it has). The exposure is set back to ``restore_ms`` (default: the
     camera's before)."""
     head.off()
-    before = getattr(camera, "exposure_ms", None)
-    if before is None:
+    if not isinstance(camera, ExposureCamera) or camera.exposure_ms is None:
         return RoomLightFrame(camera.grab(), None)
+    before = camera.exposure_ms
     exposure, grabs = float(start_ms if start_ms is not None else before), 0
     camera.set_exposure(exposure)            # manual: a camera on its own auto is set to it
     try:
