@@ -10,43 +10,44 @@ import typer
 
 from insitu.cli.common import bounded, check_output, console, one_line_errors
 from insitu.cli.job import print_read_back
-from insitu.cli.options import Field, Rig, Seed, Workpiece
-from insitu.errors import ConfigError, FormatError
-from insitu.marking.modes import PROJECTIONS, projection_mode
+from insitu.cli.options import Field, Mode, Rig, Seed, Workpiece
+from insitu.errors import ConfigError
+from insitu.marking.modes import projection_mode
 from insitu.patterns.load import sources_help
 from insitu.patterns.vector import BEAM_MM
 
 
+Image = Annotated[Path, typer.Argument(
+    metavar="IMAGE.png", help="The side camera's frame of the marked part (the laser off), or "
+    "without --cloud, --pattern and --at any photograph (PNG, JPEG, WebP, …).")]
+Cloud = Annotated[Path | None, typer.Option(help="Measured point cloud (.ply) the pattern "
+                                                 "was placed on.")]
+AsMarked = Annotated[str | None, typer.Option(
+    "--pattern", help=f"As marked: a file or spec: {sources_help()}.")]
+AtAsMarked = Annotated[tuple[float, float] | None, typer.Option(
+    "--at", metavar="X Y", callback=bounded("position_mm"),
+    help="Centre of the pattern X Y, mm, world frame, as marked.")]
+Out = Annotated[Path | None, typer.Option("-o", "--output", help="Read-back picture to write "
+                                                                 "(.png; needed with a plan).")]
+WidthAsMarked = Annotated[float | None, typer.Option(
+    "--width", callback=bounded("length_mm"), help="Width as marked, mm (insitu mark --width).")]
+RotateAsMarked = Annotated[float, typer.Option(
+    "--rotate", callback=bounded("angle_deg"), help="Rotation as marked, degrees CCW about +z.")]
+HatchAsMarked = Annotated[float | None, typer.Option(
+    "--hatch", callback=bounded("length_mm"), help="Hatch spacing as marked, mm.")]
+BeamWidth = Annotated[float, typer.Option("--beam", callback=bounded("length_mm"),
+                                          help="Beam width, mm.")]
+JobAsMarked = Annotated[Path | None, typer.Option(
+    "--job", metavar="JOB.json", help="The job as marked: a pattern with fields ({serial}, "
+    "{date}, --var …) is read back as that job rendered it (its variable_data).")]
+
+
 @one_line_errors
-def inspect(
-    image: Annotated[Path, typer.Argument(metavar="IMAGE.png", help="The side camera's frame "
-                                          "of the marked part (the laser off), or without "
-                                          "--cloud, --pattern and --at any photograph "
-                                          "(PNG, JPEG, WebP, …).")],
-    cloud: Annotated[Path | None, typer.Option(help="Measured point cloud (.ply) the pattern "
-                                                    "was placed on.")] = None,
-    pattern: Annotated[str | None, typer.Option(
-        help=f"As marked: a file or spec: {sources_help()}.")] = None,
-    at: Annotated[tuple[float, float] | None, typer.Option(metavar="X Y",
-        callback=bounded("position_mm"), help="Centre of the pattern X Y, mm, world frame, "
-                                              "as marked.")] = None,
-    out: Annotated[Path | None, typer.Option("-o", "--output", help="Read-back picture to "
-                                             "write (.png; needed with a plan).")] = None,
-    width: Annotated[float | None, typer.Option(
-        callback=bounded("length_mm"), help="Width as marked, mm (insitu mark --width).")] = None,
-    rotate: Annotated[float, typer.Option(
-        callback=bounded("angle_deg"), help="Rotation as marked, degrees CCW about +z.")] = 0.0,
-    mode: Annotated[str, typer.Option(help="; ".join(f"{k}: {m.description}" for k, m in
-                                                     PROJECTIONS.items()) + ".")] = "planar",
-    hatch: Annotated[float | None, typer.Option(
-        callback=bounded("length_mm"), help="Hatch spacing as marked, mm.")] = None,
-    beam: Annotated[float, typer.Option(
-        callback=bounded("length_mm"), help="Beam width, mm.")] = BEAM_MM,
-    job: Annotated[Path | None, typer.Option(
-        metavar="JOB.json", help="The job as marked: a pattern with fields ({serial}, {date}, "
-        "--var …) is read back as that job rendered it (its variable_data).")] = None,
-    rig: Rig = None, field: Field = None, workpiece: Workpiece = "step-block", seed: Seed = 0,
-) -> None:
+def inspect(image: Image, cloud: Cloud = None, pattern: AsMarked = None, at: AtAsMarked = None,
+            out: Out = None, width: WidthAsMarked = None, rotate: RotateAsMarked = 0.0,
+            mode: Mode = "planar", hatch: HatchAsMarked = None, beam: BeamWidth = BEAM_MM,
+            job: JobAsMarked = None, rig: Rig = None, field: Field = None,
+            workpiece: Workpiece = "step-block", seed: Seed = 0) -> None:
     """Read a mark back from IMAGE (the station's camera, as calibrated): the pattern is
     planned again as `insitu mark` placed it (same options), the image rectified onto the
     cloud's surface around it, a code decoded and graded. Writes the picture of the mark with
@@ -58,12 +59,10 @@ def inspect(
     writes the rectified codes); exit 1 when none reads."""
     from insitu.formats.images import read_image
     from insitu.formats.pointcloud import read_ply
-    from insitu.marking import Placement, read_job
-    from insitu.patterns.fields import is_template
-    from insitu.services.inspect import read_back
+    from insitu.marking import Placement
+    from insitu.services.inspect import as_marked, read_back
     from insitu.services.mark import save_image
     from insitu.services.plan import plan_mark
-    from insitu.services.serials import job_variables, render_placement
     from insitu.services.station import connect
 
     plan_options = {"--cloud": cloud, "--pattern": pattern, "--at": at}
@@ -76,15 +75,7 @@ def inspect(
                          "--cloud, --pattern, --at to read IMAGE as a photograph)")
     check_output(out, ".png")
     projection_mode(mode)
-    placement = Placement(pattern, at, width, rotate, mode, hatch, beam_mm=beam)
-    if is_template(pattern):
-        if job is None:
-            raise FormatError(f"--pattern {pattern!r} has fields: name the job it was marked "
-                              "with (--job JOB.json), whose texts say what was marked")
-        values = job_variables(read_job(job), job)
-        if values is None:
-            raise FormatError(f"{job}: no variable_data: not the job of a pattern with fields")
-        placement = render_placement(placement, values.variables())
+    placement = as_marked(Placement(pattern, at, width, rotate, mode, hatch, beam_mm=beam), job)
     measured = read_ply(cloud)
     with connect(rig, workpiece, seed, field=field) as station:
         cam = station.rig.camera

@@ -15,6 +15,7 @@ import numpy as np
 from insitu.errors import FormatError
 from insitu.formats.pointcloud import PointCloud
 from insitu.geometry.camera import CameraModel
+from insitu.marking import Placement
 from insitu.marking.readback import MarkReading, read_mark
 from insitu.marking.readback_picture import readback_picture
 from insitu.marking.surface import Surface
@@ -102,3 +103,22 @@ def table_rows(result: ReadBack) -> list[list[str]]:
                      "yes" if r.ok else "NO", off, f"{r.seen:.0%}",
                      "-" if r.grades is None else r.grades.summary()])
     return rows
+
+
+def as_marked(placement: Placement, job_path: Path | None) -> Placement:
+    """``placement`` as its job marked it: a pattern with fields (``{serial}``, ``{date}``, …)
+    rendered with the job's recorded variable data (FormatError naming the pattern without a
+    job, or a job without that record)."""
+    from insitu.marking import read_job
+    from insitu.patterns.fields import is_template
+    from insitu.services.serials import job_variables, render_placement
+
+    if not is_template(placement.pattern):
+        return placement
+    if job_path is None:
+        raise FormatError(f"pattern {placement.pattern!r} has fields: name the job it was "
+                          "marked with, whose texts say what was marked", field="pattern")
+    values = job_variables(read_job(job_path), job_path)
+    if values is None:
+        raise FormatError(f"{job_path}: no variable_data: not the job of a pattern with fields")
+    return render_placement(placement, values.variables())
