@@ -12,7 +12,7 @@ columns, found from the image's structure when not given (:func:`line_direction`
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import cv2
 import numpy as np
@@ -174,7 +174,8 @@ def line_centres(image: np.ndarray, method: str = "gray", direction: str | None 
     peaks are taken only where laser-coloured light lies within reach). A colour image with
     channel "auto" is measured in its laser's channel, or in the sum of its channels when the
     laser's channel is clipped at most of the stripe's peaks (a halo clips it; the core clips
-    white, the halo does not) or the sum holds the longer stripe. direction: "rows" (one
+    white, the halo does not) or the sum holds the longer stripe; peak and contrast are then
+    the channels' mean, on the frame's scale. direction: "rows" (one
     point per column), "cols" (one per row: the frame is transposed and u, v swapped back) or
     None (auto, :func:`line_direction`). band: (lo, hi) allowed range of the cross coordinate
     per scan line (v per column, or u per row for "cols"). clipped: the fraction of full
@@ -200,7 +201,7 @@ def line_centres(image: np.ndarray, method: str = "gray", direction: str | None 
         t = _along(fn, li.total, direction, band, allow, scaled(3 * li.full_scale))
         if (np.mean(c.saturated) > 0.5 if len(c) else False) or \
                 _stripe_length(t, direction) > _stripe_length(c, direction):
-            return t
+            return replace(t, peak=t.peak / 3, contrast=t.contrast / 3, full_scale=c.full_scale)
     return c
 
 
