@@ -88,6 +88,7 @@ def run_on_station(station, job, job_path: Path, resume: bool, preview: bool,
     cut = f", cut path {r.cut + 1}: {r.cut_choice}" if r.cut is not None else ""
     console.print(f"{done} ({r.state}{cut}); journal in {journal_path_for(job_path)}",
                   highlight=False)
+    console.print(step_time_text("marking", run.time), highlight=False)
     if inspect is not None and read is not None:
         from insitu.services.inspect import read_back, save_read_back
 
@@ -99,6 +100,14 @@ def run_on_station(station, job, job_path: Path, resume: bool, preview: bool,
         console.print(f"wrote {inspect} (the raw frame: {raw})", highlight=False)
     elif inspect is not None:
         console.print(f"wrote {inspect}", highlight=False)
+
+
+def step_time_text(what: str, t) -> str:
+    """``what``'s seconds in one line: the station's own (its devices'; a real rig has only
+    the wall clock), the computer's processing CPU and the wall clock's."""
+    station = (f"station {t.station:.2f} s" if t.station is not None
+               else "station: a real rig (its time is the wall clock's)")
+    return f"{what}: {station}, CPU {t.cpu:.2f} s, wall {t.wall:.1f} s"
 
 
 def print_read_back(result) -> None:

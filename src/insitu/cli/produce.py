@@ -49,7 +49,13 @@ def part_line(rec) -> Text:
     if rec.rescan_s is not None:
         bits.append(f"second look, crossed ({rec.rescan_s:.1f} s)")
     total = sum(getattr(rec, f"{s}_s") or 0.0 for s in STAGES)
-    bits.append(f"{total:.1f} s")
+    station = [getattr(rec, f"{s}_station_s") for s in STAGES]
+    cpu = sum(getattr(rec, f"{s}_cpu_s") or 0.0 for s in STAGES)
+    if any(v is not None for v in station):
+        bits.append(f"station {sum(v or 0.0 for v in station):.2f} s, CPU {cpu:.2f} s, "
+                    f"wall {total:.1f} s")
+    else:
+        bits.append(f"CPU {cpu:.2f} s, wall {total:.1f} s")
     if rec.error:
         bits.append(rec.error)
     return Text.assemble((f"part {rec.part} {rec.outcome}", style), ": " + "; ".join(bits))

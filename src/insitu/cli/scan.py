@@ -104,8 +104,19 @@ def scan(
     if room_light is not None:
         table.add_row("room-light frame", f"→ {room_light}" if result.room_light is not None
                       else f"not written: {s.ambient}")
-    table.add_row("time", f"{s.seconds:.1f} s")
+    table.add_row("time", scan_time_text(s))
     console.print(table)
+
+
+def scan_time_text(s) -> str:
+    """The scan's seconds: the station's own (its frames; none for a replay or a real rig),
+    the computer's processing CPU — which runs beside the frames, so a station's scan takes
+    the longer of the two — and the wall clock's (with the simulator's drawing)."""
+    cpu = f"CPU {s.cpu_s:.2f} s (processing)"
+    if s.station_s is None:
+        return f"{cpu}, wall {s.seconds:.1f} s"
+    return (f"station {s.station_s:.2f} s, {cpu}: a cycle of {max(s.station_s, s.cpu_s):.2f} s "
+            f"(the slower of the two); wall {s.seconds:.1f} s")
 
 
 def _rig_height_calibration(rig: Path) -> Path | None:

@@ -7,7 +7,14 @@ JSON lines after each record, for a spreadsheet).
      "decoded": "00007",
      "decode_ok": true, "grade": "A", "offset_mm": 0.03, "job": "part-0007.job.json",
      "scan_s": 1.2, "rescan_s": null, "locate_s": 0.4, "plan_s": 0.3, "mark_s": 0.8,
-     "read_s": 0.5, "error": null, "resumed": false, "time": "2026-12-02T05:01:02+00:00"}
+     "read_s": 0.5, "scan_station_s": 0.9, "scan_cpu_s": 0.7, ..., "read_station_s": 0.2,
+     "read_cpu_s": 0.4, "error": null, "resumed": false, "time": "2026-12-02T05:01:02+00:00"}
+
+Per stage (``scan``, ``rescan``, ``locate``, ``plan``, ``mark``, ``read``): ``<stage>_s`` the
+wall clock's seconds, ``<stage>_station_s`` the station's own (its devices' time: camera
+frames, the head, marking; null on a real rig, whose time is the wall clock's, and 0 for a
+stage that drives no device) and ``<stage>_cpu_s`` the computer's processing
+(``time.process_time``; on the simulated rig the simulator's drawing is left out).
 
 ``image_edges``: the room-light frame's edge points that gave x, y and the turn (0: the scan
 lines' edges did). ``rescan_s``: the second look's crossed scan (null: none). ``outcome``: "marked" (marked and
@@ -63,6 +70,18 @@ class PartRecord(BaseModel):
     plan_s: float | None = None
     mark_s: float | None = None
     read_s: float | None = None
+    scan_station_s: float | None = None
+    rescan_station_s: float | None = None
+    locate_station_s: float | None = None
+    plan_station_s: float | None = None
+    mark_station_s: float | None = None
+    read_station_s: float | None = None
+    scan_cpu_s: float | None = None
+    rescan_cpu_s: float | None = None
+    locate_cpu_s: float | None = None
+    plan_cpu_s: float | None = None
+    mark_cpu_s: float | None = None
+    read_cpu_s: float | None = None
     error: str | None = None
     resumed: bool = False
     time: str

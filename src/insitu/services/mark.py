@@ -12,6 +12,7 @@ from typing import TYPE_CHECKING
 import cv2
 import numpy as np
 
+from insitu.devices.clock import StepTime, StepTimer
 from insitu.errors import FormatError
 from insitu.formats.atomic import atomic_write_bytes
 from insitu.marking import (GalvoDriver, JournalSummary, MarkJob, RunResult, history,
@@ -92,13 +93,15 @@ def mark(job: MarkJob, driver: GalvoDriver, controller, progress_path: str | Pat
 @dataclass(frozen=True)
 class StationRun:
     """A job marked on the station: ``result``, the ``progress_path`` recording it (None:
-    not recorded), the camera's ``image`` (H, W) of the marked part (None: not asked) and
-    the marks read back from it (``insitu.services.inspect.ReadBack``; None: not read)."""
+    not recorded), the camera's ``image`` (H, W) of the marked part (None: not asked), the
+    marks read back from it (``insitu.services.inspect.ReadBack``; None: not read) and the
+    seconds it took (``time``: station, CPU, wall; :class:`~insitu.devices.clock.StepTime`)."""
 
     result: RunResult
     progress_path: Path | None
     image: np.ndarray | None = None
     readback: object | None = None
+    time: StepTime | None = None
 
 
 def mark_on_station(station: Station, job: MarkJob, job_path: str | Path | None = None, *,
@@ -112,12 +115,13 @@ def mark_on_station(station: Station, job: MarkJob, job_path: str | Path | None 
     under the room light, auto-exposed, when ``image`` is set or ``inspect`` names the .png
     to write."""
     ppath = progress_path_for(job_path) if job_path is not None else None
+    timer = StepTimer(station.clock)
     result = mark(job, station.driver, station.devices.controller, ppath, resume, preview,
                   cancel, progress, restart, cut_path)
     picture = station_room_light(station).image if image or inspect is not None else None
     if inspect is not None:
         save_image(inspect, picture)
-    return StationRun(result, ppath, picture)
+    return StationRun(result, ppath, picture, time=timer.elapsed())
 
 
 def save_image(path: str | Path, image: np.ndarray) -> None:

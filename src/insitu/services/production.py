@@ -15,7 +15,6 @@ them) gets a second look: the part scanned again, crossed, where it lies (:func:
 from __future__ import annotations
 
 import threading
-import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from datetime import datetime, timezone
@@ -24,6 +23,7 @@ from typing import Any, Protocol
 
 import numpy as np
 
+from insitu.devices.clock import StepTimer
 from insitu.errors import DeviceError, FormatError, InsituError
 from insitu.formats.pointcloud import PointCloud, read_ply, write_ply
 from insitu.formats.production_log import PartRecord, append_record, read_log
@@ -165,6 +165,8 @@ class _Part:
 
     number: int
     times: dict[str, float] = field(default_factory=dict)
+    station: dict[str, float | None] = field(default_factory=dict)
+    cpu: dict[str, float] = field(default_factory=dict)
     fields: dict[str, Any] = field(default_factory=dict)
     serial: int | None = None
     job: Path | None = None
@@ -174,6 +176,9 @@ class _Part:
                           job=None if self.job is None else self.job.name, error=error,
                           time=datetime.now(timezone.utc).isoformat(timespec="seconds"),
                           **{f"{k}_s": round(v, 3) for k, v in self.times.items()},
+                          **{f"{k}_station_s": None if v is None else round(v, 3)
+                             for k, v in self.station.items()},
+                          **{f"{k}_cpu_s": round(v, 3) for k, v in self.cpu.items()},
                           **self.fields, **more)
 
 
@@ -248,14 +253,21 @@ def _text(e: BaseException) -> str:
 
 
 def _stage(run: Production, part: _Part, name: str, work: Callable[[], Any]) -> Any:
-    """``work()`` as stage ``name`` of ``part``, its time added to the stage's."""
+    """``work()`` as stage ``name`` of ``part``, its seconds (wall, station, CPU:
+    :class:`~insitu.devices.clock.StepTimer`) added to the stage's."""
     if run.on_stage is not None:
         run.on_stage(part.number, name)
-    t0 = time.perf_counter()
+    timer = StepTimer(run.station.clock)
     try:
-        return work()
+        with timer:
+            return work()
     finally:
-        part.times[name] = part.times.get(name, 0.0) + time.perf_counter() - t0
+        t = timer.result
+        part.times[name] = part.times.get(name, 0.0) + t.wall
+        part.cpu[name] = part.cpu.get(name, 0.0) + t.cpu
+        before = part.station.get(name, 0.0)
+        part.station[name] = (None if t.station is None or before is None
+                              else before + t.station)
 
 
 def _run_part(run: Production, part: _Part) -> PartRecord:

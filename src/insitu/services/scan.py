@@ -4,13 +4,13 @@ frames of both through the same reconstruction."""
 from __future__ import annotations
 
 import threading
-import time
 from collections.abc import Callable
 from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
 
+from insitu.devices.clock import StepTimer
 from insitu.devices.protocols import Camera, ScanHead
 from insitu.devices.replay import ReplayCamera
 from insitu.errors import DeviceError, InsituError, MeasurementError
@@ -31,6 +31,10 @@ from insitu.services.station import Station
 
 @dataclass(frozen=True)
 class ScanSummary:
+    """``seconds``: the wall clock's; ``station_s``: the station's own (its camera frames
+    and head: :mod:`insitu.devices.clock`; None for a replay or on a real rig);
+    ``cpu_s``: the computer's processing (the simulator's drawing left out)."""
+
     points: int
     frames: int
     frames_with_line: int
@@ -41,6 +45,8 @@ class ScanSummary:
     outliers_removed: int = 0
     unconfirmed_removed: int = 0
     ambient: str = "none"      # "yes": each point has its grey value; else why not
+    station_s: float | None = None
+    cpu_s: float = 0.0
 
     @property
     def coverage(self) -> float:
@@ -92,7 +98,7 @@ class ScanInterrupted(DeviceError):
         self.partial = partial
 
 
-def _partial(rec: ScanReconstructor, t0: float, rig: RigRecord | None,
+def _partial(rec: ScanReconstructor, t0: StepTimer, rig: RigRecord | None,
              ambient: str = "none") -> ScanResult | None:
     try:
         return _finish(rec, t0, rig, ambient)
@@ -100,15 +106,16 @@ def _partial(rec: ScanReconstructor, t0: float, rig: RigRecord | None,
         return None
 
 
-def _finish(rec: ScanReconstructor, t0: float, rig: RigRecord | None = None,
+def _finish(rec: ScanReconstructor, t0: StepTimer, rig: RigRecord | None = None,
             ambient: str = "none", room_light: np.ndarray | None = None) -> ScanResult:
     """The result so far, its cloud recording ``rig`` (the station's; None for a replay)."""
     cloud = replace(rec.cloud(), rig=rig)
     lo, hi = cloud.points.min(axis=0), cloud.points.max(axis=0)
+    t = t0.elapsed()
     return ScanResult(cloud, ScanSummary(len(cloud), rec.frames, rec.frames_with_line, rec.method,
-                                         time.perf_counter() - t0, tuple(lo), tuple(hi),
+                                         t.wall, tuple(lo), tuple(hi),
                                          rec.outliers_removed, rec.unconfirmed_removed,
-                                         ambient), room_light)
+                                         ambient, t.station, t.cpu), room_light)
 
 
 def reconstructor(camera: CameraModel, pivot_height_mm: float, telecentric: bool,
@@ -158,7 +165,7 @@ def scan_replay(folder: str | Path, height_cal: HeightCalibration | None = None,
     or Method 2 when a height calibration is given. The recording is a camera like any other
     (:class:`~insitu.devices.replay.ReplayCamera`): the same loop as a live scan. Its
     ambient frame, when it has one, gives each point its ``ambient`` grey value."""
-    t0 = time.perf_counter()
+    t0 = StepTimer(None)
     seq = Sequence.open(folder)
     if seq.kind != "scan":
         raise MeasurementError(f"{seq.folder}: a '{seq.kind}' sequence, not a scan")
@@ -188,7 +195,7 @@ def scan_live(station: Station, spacing: float = 0.5, region=None,
     the room light, auto-exposed (:func:`~insitu.services.room_light.station_room_light`),
     gives each point its ``ambient`` grey value. The laser is off when this returns or
     raises; a device fault raises :class:`ScanInterrupted` with what was measured before it."""
-    t0 = time.perf_counter()
+    t0 = StepTimer(station.clock)
     region = tuple(region) if region is not None else station.default_region()
     rig = station.rig
     check_region(region, rig.head.field_size_mm)
@@ -205,7 +212,7 @@ def scan_live(station: Station, spacing: float = 0.5, region=None,
                  station.record, lambda: station_room_light(station).image)
 
 
-def _scan(camera: Camera, head: ScanHead, lines, rec: ScanReconstructor, t0: float, what: str,
+def _scan(camera: Camera, head: ScanHead, lines, rec: ScanReconstructor, t0: StepTimer, what: str,
           progress: Progress | None, cancel: threading.Event | None,
           on_frame: FrameCallback | None, rig: RigRecord | None = None,
           room_light: Callable[[], np.ndarray | None] | None = None) -> ScanResult:

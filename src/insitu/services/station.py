@@ -10,6 +10,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from insitu.devices.backends import Devices, open_devices
+from insitu.devices.clock import StationClock
 from insitu.errors import ConfigError, SafetyError
 from insitu.formats.project import SIM_BINNING
 from insitu.formats.rig_record import RigRecord, describe, same_rig
@@ -68,6 +69,12 @@ class Station:
 
     def __exit__(self, *exc) -> None:
         self.close()
+
+    @property
+    def clock(self) -> StationClock | None:
+        """The station's own time, which its devices advance (:mod:`insitu.devices.clock`):
+        the simulated rig's; None on a real rig (its time is the wall clock's)."""
+        return self.world.clock if self.world is not None else None
 
     def describe(self) -> tuple[str, str]:
         """(camera, scan head) one-liners for a status line."""

@@ -39,6 +39,7 @@ from insitu.devices.galvo import (Command, ListPosition, focus_points, list_dige
 from insitu.devices.protocols import check_in_field
 from insitu.errors import DeviceError, SafetyError
 from insitu.geometry.beams import TwoMirrorHead
+from insitu.sim.clock import roi_size
 from insitu.sim.marks import Burn, RoomLightView, render_inspection
 from insitu.sim.render import NOMINAL_EXPOSURE_MS
 from insitu.sim.scene import Scene
@@ -46,17 +47,35 @@ from insitu.sim.world import LaserState, SimWorld
 
 
 class SimCamera:
-    """Sees the world: the laser line or spot on the parts, a calibration board in view, or
-    room light."""
+    """Sees the world: the laser line, lines or spot on the parts, a calibration board in
+    view, or room light. Each frame advances the world's station clock by what it would
+    take (:mod:`insitu.sim.clock`: the head's jump to its list, the exposure, the readout of
+    the region of interest); drawing it counts as the simulator's CPU."""
 
     def __init__(self, world: SimWorld):
         self.world = world
         self.width, self.height = world.rig.camera.width, world.rig.camera.height
         self.exposure_ms = NOMINAL_EXPOSURE_MS
+        self.roi: tuple[int, int, int, int] | None = None
         self._frames_left: int | None = None
 
     def set_exposure(self, exposure_ms: float) -> None:
         self.exposure_ms = float(exposure_ms)
+
+    def set_region_of_interest(self, roi: tuple[int, int, int, int] | None) -> None:
+        """Read out only the pixels u0 ≤ u < u1, v0 ≤ v < v1 (``roi`` = (u0, v0, u1, v1),
+        widened to the sensor's steps: 16 columns, 2 rows; None: the whole frame). A frame
+        then reads out faster; the pixels outside it come as 0."""
+        if roi is None:
+            self.roi = None
+            return
+        u0, v0, u1, v1 = (int(np.floor(roi[0] / 16) * 16), int(np.floor(roi[1] / 2) * 2),
+                          int(np.ceil(roi[2] / 16) * 16), int(np.ceil(roi[3] / 2) * 2))
+        u0, v0, u1, v1 = max(u0, 0), max(v0, 0), min(u1, self.width), min(v1, self.height)
+        if not (u0 < u1 and v0 < v1):
+            raise DeviceError(f"simulated camera: region of interest {list(roi)} holds no "
+                              f"pixel of the {self.width}×{self.height} frame")
+        self.roi = (u0, v0, u1, v1)
 
     def fail_after(self, frames: int | None) -> None:
         """Fault injection (tests, benchmarks): after ``frames`` more frames every grab
@@ -71,41 +90,90 @@ class SimCamera:
 
     def grab(self, timeout_s: float = 5.0) -> np.ndarray:
         self._deliver()
+        with self.world.clock.simulating():
+            image = self._render()
+        self._tick()
+        if self.roi is not None:
+            u0, v0, u1, v1 = self.roi
+            inside = image[v0:v1, u0:u1].copy()
+            image[:] = 0
+            image[v0:v1, u0:u1] = inside
+        return image
+
+    def _render(self) -> np.ndarray:
         if self.world.board is not None:
             return self.world.board.frame(self.world.laser)
         r, laser = self.world.renderer(), self.world.laser
         if laser.kind == "line":
             return r.line_frame(laser.start, laser.end, self.exposure_ms, laser.focus_z)
+        if laser.kind == "lines":
+            return r.lines_frame(laser.lines, self.exposure_ms, laser.focus_z)
         if laser.kind == "spot":
             return r.spot_frame(laser.start, self.exposure_ms, laser.focus_z)
         return r.ambient_frame(self.exposure_ms)
 
+    def _exposure_now_ms(self) -> float:
+        """The exposure of the frame being taken."""
+        return self.exposure_ms
+
+    def _tick(self) -> None:
+        """The frame's station seconds (:meth:`SimTiming.frame_s`) onto the world's clock;
+        the head's jump to its list counts once, in the first frame after it."""
+        w, t = self.world, self.world.timing
+        rows, cols = roi_size(self.roi, self.width, self.height)
+        seconds = t.frame_s(self._exposure_now_ms(), w.laser.setup_s, t.readout_s(rows, cols),
+                            w.laser.cycle_s)
+        w.laser.setup_s = 0.0
+        w.clock.advance("frames", seconds)
+
 
 class SimScanHead:
+    """Projects scan lines (one, or several in one exposure) and the pilot spot on the
+    world; its moves set the next frame's timing (the jump to the list's start, one cycle
+    over its lines: :class:`~insitu.sim.clock.SimTiming`)."""
+
     def __init__(self, world: SimWorld):
         self.world = world
         nominal = world.rig.operator.head
         self.field_size_mm = tuple(nominal.field_size_mm)
         self.z_range_mm = tuple(nominal.z_range_mm)
+        self.speed_mm_s = world.timing.line_speed_mm_s
 
     def _check(self, *points) -> None:
         check_in_field(self.field_size_mm, *points)
 
     def set_line_speed(self, speed_mm_s: float) -> None:
-        """Accepted and checked; the simulated head draws the whole line within every
-        exposure, whatever its speed."""
+        """How fast each line is swept (the frames' timing); the simulated picture of a
+        line is the same at any speed (its light follows the exposure)."""
         if not speed_mm_s > 0:
             raise SafetyError(f"scan head: line speed {speed_mm_s:g} mm/s: expected > 0")
         self.speed_mm_s = float(speed_mm_s)
 
     def show_line(self, start, end, focus_z: float = 0.0) -> None:
-        self._check(start, end)
-        self.world.laser = LaserState("line", np.asarray(start, float), np.asarray(end, float),
-                                      float(focus_z))
+        self.show_lines([(start, end)], focus_z)
+
+    def show_lines(self, lines, focus_z: float = 0.0) -> None:
+        """Draw ``lines`` ((start, end) mm on z = 0 each) in turn during each exposure, one
+        list (one line: :meth:`show_line`)."""
+        lines = [(np.asarray(a, float), np.asarray(b, float)) for a, b in lines]
+        if not lines:
+            raise SafetyError("scan head: no line to draw")
+        self._check(*(p for line in lines for p in line))
+        kind = "line" if len(lines) == 1 else "lines"
+        self._set(LaserState(kind, lines[0][0], lines[0][1], float(focus_z), tuple(lines),
+                             cycle_s=self.world.timing.cycle_s(lines, self.speed_mm_s)))
 
     def show_spot(self, xy, focus_z: float = 0.0) -> None:
         self._check(xy)
-        self.world.laser = LaserState("spot", np.asarray(xy, float), None, float(focus_z))
+        self._set(LaserState("spot", np.asarray(xy, float), None, float(focus_z)))
+
+    def _set(self, laser: LaserState) -> None:
+        """Show ``laser``, its list starting with a jump from where the last one left the
+        head."""
+        w = self.world
+        laser.setup_s = w.timing.jump_s(float(np.linalg.norm(laser.start - w.head_xy)))
+        w.head_xy = laser.start.copy()
+        w.laser = laser
 
     def off(self) -> None:
         self.world.laser = LaserState()
@@ -118,8 +186,10 @@ class SimStage:
         self.world = world
 
     def move_z(self, z_mm: float) -> None:
-        self.world.plate_z = float(z_mm)
-        self.world.invalidate()
+        w = self.world
+        w.clock.advance("stage", w.timing.stage_s(abs(float(z_mm) - (w.plate_z or 0.0))))
+        w.plate_z = float(z_mm)
+        w.invalidate()
 
     def position_z(self) -> float:
         return float(self.world.plate_z if self.world.plate_z is not None else np.nan)
@@ -163,6 +233,16 @@ class SimController:
 
     # -- Controller --------------------------------------------------------------------------
     def execute(self, commands: Sequence[Command]) -> None:
+        """Run the list; its simulated time onto the world's station clock (marking), the
+        work of burning it as the simulator's CPU."""
+        t0 = self.elapsed_s
+        try:
+            with self.world.clock.simulating():
+                self._execute(commands)
+        finally:
+            self.world.clock.advance("marking", self.elapsed_s - t0)
+
+    def _execute(self, commands: Sequence[Command]) -> None:
         self._stopped = False
         digest = list_digest(commands)
         self._position = ListPosition(digest, 0)
@@ -331,10 +411,9 @@ class SimInspectionCamera(SimCamera):
         """The exposure of a frame with the laser off."""
         return self.exposure_ms if self._manual else self.inspection_exposure_ms
 
-    def grab(self, timeout_s: float = 5.0) -> np.ndarray:
+    def _render(self) -> np.ndarray:
         if self.world.laser.kind != "off" or self.world.board is not None:
-            return super().grab(timeout_s)
-        self._deliver()
+            return super()._render()
         self._frames += 1
         scene = self.world.renderer().scene
         if self._view is None or self._view[0] is not scene:
@@ -342,6 +421,10 @@ class SimInspectionCamera(SimCamera):
         return render_inspection(self.world.rig, scene, list(self.world.burns),
                                  self.room_light_exposure_ms,
                                  seed=self.world.seed + self._frames, view=self._view[1])
+
+    def _exposure_now_ms(self) -> float:
+        laser_off = self.world.laser.kind == "off" and self.world.board is None
+        return self.room_light_exposure_ms if laser_off else self.exposure_ms
 
 
 def sim_devices(world: SimWorld) -> Devices:

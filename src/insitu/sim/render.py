@@ -62,6 +62,22 @@ class Renderer:
     def line_frame(self, start, end, exposure_ms: float = NOMINAL_EXPOSURE_MS,
                    focus_z: float = 0.0) -> np.ndarray:
         """(H, W) uint8 frame (float32 if ideal) of the line commanded from start to end, mm."""
+        return self._finish(self._line_signal(start, end, exposure_ms, focus_z), exposure_ms)
+
+    def lines_frame(self, lines, exposure_ms: float = NOMINAL_EXPOSURE_MS,
+                    focus_z: float = 0.0) -> np.ndarray:
+        """(H, W) frame of the K ``lines`` ((start, end) mm each) drawn in turn during one
+        exposure: each line with the light of ``exposure_ms / K``, the room light of the
+        whole exposure (the frame's sensor noise once)."""
+        share = exposure_ms / len(lines)
+        signal = self._line_signal(*lines[0], share, focus_z)
+        for a, b in lines[1:]:
+            signal += self._line_signal(a, b, share, focus_z)
+        return self._finish(signal, exposure_ms)
+
+    def _line_signal(self, start, end, exposure_ms: float, focus_z: float) -> np.ndarray:
+        """(H, W) float32 light of the line start → end (mm) over ``exposure_ms``, before
+        the sensor: the beam's hits, their secondary light and mirror images."""
         start, end = np.asarray(start, float), np.asarray(end, float)
         length = float(np.linalg.norm(end - start))
         px_per_mm = self.cam.K[0, 0] / 250.0  # generous: the closest surfaces are ~300 mm away
@@ -71,7 +87,7 @@ class Renderer:
         signal = self._beam_signal(cmd, np.full(n, energy), focus_z, secondary=True)
         if not self.ideal:
             signal += self._mirror_image(cmd, energy * (n - 1) / length, focus_z)
-        return self._finish(signal, exposure_ms)
+        return signal
 
     def spot_frame(self, xy, exposure_ms: float = NOMINAL_EXPOSURE_MS, focus_z: float = 0.0,
                    n_rays: int = 800) -> np.ndarray:

@@ -9,6 +9,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from insitu.devices.clock import StationClock
+from insitu.sim.clock import SimTiming
 from insitu.sim.render import Renderer
 from insitu.sim.rig import SimRig, default_rig
 from insitu.sim.scene import Scene
@@ -18,10 +20,19 @@ from insitu.sim.workpieces import (Pose, Workpiece, load_mesh_workpiece, make_wo
 
 @dataclass
 class LaserState:
-    kind: str = "off"                       # "off" | "line" | "spot"
+    """What the head shows: nothing ("off"), a ``"line"`` start → end, several lines in one
+    exposure (``"lines"``: ``lines``, (start, end) each; ``start``, ``end`` the first's) or
+    a ``"spot"`` at ``start``; mm on z = 0, focused at ``focus_z``. Its timing: the head's
+    jump to it (``setup_s``, counted by the next frame) and one cycle over its lines
+    (``cycle_s``)."""
+
+    kind: str = "off"                       # "off" | "line" | "lines" | "spot"
     start: np.ndarray | None = None
     end: np.ndarray | None = None
     focus_z: float = 0.0
+    lines: tuple = ()
+    setup_s: float = 0.0
+    cycle_s: float = 0.0
 
 
 @dataclass
@@ -31,7 +42,9 @@ class SimWorld:
     plate is mounted; ``burns``: the marks burnt into the parts so far
     (:class:`insitu.sim.marks.Burn`, world frame), shared by every controller and camera;
     ``board``: a calibration board in view (anything with ``frame(laser) -> image``, see
-    :mod:`insitu.sim.board`), None when there is none."""
+    :mod:`insitu.sim.board`), None when there is none. ``clock``: the station's time, which
+    the devices advance by ``timing`` (:mod:`insitu.sim.clock`); ``head_xy``: where the
+    head's last list left it (mm on z = 0)."""
 
     rig: SimRig
     parts: list[Workpiece] = field(default_factory=list)
@@ -40,6 +53,9 @@ class SimWorld:
     laser: LaserState = field(default_factory=LaserState)
     burns: list = field(default_factory=list)
     board: object | None = None
+    clock: StationClock = field(default_factory=StationClock)
+    timing: SimTiming = field(default_factory=SimTiming)
+    head_xy: np.ndarray = field(default_factory=lambda: np.zeros(2))
     _renderer: Renderer | None = field(default=None, repr=False)
 
     def scene_parts(self) -> list[Workpiece]:

@@ -1,0 +1,131 @@
+"""The station clock: what the simulated devices would take on a real station (camera frames
+with the head's jumps, marking, the stage), kept apart from the computer's CPU, and reported
+by a scan, a marking run and production."""
+
+import json
+
+import numpy as np
+import pytest
+from insitu.devices.clock import StationClock, StationTime, StepTimer
+from insitu.marking import GalvoDriver, estimate_time, make_job, run_job
+from insitu.services.scan import scan_live
+from insitu.services.station import connect
+from insitu.sim.clock import SimTiming
+from insitu.sim.devices import SimCamera, SimController, SimScanHead, SimStage
+from insitu.sim.world import sim_world
+
+
+def test_clock_adds_by_kind_and_refuses_nonsense():
+    clock = StationClock()
+    t0 = clock.now()
+    clock.advance("frames", 0.5)
+    clock.advance("marking", 1.25)
+    span = clock.now() - t0
+    assert span.seconds == pytest.approx(1.75) and span.by["frames"] == 0.5
+    assert (span + span).seconds == pytest.approx(3.5)
+    with pytest.raises(ValueError, match="kind 'coffee'"):
+        clock.advance("coffee", 1.0)
+    with pytest.raises(ValueError, match="expected ≥ 0"):
+        clock.advance("frames", -1.0)
+    assert StationTime().seconds == 0.0
+
+
+def test_a_frame_takes_its_exposure_or_its_readout_whichever_is_longer():
+    world = sim_world("step-block", binning=8)
+    cam, head, t = SimCamera(world), SimScanHead(world), world.timing
+    cam.set_exposure(40.0)
+    head.set_line_speed(1e7)                            # 8 µs a sweep: no bound here
+    head.show_line([0.0, -40.0], [0.0, 40.0])
+    before = world.clock.now()
+    cam.grab()
+    jump = t.jump_s(40.0)                                # from the field centre to (0, −40)
+    full = t.readout_s(cam.height, cam.width)
+    assert (world.clock.now() - before).seconds == pytest.approx(
+        max(jump + t.trigger_us * 1e-6 + 0.040, full))
+    cam.set_exposure(0.1)                               # now the readout bounds the frame
+    before = world.clock.now()
+    cam.grab()
+    assert (world.clock.now() - before).seconds == pytest.approx(full)
+    cam.set_region_of_interest((0, 0, cam.width, 32))   # fewer rows: faster
+    before = world.clock.now()
+    image = cam.grab()
+    assert (world.clock.now() - before).seconds == pytest.approx(t.readout_s(32, cam.width))
+    assert not image[32:].any()                         # nothing read outside it
+
+
+def test_lines_in_one_exposure_take_one_cycle_over_all_of_them():
+    t = SimTiming(line_speed_mm_s=1000.0, jump_mm_s=2000.0, settle_ms=0.5)
+    lines = [(np.array([0.0, -40.0]), np.array([0.0, 40.0])),
+             (np.array([8.0, -40.0]), np.array([8.0, 40.0]))]
+    # 2 × 80 mm swept, jumps of √(8² + 80²) mm (end of one to start of the next) twice
+    jump = np.hypot(8.0, 80.0) / 2000.0 + 0.5e-3
+    assert t.cycle_s(lines, None) == pytest.approx(0.160 + 2 * jump)
+    assert t.cycle_s(lines[:1], 500.0) == pytest.approx(0.160)
+    assert t.frame_s(10.0, 0.0, 0.001, t.cycle_s(lines, None)) > 0.16   # one pass at least
+
+
+def test_marking_and_stage_advance_the_clock_by_their_own_models():
+    world = sim_world("step-block", binning=8)
+    ctrl, stage = SimController(world), SimStage(world)
+    job = make_job([np.array([[0.0, 0.0, 15.0], [5.0, 0.0, 15.0], [5.0, 5.0, 15.0]])])
+    before = world.clock.now()
+    run_job(job, GalvoDriver.from_config(world.rig.operator.head), ctrl, None)
+    spent = world.clock.now() - before
+    assert spent.by["marking"] == pytest.approx(ctrl.elapsed_s)
+    assert spent.by["marking"] == pytest.approx(estimate_time(job).total_s, rel=0.05)
+    assert spent.simulation_cpu_s > 0                   # burning it is the simulator's work
+    stage.move_z(10.0)
+    assert (world.clock.now() - before).by["stage"] == pytest.approx(
+        world.timing.stage_s(10.0))
+
+
+def test_a_scan_reports_station_seconds_beside_its_cpu():
+    with connect(None, "step-block", 0, 4) as station:
+        timer = StepTimer(station.clock)
+        result = scan_live(station, 1.0, (-5.0, 5.0, -40.0, 40.0))
+        spent = timer.elapsed()
+    s = result.summary
+    assert s.station_s == pytest.approx(spent.station, rel=1e-6)
+    # 11 line frames, each at least its exposure, and the room light's frames before them
+    assert s.station_s > 11 * 0.010
+    assert 0 < s.cpu_s < s.seconds                      # the simulator's drawing left out
+
+
+def test_produce_logs_station_and_cpu_seconds_per_step(tmp_path):
+    from insitu.cli.produce import part_line
+    from insitu.formats.production_log import read_log
+    from insitu.formats.recipe import Recipe, RecipeScan
+    from insitu.formats.pointcloud import write_ply
+    from insitu.marking import Placement
+    from insitu.services import production
+
+    with connect(None, "step-block", 0, 4) as station:
+        write_ply(tmp_path / "ref.ply", scan_live(station, 1.0).cloud)
+        recipe = Recipe(tmp_path / "ref.ply", "cloud", (
+            Placement('text:"A";size=2', (0.0, -30.0), 4.0, 10.0),), scan=RecipeScan(
+                margin_mm=4.0, spacing_mm=1.0), workpiece="step-block")
+        where = lambda cloud, room_light=None: production.Located(np.eye(4), 1.0, 0.0)  # noqa: E731
+        run = production.Production(recipe, station, tmp_path / "run.jsonl", 1, where,
+                                    production.read_part)
+        production.produce(run)
+    rec = read_log(tmp_path / "run.jsonl")[0]
+    assert rec.outcome == "marked"
+    assert rec.scan_station_s > 0.1 and rec.mark_station_s > 0 and rec.read_station_s > 0
+    assert rec.locate_station_s == 0 and rec.plan_cpu_s > 0
+    assert "station" in part_line(rec).plain
+    line = json.loads((tmp_path / "run.jsonl").read_text().splitlines()[0])
+    assert "scan_station_s" in line and "scan_cpu_s" in line
+    header = (tmp_path / "run.csv").read_text().splitlines()[0].split(",")
+    assert "mark_station_s" in header
+
+
+def test_mark_run_prints_station_seconds(tmp_path, capsys):
+    from insitu.cli.job import run_on_station
+    from insitu.marking import write_job
+
+    job = make_job([np.array([[0.0, -30.0, 3.0], [4.0, -30.0, 3.0]])])
+    write_job(tmp_path / "job.json", job)
+    with connect(None, "step-block", 0, 8) as station:
+        run_on_station(station, job, tmp_path / "job.json", False, False, None)
+    out = capsys.readouterr().out
+    assert "marking: station 0." in out and "CPU" in out
