@@ -1,7 +1,15 @@
-"""Shared by every tier (unit, gui, hardware): the simulated boards import as ``fakes``
-(``tests/fakes``), the recordings are in ``tests/data``; under ``CliRunner`` a command that
-lets an exception escape (anything but its exit) fails the test, whatever else it checks."""
+"""Shared by every tier (unit, integration, gui, hardware): the simulated boards import as
+``fakes`` (``tests/fakes``), the recordings are in ``tests/data``; under ``CliRunner`` a command
+that lets an exception escape (anything but its exit) fails the test, whatever else it checks.
 
+``INSITU_TEST_NO_QT=1`` (the core tier of ``scripts/test.sh``, with ``-p no:pytest-qt``): the
+GUI packages cannot be imported, as where insitu is installed without its ``gui`` extra. The
+fuzz seed (``INSITU_FUZZ_SEED``, drawn when unset) is fixed for the run and printed in its
+header. The height calibration of ``tests/data/height-cal-b4`` is fitted once per run
+(``height_cal_file``, a :func:`run_folders.shared` folder)."""
+
+import os
+import random
 import sys
 from pathlib import Path
 
@@ -9,6 +17,26 @@ import pytest
 from typer.testing import CliRunner
 
 sys.path.insert(0, str(Path(__file__).parent))
+from run_folders import shared  # noqa: E402
+
+DATA = Path(__file__).parent / "data"
+
+GUI_PACKAGES = ("PySide6", "shiboken6", "OpenGL", "pytestqt")
+if os.environ.get("INSITU_TEST_NO_QT") == "1":
+    loaded = [name for name in GUI_PACKAGES if sys.modules.get(name) is not None]
+    if loaded:
+        raise pytest.UsageError(f"INSITU_TEST_NO_QT=1: {', '.join(loaded)} already imported "
+                                "(run pytest with -p no:pytest-qt)")
+    for name in GUI_PACKAGES:
+        sys.modules[name] = None                 # import raises ModuleNotFoundError
+
+os.environ.setdefault("INSITU_FUZZ_SEED", str(random.SystemRandom().randrange(10**9)))
+
+
+def pytest_report_header(config):
+    seed = os.environ["INSITU_FUZZ_SEED"]
+    qt = "blocked" if os.environ.get("INSITU_TEST_NO_QT") == "1" else "importable"
+    return f"insitu: fuzz seed {seed} (INSITU_FUZZ_SEED={seed} repeats this run); Qt {qt}"
 
 
 @pytest.fixture(autouse=True)
@@ -22,3 +50,23 @@ def _commands_let_no_exception_escape(monkeypatch):
                                  f"{res.exception}") from res.exception
         return res
     monkeypatch.setattr(CliRunner, "invoke", checked)
+
+
+@pytest.fixture(scope="session")
+def height_cal_file(tmp_path_factory) -> Path:
+    """tests/data/height-cal-b4 (91 frames, binning 4) fitted by ``calibrate_height``, saved
+    as the JSON file ``insitu calibrate height`` writes."""
+    from insitu.formats.json_file import save_json_model
+    from insitu.services import calibrate_height
+
+    def fit(folder):
+        save_json_model(folder / "height.json", calibrate_height(DATA / "height-cal-b4"))
+    return shared(tmp_path_factory, "height-cal-b4", fit) / "height.json"
+
+
+@pytest.fixture(scope="session")
+def height_cal(height_cal_file):
+    """The fitted height calibration of tests/data/height-cal-b4 (``HeightCalibration``)."""
+    from insitu.services import load_height_calibration
+
+    return load_height_calibration(height_cal_file)

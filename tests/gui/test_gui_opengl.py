@@ -23,7 +23,7 @@ BACKGROUND = np.array([0.14, 0.12, 0.11]) * 255        # BGR of the view's clear
 
 
 @pytest.fixture(scope="module")
-def rendered(tmp_path_factory):
+def rendered(tmp_path_factory, height_cal_file):
     """One run of the screenshot module: the iso view by height (``view.png``) and the
     orthographic top view with camera colours (``view-1.png``), a text across a step edge."""
     if not os.environ.get("DISPLAY"):
@@ -31,7 +31,7 @@ def rendered(tmp_path_factory):
     tmp = tmp_path_factory.mktemp("gl")
     cmd = [sys.executable, "-m", "insitu.ui.qt.screenshot", str(tmp / "gui.png"),
            "--replay", str(DATA / "scan-step-block-b4"), "--height-cal",
-           str(DATA / "height-cal-b4"), "--pattern", 'text:"insitu"', "--at", "0", "20",
+           str(height_cal_file), "--pattern", 'text:"insitu"', "--at", "0", "20",
            "--width", "16", "--view", "iso",
            "--extra", f"top:camera:{tmp / 'gui-top.png'}", "--view-png", str(tmp / "view.png")]
     env = dict(os.environ, QT_QPA_PLATFORM="xcb")

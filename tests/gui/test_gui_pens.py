@@ -9,7 +9,7 @@ from insitu.formats.project import read_project
 from insitu.marking import PROJECTIONS, Placement
 
 WAIT_MS, place, scan_recording = workflow.WAIT_MS, workflow.place, workflow.scan_recording
-height_cal_file, window = workflow.height_cal_file, workflow.window     # the same fixtures
+window = workflow.window     # the same fixture
 
 
 def _planned(qtbot, w):

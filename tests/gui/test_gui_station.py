@@ -20,7 +20,7 @@ from insitu.ui.qt.main_window import MainWindow
 from insitu.ui.qt.scan_panel import NO_RIG
 
 
-window, height_cal_file = wf.window, wf.height_cal_file       # the workflow tests' fixtures
+window = wf.window       # the workflow tests' fixture
 
 
 def answer_box(button, seen=None, after_ms=50, tries=400):

@@ -8,7 +8,7 @@ from PySide6.QtCore import QPoint, QPointF, QSettings, Qt
 from PySide6.QtGui import QWheelEvent
 from PySide6.QtTest import QTest
 from PySide6.QtWidgets import QApplication
-from test_gui_workflow import WAIT_MS, height_cal_file, place, scan_recording, window
+from test_gui_workflow import WAIT_MS, place, scan_recording, window
 
 from insitu.formats.pointcloud import PointCloud
 from insitu.ui.model.scene_data import AMBIENT
@@ -16,7 +16,7 @@ from insitu.ui.qt.main_window import MainWindow
 from insitu.ui.qt.view_menu import NO_AMBIENT
 from insitu.ui.qt.view_overlay import colour_bar_range
 
-SHARED_FIXTURES = (height_cal_file, window)          # the connected window of the workflow tests
+SHARED_FIXTURES = (window,)          # the connected window of the workflow tests
 
 
 @pytest.fixture

@@ -12,7 +12,6 @@ from PySide6.QtGui import QDropEvent
 from PySide6.QtTest import QTest
 
 from insitu import services
-from insitu.formats.json_file import save_json_model
 from insitu.ui.qt.main_window import MainWindow
 from insitu.ui.model.session import RigChoice
 
@@ -20,13 +19,6 @@ DATA = Path(__file__).parents[1] / "data"
 SCAN = DATA / "scan-step-block-b4"
 ROOT = Path(__file__).parents[2]
 WAIT_MS = 30_000
-
-
-@pytest.fixture(scope="session")
-def height_cal_file(tmp_path_factory):
-    path = tmp_path_factory.mktemp("calib") / "height.json"
-    save_json_model(path, services.calibrate_height(DATA / "height-cal-b4"))
-    return path
 
 
 @pytest.fixture

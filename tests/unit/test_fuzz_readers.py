@@ -1,19 +1,18 @@
 """Every file the program reads, fuzzed for a bounded time: the mutation engine of
-benchmarks/fuzz.py (a few hundred examples over its twelve readers, in worker processes that
+tests/fuzzing.py (a few hundred examples over its twelve readers, in worker processes that
 catch hangs and crashes), arbitrary bytes, arbitrary JSON, and valid files with one field
 replaced by anything. A reader (and the first use of what it read) may only fail with an
-InsituError. Every run draws a new seed, printed; INSITU_FUZZ_SEED=N repeats a run,
-INSITU_FUZZ_EXAMPLES=2000 explores longer (benchmarks/fuzz.py: 10,000 per reader)."""
+InsituError. The run's seed is in pytest's header (tests/conftest.py draws one unless
+INSITU_FUZZ_SEED=N repeats a run); INSITU_FUZZ_EXAMPLES=2000 explores longer (benchmarks/fuzz.py:
+10,000 per reader)."""
 
-import importlib.util
 import json
 import math
 import os
-import random
-import sys
 from pathlib import Path
 
 import numpy as np
+import fuzzing
 import pytest
 from hypothesis import HealthCheck, given, seed, settings
 from hypothesis import strategies as st
@@ -33,8 +32,7 @@ from insitu.services.common import camera_model
 from insitu.services.field import read_targets_csv
 from insitu.services.height import height_model
 
-# each run explores anew from a printed seed; INSITU_FUZZ_SEED repeats one
-SEED = int(os.environ.get("INSITU_FUZZ_SEED") or random.SystemRandom().randrange(10**9))
+SEED = int(os.environ["INSITU_FUZZ_SEED"])         # the run's, set by tests/conftest.py
 EXAMPLES = int(os.environ.get("INSITU_FUZZ_EXAMPLES", 60))
 FUZZ = settings(max_examples=EXAMPLES, deadline=None, database=None,
                 suppress_health_check=[HealthCheck.function_scoped_fixture,
@@ -49,23 +47,13 @@ json_values = st.recursive(
                                                                  max_size=4),
     max_leaves=12)
 
-_spec = importlib.util.spec_from_file_location(
-    "insitu_fuzz", Path(__file__).parents[2] / "benchmarks" / "fuzz.py")
-engine = sys.modules.setdefault("insitu_fuzz", importlib.util.module_from_spec(_spec))
-_spec.loader.exec_module(engine)
 
 
-@pytest.fixture(scope="module", autouse=True)
-def _print_seed(request):
-    with request.config.pluginmanager.get_plugin("capturemanager").global_and_fixture_disabled():
-        print(f"\nfuzz seed {SEED} (INSITU_FUZZ_SEED={SEED} repeats this run)")
-
-
-@pytest.mark.parametrize("name", sorted(engine.READERS))
+@pytest.mark.parametrize("name", sorted(fuzzing.READERS))
 def test_fuzz_engine(name):
-    """Mutated valid files of each reader, as benchmarks/fuzz.py makes them (30 each)."""
+    """Mutated valid files of each reader, as tests/fuzzing.py makes them (30 each)."""
     n = max(EXAMPLES // 2, 10)
-    stats = engine.run_reader(name, SEED, n, timeout_s=60.0)
+    stats = fuzzing.run_reader(name, SEED, n, timeout_s=60.0)
     assert stats.examples == n and not stats.failures, (
         f"INSITU_FUZZ_SEED={SEED}: {stats.failures[:3]} (benchmarks/fuzz.py --readers {name} "
         f"--seed {SEED} --start K --examples 1 repeats example K)")

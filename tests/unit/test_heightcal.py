@@ -14,16 +14,17 @@ from insitu.calibrate.height_fit import LineObservation, fit_paper, fit_sheet
 from insitu.reconstruct.plate_models import SheetHeightModel
 from insitu.formats.calibration import HeightCalibration
 from insitu.formats.json_file import load_json_model
-from insitu.services import calibrate_height, load_height_calibration, scan_replay
+from insitu.services import load_height_calibration, scan_replay
 from insitu.sim.workpieces import make_workpiece
 
 DATA = Path(__file__).parents[1] / "data"
 runner = CliRunner()
 
 
-@pytest.fixture(scope="module")
-def cal():
-    return calibrate_height(DATA / "height-cal-b4")
+@pytest.fixture
+def cal(height_cal):
+    """tests/data/height-cal-b4 fitted (tests/conftest.py: once per run)."""
+    return height_cal
 
 
 def _step_height_errors(cloud):
@@ -147,9 +148,9 @@ def test_cli_calibrate_then_scan_with_the_file(tmp_path):
     assert res.exit_code == 0 and "plane" in res.output
 
 
-def test_height_calibration_from_another_rig_is_refused(tmp_path):
+def test_height_calibration_from_another_rig_is_refused(height_cal_file, tmp_path):
     res = runner.invoke(app, ["scan", "--replay", str(DATA / "scan-step-block-full"),
-                              "--height-cal", str(DATA / "height-cal-b4"), "-o", str(tmp_path / "c.ply")])
+                              "--height-cal", str(height_cal_file), "-o", str(tmp_path / "c.ply")])
     assert res.exit_code == 1
     assert "another rig" in res.output and "612×512" in res.output
     assert not (tmp_path / "c.ply").exists()

@@ -1,13 +1,8 @@
 """The journal of what the laser did: started / done / cut per path, refusals, the operator's
-choice for a cut path (remark, skip, continue), malformed records, SIGTERM."""
+choice for a cut path (remark, skip, continue), malformed records (signals from outside:
+tests/integration/test_kill_resume.py)."""
 
 import json
-import os
-import signal
-import subprocess
-import sys
-import time
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -15,12 +10,11 @@ import pytest
 from insitu.devices.galvo import ListPosition, RecordingController, list_digest
 from insitu.errors import DeviceError, FormatError, SafetyError
 from insitu.geometry.beams import TwoMirrorHead
-from insitu.marking import (GalvoDriver, history, make_job, progress_path_for, read_job,
-                            read_journal, read_progress, run_job, write_job)
+from insitu.marking import (GalvoDriver, history, make_job, progress_path_for, read_journal,
+                            read_progress, run_job, write_job)
 from insitu.marking.run import resume_list
 
 HEAD = TwoMirrorHead(350.0, 12.0)
-SRC = Path(__file__).parents[2] / "src"
 
 
 def job_of(n=5, points=6):
@@ -266,54 +260,6 @@ def test_a_journal_line_cut_short_by_a_kill_is_ignored(tmp_path):
     j.write_text("\n".join(text[:3]) + '\n{"event": "sta\n' + text[3] + "\n")
     with pytest.raises(FormatError, match="line 4: not JSON"):
         read_journal(j)
-
-
-def _cli(*args, env=None):
-    code = "from insitu.cli.main import main; main()"
-    return subprocess.Popen([sys.executable, "-c", code, *map(str, args)],
-                            env={**os.environ, "PYTHONPATH": str(SRC), **(env or {})},
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-
-
-@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGHUP])
-def test_sigterm_and_sighup_leave_the_laser_off_and_the_record_interrupted(tmp_path, sig):
-    job_path, log = tmp_path / "job.json", tmp_path / "marks.log"
-    write_job(job_path, job_of(400, 12))
-    p = _cli("job", "run", job_path, env={"INSITU_SIM_MARK_LOG": str(log)})
-    journal = tmp_path / "job.journal.jsonl"
-    t_end = time.monotonic() + 120
-    while p.poll() is None and time.monotonic() < t_end and (
-            not journal.exists() or journal.read_text().count('"done"') < 20):
-        time.sleep(0.01)
-    p.send_signal(sig)
-    out, err = p.communicate(timeout=60)
-    assert p.returncode == 1, out + err
-    assert f"marking stopped by {sig.name}; the laser is off" in err
-    s = history(read_job(job_path), progress_path_for(job_path))
-    assert s.state == "interrupted" and 20 <= len(s.done) < 400
-    assert read_progress(progress_path_for(job_path))["state"] == "interrupted"
-    tail = [w for w in log.read_text().splitlines() if w]
-    assert tail[-1] == "O"                              # the sim controller's laser-off
-    res = _cli("job", "run", job_path)
-    out, err = res.communicate(timeout=60)
-    assert res.returncode == 1 and "resume it, or restart it" in err
-    shown = _cli("job", "show", job_path).communicate(timeout=60)[0]
-    assert "interrupted" in shown and f"{len(s.done)} of 400 paths done" in shown
-
-
-@pytest.mark.slow
-def test_kill_and_resume_marks_every_path_once(tmp_path):
-    """benchmarks/kill_resume.py with 5 SIGKILLs: no path twice in full, none skipped, every
-    kill mid-path reported as a cut path."""
-    bench = Path(__file__).parents[2] / "benchmarks" / "kill_resume.py"
-    res = subprocess.run([sys.executable, str(bench), "--kills", "5", "--paths", "200",
-                          "--seed", "3", "--folder", str(tmp_path)], capture_output=True,
-                         text=True, env={**os.environ, "PYTHONPATH": str(SRC)}, timeout=600)
-    assert res.returncode == 0, res.stdout[-2000:] + res.stderr[-2000:]
-    result = dict(w.split("=") for w in res.stdout.split("RESULT ")[1].splitlines()[0].split())
-    assert result["kills"] == "5" and result["marked_twice_in_full"] == "0"
-    assert result["skipped"] == "0"
-    assert int(result["cut_paths_reported"]) >= int(result["cut_mid-path"])
 
 
 @pytest.mark.parametrize("args, message", [

@@ -1,5 +1,5 @@
 """Only insitu.ui.qt may import Qt or OpenGL, nothing in the core imports insitu.ui, and the
-unit tests run without the GUI packages."""
+unit and integration tests run without the GUI packages."""
 
 import ast
 from pathlib import Path
@@ -50,9 +50,11 @@ def test_the_gui_models_do_not_import_qt():
 
 
 def test_the_unit_tests_need_no_gui_package():
-    """tests/unit runs in a venv without the ``gui`` extra (.ci/run): no Qt, no qtbot."""
-    tests = sorted(Path(__file__).parent.glob("*.py"))
-    assert len(tests) > 20
+    """tests/unit and tests/integration run with the GUI packages unimportable (scripts/test.sh's
+    core tier): no Qt, no qtbot."""
+    tiers = Path(__file__).parents[1]
+    tests = sorted([*(tiers / "unit").glob("*.py"), *(tiers / "integration").glob("*.py")])
+    assert len(tests) > 30
     offenders = _gui_imports(tests)
     offenders += [f"{p.name} uses qtbot" for p in tests if "qtbot" in p.read_text()
                   and p.name != Path(__file__).name]

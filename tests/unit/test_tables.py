@@ -21,8 +21,7 @@ from insitu.marking import (PROJECTIONS, GalvoDriver, Limits, check_projection, 
                             make_job, project)
 from insitu.reconstruct.height_models import HEIGHT_MODELS, HeightModel
 from insitu.patterns import FILE_SUFFIXES, SOURCES, SPEC_PREFIXES, is_spec, load_pattern
-from insitu.formats.json_file import save_json_model
-from insitu.services import calibrate_height, height_model, load_height_calibration
+from insitu.services import height_model, load_height_calibration
 from insitu.marking import Placement
 from insitu.formats.project import Project, read_project, write_project
 from insitu.vision.centres import CENTRE_METHODS, line_centres
@@ -117,15 +116,8 @@ def test_placements_and_project_refuse_an_unknown_mode():
         assert mode.project is not None and mode.description
 
 
-@pytest.fixture(scope="module")
-def height_file(tmp_path_factory):
-    path = tmp_path_factory.mktemp("hcal") / "h.json"
-    save_json_model(path, calibrate_height(DATA / "height-cal-b4"))
-    return path
-
-
-def test_height_models_follow_the_protocol(height_file):
-    cal = load_height_calibration(height_file)
+def test_height_models_follow_the_protocol(height_cal_file):
+    cal = load_height_calibration(height_cal_file)
     for name, kind in HEIGHT_MODELS.items():
         _, model = height_model(cal, name)
         assert isinstance(model, HeightModel) and isinstance(model, kind.model)
@@ -140,9 +132,9 @@ def test_height_models_follow_the_protocol(height_file):
 
 
 @pytest.mark.parametrize("field, value", [("model", "spline"), ("centres.method", "canny")])
-def test_a_height_file_names_a_model_and_a_centre_method_of_the_tables(height_file, tmp_path,
-                                                                         field, value):
-    data = json.loads(height_file.read_text())
+def test_a_height_file_names_a_model_and_a_centre_method_of_the_tables(height_cal_file,
+                                                                         tmp_path, field, value):
+    data = json.loads(height_cal_file.read_text())
     where = data
     *head, last = field.split(".")
     for key in head:

@@ -19,7 +19,8 @@ from insitu.reconstruct.plan import scan_lines
 from insitu.reconstruct.turned_sheet import (CROSS_ANGLE_DEG, TurnedSheetModel, line_angle,
                                          turned_lines, turned_offset)
 from insitu.formats.calibration import HeightCalibration
-from insitu.formats.json_file import load_json_model, save_json_model
+from insitu.formats.json_file import load_json_model
+from insitu.formats.sequence import Sequence
 from insitu.services import calibrate_height, load_height_calibration, scan_live
 from insitu.services.record import record_height_calibration
 from insitu.services.station import connect, simulated
@@ -28,20 +29,12 @@ from insitu.sim.workpieces import make_workpiece
 from insitu.sim.world import sim_world
 
 DATA = Path(__file__).parent.parent / "data"
-HEIGHTS = (-10.0, -5.0, 0.0, 5.0, 10.0, 15.0)
-OFFSETS = tuple(float(x) for x in range(-30, 31, 10))
 
 
 @pytest.fixture(scope="module")
-def crossed_cal(tmp_path_factory):
-    """A height calibration recorded with crossed lines at binning 4 (6 heights, 7 offsets
-    along y and the crossed lines over the same rectangle), fitted and saved."""
-    folder = tmp_path_factory.mktemp("crossed")
-    with connect(None, "step-block", 0, 4) as station:
-        record_height_calibration(station, folder / "hcal", HEIGHTS, OFFSETS)
-    path = folder / "height.json"
-    save_json_model(path, calibrate_height(folder / "hcal"))
-    return load_height_calibration(path)
+def crossed_cal(crossed_height_cal):
+    """The height calibration recorded with crossed lines (tests/integration/conftest.py)."""
+    return load_height_calibration(crossed_height_cal / "height.json")
 
 
 def _pass(cloud, angle):
@@ -261,11 +254,16 @@ def test_new_recipes_scan_crossed_and_old_ones_do_not(tmp_path):
     assert not (tmp_path / "rTrue.production.jsonl").exists()
 
 
-def test_crossed_lines_leave_the_calibration_along_y_as_it_was(crossed_cal, tmp_path):
+def test_crossed_lines_leave_the_calibration_along_y_as_it_was(crossed_height_cal, crossed_cal,
+                                                               tmp_path):
     """The crossed lines are recorded after the lines along y: the same station records the
     lines along y exactly as without them, so the model along y is the same."""
+    frames = Sequence.open(crossed_height_cal / "hcal").frames
+    along_y = [f for f in frames if f.line.start[0] == f.line.end[0]]
+    heights = sorted({f.plate_z_mm for f in along_y})
+    offsets = sorted({f.line.start[0] for f in along_y})
     with connect(None, "step-block", 0, 4) as station:
-        record_height_calibration(station, tmp_path / "h", HEIGHTS, OFFSETS, cross=False)
+        record_height_calibration(station, tmp_path / "h", heights, offsets, cross=False)
     plain = calibrate_height(tmp_path / "h")
     assert plain.sheet_cross is None
     assert plain.sheet.coefficients_mm == crossed_cal.sheet.coefficients_mm

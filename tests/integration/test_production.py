@@ -30,20 +30,12 @@ TEXT = 'text:"{serial:03d}";size=2'
 AT = (0.0, -30.0)                 # on the step block's 3 mm step, part frame
 
 
-@pytest.fixture(scope="module")
-def reference(tmp_path_factory):
-    """A first scan of the step block where it lay (binning 2: what locating needs)."""
-    path = tmp_path_factory.mktemp("produce") / "ref.ply"
-    with connect(None, "step-block", 0, 2) as station:
-        write_ply(path, scan_live(station, 0.5).cloud)
-    return path
-
-
 @pytest.fixture
-def recipe(reference, tmp_path):
-    """A recipe with the first scan as its reference, its counter in the test's folder."""
+def recipe(step_block_reference, tmp_path):
+    """A recipe with a first scan of the step block (tests/integration/conftest.py) as its
+    reference, its counter in the test's folder."""
     path = tmp_path / "recipe.json"
-    write_recipe(path, Recipe(reference, "cloud", (Placement(TEXT, AT, 4.0, 10.0),),
+    write_recipe(path, Recipe(step_block_reference, "cloud", (Placement(TEXT, AT, 4.0, 10.0),),
                               scan=RecipeScan(margin_mm=4.0), serial_start=1,
                               workpiece="step-block"))
     return path
@@ -148,7 +140,8 @@ def test_faults_and_aborts_resume_with_each_serial_exactly_once(recipe, tmp_path
     # field distortion: this station has no field correction (benchmarks/production.py
     # calibrates one and measures the 0.1 mm)
     assert len(offsets) == 3 and np.linalg.norm(offsets, axis=1).max() < 0.6, offsets
-    rows = list(csv.DictReader(csv_path_for(log).open()))
+    with csv_path_for(log).open(newline="") as f:
+        rows = list(csv.DictReader(f))
     assert [(r["part"], r["outcome"], r["serial"]) for r in rows] == [
         (str(r.part), r.outcome, "" if r.serial is None else str(r.serial)) for r in records]
     assert rows[1]["error"] == records[1].error and rows[4]["resumed"] == "True"

@@ -19,17 +19,8 @@ def _run(*args):
     return runner.invoke(app, [str(a) for a in args])
 
 
-@pytest.fixture(scope="module")
-def scan_rec(tmp_path_factory):
-    out = tmp_path_factory.mktemp("rec") / "scan"
-    res = _run("sim", "record", "scan", "--workpiece", "step-block", "-o", out, "--binning", 4,
-               "--spacing", 2.0)
-    assert res.exit_code == 0, res.output
-    return out
-
-
-def test_sim_record_writes_a_valid_sequence_with_truth(scan_rec):
-    seq = Sequence.open(scan_rec)
+def test_sim_record_writes_a_valid_sequence_with_truth(scan_recording):
+    seq = Sequence.open(scan_recording)
     assert seq.kind == "scan" and len(seq) > 5
     assert seq.has_truth
     truth = seq.read_truth()
@@ -38,9 +29,9 @@ def test_sim_record_writes_a_valid_sequence_with_truth(scan_rec):
     assert not np.allclose(seq.camera.K_array, np.array(truth["rig"]["camera"]["K"]))
 
 
-def test_scan_replay_writes_cloud_and_summary(scan_rec, tmp_path):
+def test_scan_replay_writes_cloud_and_summary(scan_recording, tmp_path):
     out = tmp_path / "cloud.ply"
-    res = _run("scan", "--replay", scan_rec, "-o", out)
+    res = _run("scan", "--replay", scan_recording, "-o", out)
     assert res.exit_code == 0, res.output
     assert "points" in res.output
     cloud = read_ply(out)
@@ -96,18 +87,18 @@ def test_rig_file_drives_the_simulated_rig_with_its_calibration(tmp_path):
     assert not (tmp_path / "d.ply").exists()
 
 
-def test_scan_preview_picture(scan_rec, tmp_path):
-    res = _run("scan", "--replay", scan_rec, "-o", tmp_path / "c.ply", "--preview", tmp_path / "c.png")
+def test_scan_preview_picture(scan_recording, tmp_path):
+    res = _run("scan", "--replay", scan_recording, "-o", tmp_path / "c.ply", "--preview", tmp_path / "c.png")
     assert res.exit_code == 0, res.output
     import cv2
     img = cv2.imread(str(tmp_path / "c.png"))
     assert img is not None and (img < 250).any()
 
 
-def test_a_rig_file_measures_with_the_height_calibration_it_names(tmp_path):
+def test_a_rig_file_measures_with_the_height_calibration_it_names(height_cal_file, tmp_path):
     rig = tmp_path / "rig.json"
     rig.write_text(json.dumps({"kind": "rig", "sim_seed": 11,
-                               "height_calibration": str(DATA / "height-cal-b4")}))
+                               "height_calibration": str(height_cal_file)}))
     res = _run("scan", "-o", tmp_path / "c.ply", "--rig", rig, "--binning", 4,
                "--region", -2, 2, -45, 45, "--spacing", 2)
     assert res.exit_code == 0, res.output

@@ -4,27 +4,20 @@ images of the line in step faces), Method 2 with the height calibration fitted f
 recorded plate. truth.json is read only to score."""
 
 import json
-from pathlib import Path
 
 import numpy as np
 import pytest
 
-from insitu.services import calibrate_height, scan_replay
 from insitu.sim.workpieces import make_workpiece
-
-RECORDINGS = Path(__file__).resolve().parents[3] / "shared" / "recordings"
-SCAN = RECORDINGS / "step-block-independent"
-HCAL = RECORDINGS / "height-calibration-coarse-independent"
 
 
 @pytest.fixture(scope="module")
-def measured():
-    assert SCAN.is_dir() and HCAL.is_dir(), f"{RECORDINGS}: the shared recordings are missing"
-    cal = calibrate_height(HCAL)
-    p = json.loads((SCAN / "truth.json").read_text())["workpiece"]["params"]
+def measured(independent_scan):
+    folder, result = independent_scan
+    p = json.loads((folder / "truth.json").read_text())["workpiece"]["params"]
     part = make_workpiece("step-block", length=p["y_size"], width=p["x_size"],
                           heights=p["heights"], x=p["center"][0], y=p["center"][1])
-    return scan_replay(SCAN, cal), part
+    return result, part
 
 
 def _top_errors(part, pts, margin):
@@ -36,7 +29,6 @@ def _top_errors(part, pts, margin):
     return pts[ok, 2] - z[ok]
 
 
-@pytest.mark.slow
 def test_method_2_holds_on_an_independent_recording(measured):
     result, part = measured
     e = _top_errors(part, result.cloud.points, 0.3)

@@ -15,16 +15,11 @@ from typer.testing import CliRunner
 from insitu.calibrate.camera import (BoardSpec, Detection, board_pose, calibrate_intrinsics,
                                      detect_board, find_chessboard)
 from insitu.cli.camera import camera as camera_cmd
-from insitu.sim.world import SimWorld
 from insitu.errors import CalibrationError
 from insitu.formats.sequence import Sequence, SequenceWriter
 from insitu.geometry.camera import CameraModel
 from insitu.formats.calibration import CameraCalibration
 from insitu.formats.json_file import load_json_model
-from insitu.services.record import record_camera_calibration
-from insitu.services.station import simulated
-from insitu.geometry.beams import axis_lines
-from insitu.sim.board import BoardViews
 from insitu.sim.checkerboard import board_corners, random_board_poses
 from insitu.sim.rig import default_rig
 
@@ -114,15 +109,11 @@ def test_charuco_views_are_detected_and_calibrate():
 
 
 # -- the command ---------------------------------------------------------------------------
-@pytest.fixture(scope="module")
-def rec(tmp_path_factory):
-    out = tmp_path_factory.mktemp("cam") / "camcal"
-    rig = default_rig(seed=2, binning=2)
-    world = SimWorld(rig, seed=2)
-    board = BoardViews(world, 4, lines=axis_lines())
-    record_camera_calibration(simulated(world), out, board, 4, axis_lines=axis_lines(),
-                              truth=board.truth)
-    return out, rig
+@pytest.fixture
+def rec(camera_recording):
+    """The camera calibration recorded on the rig of seed 2 at binning 2
+    (tests/integration/conftest.py) and that rig."""
+    return camera_recording, default_rig(seed=2, binning=2)
 
 
 def test_cli_calibrates_intrinsics_and_the_world_pose(rec, tmp_path):

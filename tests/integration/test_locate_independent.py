@@ -6,31 +6,23 @@ half of the block must be refused as partial. truth.json is read only to score."
 
 import json
 import re
-from pathlib import Path
 
 import numpy as np
 import pytest
 
 from insitu.locate.part import LocateRefused, locate_part
 from insitu.locate.reference import reference_from_mesh
-from insitu.services import calibrate_height, scan_replay
 from insitu.services.locate import locate_cloud
 from insitu.sim.workpieces import make_workpiece
 
-RECORDINGS = Path(__file__).resolve().parents[3] / "shared" / "recordings"
-SCAN = RECORDINGS / "step-block-independent"
-HCAL = RECORDINGS / "height-calibration-coarse-independent"
-
 
 @pytest.fixture(scope="module")
-def scanned():
-    assert SCAN.is_dir() and HCAL.is_dir(), f"{RECORDINGS}: the shared recordings are missing"
-    cloud = scan_replay(SCAN, calibrate_height(HCAL)).cloud
+def scanned(independent_scan):
+    cloud = independent_scan[1].cloud
     mesh = make_workpiece("step-block")
     return cloud, reference_from_mesh(mesh.vertices, mesh.triangles, "step-block")
 
 
-@pytest.mark.slow
 def test_the_sparse_independent_scan_is_refused_never_located_wrong(scanned):
     cloud, ref = scanned
     with pytest.raises(LocateRefused) as e:
@@ -53,7 +45,6 @@ def test_the_sparse_independent_scan_is_refused_never_located_wrong(scanned):
     assert "mm apart along x: nothing holds the part along x" in str(e.value)
 
 
-@pytest.mark.slow
 def test_half_the_block_is_refused_as_partial(scanned):
     cloud, ref = scanned
     half = cloud.points[:, 1] < 0
@@ -63,12 +54,11 @@ def test_half_the_block_is_refused_as_partial(scanned):
     assert re.search(r"only partly in the scan: 4\d% of the reference's top", str(e.value))
 
 
-@pytest.mark.slow
-def test_no_ghost_reaches_the_cloud(scanned):
+def test_no_ghost_reaches_the_cloud(scanned, independent_scan):
     """The mirror images in the step faces (frames flagged "ghost") leave no point off the
     true surface away from the walls."""
     cloud, _ = scanned
-    p = json.loads((SCAN / "truth.json").read_text())["workpiece"]["params"]
+    p = json.loads((independent_scan[0] / "truth.json").read_text())["workpiece"]["params"]
     part = make_workpiece("step-block", length=p["y_size"], width=p["x_size"],
                           heights=p["heights"], x=p["center"][0], y=p["center"][1])
     pts = cloud.points
