@@ -84,9 +84,10 @@ def scan_recording(tmp_path_factory) -> Path:
 def camera_recording(tmp_path_factory) -> Path:
     """A camera calibration recorded on the simulated rig of seed 2 at binning 2: the board
     in 4 views, the scan head's axis lines, the board's truth."""
+    from insitu.geometry.beams import axis_lines
     from insitu.services.record import record_camera_calibration
     from insitu.services.station import simulated
-    from insitu.sim.board import BoardViews, axis_lines
+    from insitu.sim.board import BoardViews
     from insitu.sim.rig import default_rig
     from insitu.sim.world import SimWorld
 
