@@ -23,6 +23,8 @@ if (($#)); then
     "${XVFB[@]}" python -m pytest --basetemp="$BASETEMP" "$@"
     exit
 fi
-INSITU_TEST_NO_QT=1 python -m pytest -p no:pytest-qt -n auto --basetemp="$BASETEMP" \
-    tests/unit tests/integration
-"${XVFB[@]}" python -m pytest -n auto --basetemp="$BASETEMP" tests/gui
+# the long tests first: the short ones fill the workers' ends; a module marked xdist_group runs
+# on one worker (its module fixture made once)
+XDIST=(-n auto --dist loadgroup --basetemp="$BASETEMP")
+INSITU_TEST_NO_QT=1 python -m pytest -p no:pytest-qt "${XDIST[@]}" tests/integration tests/unit
+"${XVFB[@]}" python -m pytest "${XDIST[@]}" tests/gui

@@ -10,7 +10,8 @@ twice, *skipped* when one of them is not in it. A kill is *cut mid-path* when th
 list has no end; its cut path is *reported* when the resume's journal names that path.
 
 The cut path's choice (``auto``): continue where the simulated board reports its position for
-the cut path's list (the mark log), else remark.
+the cut path's list (the mark log), else remark. The runs no kill is meant for (each job's clean
+reference run, the last resume) run in this process, through the same command.
 """
 
 from __future__ import annotations
@@ -86,6 +87,17 @@ def cli(args, env, wait=True):
     return p
 
 
+def run_here(args, log: Path) -> tuple[int, str]:
+    """``insitu job run …`` in this process, the simulated controller logging to ``log``:
+    (exit code, output)."""
+    from typer.testing import CliRunner
+
+    from insitu.cli.main import app
+
+    res = CliRunner().invoke(app, [str(a) for a in args], env={MARK_LOG_ENV: str(log)})
+    return res.exit_code, res.output
+
+
 def kill_at_random(args, env, journal: Path, mark_s: float, rng) -> int:
     """Start ``job run``, SIGKILL it a random time after its journal's first line (or let it
     end); returns the exit code."""
@@ -106,7 +118,7 @@ def _reference(folder: Path, n_job: int, n_paths: int, rng) -> tuple[Path, list,
     each path's mark segments, the marking's duration in s)."""
     job_path, ref_log = folder / f"job{n_job}.json", folder / f"ref{n_job}.log"
     make_test_job(job_path, n_paths, rng)
-    rc, out = cli(["job", "run", job_path], {**os.environ, MARK_LOG_ENV: str(ref_log)})
+    rc, out = run_here(["job", "run", job_path], ref_log)
     assert rc == 0, out
     ref = [segs for _, segs, _ in read_log(ref_log)]
     assert len(ref) == len(read_job(job_path).paths)
@@ -177,7 +189,7 @@ def campaign(kills: int, n_paths: int, seed: int, folder: Path, choice: str = "a
                 break
             args = _after_kill(c, job, job_path, log, ref, n_job, choice)
             if args is not None and c.stats["kills"] >= kills:
-                rc, out = cli(args, env)
+                rc, out = run_here(args, log)
                 assert rc == 0, out
                 break
         _count(c, log, ref, n_job)

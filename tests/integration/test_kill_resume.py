@@ -53,8 +53,8 @@ def test_sigterm_and_sighup_leave_the_laser_off_and_the_record_interrupted(tmp_p
 
 
 def test_kill_and_resume_marks_every_path_once(tmp_path):
-    """Five SIGKILLs: no path twice in full, none skipped, every kill mid-path reported as a
-    cut path."""
+    """Five SIGKILLs in jobs of 200 paths: no path twice in full, none skipped, every kill
+    mid-path reported as a cut path."""
     c = campaign(kills=5, n_paths=200, seed=3, folder=tmp_path)
     assert not c.problems, c.problems
     assert c.stats["kills"] == 5 and c.stats["marked twice in full"] == 0

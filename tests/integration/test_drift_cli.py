@@ -18,6 +18,9 @@ from insitu.services.field import calibrate_field, check_drift
 from insitu.services.record import record_field_calibration
 from insitu.sim.rig import default_rig
 
+# its module fixture made once: the module's tests on one pytest-xdist worker
+pytestmark = pytest.mark.xdist_group("drift-cli")
+
 runner = CliRunner()
 SEED = 3
 
