@@ -33,10 +33,12 @@ AT = (0.0, -30.0)                 # on the step block's 3 mm step, part frame
 @pytest.fixture
 def recipe(step_block_reference, tmp_path):
     """A recipe with a first scan of the step block (tests/integration/conftest.py) as its
-    reference, its counter in the test's folder."""
+    reference, its counter in the test's folder; its parts scanned with lines 1 mm apart (the
+    runs here locate by the simulator's truth or refuse a part that is not there; the marks'
+    heights come from a step's flat top)."""
     path = tmp_path / "recipe.json"
     write_recipe(path, Recipe(step_block_reference, "cloud", (Placement(TEXT, AT, 4.0, 10.0),),
-                              scan=RecipeScan(margin_mm=4.0), serial_start=1,
+                              scan=RecipeScan(margin_mm=4.0, spacing_mm=1.0), serial_start=1,
                               workpiece="step-block"))
     return path
 
@@ -192,7 +194,7 @@ def test_a_pose_the_lines_leave_unheld_gets_a_second_look_crossed(recipe, tmp_pa
         run, truths = _run(recipe, log, 1, station)
         r = read(recipe)                     # the region a tray would give, wider than the part
         run.recipe = replace(r, scan=replace(r.scan, region=(-45.0, 45.0, -70.0, 70.0),
-                                             spacing_mm=0.5, second_look=second_look))
+                                             spacing_mm=1.0, second_look=second_look))
         clouds = []
 
         def locate(cloud, room_light=None):
@@ -233,7 +235,7 @@ def test_a_recipe_job_marks_every_placement_where_the_part_lies(recipe, tmp_path
 
     x, y, a = 3.0, -2.0, 35.0
     with connect(None, "step-block", 0, BINNING, pose=(x, y, a)) as station:
-        cloud = scan_live(station, 0.5).cloud
+        cloud = scan_live(station, 1.0).cloud
         r = read(recipe)
         r = replace(r, placements=r.placements + (Placement('qr:"{serial:05d}"', (0.0, 30.0),
                                                             7.35),))
@@ -254,7 +256,7 @@ def test_a_recipe_job_marks_every_placement_where_the_part_lies(recipe, tmp_path
 def test_mark_recipe_refuses_a_part_it_does_not_find_and_takes_no_serial(recipe, tmp_path):
     cloud = tmp_path / "arc.ply"
     with connect(None, "arc", 0, BINNING) as station:
-        write_ply(cloud, scan_live(station, 0.5).cloud)
+        write_ply(cloud, scan_live(station, 1.0).cloud)
     out = tmp_path / "job.json"
     res = CliRunner().invoke(app, ["mark", "--recipe", str(recipe), "--cloud", str(cloud),
                                    "-o", str(out), "--counter", "c.json"])
