@@ -64,7 +64,7 @@ def frame_ms(app, window, points: np.ndarray, moving: bool, camera: bool = False
     view.set_view("iso")
     view.frame_all(points.min(0), points.max(0))
     times, cpu = [], []
-    for i in range(frames + 1):
+    for _ in range(frames + 1):
         view.moving = moving
         view.camera.orbit(3.0, 0.0)
         t0, c0 = time.perf_counter(), time.process_time()

@@ -65,8 +65,9 @@ def main(rounds: int = 5) -> None:
                 "load+place ms", "hatch+order ms"):
         table.add_column(col, justify="left" if col == "case" else "right")
     for name, spec, width, kw in CASES:
-        placed, t_load = timed(lambda: load_pattern(spec).placed((0.0, 0.0), width), rounds)
-        polys, t_hatch = timed(lambda: hatch(placed, **kw), rounds)
+        placed, t_load = timed(lambda s=spec, w=width: load_pattern(s).placed((0.0, 0.0), w),
+                               rounds)
+        polys, t_hatch = timed(lambda p=placed, k=kw: hatch(p, **k), rounds)
         mark = sum(float(np.linalg.norm(np.diff(p, axis=0), axis=1).sum()) for p in polys)
         table.add_row(name, f"{len(polys)}", f"{mark:.0f}", f"{jump_length(polys):.0f}",
                       f"{scanline_jump(placed, **kw):.0f}" if not kw.get("cross") else "",

@@ -276,7 +276,7 @@ def marking(args, rig, cal, cache: Path) -> None:
         wp = make_workpiece(name)
         ref = reference_from_mesh(wp.vertices, wp.triangles, name)
         done = 0
-        for i in range(3 * args.marks):
+        for _ in range(3 * args.marks):
             if done == args.marks:
                 break
             pose = random_pose(rng)

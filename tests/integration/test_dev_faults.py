@@ -32,7 +32,7 @@ RUNS_PER_DEVICE = 200
 def long_job(n_paths=40):
     rng = np.random.default_rng(7)
     paths = []
-    for i in range(n_paths):
+    for _ in range(n_paths):
         k = int(rng.integers(2, 6))
         xy = rng.uniform(-8, 8, (k, 2))
         paths.append(np.column_stack([xy, np.zeros(k)]))

@@ -71,7 +71,7 @@ def write_rig(folder: Path, lib: Path, port: str, frames: int, **options) -> Pat
 def open_rig(rig: Path):
     """The station of ``rig``, its devices opened."""
     station = connect(rig)
-    station.devices
+    assert station.devices is not None                  # opened on first use
     return station
 
 
