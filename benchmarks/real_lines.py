@@ -181,7 +181,7 @@ def score(s: PhotoSet, shots, plane):
     uv of baseline)] on the pairs both found})."""
     rows = {m: [0, 0, 0] for m in (*METHODS, "naive")}
     pairs = {m: [] for m in METHODS}
-    for f, (R, t), shape, found in shots:
+    for _f, (R, t), shape, found in shots:
         course = true_course(s, R, t, plane, shape)
         if course is None:
             continue

@@ -160,7 +160,7 @@ def _layout(doc, run: _Run, c, path_len) -> list[tuple[list[np.ndarray], dict]]:
         anchor = chunk[0][2].get("text-anchor", "start")
         width = chunk[-1][3] - chunk[0][4]
         shift = {"middle": -width / 2, "end": -width}.get(anchor, 0.0)
-        for ch, place, sty, _, _ in chunk:
+        for _ch, place, sty, _, _ in chunk:
             out.append((place(shift), sty))
         chunk.clear()
 
