@@ -59,6 +59,7 @@ import numpy as np
 from insitu.vision.chains import carry_ends, continuity as chain_support, junction, median3, \
     short_ridges
 from insitu.vision.laser_image import full_scale, noise_sigma
+from insitu.vision.tracks import candidates, on_longest_track
 
 FWHM_PER_SIGMA = 2.0 * np.sqrt(2.0 * np.log(2.0))
 
@@ -147,26 +148,28 @@ def gather(img: np.ndarray, rows: np.ndarray, cols: np.ndarray):
     return img[np.clip(rows, 0, H - 1), cols].astype(np.float32), inside
 
 
-def _stats(pre, row, w, near=False):
-    """Plateau-centred rows, peak, background, contrast and plateau length for all columns.
+def _stats(pre, row, w, near=False, cols=None):
+    """Plateau-centred rows, peak, background, contrast and plateau length for all columns
+    (or the columns ``cols``, one per row of ``row``).
     Background: the mean of the medians of 3 px at each end of the band ±w rows about it,
     widened by half of a plateau longer than 2 px (near: of the least of the 3 px 1 to 3 px
     beyond the line's half maximum, its own sides); contrast: peak minus the brighter side's
     (an edge of a bright region is no line)."""
-    cols = np.arange(pre.shape[1])
+    cols = np.arange(pre.shape[1]) if cols is None else cols
     below, inside = gather(pre, row[None, :] + np.arange(0, w + 1)[:, None], cols)
     gmax = below[0]
     same = (below == gmax) & inside
     run = np.where(same.all(axis=0), w + 1, np.argmin(same, axis=0))  # plateau from 1st max
     long = np.flatnonzero(run > w)                     # a clipped core: its whole plateau
     if len(long):
-        far, inside = gather(pre, row[None, long] + np.arange(0, 4 * w + 1)[:, None], long)
+        far, inside = gather(pre, row[None, long] + np.arange(0, 4 * w + 1)[:, None],
+                             cols[long])
         same = (far == gmax[long]) & inside
         run[long] = np.where(same.all(axis=0), 4 * w + 1, np.argmin(same, axis=0))
     row = row + (run - 1) // 2
     if near:
         wide = w + min(int(run.max(initial=0)) // 2, w)
-        reach, pick = _half_width(pre, row, gmax, wide) + 1, lambda a: a.min(axis=0)
+        reach, pick = _half_width(pre, row, gmax, wide, cols) + 1, lambda a: a.min(axis=0)
     else:
         reach, pick = w + np.maximum(run - 2, 0) // 2, lambda a: median3(*a)
     above, _ = gather(pre, row[None, :] - reach[None, :] + np.arange(3)[:, None], cols)
@@ -175,10 +178,9 @@ def _stats(pre, row, w, near=False):
     return row, gmax, (top + bot) / 2, gmax - np.maximum(top, bot), run
 
 
-def _half_width(pre, row, gmax, w) -> np.ndarray:
-    """(W,) int: how far from ``row`` each column stays above half-way from the least of
-    its ±w band to its peak, on the wider side, px."""
-    cols = np.arange(pre.shape[1])
+def _half_width(pre, row, gmax, w, cols) -> np.ndarray:
+    """(n,) int: how far from ``row`` each of the columns ``cols`` stays above half-way
+    from the least of its ±w band to its peak, on the wider side, px."""
     g, inside = gather(pre, row[None, :] + np.arange(-w, w + 1)[:, None], cols)
     above = (g > (gmax + np.where(inside, g, np.inf).min(axis=0)) / 2) & inside
     up = np.cumprod(above[w::-1], axis=0).sum(axis=0)
@@ -234,15 +236,21 @@ def detect(image, median=3, band=None, window=12, min_peak=40.0, min_contrast=20
     thr = max(min_contrast, snr * noise)
     search, lo, searched = _search(pre, band, allow, fill, w if ridge else 0, thr)
 
-    def candidate(j):
-        row, gmax, bg, contrast, run = _stats(pre, lo + j, w, ridge)
-        ok = searched & (gmax >= min_peak) & (contrast >= thr)
+    def candidate(j, cols=slice(None)):
+        at = None if isinstance(cols, slice) else cols
+        row, gmax, bg, contrast, run = _stats(pre, lo[cols] + j, w, ridge, at)
+        ok = searched[cols] & (gmax >= min_peak) & (contrast >= thr)
         return row, gmax, bg, contrast, ok, run
 
-    j1 = np.argmax(search, axis=1)
-    row, gmax, bg, contrast, ok, run = candidate(j1)
-    ambiguous, locked = np.zeros(W, bool), np.zeros(W, bool)
-    if continuity and W > 2 and search.shape[1] > 2 * w + 1:
+    if ridge:
+        row, gmax, bg, contrast, ok, run, ambiguous = on_longest_track(
+            candidates(search, fill, w, candidate), max_jump)
+        locked = ambiguous
+    else:
+        j1 = np.argmax(search, axis=1)
+        row, gmax, bg, contrast, ok, run = candidate(j1)
+        ambiguous, locked = np.zeros(W, bool), np.zeros(W, bool)
+    if not ridge and continuity and W > 2 and search.shape[1] > 2 * w + 1:
         guard = np.clip(j1[:, None] + np.arange(-w, w + 1)[None, :], 0, search.shape[1] - 1)
         np.put_along_axis(search, guard, fill, axis=1)
         row2, gmax2, bg2, contrast2, ok2, run2 = candidate(np.argmax(search, axis=1))
