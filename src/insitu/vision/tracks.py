@@ -35,7 +35,8 @@ def candidates(search: np.ndarray, fill, w: int, stats, k: int = CANDIDATES):
     at = cv2.findNonZero(peak)
     at = np.zeros((0, 2), np.int64) if at is None else at.reshape(-1, 2).astype(np.int64)
     j, cols = at[:, 0], at[:, 1]                       # row-major: by column, then row
-    first = np.r_[True, (cols[1:] != cols[:-1]) | (j[1:] != j[:-1] + 1)]
+    first = np.ones(len(cols), bool)
+    first[1:] = (cols[1:] != cols[:-1]) | (j[1:] != j[:-1] + 1)
     cols, j = cols[first], j[first]                    # a plateau's first pixel
     order = np.lexsort((-search[cols, j].astype(np.float64), cols))
     cols, j = cols[order], j[order]
@@ -96,7 +97,7 @@ def track_length(row: np.ndarray, ok: np.ndarray, max_jump: float,
     px per column, and goes on across gaps of up to ``bridge`` columns (:func:`_bridged`)."""
     k, W = row.shape
     node = np.arange(k * W).reshape(k, W)
-    src, dst = [], []
+    src, dst = [np.zeros(0, np.int64)], [np.zeros(0, np.int64)]
     for d in range(1, min(LINK, W - 1) + 1):
         for a in range(k):
             for b in range(k):
