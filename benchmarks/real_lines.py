@@ -42,7 +42,7 @@ from rich.table import Table
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from real_sets import SETS, TUNING, PhotoSet  # noqa: E402
 
-from insitu.vision.centres import CENTRE_METHODS, photo_centres  # noqa: E402
+from insitu.vision.centres import CENTRE_METHODS, UncertainLine, photo_centres  # noqa: E402
 
 NAIVE_FRACTION, NAIVE_WINDOW = 0.8, 8
 RIGHT_PX = 5.0
@@ -138,6 +138,14 @@ def rms_to_own_plane(X) -> float:
     return float(np.linalg.svd(X - X.mean(axis=0), full_matrices=False)[1][2] / np.sqrt(len(X)))
 
 
+def centres_or_none(bgr, method, laser_off) -> np.ndarray:
+    """photo_centres' uv (N, 2), or (0, 2) for a photograph it refuses (UncertainLine)."""
+    try:
+        return photo_centres(bgr, method, laser_off=laser_off).uv
+    except UncertainLine:
+        return np.zeros((0, 2))
+
+
 def measure(s: PhotoSet, root: str, background: bool):
     """Centres of every photograph with a board pose: [(file, pose, shape, {name: uv})], the
     naive baseline under "naive" (its uv for both directions: "naive rows", "naive cols")."""
@@ -150,7 +158,7 @@ def measure(s: PhotoSet, root: str, background: bool):
         bg = None
         if background and s.background(f) is not None:
             bg = cv2.imread(s.background(f), cv2.IMREAD_COLOR)
-        found = {m: photo_centres(bgr, m, laser_off=bg).uv for m in METHODS}
+        found = {m: centres_or_none(bgr, m, bg) for m in METHODS}
         ch = bgr[:, :, "bgr".index(s.laser)]
         for along_rows in (True, False):
             cen = naive_com(ch, along_rows)
@@ -215,24 +223,28 @@ def report(s: PhotoSet, root: str, background: bool, console: Console) -> None:
         return
     plane = reference_plane(s, shots)
     rows, pairs = score(s, shots, plane)
-    role = "tuning set" if s.name == TUNING else "held out"
+    role = "tuning set" if s.name == TUNING else "looked at, not held out"
     table = Table(title=f"{s.name} ({s.repo}, {role}): {len(shots)} photographs with the "
                         f"board{', laser-off frame subtracted' if background else ''}")
-    for col in ("method", "board scan lines", "found %", "wrong %", "pairs", "RMS mm",
-                "naive RMS mm", "ratio"):
+    for col in ("method", "board scan lines", "found %", "wrong %", "photos without",
+                "pairs", "RMS mm", "naive RMS mm", "ratio"):
         table.add_column(col, justify="left" if col == "method" else "right")
     for m in (*METHODS, "naive"):
         n, right, wrong = rows[m]
-        cells = [m, str(n), f"{100 * right / max(n, 1):.1f}", f"{100 * wrong / max(n, 1):.2f}"]
+        cells = [m, str(n), f"{100 * right / max(n, 1):.1f}", f"{100 * wrong / max(n, 1):.2f}",
+                 "" if m == "naive" else str(sum(not len(sh[3][m]) for sh in shots))]
         if m == "naive":
             table.add_row(*cells, "", "", "", "")
             continue
         X = np.concatenate([rays_to_board(uv, s.K, s.dist, R, t) for R, t, uv, _ in pairs[m]])
         Xb = np.concatenate([rays_to_board(b, s.K, s.dist, R, t) for R, t, _, b in pairs[m]])
-        r, rb = (rms_to_own_plane(X), rms_to_own_plane(Xb)) if len(X) > 3 else (np.nan,) * 2
+        if len(X) <= 3:
+            table.add_row(*cells, str(len(X)), "—", "—", "—")
+            continue
+        r, rb = rms_to_own_plane(X), rms_to_own_plane(Xb)
         table.add_row(*cells, str(len(X)), f"{r:.3f}", f"{rb:.3f}", f"{r / rb:.2f}")
     console.print(table)
-    if s.plane() is not None:
+    if s.plane() is not None and sum(len(found[m]) for *_, found in shots for m in METHODS) > 3:
         own = reference_plane(PhotoSet(**{**s.__dict__, "plane": lambda: None}), shots)
         angle = np.degrees(np.arccos(min(1.0, abs(float(own[0] @ s.plane()[0])))))
         console.print(f"the published plane and one fitted to the points: {angle:.2f}° apart")
@@ -254,7 +266,9 @@ def main() -> None:
     console.print(f"found: a centre within {RIGHT_PX:g} px of the true course on a scan line "
                   f"where it crosses the board; wrong: farther. RMS: on the pairs both the "
                   f"method and the naive centre of mass ({NAIVE_FRACTION:g} of the line's "
-                  f"maximum, ±{NAIVE_WINDOW} px) found, each about its own plane.")
+                  f"maximum, ±{NAIVE_WINDOW} px) found, each about its own plane. Photos "
+                  f"without: photographs with no centre (none found, or refused: the line's "
+                  f"laser colour no stronger than the colour fringes at the edges).")
 
 
 if __name__ == "__main__":

@@ -17,7 +17,7 @@ from insitu.errors import InsituError
 from insitu.formats import images
 from insitu.formats.atomic import atomic_write_bytes, atomic_write_text
 from insitu.formats.validation import one_of
-from insitu.vision.centres import CENTRE_METHODS, LineCentres, photo_centres
+from insitu.vision.centres import CENTRE_METHODS, LineCentres, UncertainLine, photo_centres
 from insitu.vision.laser_image import PIXEL_BITS
 
 COLUMNS = "file,u,v,peak,width,quality"
@@ -52,6 +52,28 @@ def preview(img: np.ndarray, c: LineCentres) -> bytes:
     return cv2.imencode(".png", out)[1].tobytes()
 
 
+def _measure(frames, off, preview_dir, *args):
+    """The CSV text of every frame's centres (``photo_centres(img, *args[:3], off,
+    args[3])``), the previews {path: PNG}, the frames without centres and one line per frame
+    whose line is uncertain (:class:`~insitu.vision.centres.UncertainLine`)."""
+    method, direction, channel, pixel_bits = args
+    rows, pictures, empty, doubt = io.StringIO(), {}, [], []
+    rows.write(COLUMNS + "\n")
+    for path, img in frames:
+        try:
+            c = photo_centres(img, method, direction, channel, off, pixel_bits)
+        except UncertainLine as e:
+            c = LineCentres(*(np.zeros(0),) * 5)
+            doubt.append(f"{path}: {e}")
+        if not len(c):
+            empty.append(str(path))
+        for u, v, peak, width, q in zip(c.u, c.v, c.peak, c.width, c.contrast):
+            rows.write(f"{path},{u:.3f},{v:.3f},{peak:.1f},{width:.2f},{q:.1f}\n")
+        if preview_dir is not None:
+            pictures[preview_dir / f"{path.stem}.png"] = preview(img, c)
+    return rows, pictures, empty, doubt
+
+
 @one_line_errors
 def centres(
     images: Annotated[list[Path], typer.Argument(help="Photographs of a laser line (any "
@@ -79,7 +101,8 @@ def centres(
     background, gray values). A colour image's line is taken where the light has the laser's
     colour; a thin ridge across at least 20 columns (or rows) is a line, a glint, a lamp or
     the edge of a bright object is not. An image without a line gives no rows and is
-    reported."""
+    reported; so is one whose line carries no more laser colour than the colour fringes at
+    its edges (it could be any edge: give --background)."""
     _check_options(method, direction, channel, pixel_bits)
     check_output(out, ".csv")
     if preview_dir is not None and preview_dir.exists() and not preview_dir.is_dir():
@@ -89,20 +112,13 @@ def centres(
     if off is not None and (odd := next((p for p, i in frames if i.shape != off.shape), None)):
         raise InsituError(f"--background {background}: shape {off.shape}, but {odd} has "
                           f"{dict(frames)[odd].shape} (the same camera's view, laser off)")
-    rows, pictures, empty = io.StringIO(), {}, []
-    rows.write(COLUMNS + "\n")
-    for path, img in frames:
-        c = photo_centres(img, method, None if direction == "auto" else direction, channel,
-                          off, pixel_bits)
-        if not len(c):
-            empty.append(str(path))
-        for u, v, peak, width, q in zip(c.u, c.v, c.peak, c.width, c.contrast):
-            rows.write(f"{path},{u:.3f},{v:.3f},{peak:.1f},{width:.2f},{q:.1f}\n")
-        if preview_dir is not None:
-            pictures[preview_dir / f"{path.stem}.png"] = preview(img, c)
+    rows, pictures, empty, doubt = _measure(frames, off, preview_dir, method,
+                                            None if direction == "auto" else direction,
+                                            channel, pixel_bits)
     if len(empty) == len(frames):
         raise InsituError(f"no laser line found in {'any of the ' if len(frames) > 1 else ''}"
-                          f"{len(frames)} image{'s' if len(frames) > 1 else ''}")
+                          f"{len(frames)} image{'s' if len(frames) > 1 else ''}"
+                          + (f"; {doubt[0]}" if len(doubt) == 1 == len(frames) else ""))
     if preview_dir is not None:
         preview_dir.mkdir(parents=True, exist_ok=True)
         for name, png in pictures.items():
@@ -113,3 +129,5 @@ def centres(
                   f"({method}) → {out}" + (f"; previews in {preview_dir}" if preview_dir else ""))
     if empty:
         console.print(f"no line found in: {', '.join(empty)}")
+    for line in doubt:
+        console.print(f"warning: not measured, {line}")

@@ -35,6 +35,9 @@ CHROMA = 12 / 255
 scale."""
 CHROMA_SNR = 6.0
 """… and least multiple of the excess's noise sigma."""
+EDGES = 0.02
+"""The fraction of a frame's pixels, of the strongest gradient, whose colour fringes
+:func:`colour_margin` weighs the line's colour against."""
 _SIDE = 640         # the structure of the line is judged on the frame shrunk to ≤ this, px
 _HAT = 7            # top-hat structuring element, px of the shrunk frame (> the line's width)
 
@@ -135,6 +138,42 @@ def _auto_channel(bgr: np.ndarray) -> int:
     return int(np.argmax([line_contrast(ridges(_excess(small, c))) for c in range(3)]))
 
 
+def _reach(shape) -> tuple[int, int]:
+    """How far (px) laser colour is looked for beside a line in a frame of ``shape``: 1 % of
+    its shorter side, ≥ 3; and the block size (px) its colour is pooled in (reach // 3)."""
+    reach = max(3, round(min(shape[:2]) / 100))
+    return reach, max(1, reach // 3)
+
+
+def colour_margin(li: LaserImage, u: np.ndarray, v: np.ndarray) -> float:
+    """How much more laser colour the line at centres ``u``, ``v`` (n,) px carries than the
+    colour fringes at the frame's edges (a lens's chromatic aberration, JPEG chroma): the
+    median over the centres of the thin ridges of the laser's excess (``li.ridge``) within
+    reach, over their 99th percentile at the frame's strongest edges (the top
+    :data:`EDGES` of the laser channel's gradient) away from the line. Below 1 the colour
+    cannot tell the line from the edges of a bright pattern. inf for a gray image or no
+    centres."""
+    if li.ridge is None or not len(u):
+        return np.inf
+    H, W = li.gray.shape
+    reach, f = _reach((H, W))
+    thin = li.ridge
+    h, w = thin.shape
+    r = 2 * (reach // f) + 1
+    near_max = cv2.dilate(thin, np.ones((r, r), np.uint8))
+    cu = np.clip((np.asarray(u) / f).astype(np.int64), 0, w - 1)
+    cv_ = np.clip((np.asarray(v) / f).astype(np.int64), 0, h - 1)
+    line = np.zeros((h, w), np.uint8)
+    line[cv_, cu] = 1
+    line = cv2.dilate(line, np.ones((2 * r + 1, 2 * r + 1), np.uint8)) > 0
+    gray = cv2.resize(li.gray, (w, h), interpolation=cv2.INTER_AREA).astype(np.float32)
+    grad = cv2.magnitude(cv2.Sobel(gray, cv2.CV_32F, 1, 0), cv2.Sobel(gray, cv2.CV_32F, 0, 1))
+    edge = (grad >= np.percentile(grad, 100 * (1 - EDGES))) & (grad > 0) & ~line
+    fringe = float(np.percentile(near_max[edge], 99)) if edge.any() else 0.0
+    stripe = float(np.median(near_max[cv_, cu]))
+    return stripe / max(fringe, CHROMA * li.full_scale)
+
+
 def _laser_coloured(bgr: np.ndarray, c: int, fs: float) -> tuple[np.ndarray, np.ndarray]:
     """The thin ridges (white top-hat) of channel c's excess, and (H, W) bool: where they
     (≥ :data:`CHROMA` · fs and :data:`CHROMA_SNR` · their noise) are, or lie within reach
@@ -143,8 +182,7 @@ def _laser_coloured(bgr: np.ndarray, c: int, fs: float) -> tuple[np.ndarray, np.
     Made on the excess max-pooled by reach // 3 (a thin ridge keeps its peak), with
     reach // 3 ≥ 3 px left: a full-HD frame in 3 × 3 blocks."""
     H, W = bgr.shape[:2]
-    reach = max(3, round(min(H, W) / 100))
-    f = max(1, reach // 3)
+    reach, f = _reach(bgr.shape)
     excess = _excess(bgr, c)
     if f > 1:
         h, w = H // f, W // f
