@@ -20,7 +20,8 @@ from insitu.formats.sequence import Sequence
 from insitu.formats.calibration import CameraCalibration
 from insitu.formats.json_file import load_json_model, save_json_model
 from insitu.formats.rig import RigConfig, ScanHeadConfig
-from insitu.services.scan import ScanInterrupted, scan_live, scan_replay
+from insitu.services import ScanInterrupted
+from insitu.services.scan import scan_live, scan_replay
 from insitu.services.station import connect
 
 PROGRESS = re.compile(r"[\w ]+: \d+ of \d+( \w+)?")   # a plain progress line (no terminal)

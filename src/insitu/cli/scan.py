@@ -10,54 +10,66 @@ import typer
 from rich.table import Table
 
 from insitu.cli.common import bounded, check_output, console, fail, one_line_errors, progress_bar
-from insitu.cli.options import CrossScan, CrossSpacing, PartPose
+from insitu.cli.options import CrossScan, CrossSpacing, PartPose, Rig, Seed, Workpiece
 from insitu.formats.atomic import atomic_write_bytes
 from insitu.formats.project import SIM_BINNING
 from insitu.formats.validation import one_of
 from insitu.reconstruct.height_models import HEIGHT_MODELS
 
 
+Output = Annotated[Path, typer.Option("-o", "--output", help="Point cloud to write (.ply).")]
+Replay = Annotated[Path | None, typer.Option(help="Recorded scan folder to reconstruct.")]
+HeightCal = Annotated[Path | None, typer.Option(
+    "--height-cal", help="Height calibration: a recorded folder or a file from 'insitu "
+                         "calibrate height' (default with --rig: the rig file's).")]
+Method = Annotated[str | None, typer.Option(
+    help="plane: light-plane intersection only (Method 1); height: with the height "
+         "calibration (Method 2, the default when --height-cal is given).")]
+HeightModel = Annotated[str | None, typer.Option(
+    help="With --method height: " + " or ".join(f"{k} ({m.description})" for k, m in
+                                                 HEIGHT_MODELS.items()) + ".")]
+Spacing = Annotated[float, typer.Option(callback=bounded("spacing_mm"), help="Line spacing, mm.")]
+Region = Annotated[tuple[float, float, float, float] | None, typer.Option(
+    metavar="X0 X1 Y0 Y1", callback=bounded("position_mm"),
+    help="Region X0 X1 Y0 Y1, mm (default on the simulated rig: the whole part; a real rig "
+         "needs one).")]
+Binning = Annotated[int, typer.Option(
+    callback=bounded("binning"), help="Simulated rig: divide the image size by this.")]
+LineSpeed = Annotated[float | None, typer.Option(
+    callback=bounded("mark_speed_mm_s"),
+    help="How fast the head sweeps each line, mm/s (default: the rig file's).")]
+PreviewPng = Annotated[Path | None, typer.Option(
+    help="Also write a picture of the cloud (.png): the top view by height, and in the "
+         "camera's room-light grey when the scan has it.")]
+RoomLight = Annotated[Path | None, typer.Option(
+    "--room-light", metavar="FRAME.png",
+    help="Also write the camera's frame under the room light, laser off, taken before the "
+         "lines (for `insitu locate --room-light`).")]
+LinesPerFrame = Annotated[str | None, typer.Option(
+    "--lines-per-frame", metavar="auto|K",
+    help="Draw several lines in one exposure: K, or auto (as many as the heights a first "
+         "sparse frame measures allow); each line's centres only where its band — from the "
+         "rig's geometry and the heights — holds them, none where two bands could. Default: "
+         "one line a frame.")]
+PartHeights = Annotated[tuple[float, float] | None, typer.Option(
+    "--part-heights", metavar="LOW HIGH", callback=bounded("position_mm"),
+    help="With several lines a frame: the surface's heights LOW … HIGH, mm, when known "
+         "(no survey frame; its bands follow them). Replay: instead of its survey frames'.")]
+
+
 @one_line_errors
-def scan(
-    out: Annotated[Path, typer.Option("-o", "--output", help="Point cloud to write (.ply).")],
-    replay: Annotated[Path | None, typer.Option(help="Recorded scan folder to reconstruct.")] = None,
-    height_cal: Annotated[Path | None, typer.Option(
-        "--height-cal", help="Height calibration: a recorded folder or a file from "
-                             "'insitu calibrate height' (default with --rig: the rig "
-                             "file's).")] = None,
-    method: Annotated[str | None, typer.Option(
-        help="plane: light-plane intersection only (Method 1); height: with the height "
-             "calibration (Method 2, the default when --height-cal is given).")] = None,
-    height_model: Annotated[str | None, typer.Option(
-        help="With --method height: " + " or ".join(f"{k} ({m.description})" for k, m in
-                                                     HEIGHT_MODELS.items()) + ".")] = None,
-    rig: Annotated[Path | None, typer.Option(help="Rig file (default: the simulated rig).")] = None,
-    workpiece: Annotated[str, typer.Option(help="Simulated rig: the part on the table.")] = "step-block",
-    pose: PartPose = (0.0, 0.0, 0.0),
-    spacing: Annotated[float, typer.Option(
-        callback=bounded("spacing_mm"), help="Line spacing, mm.")] = 0.5,
-    cross: CrossScan = False,
-    cross_spacing: CrossSpacing = None,
-    region: Annotated[tuple[float, float, float, float] | None,
-                      typer.Option(metavar="X0 X1 Y0 Y1", callback=bounded("position_mm"),
-                                   help="Region X0 X1 Y0 Y1, mm (default on the simulated rig: "
-                                        "the whole part; a real rig needs one).")] = None,
-    seed: Annotated[int, typer.Option(callback=bounded("seed"), help="Simulated rig: seed.")] = 0,
-    binning: Annotated[int, typer.Option(
-        callback=bounded("binning"), help="Simulated rig: divide the image size by this.")] = SIM_BINNING,
-    line_speed: Annotated[float | None, typer.Option(
-        callback=bounded("mark_speed_mm_s"),
-        help="How fast the head sweeps each line, mm/s (default: the rig file's).")] = None,
-    preview: Annotated[Path | None, typer.Option(help="Also write a picture of the cloud (.png): the top view by height, and "
-                                      "in the camera's room-light grey when the scan has it.")] = None,
-    room_light: Annotated[Path | None, typer.Option(
-        "--room-light", metavar="FRAME.png",
-        help="Also write the camera's frame under the room light, laser off, taken before the "
-             "lines (for `insitu locate --room-light`).")] = None,
-) -> None:
-    """Scan a part (or replay a recorded scan: its own lines, crossed or not) and write its
-    point cloud."""
+def scan(out: Output, replay: Replay = None, height_cal: HeightCal = None,
+         method: Method = None, height_model: HeightModel = None, rig: Rig = None,
+         workpiece: Workpiece = "step-block", pose: PartPose = (0.0, 0.0, 0.0),
+         spacing: Spacing = 0.5, cross: CrossScan = False, cross_spacing: CrossSpacing = None,
+         region: Region = None, seed: Seed = 0, binning: Binning = SIM_BINNING,
+         line_speed: LineSpeed = None, preview: PreviewPng = None,
+         room_light: RoomLight = None, lines_per_frame: LinesPerFrame = None,
+         part_heights: PartHeights = None) -> None:
+    """Scan a part (or replay a recorded scan: its own lines, crossed or not, one or several
+    a frame) and write its point cloud."""
     from insitu import services
+    from insitu.reconstruct.packing import lines_per_frame as per_frame
     from insitu.services.station import connect
 
     check_output(out, ".ply")
@@ -65,6 +77,31 @@ def scan(
         check_output(room_light, ".png")
     if height_cal is None and rig is not None and replay is None:
         height_cal = _rig_height_calibration(rig)
+    cal = _calibration(method, height_cal, height_model)
+    packing = {"heights": _heights(part_heights)}
+    with progress_bar("scanning", "lines") as progress:
+        if replay is not None:
+            result = services.scan_replay(replay, cal, height_model, progress=progress,
+                                          **packing)
+        else:
+            with connect(rig, workpiece, seed, binning, pose=pose) as station:
+                result = _live(station, out, spacing=spacing, region=region, height_cal=cal,
+                               model=height_model, progress=progress, speed_mm_s=line_speed,
+                               cross=cross, cross_spacing=cross_spacing,
+                               lines_per_frame=per_frame(lines_per_frame), **packing)
+    services.save_cloud(result, out)
+    if room_light is not None and result.room_light is not None:
+        atomic_write_bytes(room_light, cv2.imencode(".png", result.room_light)[1].tobytes())
+    if preview is not None:
+        from insitu.reconstruct.preview import save_cloud_picture
+        save_cloud_picture(result.cloud, check_output(preview, ".png"), title=out.name)
+    console.print(_table(result, out, room_light))
+
+
+def _calibration(method: str | None, height_cal: Path | None, height_model: str | None):
+    """The height calibration a scan uses (None: Method 1), its options checked."""
+    from insitu import services
+
     method = method or ("height" if height_cal is not None else "plane")
     if method not in ("plane", "height"):
         fail(f"--method {method!r}: expected 'plane' or 'height'")
@@ -72,24 +109,19 @@ def scan(
         fail("--method height needs --height-cal HCAL")
     if height_model is not None and height_model not in HEIGHT_MODELS:
         fail(f"--height-model {height_model!r}: expected {one_of(HEIGHT_MODELS)}")
-    cal = None
-    if method == "height":
-        with progress_bar("height calibration") as progress:
-            cal = services.load_height_calibration(height_cal, progress)
-    with progress_bar("scanning", "lines") as progress:
-        if replay is not None:
-            result = services.scan_replay(replay, cal, height_model, progress=progress)
-        else:
-            with connect(rig, workpiece, seed, binning, pose=pose) as station:
-                result = _live(station, out, spacing=spacing, region=region, height_cal=cal,
-                               model=height_model, progress=progress, speed_mm_s=line_speed,
-                               cross=cross, cross_spacing=cross_spacing)
-    services.save_cloud(result, out)
-    if room_light is not None and result.room_light is not None:
-        atomic_write_bytes(room_light, cv2.imencode(".png", result.room_light)[1].tobytes())
-    if preview is not None:
-        from insitu.reconstruct.preview import save_cloud_picture
-        save_cloud_picture(result.cloud, check_output(preview, ".png"), title=out.name)
+    if method != "height":
+        return None
+    with progress_bar("height calibration") as progress:
+        return services.load_height_calibration(height_cal, progress)
+
+
+def _heights(part_heights) -> tuple[float, float] | None:
+    if part_heights is not None and not part_heights[0] < part_heights[1]:
+        fail(f"--part-heights {part_heights[0]:g} {part_heights[1]:g}: expected LOW < HIGH")
+    return part_heights
+
+
+def _table(result, out: Path, room_light: Path | None) -> Table:
     s = result.summary
     table = Table(title=f"scan → {out}", show_header=False)
     table.add_row("method", s.method)
@@ -97,6 +129,7 @@ def scan(
                             f"{s.unconfirmed_removed:,} unconfirmed by the neighbouring lines "
                             "removed)")
     table.add_row("lines with points", f"{s.frames_with_line} of {s.frames} ({s.coverage:.0%})")
+    table.add_row("frames", f"{s.camera_frames}: {s.packing}")
     table.add_row("x range, mm", f"{s.bounds_min[0]:.2f} … {s.bounds_max[0]:.2f}")
     table.add_row("y range, mm", f"{s.bounds_min[1]:.2f} … {s.bounds_max[1]:.2f}")
     table.add_row("z range, mm", f"{s.bounds_min[2]:.2f} … {s.bounds_max[2]:.2f}")
@@ -105,7 +138,7 @@ def scan(
         table.add_row("room-light frame", f"→ {room_light}" if result.room_light is not None
                       else f"not written: {s.ambient}")
     table.add_row("time", scan_time_text(s))
-    console.print(table)
+    return table
 
 
 def scan_time_text(s) -> str:

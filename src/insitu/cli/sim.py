@@ -18,51 +18,60 @@ app = typer.Typer(help="The simulated rig.", no_args_is_help=True,
                  rich_markup_mode="markdown")
 
 
+Kind = Annotated[str, typer.Argument(help="scan | height-calibration | field-calibration | "
+                                           "camera-calibration")]
+Output = Annotated[Path, typer.Option("-o", "--output",
+                                      help="Folder to write (replaced if it exists).")]
+Part = Annotated[str, typer.Option(help=f"For a scan: {', '.join(WORKPIECES)} or a mesh file "
+                                        "(STL/PLY/OBJ).")]
+Spacing = Annotated[float, typer.Option(callback=bounded("spacing_mm"),
+                                        help="Scan line spacing, mm.")]
+Region = Annotated[tuple[float, float, float, float] | None, typer.Option(
+    metavar="X0 X1 Y0 Y1", callback=bounded("position_mm"),
+    help="Scan region X0 X1 Y0 Y1, mm (default: the part).")]
+Seed = Annotated[int, typer.Option(callback=bounded("seed"),
+                                   help="Seed of the simulated rig and its noise.")]
+Binning = Annotated[int, typer.Option(help="Divide the 2448×2048 image by this (1, 2, 4, 8).")]
+Views = Annotated[int, typer.Option(callback=bounded("count"),
+                                    help="Camera calibration: checkerboard views.")]
+Grid = Annotated[int, typer.Option(callback=bounded("count"),
+                                   help="Field calibration: spots per side.")]
+Marked = Annotated[bool, typer.Option(help="Field calibration: mark circles on the plate and "
+                                           "image them instead of pilot spots.")]
+Heights = Annotated[str, typer.Option(
+    metavar="Z1,Z2,...",
+    help="Field calibration: plate heights, mm, comma-separated. Two or more (e.g. 0,20) "
+         "record the spots `insitu calibrate camera` needs to re-estimate the camera's pose "
+         "after it moved.")]
+Alignment = Annotated[bool, typer.Option(
+    "--axis-lines/--no-axis-lines",
+    help="Camera calibration: after the views, the board flat on the plate with the head's x "
+         "and y axis lines drawn on it, which give the camera's pose in the scan-head "
+         "frame.")]
+MovedDeg = Annotated[float, typer.Option(
+    callback=bounded("angle_deg"),
+    help="Knock the camera after its calibration: turn it by this angle, degrees, about a "
+         "random axis (from --seed). sequence.json keeps the operator's calibration of the "
+         "old pose; truth.json holds the moved camera.")]
+MovedMm = Annotated[float, typer.Option(
+    callback=bounded("move_mm"),
+    help="Knock the camera after its calibration: move it by this distance, mm, in a random "
+         "direction (from --seed).")]
+LinesPerFrame = Annotated[str | None, typer.Option(
+    "--lines-per-frame", metavar="K|auto",
+    help="Scan: K lines drawn in each exposure (frames with `lines`), after survey frames "
+         "that bound the heights (auto: as many as those heights allow). Default: one.")]
+
+
 @app.command("record")
 @one_line_errors
-def record_cmd(
-    kind: Annotated[str, typer.Argument(help="scan | height-calibration | field-calibration | "
-                                             "camera-calibration")],
-    out: Annotated[Path, typer.Option("-o", "--output", help="Folder to write (replaced if it exists).")],
-    workpiece: Annotated[str, typer.Option(help=f"For a scan: {', '.join(WORKPIECES)} or a "
-                                                "mesh file (STL/PLY/OBJ).")] = "step-block",
-    pose: PartPose = (0.0, 0.0, 0.0),
-    spacing: Annotated[float, typer.Option(
-        callback=bounded("spacing_mm"), help="Scan line spacing, mm.")] = 0.5,
-    cross: RecordCross = None,
-    region: Annotated[tuple[float, float, float, float] | None,
-                      typer.Option(metavar="X0 X1 Y0 Y1", callback=bounded("position_mm"),
-                                   help="Scan region X0 X1 Y0 Y1, mm (default: the part).")] = None,
-    seed: Annotated[int, typer.Option(
-        callback=bounded("seed"), help="Seed of the simulated rig and its noise.")] = 0,
-    binning: Annotated[int, typer.Option(
-        help="Divide the 2448×2048 image by this (1, 2, 4, 8).")] = SIM_BINNING,
-    views: Annotated[int, typer.Option(
-        callback=bounded("count"), help="Camera calibration: checkerboard views.")] = 15,
-    grid: Annotated[int, typer.Option(
-        callback=bounded("count"), help="Field calibration: spots per side.")] = 21,
-    marked: Annotated[bool, typer.Option(help="Field calibration: mark circles on the plate "
-                                              "and image them instead of pilot spots.")] = False,
-    heights: Annotated[str, typer.Option(
-        metavar="Z1,Z2,...",
-        help="Field calibration: plate heights, mm, comma-separated. Two or more (e.g. 0,20) "
-             "record the spots `insitu calibrate camera` needs to re-estimate the camera's "
-             "pose after it moved.")] = "0",
-    alignment: Annotated[bool, typer.Option(
-        "--axis-lines/--no-axis-lines",
-        help="Camera calibration: after the views, the board flat on the plate with the "
-             "head's x and y axis lines drawn on it, which give the camera's pose in the "
-             "scan-head frame.")] = True,
-    camera_moved_deg: Annotated[float, typer.Option(
-        callback=bounded("angle_deg"),
-        help="Knock the camera after its calibration: turn it by this angle, degrees, about a "
-             "random axis (from --seed). sequence.json keeps the operator's calibration of the "
-             "old pose; truth.json holds the moved camera.")] = 0.0,
-    camera_moved_mm: Annotated[float, typer.Option(
-        callback=bounded("move_mm"),
-        help="Knock the camera after its calibration: move it by this distance, mm, in a "
-             "random direction (from --seed).")] = 0.0,
-) -> None:
+def record_cmd(kind: Kind, out: Output, workpiece: Part = "step-block",
+               pose: PartPose = (0.0, 0.0, 0.0), spacing: Spacing = 0.5,
+               cross: RecordCross = None, region: Region = None, seed: Seed = 0,
+               binning: Binning = SIM_BINNING, views: Views = 15, grid: Grid = 21,
+               marked: Marked = False, heights: Heights = "0", alignment: Alignment = True,
+               camera_moved_deg: MovedDeg = 0.0, camera_moved_mm: MovedMm = 0.0,
+               lines_per_frame: LinesPerFrame = None) -> None:
     """Write a recorded sequence (docs/formats.md) from the simulated rig, with truth.json.
 
     To try the recalibration after a camera move: record and fit a field calibration
@@ -70,6 +79,7 @@ def record_cmd(
     (`--heights 0,20 --grid 7 --camera-moved-deg 0.5 --camera-moved-mm 2`) and run
     `insitu calibrate camera SPOTS --field FIELD.json -o CAMERA.json`."""
     from insitu.geometry.beams import axis_lines
+    from insitu.reconstruct.packing import lines_per_frame as per_frame
     from insitu.services.station import simulated
     from insitu.sim.board import BoardViews
     from insitu.sim.rig import default_rig, move_camera
@@ -82,12 +92,14 @@ def record_cmd(
     plate_z = parse_heights(heights)
     if plate_z != [0.0] and (kind != "field-calibration" or marked):
         fail(f"--heights {heights}: plate heights are for spot field calibrations only")
+    if any(pose) and kind != "scan":
+        fail("--pose places the part for a scan; calibrations clear the table")
+    if lines_per_frame is not None and kind != "scan":
+        fail(f"--lines-per-frame {lines_per_frame}: several lines a frame are for a scan")
     check_output(out)
     rig = default_rig(seed, binning)
     if camera_moved_deg or camera_moved_mm:
         rig = move_camera(rig, camera_moved_deg, camera_moved_mm, seed)
-    if any(pose) and kind != "scan":
-        fail("--pose places the part for a scan; calibrations clear the table")
     world = sim_world(workpiece if kind == "scan" else "step-block", rig=rig, seed=seed,
                       pose=pose if kind == "scan" else (0.0, 0.0, 0.0))
     board = (BoardViews(world, views, lines=axis_lines() if alignment else None)
@@ -96,7 +108,7 @@ def record_cmd(
         record.record(station, kind, out, spacing=spacing, region=region, cross=cross,
                       grid=grid, heights=plate_z, marked=marked, next_view=board, views=views,
                       truth=board.truth if board else None, alignment=alignment,
-                      progress=progress)
+                      progress=progress, lines_per_frame=per_frame(lines_per_frame))
     console.print(f"wrote {out}")
 
 

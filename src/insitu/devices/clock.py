@@ -70,12 +70,13 @@ class StationClock:
 
     @contextmanager
     def simulating(self) -> Iterator[None]:
-        """Count the CPU seconds (of the whole process) spent inside as the simulator's."""
-        t0 = time.process_time()
+        """Count the CPU seconds the calling thread spends inside as the simulator's (a
+        scan's processing may run beside it on another thread)."""
+        t0 = time.thread_time()
         try:
             yield
         finally:
-            self._simulation_cpu_s += time.process_time() - t0
+            self._simulation_cpu_s += time.thread_time() - t0
 
 
 @dataclass(frozen=True)

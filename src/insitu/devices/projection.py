@@ -86,6 +86,16 @@ class GalvoLineProjector:
         self._check(start, end)
         self._show(self.sweep_list(start, end, focus_z))
 
+    def show_lines(self, lines, focus_z: float = 0.0) -> None:
+        """Several lines in one list, each swept as :meth:`show_line` sweeps one (the
+        source off on the jumps between them): they share the camera's exposure."""
+        lines = list(lines)
+        if len(lines) == 1:
+            return self.show_line(*lines[0], focus_z)
+        self._check(*(p for line in lines for p in line))
+        cmds = [c for a, b in lines for c in self.sweep_list(a, b, focus_z)]
+        self._show(cmds)
+
     def show_spot(self, xy, focus_z: float = 0.0) -> None:
         self._check(xy)
         j = self.joint(xy, focus_z)

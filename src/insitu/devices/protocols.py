@@ -31,6 +31,17 @@ class ExposureCamera(Camera, Protocol):
     exposure_ms: float
 
 
+@runtime_checkable
+class RoiCamera(Camera, Protocol):
+    """A camera that reads out only a region of interest (faster frames)."""
+
+    def set_region_of_interest(self, roi: tuple[int, int, int, int] | None) -> None:
+        """Read only the pixels u0 ≤ u < u1, v0 ≤ v < v1 of ``roi`` = (u0, v0, u1, v1)
+        (widened to the sensor's steps; None: the whole frame); the frames keep their size,
+        0 outside it."""
+        ...
+
+
 def check_in_field(field_size_mm, *points) -> None:
     """What a scan head does before it draws: SafetyError naming the first of ``points``
     ((2,) mm on z = 0 each) outside the field ``field_size_mm`` (width, height) centred on the
@@ -51,6 +62,11 @@ class ScanHead(Protocol):
 
     def show_line(self, start: np.ndarray, end: np.ndarray, focus_z: float = 0.0) -> None:
         """Draw the line start → end (mm on z = 0) repeatedly at pilot power until changed."""
+        ...
+
+    def show_lines(self, lines, focus_z: float = 0.0) -> None:
+        """Draw the ``lines`` ((start, end) mm on z = 0 each) in turn, repeatedly, one list
+        (the camera triggered at its start): several lines in one exposure."""
         ...
 
     def show_spot(self, xy: np.ndarray, focus_z: float = 0.0) -> None:

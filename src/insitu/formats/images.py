@@ -109,3 +109,22 @@ def check_bits(where: str, img: np.ndarray, bits: int | None) -> None:
     if (img.dtype == np.uint8) != (bits == 8) or (top < 65535 and int(img.max()) > top):
         raise FormatError(f"{where}: a {img.dtype} image holding up to {int(img.max())}, but "
                           f"pixel_bits is {bits} (values 0 … {top})")
+
+
+def grey_image(path, img: np.ndarray) -> np.ndarray:
+    """``img`` read from ``path`` as (H, W) uint8 or uint16: one channel, or three equal
+    ones; FormatError naming the file for a colour image or another depth."""
+    if img.ndim == 3 and img.shape[2] == 1:
+        img = img[:, :, 0]
+    elif img.ndim == 3 and img.shape[2] == 3:
+        if not (np.array_equal(img[..., 0], img[..., 1])
+                and np.array_equal(img[..., 0], img[..., 2])):
+            raise FormatError(f"{path}: expected a single-channel (grey) image, got a colour "
+                              "image with 3 channels that differ")
+        img = np.ascontiguousarray(img[..., 0])
+    elif img.ndim != 2:
+        raise FormatError(f"{path}: expected a single-channel (grey) image, "
+                          f"got {img.shape[2]} channels")
+    if img.dtype not in (np.uint8, np.uint16):
+        raise FormatError(f"{path}: expected an 8- or 16-bit image, got {img.dtype}")
+    return img

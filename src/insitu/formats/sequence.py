@@ -23,7 +23,7 @@ from insitu.errors import FormatError
 from insitu.formats.atomic import atomic_folder, atomic_write_text
 from insitu.formats.bounds import each_within, within
 from insitu.formats.camera_spec import CameraSpec
-from insitu.formats.images import check_bits, read_image
+from insitu.formats.images import check_bits, grey_image, read_image
 from insitu.formats.limits import MAX_IMAGE_BYTES, check_file, check_inside
 from insitu.formats.validation import (PositivePair, Range, Vec2, bad, dump_json, plain,
                                        read_json, show, validation_message)
@@ -81,17 +81,34 @@ class AmbientSpec(BaseModel):
 
 
 class FrameSpec(BaseModel):
-    """One frame: image ``file`` (relative to the folder) and what the head showed (mm)."""
+    """One frame: image ``file`` (relative to the folder) and what the head showed (mm): a
+    ``line``, or ``lines`` drawn in one exposure (never both; one entry is read as ``line``).
+    ``survey`` (ours): a frame that bounded the heights before lines were packed
+    (:mod:`insitu.reconstruct.packing`), its lines measured again later."""
 
     model_config = _CONFIG
     file: RelativeFile
     line: LineSpec | None = None
+    lines: Annotated[list[LineSpec], Field(min_length=1)] | None = None
+    survey: bool = False
     spot: Point | None = None
     fiducials: Annotated[list[Point], Field(min_length=1)] | None = None
     fiducial_diameter_mm: Square | None = None
     plate_z_mm: Position | None = None
     exposure_ms: Exposure | None = None
 
+    @model_validator(mode="after")
+    def _line_or_lines(self) -> "FrameSpec":
+        if self.line is not None and self.lines is not None:
+            raise bad("expected 'line' or 'lines', not both", at="lines")
+        if self.lines is not None and len(self.lines) == 1:
+            self.line, self.lines = self.lines[0], None
+        return self
+
+    def drawn(self) -> list[tuple[list[float], list[float]]]:
+        """The lines the head drew in this frame, (start, end) mm each (empty: none)."""
+        return [(list(s.start), list(s.end))
+                for s in ([self.line] if self.line is not None else self.lines or [])]
 
 
 class CheckerboardSpec(BaseModel):
@@ -109,8 +126,10 @@ def frame_problems(kind: str, frame: FrameSpec) -> list[tuple[str, str]]:
             "field-calibration": ("spot", "plate_z_mm")}.get(kind, ())
     if kind == "field-calibration" and frame.fiducials is not None:    # marked circles
         need = ("fiducials", "fiducial_diameter_mm", "plate_z_mm")
+    if frame.lines is not None and kind not in ("scan", "height-calibration"):
+        return [("lines", f"several lines in one frame: not in a '{kind}' sequence")]
     return [(name, f"missing (required in a '{kind}' sequence)") for name in need
-            if getattr(frame, name) is None]
+            if getattr(frame, name) is None and not (name == "line" and frame.lines)]
 
 
 class SequenceSpec(BaseModel):
@@ -232,19 +251,7 @@ class Sequence:
         check_inside(path, self.folder, what)
         img = read_image(path, expect=None if cam is None else (cam.width, cam.height),
                          expected="camera is")
-        if img.ndim == 3 and img.shape[2] == 1:
-            img = img[:, :, 0]
-        elif img.ndim == 3 and img.shape[2] == 3:
-            if not (np.array_equal(img[..., 0], img[..., 1])
-                    and np.array_equal(img[..., 0], img[..., 2])):
-                raise FormatError(f"{path}: expected a single-channel (grey) image, got a colour "
-                                  "image with 3 channels that differ")
-            img = np.ascontiguousarray(img[..., 0])
-        elif img.ndim != 2:
-            raise FormatError(f"{path}: expected a single-channel (grey) image, "
-                              f"got {img.shape[2]} channels")
-        if img.dtype not in (np.uint8, np.uint16):
-            raise FormatError(f"{path}: expected an 8- or 16-bit image, got {img.dtype}")
+        img = grey_image(path, img)
         _check_size(str(path), img, self.spec.camera)
         check_bits(str(path), img, self.spec.pixel_bits)
         return img

@@ -9,11 +9,15 @@ from scipy.spatial import cKDTree
 from insitu.errors import MeasurementError
 from insitu.formats.pointcloud import PointCloud
 from insitu.geometry.camera import CameraModel
+from insitu.reconstruct.bands import Packing, Sheets, exclusive
 from insitu.reconstruct.consistency import cross_line_inliers
 from insitu.reconstruct.height_models import HeightModel
 from insitu.reconstruct.plate_models import check_bracket
 from insitu.reconstruct.plane import band_and_side, line_runs_along_rows, reconstruct_line
-from insitu.reconstruct.turned_sheet import TurnedSheetModel, line_angle, same_direction, turned_offset
+from insitu.reconstruct.turned_sheet import (TurnedSheetModel, line_angle, same_direction,
+                                             turned_offset)
+from insitu.vision.band_centres import centres_in_bands
+from insitu.vision.detect import LineCentres
 from insitu.vision.extract import CentreSettings, extract_centres
 
 
@@ -43,7 +47,7 @@ class ScanReconstructor:
         self.camera, self.H, self.telecentric = camera, pivot_height_mm, telecentric
         self.model, self.settings, self.z_range = height_model, settings, z_range_mm
         self.cross_model, self.pixel_bits = cross_model, pixel_bits
-        self._angles: dict[int, float] = {}     # frame index → its line's angle to x
+        self._angles: dict[int, float] = {}     # line index → its angle to x
         self.min_points = min_points
         self._chunks: list[tuple[np.ndarray, ...]] = []
         self.frames = 0
@@ -53,6 +57,7 @@ class ScanReconstructor:
         self.last_centres = np.zeros((0, 2))
         self.last_points = np.zeros((0, 3))
         self._ambient: np.ndarray | None = None
+        self._sheets: Sheets | None = None
 
     def set_ambient(self, image: np.ndarray | None) -> None:
         """The laser-off frame under the room light, (H, W) uint8 or uint16 as the line
@@ -71,10 +76,7 @@ class ScanReconstructor:
         """Process frame ``index`` of the line start → end (mm); returns the points it gave.
         ``last_centres`` (M, 2) px and ``last_points`` (K, 3) mm then hold this frame's line
         centres and points (before outlier removal), for live display."""
-        if image.shape != (self.camera.height, self.camera.width):
-            raise MeasurementError(
-                f"frame {index}: {image.shape[1]}×{image.shape[0]} px, but the camera "
-                f"calibration is for {self.camera.width}×{self.camera.height} px")
+        self._check(index, image)
         self.frames += 1
         rows = line_runs_along_rows(self.camera, start, end)
         band, upper = None, 0
@@ -84,6 +86,65 @@ class ScanReconstructor:
             band = (lo, hi)
         centres = extract_centres(image, self.settings, band, rows, upper, self.pixel_bits)
         self.last_centres, self.last_points = centres.uv, np.zeros((0, 3))
+        return self._store(index, start, end, centres)
+
+    def add_lines(self, image: np.ndarray, lines, ids, z_range: tuple[float, float],
+                  packing: Packing = Packing()) -> int:
+        """Process a frame of several ``lines`` ((start, end) mm each) drawn in one exposure,
+        line ``ids[k]`` of the scan each (its place across its pass: the cloud's ``line``):
+        each line's centres only inside its band for surfaces within ``z_range`` mm
+        (:mod:`insitu.reconstruct.bands`, widened by ``packing``), none where two bands hold
+        the same pixel. Returns the points the frame gave; ``last_centres``, ``last_points``
+        hold all its lines'."""
+        self._check(ids[0], image)
+        self.frames += len(lines)
+        bands = exclusive([self.sheets.band(a, b, z_range, packing.margin_px) for a, b in lines],
+                          packing.guard_px)
+        found = centres_in_bands(image, bands, self.settings, packing.edge_px, self.pixel_bits)
+        total, centres, points = 0, [], []
+        for (a, b), k, c in zip(lines, ids, found):
+            total += self._store(int(k), a, b, c)
+            centres.append(c.uv)
+            points.append(self.last_points)
+        self.last_centres, self.last_points = np.vstack(centres), np.vstack(points)
+        return total
+
+    def twin(self) -> "ScanReconstructor":
+        """A new, empty reconstructor that measures as this one does (a survey's)."""
+        return ScanReconstructor(self.camera, self.H, self.telecentric, self.model,
+                                 self.settings, self.z_range, self.min_points,
+                                 self.cross_model, self.pixel_bits)
+
+    def heights(self, radius_mm: float = 1.5, neighbours: int = 8
+                ) -> tuple[float, float] | None:
+        """The lowest and highest of the points so far, (low, high) mm, less isolated ones
+        (:func:`density_inliers`: a speck off the surface widens nothing); None: no points."""
+        if not self._chunks:
+            return None
+        pts = np.concatenate([c[0] for c in self._chunks])
+        keep = density_inliers(pts, radius_mm, neighbours)
+        if not keep.any():
+            return None
+        return float(pts[keep, 2].min()), float(pts[keep, 2].max())
+
+    @property
+    def sheets(self) -> Sheets:
+        """The light sheets the bands follow (the height model's, else the nominal planes)."""
+        if self._sheets is None:
+            self._sheets = Sheets(self.camera, self.H, self.telecentric, self.model,
+                                  self.cross_model)
+        return self._sheets
+
+    def _check(self, index: int, image: np.ndarray) -> None:
+        if image.shape != (self.camera.height, self.camera.width):
+            raise MeasurementError(
+                f"frame {index}: {image.shape[1]}×{image.shape[0]} px, but the camera "
+                f"calibration is for {self.camera.width}×{self.camera.height} px")
+
+    def _store(self, index: int, start, end, centres: LineCentres) -> int:
+        """The points of line ``index`` (start → end, mm) from its ``centres``, kept when
+        there are enough; ``last_points`` holds them."""
+        self.last_points = np.zeros((0, 3))
         if len(centres) < self.min_points:
             return 0
         if self.model is None:

@@ -40,7 +40,7 @@ def same_direction(start, end, angle_deg: float, tol_deg: float = 1e-4) -> bool:
     return abs(diff) <= tol_deg
 
 
-def _turn(angle_deg: float) -> np.ndarray:
+def turn_to_y(angle_deg: float) -> np.ndarray:
     """(3, 3) Rz(90° − angle): turns lines at ``angle_deg`` to x onto the y axis."""
     return rot_z(np.radians(90.0 - angle_deg))
 
@@ -48,12 +48,12 @@ def _turn(angle_deg: float) -> np.ndarray:
 def turned_camera(camera: CameraModel, angle_deg: float) -> CameraModel:
     """The same camera in the turned world (p' = Rz p): ``R Rzᵀ`` with the same ``t``."""
     return CameraModel(camera.width, camera.height, camera.K, camera.dist,
-                       camera.R @ _turn(angle_deg).T, camera.t)
+                       camera.R @ turn_to_y(angle_deg).T, camera.t)
 
 
 def turned_offset(start, end, angle_deg: float) -> float:
     """The line's offset in the turned frame: its constant x' there, mm."""
-    R = _turn(angle_deg)[:2, :2]
+    R = turn_to_y(angle_deg)[:2, :2]
     mid = (np.asarray(start, float)[:2] + np.asarray(end, float)[:2]) / 2
     return float((R @ mid)[0])
 
@@ -62,7 +62,7 @@ def turned_lines(offsets, span: tuple[float, float], angle_deg: float
                  ) -> list[tuple[np.ndarray, np.ndarray]]:
     """World lines (start, end) mm at ``angle_deg`` to x: the lines x' = offset, y' from
     span[0] to span[1] of the turned frame, turned back."""
-    Rt = _turn(angle_deg)[:2, :2].T
+    Rt = turn_to_y(angle_deg)[:2, :2].T
     return [(Rt @ np.array([x, span[0]], float), Rt @ np.array([x, span[1]], float))
             for x in map(float, offsets)]
 
@@ -85,7 +85,7 @@ class TurnedSheetModel:
                ) -> np.ndarray:
         """(N, 3) world mm of the centres (u, v) of the line at turned offset ``x_mm``."""
         p = self.sheet.points(turned_camera(camera, self.angle_deg), x_mm, u, v)
-        return p @ _turn(self.angle_deg)          # p = Rzᵀ p', row-wise
+        return p @ turn_to_y(self.angle_deg)          # p = Rzᵀ p', row-wise
 
     def to_dict(self) -> dict:
         return {"line_angle_deg": self.angle_deg, **self.sheet.to_dict()}

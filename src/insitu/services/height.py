@@ -28,7 +28,8 @@ def observations(seq: Sequence, settings: CentreSettings = CentreSettings(),
                  progress: Progress | None = None
                  ) -> tuple[list[LineObservation], list[LineObservation], float | None]:
     """Line centres of every frame of a height-calibration sequence, one frame at a time,
-    each searched where its light plane meets the plate (± 3 mm): (the frames of lines along
+    each line (a frame may hold several) searched where its light plane meets the plate
+    (± 3 mm): (the frames of lines along
     y, each at its x; the crossed frames, each at its offset in the turned frame
     (:mod:`insitu.reconstruct.turned_sheet`); the crossed lines' angle to x, None without)."""
     if seq.kind != "height-calibration":
@@ -36,26 +37,27 @@ def observations(seq: Sequence, settings: CentreSettings = CentreSettings(),
     camera, H = camera_model(seq.camera), seq.scan_head.pivot_height_mm
     along_y, crossed, angle = [], [], None
     for i, frame, image in seq:
-        a, b = frame.line.start, frame.line.end
-        if abs(a[0] - b[0]) > 1e-9:
-            angle = line_angle(a, b) if angle is None else angle
-            if not same_direction(a, b, angle):
-                raise CalibrationError(
-                    f"{seq.folder}: frames[{i}].line: expected lines along y or crossed lines "
-                    f"at {angle:g}° to x (as the earlier frames), got {line_angle(a, b):g}°")
-        rows = line_runs_along_rows(camera, a, b)
-        band = expected_band(camera, a, b, H, (frame.plate_z_mm - 3.0, frame.plate_z_mm + 3.0),
-                             along_rows=rows)
-        c = extract_centres(image, settings, band, rows, pixel_bits=seq.pixel_bits)
-        if len(c) < 20:
-            raise CalibrationError(f"{seq.folder}: {frame.file}: no laser line found "
-                                   f"(line {list(a)} → {list(b)} mm, plate at "
-                                   f"{frame.plate_z_mm:g} mm)")
-        if abs(a[0] - b[0]) > 1e-9:
-            crossed.append(LineObservation(turned_offset(a, b, angle), float(frame.plate_z_mm),
-                                           c.u, c.v))
-        else:
-            along_y.append(LineObservation(float(a[0]), float(frame.plate_z_mm), c.u, c.v))
+        for a, b in frame.drawn():             # a frame's lines lie apart on the plate
+            if abs(a[0] - b[0]) > 1e-9:
+                angle = line_angle(a, b) if angle is None else angle
+                if not same_direction(a, b, angle):
+                    raise CalibrationError(
+                        f"{seq.folder}: frames[{i}].line: expected lines along y or crossed "
+                        f"lines at {angle:g}° to x (as the earlier frames), got "
+                        f"{line_angle(a, b):g}°")
+            rows = line_runs_along_rows(camera, a, b)
+            plate = (frame.plate_z_mm - 3.0, frame.plate_z_mm + 3.0)
+            band = expected_band(camera, a, b, H, plate, along_rows=rows)
+            c = extract_centres(image, settings, band, rows, pixel_bits=seq.pixel_bits)
+            if len(c) < 20:
+                raise CalibrationError(f"{seq.folder}: {frame.file}: no laser line found "
+                                       f"(line {list(a)} → {list(b)} mm, plate at "
+                                       f"{frame.plate_z_mm:g} mm)")
+            if abs(a[0] - b[0]) > 1e-9:
+                crossed.append(LineObservation(turned_offset(a, b, angle),
+                                               float(frame.plate_z_mm), c.u, c.v))
+            else:
+                along_y.append(LineObservation(float(a[0]), float(frame.plate_z_mm), c.u, c.v))
         if progress:
             progress(i + 1, len(seq))
     return along_y, crossed, angle

@@ -18,7 +18,9 @@ from insitu.reconstruct.plan import check_region
 from insitu.reconstruct.turned_sheet import CROSS_ANGLE_DEG, turned_lines, turned_offset
 from insitu.services.common import Progress
 from insitu.services.room_light import station_room_light
-from insitu.services.scan import plan_lines
+from insitu.reconstruct.packing import Frame, FramePlan
+from insitu.services.scan import plan_lines, reconstructor
+from insitu.services.scan_frames import Shots, survey_heights
 from insitu.services.station import Station
 
 KINDS = ("scan", "height-calibration", "field-calibration", "camera-calibration")
@@ -56,31 +58,45 @@ def _on_plate(station: Station):
 
 def record_scan(station: Station, out: Path, spacing: float = 0.5, region=None,
                 exposure_ms: float | None = None, cross: bool = False,
-                progress: Progress | None = None) -> Path:
+                progress: Progress | None = None, lines_per_frame: int | str | None = None
+                ) -> Path:
     """A scan over ``region`` (x0, x1, y0, y1) mm (default: the station's), a line every
     ``spacing`` mm (``cross``: then a crossed pass, as :func:`~insitu.services.scan.scan_live`
     draws it without a height calibration), after a frame with the laser off under the room
-    light (auto-exposed, ``ambient.png``; left out when the camera gives none)."""
+    light (auto-exposed, ``ambient.png``; left out when the camera gives none).
+    ``lines_per_frame`` K or "auto": the frames as a live scan packs them
+    (:mod:`insitu.reconstruct.packing`; its survey frames first, ``"survey": true``), each
+    with its ``lines`` and the exposure it was taken with."""
     region = tuple(region) if region is not None else station.default_region()
     check_region(region, station.rig.head.field_size_mm)
     lines = plan_lines(region, spacing, cross)
-    cam, head = station.devices.camera, station.devices.head
+    cam, head, rig = station.devices.camera, station.devices.head, station.rig
     exposure = _exposure(cam, exposure_ms)
+    rec = reconstructor(rig.camera, rig.head.pivot_height_mm, rig.head.lens == "telecentric",
+                        rig.head.z_range_mm, None, None, "recording")
+    plan = FramePlan(lines, rec.sheets, rig.head.z_range_mm, lines_per_frame)
+    shot = Shots(cam, head, None)
     with _writer(station, out, "scan", truth=station.truth(region=list(region))) as w:
+        def keep(frame: Frame, image: np.ndarray) -> None:
+            drawn = [{"start": a.tolist(), "end": b.tolist()} for a, b in frame.lines]
+            many = {"lines": drawn} if len(drawn) > 1 else {"line": drawn[0]}
+            survey = {"survey": True} if frame.survey else {}
+            w.add(image, **many, **survey,
+                  exposure_ms=exposure * len(drawn) if exposure is not None else None)
         try:
             try:
                 room = station_room_light(station)
                 w.add_ambient(room.image, exposure_ms=room.exposure_ms)
             except DeviceError:
                 pass            # a camera only the head triggers: a recording without one
-            for i, (a, b) in enumerate(lines):
-                head.show_line(a, b)
-                w.add(cam.grab(), line={"start": a.tolist(), "end": b.tolist()},
-                      exposure_ms=exposure)
+            measured, _ = survey_heights(shot, rec, plan, keep)
+            frames = plan.frames(measured)
+            for i, f in enumerate(frames):
+                keep(f, shot.take(f, i, len(frames), lambda: None))
                 if progress:
-                    progress(i + 1, len(lines))
+                    progress(i + 1, len(frames))
         finally:
-            head.off()
+            shot.done()
     return out
 
 
@@ -222,16 +238,18 @@ def record(station: Station, kind: str, out: Path, *, spacing: float = 0.5, regi
            cross: bool | None = None, grid: int = 21, heights: Seq[float] = (0.0,),
            marked: bool = False,
            next_view: NextView | None = None, views: int = 15, truth: dict | None = None,
-           alignment: bool = True, progress: Progress | None = None) -> Path:
+           alignment: bool = True, progress: Progress | None = None,
+           lines_per_frame: int | str | None = None) -> Path:
     """A sequence of ``kind`` (one of :data:`KINDS`) with the options that kind takes:
-    a scan (``spacing``, ``region``), the height calibration, the field calibration
+    a scan (``spacing``, ``region``, ``lines_per_frame``), the height calibration, the field calibration
     (``grid`` spots per side at ``heights``, or ``marked`` circles), the camera calibration
     (``views`` brought by ``next_view``, then with ``alignment`` the board flat on the plate
     and the head's axis lines on it, which give the camera's pose in the scan-head frame;
     ``truth``: added to the station's). ``cross``: a scan's crossed pass (default off), the
     height calibration's crossed lines (default on)."""
     if kind == "scan":
-        return record_scan(station, out, spacing, region, cross=bool(cross), progress=progress)
+        return record_scan(station, out, spacing, region, cross=bool(cross), progress=progress,
+                           lines_per_frame=lines_per_frame)
     if kind == "height-calibration":
         return record_height_calibration(station, out, cross=cross is not False,
                                           progress=progress)

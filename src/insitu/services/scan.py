@@ -18,6 +18,8 @@ from insitu.formats.pointcloud import PointCloud, write_ply
 from insitu.formats.rig_record import RigRecord
 from insitu.formats.sequence import Sequence
 from insitu.geometry.camera import CameraModel
+from insitu.reconstruct.bands import Packing
+from insitu.reconstruct.packing import FramePlan, RecordedPlan
 from insitu.reconstruct.plan import check_region, scan_lines
 from insitu.reconstruct.scan import ScanReconstructor
 from insitu.reconstruct.turned_sheet import CROSS_ANGLE_DEG
@@ -26,14 +28,20 @@ from insitu.services.common import Progress, camera_model
 from insitu.services.height import (centre_settings, check_same_camera, crossed_model,
                                     height_model)
 from insitu.services.room_light import station_room_light
+from insitu.services.scan_frames import (ScanInterrupted, Shots, Stream, describe_packing,
+                                         region_of_interest, survey_heights)
 from insitu.services.station import Station
 
 
 @dataclass(frozen=True)
 class ScanSummary:
-    """``seconds``: the wall clock's; ``station_s``: the station's own (its camera frames
-    and head: :mod:`insitu.devices.clock`; None for a replay or on a real rig);
-    ``cpu_s``: the computer's processing (the simulator's drawing left out)."""
+    """``frames``: the lines measured (one a frame unless several share an exposure),
+    ``frames_with_line``: those that gave points, ``camera_frames``: the frames taken (a
+    survey frame's too, the room light's not), ``packing``: how many lines a frame held
+    and the heights their bands followed. ``seconds``: the wall clock's; ``station_s``: the
+    station's own (its camera frames and head: :mod:`insitu.devices.clock`; None for a
+    replay or on a real rig); ``cpu_s``: the computer's processing (the simulator's drawing
+    left out)."""
 
     points: int
     frames: int
@@ -47,6 +55,8 @@ class ScanSummary:
     ambient: str = "none"      # "yes": each point has its grey value; else why not
     station_s: float | None = None
     cpu_s: float = 0.0
+    camera_frames: int = 0
+    packing: str = "one line a frame"
 
     @property
     def coverage(self) -> float:
@@ -89,25 +99,17 @@ class Cancelled(InsituError):
         self.partial = partial
 
 
-class ScanInterrupted(DeviceError):
-    """A device failed mid-scan; the laser is off. ``partial``: the result of the lines
-    measured before the fault (None when none gave points)."""
-
-    def __init__(self, message: str, partial: ScanResult | None):
-        super().__init__(message)
-        self.partial = partial
-
-
 def _partial(rec: ScanReconstructor, t0: StepTimer, rig: RigRecord | None,
-             ambient: str = "none") -> ScanResult | None:
+             ambient: str = "none", frames: int = 0, packing: str = "") -> ScanResult | None:
     try:
-        return _finish(rec, t0, rig, ambient)
+        return _finish(rec, t0, rig, ambient, None, frames, packing)
     except MeasurementError:
         return None
 
 
 def _finish(rec: ScanReconstructor, t0: StepTimer, rig: RigRecord | None = None,
-            ambient: str = "none", room_light: np.ndarray | None = None) -> ScanResult:
+            ambient: str = "none", room_light: np.ndarray | None = None, frames: int = 0,
+            packing: str = "one line a frame") -> ScanResult:
     """The result so far, its cloud recording ``rig`` (the station's; None for a replay)."""
     cloud = replace(rec.cloud(), rig=rig)
     lo, hi = cloud.points.min(axis=0), cloud.points.max(axis=0)
@@ -115,7 +117,8 @@ def _finish(rec: ScanReconstructor, t0: StepTimer, rig: RigRecord | None = None,
     return ScanResult(cloud, ScanSummary(len(cloud), rec.frames, rec.frames_with_line, rec.method,
                                          t.wall, tuple(lo), tuple(hi),
                                          rec.outliers_removed, rec.unconfirmed_removed,
-                                         ambient, t.station, t.cpu), room_light)
+                                         ambient, t.station, t.cpu, frames, packing),
+                      room_light)
 
 
 def reconstructor(camera: CameraModel, pivot_height_mm: float, telecentric: bool,
@@ -160,23 +163,30 @@ def plan_lines(region, spacing: float, cross: bool = False,
 def scan_replay(folder: str | Path, height_cal: HeightCalibration | None = None,
                 model: str | None = None, progress: Progress | None = None,
                 cancel: threading.Event | None = None,
-                on_frame: FrameCallback | None = None) -> ScanResult:
+                on_frame: FrameCallback | None = None,
+                heights: tuple[float, float] | None = None,
+                packing: Packing = Packing()) -> ScanResult:
     """Reconstruct a recorded scan sequence (docs/formats.md, recorded sequence): Method 1,
     or Method 2 when a height calibration is given. The recording is a camera like any other
-    (:class:`~insitu.devices.replay.ReplayCamera`): the same loop as a live scan. Its
-    ambient frame, when it has one, gives each point its ``ambient`` grey value."""
+    (:class:`~insitu.devices.replay.ReplayCamera`): the same loop as a live scan; frames of
+    one ``line`` and of several ``lines`` alike (:class:`~insitu.reconstruct.packing.
+    RecordedPlan`: the lines of a frame told apart by their bands, for the ``heights`` given,
+    else those its survey frame measured). Its ambient frame, when it has one, gives each
+    point its ``ambient`` grey value."""
     t0 = StepTimer(None)
     seq = Sequence.open(folder)
     if seq.kind != "scan":
         raise MeasurementError(f"{seq.folder}: a '{seq.kind}' sequence, not a scan")
     head = seq.scan_head
-    lines = [(np.asarray(f.line.start, float), np.asarray(f.line.end, float))
-             for f in seq.frames]
+    drawn = [f.drawn() for f in seq.frames]
+    plan = RecordedPlan(drawn, [f.survey for f in seq.frames], tuple(head.z_range_mm),
+                        packing, heights)
     rec = reconstructor(camera_model(seq.camera), head.pivot_height_mm,
                         head.lens == "telecentric", tuple(head.z_range_mm), height_cal, model,
-                        str(seq.folder), cross=any(abs(a[0] - b[0]) > 1e-9 for a, b in lines),
+                        str(seq.folder), cross=any(abs(a[0] - b[0]) > 1e-9
+                                                   for f in drawn for a, b in f),
                         pixel_bits=seq.pixel_bits)
-    return _scan(ReplayCamera(seq), RecordedHead(), lines, rec, t0, "frames", progress, cancel,
+    return _scan(ReplayCamera(seq), RecordedHead(), plan, rec, t0, "frames", progress, cancel,
                  on_frame, room_light=seq.read_ambient)
 
 
@@ -185,16 +195,23 @@ def scan_live(station: Station, spacing: float = 0.5, region=None,
               progress: Progress | None = None, cancel: threading.Event | None = None,
               on_frame: FrameCallback | None = None, exposure_ms: float | None = None,
               speed_mm_s: float | None = None, cross: bool = False,
-              cross_spacing: float | None = None) -> ScanResult:
+              cross_spacing: float | None = None, lines_per_frame: int | str | None = None,
+              heights: tuple[float, float] | None = None,
+              packing: Packing = Packing()) -> ScanResult:
     """Drive the station: step the line over ``region`` (x0, x1, y0, y1) mm (default: the
     station's, which a real rig does not have), with ``cross`` a second pass of crossed
     lines over it ``cross_spacing`` mm apart (:func:`plan_lines`), and reconstruct each
     frame as it arrives
-    (``on_frame`` sees each; ``exposure_ms``: the camera's, default its own; ``speed_mm_s``:
-    the head's line sweep speed, default its own). First a frame with the laser off under
-    the room light, auto-exposed (:func:`~insitu.services.room_light.station_room_light`),
-    gives each point its ``ambient`` grey value. The laser is off when this returns or
-    raises; a device fault raises :class:`ScanInterrupted` with what was measured before it."""
+    (``on_frame`` sees each; ``exposure_ms``: the camera's, default its own, for each line;
+    ``speed_mm_s``: the head's line sweep speed, default its own). ``lines_per_frame``:
+    None or 1, K or "auto" (:mod:`insitu.reconstruct.packing`: a survey frame bounds the
+    heights, unless ``heights`` (low, high) mm are known, then the lines are packed by
+    them; a frame of K lines is exposed K times as long). First a frame with the laser off
+    under the room light, auto-exposed (:func:`~insitu.services.room_light.
+    station_room_light`), gives each point its ``ambient`` grey value; the camera then
+    reads out only the region the lines can reach (a camera that can). The laser is off
+    when this returns or raises; a device fault raises :class:`ScanInterrupted` with what
+    was measured before it."""
     t0 = StepTimer(station.clock)
     region = tuple(region) if region is not None else station.default_region()
     rig = station.rig
@@ -203,25 +220,32 @@ def scan_live(station: Station, spacing: float = 0.5, region=None,
     rec = reconstructor(rig.camera, rig.head.pivot_height_mm, rig.head.lens == "telecentric",
                         rig.head.z_range_mm, height_cal, model, "live scan", cross,
                         getattr(station.devices.camera, "pixel_bits", None))
+    plan = FramePlan(lines, rec.sheets, rig.head.z_range_mm, lines_per_frame, packing, heights)
     camera, head = station.devices.camera, station.devices.head
     if exposure_ms is not None:
         camera.set_exposure(exposure_ms)
     if speed_mm_s is not None:
         head.set_line_speed(speed_mm_s)
-    return _scan(camera, head, lines, rec, t0, "lines", progress, cancel, on_frame,
-                 station.record, lambda: station_room_light(station).image)
+    return _scan(camera, head, plan, rec, t0, "lines", progress, cancel, on_frame,
+                 station.record, lambda: station_room_light(station).image,
+                 roi=region_of_interest(rec, lines))
 
 
-def _scan(camera: Camera, head: ScanHead, lines, rec: ScanReconstructor, t0: StepTimer, what: str,
-          progress: Progress | None, cancel: threading.Event | None,
+def _scan(camera: Camera, head: ScanHead, plan, rec: ScanReconstructor, t0: StepTimer,
+          what: str, progress: Progress | None, cancel: threading.Event | None,
           on_frame: FrameCallback | None, rig: RigRecord | None = None,
-          room_light: Callable[[], np.ndarray | None] | None = None) -> ScanResult:
+          room_light: Callable[[], np.ndarray | None] | None = None,
+          roi: tuple[int, int, int, int] | None = None) -> ScanResult:
     """The scan loop: ``room_light()`` (the laser-off frame, or None) first — a camera that
     gives none (a trigger only the head sends) leaves the points without grey values, said in
-    the summary's ``ambient`` — then each line drawn, grabbed and reconstructed in turn; the
-    laser off at the end, on a cancel (:class:`Cancelled`) or a device fault
-    (:class:`ScanInterrupted`), each keeping what was measured."""
-    ambient, room = "none", None
+    the summary's ``ambient`` — then the ``plan``'s survey frames (their heights bound the
+    packed frames), then its frames: drawn and taken on a thread of their own
+    (:class:`~insitu.services.scan_frames.Stream`) while the last ones are reconstructed
+    here, so a scan takes the slower of the two; the laser off at the end, on a cancel
+    (:class:`Cancelled`) or a device fault (:class:`ScanInterrupted`), each keeping what was
+    measured. The camera reads ``roi`` only during the lines."""
+    ambient, room, taken, packing = "none", None, 0, "one line a frame"
+    shot = Shots(camera, head, roi)
     try:
         if room_light is not None:
             try:
@@ -230,31 +254,44 @@ def _scan(camera: Camera, head: ScanHead, lines, rec: ScanReconstructor, t0: Ste
             except DeviceError as e:
                 ambient = f"none (the room-light frame failed: {e})"
             rec.set_ambient(room)
-        for i, (a, b) in enumerate(lines):
-            if cancel is not None and cancel.is_set():
-                raise Cancelled(f"scan cancelled after {i} of {len(lines)} {what}",
-                                _partial(rec, t0, rig, ambient))
-            try:
-                head.show_line(a, b)
-                image = camera.grab()
-            except DeviceError as e:
-                head.off()
-                raise ScanInterrupted(f"scan stopped at line {i + 1} of {len(lines)}, laser "
-                                      f"off: {e}", _partial(rec, t0, rig, ambient)) from e
-            rec.add(i, image, a, b)
-            if on_frame:
-                on_frame(ScanFrame(i, len(lines), image, rec.last_centres, rec.last_points))
-            if progress:
-                progress(i + 1, len(lines))
+        measured, taken = survey_heights(shot, rec, plan)
+        frames = plan.frames(measured)
+        packing = describe_packing(plan, frames, measured)
+        stream = Stream(shot, frames)
+        try:
+            for i, f, image in stream:
+                if cancel is not None and cancel.is_set():
+                    raise Cancelled(f"scan cancelled after {i} of {len(frames)} {what}",
+                                    _partial(rec, t0, rig, ambient, taken + i, packing))
+                if f.survey:
+                    continue
+                if len(f.lines) == 1:
+                    rec.add(f.ids[0], image, *f.lines[0])
+                else:
+                    rec.add_lines(image, f.lines, f.ids, plan.z_range, plan.packing)
+                if on_frame:
+                    on_frame(ScanFrame(i, len(frames), image, rec.last_centres,
+                                       rec.last_points))
+                if progress:
+                    progress(i + 1, len(frames))
+        except ScanInterrupted as e:
+            raise ScanInterrupted(str(e), _partial(rec, t0, rig, ambient, taken, packing)
+                                  ) from e.__cause__
+        finally:
+            stream.close()
+        taken += len(frames)
     finally:
-        head.off()
-    return _finish(rec, t0, rig, ambient, room)
+        shot.done()
+    return _finish(rec, t0, rig, ambient, room, taken, packing)
 
 
 class RecordedHead:
     """The scan head of a recording: its lines were drawn when the frames were taken."""
 
     def show_line(self, start, end, focus_z: float = 0.0) -> None:
+        """Nothing to draw."""
+
+    def show_lines(self, lines, focus_z: float = 0.0) -> None:
         """Nothing to draw."""
 
     def off(self) -> None:
