@@ -30,7 +30,9 @@ class Station:
     opened on first use, so planning never touches the hardware. Close it when done (laser
     off, devices released); it is a context manager. ``record``: which rig and workpiece
     this is, as clouds and jobs record it (None: unknown). ``room_light_ms``: the exposure
-    the last frame under the room light needed (:mod:`insitu.services.room_light`)."""
+    the last frame under the room light needed (:mod:`insitu.services.room_light`);
+    ``mark_pace``: the board's own pace, wall seconds per planned second of its last jobs
+    (:func:`insitu.services.mark.board_seconds`; None: nothing marked yet)."""
 
     def __init__(self, rig: RigModel, cfg: RigConfig, world: SimWorld | None = None,
                  field: Path | None = None, rig_file: Path | None = None,
@@ -38,6 +40,7 @@ class Station:
         self.rig, self.cfg, self.world, self.rig_file = rig, cfg, world, rig_file
         self.record = record
         self.room_light_ms: float | None = None
+        self.mark_pace: float | None = None
         self._devices: Devices | None = None
         self.use_field(field)
 

@@ -1,5 +1,6 @@
 """What the operator confirms before the laser fires: the job's patterns, paths, marked
-length, extent, time, laser settings, and the rig and workpiece — as (label, value) rows."""
+length, extent, time on the board, laser settings, the rig and workpiece, where the job and
+its journal are kept — as (label, value) rows."""
 
 from __future__ import annotations
 
@@ -7,7 +8,8 @@ from pathlib import Path
 
 import numpy as np
 
-from insitu.marking import MarkJob, estimate_time
+from insitu.marking import MarkJob, journal_path_for
+from insitu.services.mark import BoardTime, board_seconds
 
 
 def rig_text(record: dict | None) -> str:
@@ -20,15 +22,16 @@ def rig_text(record: dict | None) -> str:
             f", binning {record.get('binning', '?')}")
 
 
-def arm_rows(job: MarkJob, patterns: list[str], station_text: str, timing=None,
-             first_path: int = 0, job_path: Path | None = None,
-             choice: dict | None = None) -> list[tuple[str, str]]:
+def arm_rows(job: MarkJob, patterns: list[str], station_text: str,
+             time: BoardTime | None = None, first_path: int = 0, job_path: Path | None = None,
+             choice: dict | None = None, unsaved: bool = False) -> list[tuple[str, str]]:
     """The rows of the arming summary of ``job`` (from ``first_path`` on when resuming):
-    ``patterns`` placed (names), ``station_text`` (the station connected), ``choice``: the
-    keywords of the run (resume, cut path, restart)."""
+    ``patterns`` placed (names), ``station_text`` (the station connected), ``time`` on the
+    board (default: the plan's), ``choice``: the keywords of the run (resume, cut path,
+    restart); ``unsaved``: ``job_path`` is in the working folder of a project never saved."""
     pts = np.vstack([p.points for p in job.paths])
     lo, hi = pts.min(0), pts.max(0)
-    e = estimate_time(job, timing, first_path=first_path)
+    e = time or board_seconds(job, None, first_path)
     n = len(job.paths)
     las = job.laser
     own = sum(p.laser is not None for p in job.paths)
@@ -37,7 +40,7 @@ def arm_rows(job: MarkJob, patterns: list[str], station_text: str, timing=None,
             ("marked length", f"{e.mark_mm:.0f} mm (jumps {e.jump_mm:.0f} mm)"),
             ("extent, mm", f"x {lo[0]:.2f} … {hi[0]:.2f}, y {lo[1]:.2f} … {hi[1]:.2f}, "
                            f"z {lo[2]:.2f} … {hi[2]:.2f}"),
-            ("time", f"about {e.total_s:.1f} s"),
+            ("time", e.words()),
             ("laser", f"{las.power_pct:g} %, {las.frequency_khz:g} kHz, mark "
                       f"{las.mark_speed_mm_s:g} mm/s, jump {las.jump_speed_mm_s:g} mm/s"
                       + (f"; {own} paths with their own settings" if own else ""))]
@@ -49,4 +52,6 @@ def arm_rows(job: MarkJob, patterns: list[str], station_text: str, timing=None,
         rows.append(("run", how))
     if job_path is not None:
         rows.append(("job file", str(job_path)))
+        rows.append(("journal", str(journal_path_for(job_path)) + (
+            " (the working folder of a project never saved)" if unsaved else "")))
     return rows

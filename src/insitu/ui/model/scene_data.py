@@ -152,3 +152,29 @@ def scale_to(p: Placement, start_width_mm: float, start_xy, mouse_xy) -> float:
     d0 = np.linalg.norm(np.asarray(start_xy, float) - c)
     d1 = np.linalg.norm(np.asarray(mouse_xy, float) - c)
     return max(round(start_width_mm * d1 / max(d0, 1e-6), 2), 0.1)
+
+
+def pattern_at(items, xy) -> int:
+    """The index of the last of placements ``items`` whose rotated box holds ``xy`` mm
+    (drawn on top), or -1."""
+    from shapely import Point, Polygon
+
+    for i in range(len(items) - 1, -1, -1):
+        try:
+            corners = handles(items[i]).corners
+        except InsituError:
+            continue
+        if Polygon(corners).covers(Point(*xy)):
+            return i
+    return -1
+
+
+def pattern_in_box(items, box) -> int:
+    """The index of the placement of ``items`` whose centre lies in ``box`` (x0, x1, y0, y1)
+    mm — of several, the one nearest the box's centre — or -1 (nothing selected)."""
+    x0, x1, y0, y1 = box
+    centre = np.array([(x0 + x1) / 2, (y0 + y1) / 2])
+    inside = [(float(np.hypot(*(np.asarray(p.at_mm) - centre))), i)
+              for i, p in enumerate(items)
+              if x0 <= p.at_mm[0] <= x1 and y0 <= p.at_mm[1] <= y1]
+    return min(inside)[1] if inside else -1

@@ -19,14 +19,16 @@ from insitu.ui.model.scene_data import follow_code_hatch
 
 
 class PlacementHistory:
-    """The placed patterns with undo/redo: every change is a new state (a tuple of
-    :class:`Placement`). Consecutive changes with the same ``merge_key`` (one mouse drag)
-    make one undo step."""
+    """The placed patterns and the cloud they are placed on, with undo/redo: every change is
+    a new state (a tuple of :class:`Placement`, and the cloud of that moment as
+    ``(PointCloud | None, path | None)``), so a cloud replaced by a scan comes back with Undo.
+    Consecutive changes with the same ``merge_key`` (one mouse drag) make one undo step."""
 
     changed = Signal()
 
     def __init__(self) -> None:
         self._states: list[tuple[Placement, ...]] = [()]
+        self._clouds: list[tuple] = [(None, None)]
         self._index = 0
         self._merge_key: object = None
 
@@ -34,19 +36,36 @@ class PlacementHistory:
     def items(self) -> tuple[Placement, ...]:
         return self._states[self._index]
 
-    def push(self, items: tuple[Placement, ...], merge_key: object = None) -> None:
-        """Make ``items`` the current state (undoable)."""
-        items = tuple(items)
-        if items == self.items:
-            return
-        del self._states[self._index + 1:]
+    @property
+    def cloud(self) -> tuple:
+        """(cloud, path) of the current state."""
+        return self._clouds[self._index]
+
+    def _step(self, items: tuple[Placement, ...], cloud: tuple, merge_key: object) -> None:
+        del self._states[self._index + 1:], self._clouds[self._index + 1:]
         if merge_key is not None and merge_key == self._merge_key and self._index > 0:
-            self._states[self._index] = items
+            self._states[self._index], self._clouds[self._index] = items, cloud
         else:
             self._states.append(items)
+            self._clouds.append(cloud)
             self._index += 1
         self._merge_key = merge_key
         self.changed.emit()
+
+    def push(self, items: tuple[Placement, ...], merge_key: object = None) -> None:
+        """Make ``items`` the current state (undoable)."""
+        items = tuple(items)
+        if items != self.items:
+            self._step(items, self.cloud, merge_key)
+
+    def push_cloud(self, cloud, path=None) -> None:
+        """Make ``cloud`` (at ``path``) the current state's cloud (undoable)."""
+        if cloud is not self.cloud[0] or path != self.cloud[1]:
+            self._step(self.items, (cloud, path), None)
+
+    def cloud_written(self, cloud, path) -> None:
+        """``cloud`` is on disk at ``path`` now (in every state that holds it)."""
+        self._clouds = [(c, path) if c is cloud else (c, p) for c, p in self._clouds]
 
     def rewrite(self, change) -> None:
         """Apply ``change`` (Placement → Placement) to every state, undo and redo included
@@ -57,8 +76,9 @@ class PlacementHistory:
             self.changed.emit()
 
     def reset(self, items: tuple[Placement, ...] = ()) -> None:
-        """Start a new history at ``items`` (nothing to undo)."""
-        self._states, self._index, self._merge_key = [tuple(items)], 0, None
+        """Start a new history at ``items`` on the current cloud (nothing to undo)."""
+        self._states, self._clouds = [tuple(items)], [self.cloud]
+        self._index, self._merge_key = 0, None
         self.changed.emit()
 
     def can_undo(self) -> bool:
@@ -114,14 +134,27 @@ class Session:
         self.project_path: Path | None = None
         self.pens: PenTable = DEFAULT_PENS
         self.job_file: JobFile | None = None
+        self.placements.changed.connect(self._follow_cloud)
         self.placements.changed.connect(self._clamp_selection)
         self.placements.changed.connect(self._placed)
 
     # -- cloud ---------------------------------------------------------------------------
     def set_cloud(self, cloud: PointCloud | None, path: Path | None = None) -> None:
-        self.cloud, self.cloud_path = cloud, path
-        self.plans = []
-        self.cloud_changed.emit()
+        """Place on ``cloud`` (at ``path``; None: not on disk yet) from now on: one undo
+        step (Undo brings back the cloud before)."""
+        self.placements.push_cloud(cloud, path)
+
+    def cloud_written(self, path: Path | None) -> None:
+        """The session's cloud was written to ``path`` (a project saved)."""
+        self.placements.cloud_written(self.cloud, path)
+        self.cloud_path = path
+
+    def _follow_cloud(self) -> None:
+        cloud, path = self.placements.cloud
+        if cloud is not self.cloud or path != self.cloud_path:
+            self.cloud, self.cloud_path = cloud, path
+            self.plans = []
+            self.cloud_changed.emit()
 
     # -- placements ----------------------------------------------------------------------
     def current(self) -> Placement | None:

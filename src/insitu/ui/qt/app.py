@@ -26,7 +26,8 @@ def surface_format() -> QSurfaceFormat:
 def run(project: Path | None = None, rig: Path | None = None, workpiece: str = "step-block",
         binning: int = SIM_BINNING) -> int:
     """Open the main window and connect the rig (the simulated one unless ``rig`` names a rig
-    file), or open ``project`` without connecting its rig (the operator connects it: Rig ▸
+    file) — with the last job marked opened when it did not finish (Resume finishes it) —,
+    or open ``project`` without connecting its rig (the operator connects it: Rig ▸
     Connect); returns the exit code."""
     QSurfaceFormat.setDefaultFormat(surface_format())
     app = QApplication.instance() or QApplication(sys.argv[:1])
@@ -38,4 +39,5 @@ def run(project: Path | None = None, rig: Path | None = None, workpiece: str = "
         window.open_project(project)
     else:
         window.connect_rig(RigChoice(workpiece=workpiece, binning=binning, rig_file=rig))
+        window.restore_unfinished()
     return app.exec()

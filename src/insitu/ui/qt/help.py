@@ -104,7 +104,7 @@ def add_help_menu(window) -> None:
         w.raise_()
 
     window.guide_action = window._action(m, "Operator &guide", lambda: show(
-        "guide", lambda: GuideWindow(window)), QKeySequence.StandardKey.HelpContents)
+        "guide", lambda: GuideWindow(window)), "Shift+F1")      # F1: the red light
     window.shortcuts_action = window._action(m, "&Keyboard shortcuts", lambda: show(
         "shortcuts", lambda: ShortcutsWindow(window)))
     window.about_action = window._action(m, "&About insitu", lambda: show(

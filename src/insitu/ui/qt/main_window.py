@@ -1,67 +1,46 @@
 """The main window of ``insitu gui``: the 3-D view in the middle, docks for Scan, Place, Mark,
-Calibrate and the camera; menus, toolbar, status bar (camera, scan head, calibration age),
-project files with recent files (and clouds and jobs: :mod:`insitu.ui.qt.open_files`),
-unsaved changes asked about, undo/redo, drag-and-drop of patterns, projects, clouds, jobs."""
+Calibrate, Production and the camera; menus, toolbar, status bar (messages, camera, scan
+head, calibration age, where the journal is kept); the rig (:mod:`.rig_connection`) and
+the project files (:mod:`.project_files`); undo/redo, the keys of a laser station
+(:mod:`.keys`), drag-and-drop of patterns, projects, clouds, jobs."""
 
 from __future__ import annotations
 
-from datetime import datetime, timezone
-from pathlib import Path
-
-import numpy as np
 from PySide6.QtCore import QSettings, Qt, QTimer
 from PySide6.QtGui import QAction, QKeySequence
-from PySide6.QtWidgets import QDockWidget, QFileDialog, QLabel, QMainWindow
+from PySide6.QtWidgets import QDockWidget, QLabel, QMainWindow
 
-from insitu.errors import InsituError
-from insitu.formats.project import SUFFIX, Project, RigChoice, beside
 from insitu.patterns import FILE_SUFFIXES
-from insitu.services import load_height_calibration
 from insitu.services.mark_job import preview_plans
 from insitu.services.plan import PlanOutcome
-from insitu.services.project import OpenedProject, open_project, save_project
-from insitu.services.serials import is_templated
 from insitu.services.station import Station
-from insitu.ui.model import operations as ops
 from insitu.ui.model.dirty import SavedState
 from insitu.ui.model.session import Session
+from insitu.ui.qt import keys, open_files
 from insitu.ui.qt.calibrate_panel import CalibratePanel
 from insitu.ui.qt.camera_window import CameraDock
-from insitu.ui.qt.dialogs import ask_abort, ask_save
+from insitu.ui.qt.dialogs import ask_abort
+from insitu.ui.qt.fit_label import FitLabel
 from insitu.ui.qt.forms import icon
 from insitu.ui.qt.help import add_help_menu
-from insitu.ui.qt.keys import route_undo
 from insitu.ui.qt.mark_panel import MarkPanel
-from insitu.ui.qt import open_files
 from insitu.ui.qt.place_panel import PlacePanel
 from insitu.ui.qt.production_panel import ProductionPanel, save_recipe_dialog
+from insitu.ui.qt.project_files import ProjectFiles
+from insitu.ui.qt.rig_connection import RigConnection
 from insitu.ui.qt.scan_panel import ScanPanel
 from insitu.ui.qt.scene_binding import SceneBinding
 from insitu.ui.qt.view3d import View3D
 from insitu.ui.qt.view_menu import ViewMenu
 from insitu.ui.qt.workers import TaskRunner
 
-MAX_RECENT = 8
 PLAN_DELAY_MS = 150
+ERROR_STYLE = "color: #ff6b5e;"
 
 
-def age_text(created: str | None) -> str:
-    """"2 h old" from an ISO-8601 UTC time."""
-    try:
-        t = datetime.fromisoformat(created.replace("Z", "+00:00"))
-    except (AttributeError, ValueError):
-        return "age unknown"
-    s = (datetime.now(timezone.utc) - t).total_seconds()
-    for unit, n in (("d", 86400), ("h", 3600), ("min", 60)):
-        if s >= n:
-            return f"{s / n:.0f} {unit} old"
-    return "new"
-
-
-class MainWindow(QMainWindow):
+class MainWindow(ProjectFiles, RigConnection, QMainWindow):
     def __init__(self, settings: QSettings | None = None):
         super().__init__()
-        self.setWindowTitle("insitu")
         self.setWindowIcon(icon("app"))
         self.setAcceptDrops(True)
         self.resize(1280, 800)
@@ -69,7 +48,9 @@ class MainWindow(QMainWindow):
         self.session = Session()
         self.runner = TaskRunner(self)
         self.station: Station | None = None
+        self.connecting = False
         self._rig_epoch = 0             # a connection started before a disconnect is dropped
+        self._plan_timer = QTimer(self, singleShot=True, interval=PLAN_DELAY_MS)
         self.view = View3D(self)
         self.setCentralWidget(self.view)
         self.binding = SceneBinding(self.session, self.view)
@@ -84,20 +65,27 @@ class MainWindow(QMainWindow):
         self._status_bar()
         self._actions()
         self.saved = SavedState(self._kept_state)
-        route_undo(self.place_panel, self.undo_action, self.redo_action)
-        self._plan_timer = QTimer(self, singleShot=True, interval=PLAN_DELAY_MS)
         self._plan_timer.timeout.connect(self.plan)
         self._plan_again = False
-        for sig in (self.session.placements.changed, self.session.cloud_changed,
-                    self.session.pens_changed):
+        s = self.session
+        for sig in (s.placements.changed, s.cloud_changed, s.pens_changed):
             sig.connect(lambda: self._plan_timer.start())
-        self.session.job_file_changed.connect(lambda: open_files.show_job_file(self))
+            sig.connect(self.update_title)
+        s.placements.changed.connect(self.show_journal_place)
+        s.job_file_changed.connect(lambda: open_files.show_job_file(self))
+        s.job_file_changed.connect(self.show_journal_place)
+        self.scan_panel.settings_changed.connect(self.update_title)
         self.view.pattern_moved.connect(self._moved)
         self.view.rotate_dragged.connect(self._rotated)
         self.view.scale_dragged.connect(self._scaled)
         self.view.region_drawn.connect(self._region_drawn)
+        self.view.box_selected.connect(self._box_selected)
+        self.view.clicked_at.connect(self._clicked_at)
         self.view.gl_ready.connect(lambda name: self.gl_label.setText(f"GL: {name}"))
         self._scale_start: tuple[object, float] | None = None
+        self.update_title()
+        self.show_journal_place()
+        self.view.setFocus()
 
     # -- layout --------------------------------------------------------------------------
     def _docks(self) -> None:
@@ -121,20 +109,25 @@ class MainWindow(QMainWindow):
 
     def _status_bar(self) -> None:
         bar = self.statusBar()
-        self.message_label = QLabel("")
+        self.message_label = FitLabel()
+        self.message_label.setObjectName("messageLabel")
+        self.journal_label = FitLabel(elide=Qt.TextElideMode.ElideMiddle)
+        self.journal_label.setObjectName("journalLabel")
+        self.journal_label.setMaximumWidth(320)
         self.camera_label = QLabel("camera: not connected")
         self.head_label = QLabel("scan head: not connected")
         self.calib_label = QLabel("no height calibration")
         self.gl_label = QLabel("GL: —")
         self._message_source: str | None = None
         bar.addWidget(self.message_label, 1)
+        bar.addPermanentWidget(self.journal_label, 1)
         for w in (self.camera_label, self.head_label, self.calib_label, self.gl_label):
             bar.addPermanentWidget(w)
 
     def _action(self, menu, text, slot, shortcut=None, icon_name=None) -> QAction:
         a = QAction(text, self)
         if shortcut:
-            a.setShortcut(QKeySequence(shortcut))
+            a.setShortcuts(shortcut if isinstance(shortcut, list) else [QKeySequence(shortcut)])
         if icon_name:
             a.setIcon(icon(icon_name))
         a.triggered.connect(slot)
@@ -163,7 +156,8 @@ class MainWindow(QMainWindow):
         tb.addActions([self.undo_action, self.redo_action])
         self.session.placements.changed.connect(self._undo_state)
         self._undo_state()
-        self.view_menu = ViewMenu(mb.addMenu("&View"), self.view, self.binding, self.session)
+        self.view_menu = ViewMenu(mb.addMenu("&View"), self)
+        keys.add_laser_menu(self, mb.addMenu("&Laser"), tb)
         r = mb.addMenu("&Rig")
         self.connect_action = self._action(r, "&Connect", lambda: self.connect_rig(), None,
                                            "connect")
@@ -179,105 +173,24 @@ class MainWindow(QMainWindow):
 
     # -- messages ------------------------------------------------------------------------
     def show_message(self, text: str, source: str | None = None) -> None:
-        """One line in the status bar, replacing the last; ``source`` names the state it
+        """One line in the status bar, replacing the last (an error too: it no longer
+        holds); the whole text in its tooltip where it is cut. ``source`` names the state it
         tells of, so :meth:`clear_message` takes it away once that no longer holds."""
         self.message_label.setStyleSheet("")
-        self.message_label.setText(text)
+        self.message_label.set_text(text)
         self._message_source = source
 
     def show_error(self, text: str, source: str | None = None) -> None:
-        """One line in the status bar, in red (no dialog: the station keeps running)."""
-        self.message_label.setStyleSheet("color: #ff6b5e;")
-        self.message_label.setText(text.splitlines()[0] if text else "error")
+        """One line in the status bar, in red (no dialog: the station keeps running); the
+        whole text in its tooltip."""
+        self.message_label.setStyleSheet(ERROR_STYLE)
+        self.message_label.set_text(text.splitlines()[0] if text else "error", text)
         self._message_source = source
 
     def clear_message(self, source: str) -> None:
         """Take away the message of ``source`` (and only it): what it said no longer holds."""
         if self._message_source == source:
             self.show_message("")
-
-    # -- rig -----------------------------------------------------------------------------
-    def _rig_named(self) -> None:
-        """Rig ▸ Connect names the rig it connects: the session's (a project's) choice."""
-        rig_file = self.session.rig_choice.rig_file
-        self.connect_action.setText("&Connect simulated rig" if rig_file is None
-                                    else f"&Connect rig {Path(rig_file).name}")
-
-    def disconnect_rig(self) -> None:
-        """Close the station (laser off, devices released); the status says so."""
-        self._rig_epoch += 1
-        if self.station is not None:
-            self.station.close()
-            self.station = None
-        self.camera_label.setText("camera: not connected")
-        self.head_label.setText("scan head: not connected")
-        self.clear_message("rig")
-        self.session.rig_changed.emit()
-        self._plan_timer.start()
-
-    def connect_rig(self, choice: RigChoice | None = None) -> None:
-        """Connect the station of ``choice`` (default: the session's), off the GUI thread.
-        Only the operator's action (or ``insitu gui`` without a project) calls this: opening a
-        project never connects its rig, so a rig file that came with it runs nothing."""
-        choice = choice or self.session.rig_choice
-        field, epoch = self.session.field_path, self._rig_epoch
-        self.runner.start("connect", lambda p, c, f: (epoch, choice, ops.connect(choice, field)),
-                          self._connected, lambda m, _c: self.show_error(m))
-
-    def _connected(self, result) -> None:
-        epoch, choice, station = result
-        if epoch != self._rig_epoch:    # a project was opened meanwhile: not its rig
-            station.close()
-            return
-        if self.station is not None:
-            self.station.close()
-        self.station = station
-        self.session.rig_choice = choice
-        self._rig_named()
-        cam, head = station.describe()
-        self.camera_label.setText(cam)
-        self.head_label.setText(head)
-        nominal = station.rig.head
-        self.binding.show_field(nominal.field_size_mm, nominal.z_range_mm)
-        if self.session.cloud is None:            # the whole scan field
-            hx, hy = np.asarray(nominal.field_size_mm, float) / 2
-            self.view.frame_all((-hx, -hy, min(nominal.z_range_mm)),
-                                (hx, hy, max(nominal.z_range_mm)))
-        self.session.rig_changed.emit()
-        self._plan_timer.start()
-        self.show_message("rig connected", "rig")
-
-    def _rig_file_dialog(self) -> None:
-        path, _ = QFileDialog.getOpenFileName(self, "Rig file", "", "Rig files (*.json)")
-        if path:
-            from dataclasses import replace
-            self.connect_rig(replace(self.session.rig_choice, rig_file=Path(path)))
-
-    def load_height_cal(self, path: Path | None) -> None:
-        """Use the height calibration file (or recorded folder, fitted now) ``path``."""
-        if path is None:
-            self.session.height_cal_path = self.session.height_cal = None
-            self.calib_label.setText("no height calibration")
-            return
-        self.runner.start("height-cal", lambda p, c, f: (path, load_height_calibration(path, p)),
-                          self._height_cal_loaded, lambda m, _c: self.show_error(m))
-
-    def _height_cal_loaded(self, result) -> None:
-        path, cal = result
-        self.session.height_cal_path, self.session.height_cal = path, cal
-        self.scan_panel.ui.heightCalEdit.setText(str(path))
-        self.calib_label.setText(f"height calibration {age_text(cal.created)}")
-
-    def calibration_done(self, kind: str, path: Path) -> None:
-        if kind == "height":
-            self.load_height_cal(path)
-        elif kind == "field":
-            self.session.field_path = path
-            if self.station is not None:
-                self.station.use_field(path)
-                self._plan_timer.start()
-        else:
-            self.session.camera_cal_path = path
 
     # -- placement from the 3-D view -----------------------------------------------------
     def _moved(self, x: float, y: float, key) -> None:
@@ -299,6 +212,23 @@ class MainWindow(QMainWindow):
         self.session.update_selected(key, width_mm=scale_to(p, self._scale_start[1], (x0, y0),
                                                             (x, y)))
 
+    def _nudged(self, dx: float, dy: float) -> None:
+        """An arrow key in the view: the selected pattern moved by (dx, dy) mm."""
+        p = self.session.current()
+        if p is not None:
+            self.session.update_selected(at_mm=(round(p.at_mm[0] + dx, 3),
+                                                round(p.at_mm[1] + dy, 3)))
+
+    def _box_selected(self, box) -> None:
+        from insitu.ui.model.scene_data import pattern_in_box
+        self.session.select(pattern_in_box(self.session.placements.items, box))
+
+    def _clicked_at(self, x: float, y: float) -> None:
+        from insitu.ui.model.scene_data import pattern_at
+        i = pattern_at(self.session.placements.items, (x, y))
+        if i >= 0:
+            self.session.select(i)
+
     def _region_drawn(self, region) -> None:
         self.scan_panel.set_region(region)
         self.binding.show_region(region)
@@ -312,7 +242,8 @@ class MainWindow(QMainWindow):
             s.set_plans([])
             return
         if cloud is None or self.station is None:
-            why = "no point cloud: scan or open one" if cloud is None else "connect the rig"
+            why = ("no point cloud: scan or open one" if cloud is None else
+                   "the rig is connecting…" if self.connecting else "connect the rig")
             s.set_plans([PlanOutcome.refused("station", why) for _ in items])
             return
         if self.runner.running("plan"):
@@ -321,7 +252,7 @@ class MainWindow(QMainWindow):
         station, path, pens, source = self.station, self.job_path(), s.pens, s.cloud_path
         self.runner.start("plan", lambda p, c, f: (items, pens, preview_plans(
             station, cloud, items, pens, path, source)),
-                          self._planned, lambda m, _c: self.show_error(m))
+                          self._planned, lambda m, _c: self.show_error(m, "plan"))
 
     def _planned(self, result) -> None:
         items, pens, plans = result
@@ -338,132 +269,14 @@ class MainWindow(QMainWindow):
             self._plan_again = False
             self._plan_timer.start()
 
-    # -- projects ------------------------------------------------------------------------
-    def job_path(self) -> Path | None:
-        p = self.session.project_path
-        return None if p is None else beside(p, ".job.json")
-
-    def _kept_state(self) -> dict:
-        """What a project file keeps of the session (see :class:`SavedState`)."""
-        s = self.session
-        return {"placements": s.placements.items, "cloud": s.cloud,
-                "height calibration": s.height_cal_path, "field correction": s.field_path,
-                "camera calibration": s.camera_cal_path,
-                "scan settings": self.scan_panel.settings()}
-
-    def may_discard(self, what: str) -> bool:
-        """True when the session may be replaced (``what``: "quitting", …): nothing unsaved,
-        or the operator saved it or chose to discard it."""
-        if not self.saved.dirty():
-            return True
-        answer = ask_save(self, self.saved.changes(), what)
-        return answer == "discard" or (answer == "save" and self.save())
-
-    def new_project(self) -> None:
-        if not self.may_discard("starting a new project"):
-            return
-        self.session.set_job_file(None)
-        self.session.set_cloud(None)
-        self.session.placements.reset()
-        self.session.project_path = None
-        self.setWindowTitle("insitu")
-        self.saved.mark_clean()
-
-    def _open_dialog(self) -> None:
-        path, _ = QFileDialog.getOpenFileName(self, "Open", "", open_files.OPEN_FILTERS)
-        if path:
-            self.open_file(Path(path))
-
-    def open_file(self, path: Path) -> None:
-        """Open a project, a point cloud or a mark job (by its name), after asking to save
-        unsaved changes where it replaces them."""
-        open_files.open_file(self, path)
-
-    def _export_dialog(self) -> None:
-        path, _ = QFileDialog.getSaveFileName(self, "Export job", "", open_files.JOB_FILES)
-        if path:
-            open_files.export_job(self, Path(path if path.endswith(".json") else
-                                             path + ".json"))
-
-    def _save_dialog(self) -> None:
-        path, _ = QFileDialog.getSaveFileName(self, "Save project", "", open_files.PROJECT_FILES)
-        if path:
-            self.save(Path(path if path.endswith(SUFFIX) else path + SUFFIX))
-
-    def open_project(self, path: Path) -> None:
-        self.runner.start("open", lambda p, c, f: open_project(path, p),
-                          lambda opened: self._opened(path, opened),
-                          lambda m, _c: self.show_error(m))
-
-    def _opened(self, path: Path, opened: OpenedProject) -> None:
-        pr, s = opened.project, self.session
-        s.project_path = path
-        s.height_cal_path, s.height_cal = pr.height_cal, opened.height_cal
-        s.field_path, s.camera_cal_path = pr.field_correction, pr.camera_cal
-        self.disconnect_rig()           # its rig and field correction: when the operator connects
-        s.rig_choice = pr.rig
-        self._rig_named()
-        self.scan_panel.show_settings(pr.scan)
-        self.scan_panel.ui.heightCalEdit.setText(str(pr.height_cal or ""))
-        if opened.height_cal is not None:
-            self.calib_label.setText(f"height calibration {age_text(opened.height_cal.created)}")
-        self.binding.show_region(pr.scan.region)
-        s.set_job_file(None)
-        s.set_cloud(opened.cloud, pr.cloud)
-        s.set_pens(pr.pens)
-        s.placements.reset(pr.placements)
-        s.select(pr.selected)
-        self.saved.mark_clean()
-        self._remember(path)
-        self.setWindowTitle(f"insitu — {path.name}")
-        self.show_message(f"opened {path}; rig not connected: "
-                          f"{self.connect_action.text().replace('&', '')} (Rig menu)")
-
-    def save(self, path: Path | None = None) -> bool:
-        """Save the session to ``path`` (default: where it came from); True when written."""
-        path = path or self.session.project_path
-        if path is None:
-            self._save_dialog()
-            return self.session.project_path is not None
-        s = self.session
-        project = Project(s.rig_choice, s.height_cal_path, s.field_path, s.camera_cal_path,
-                          self.scan_panel.settings(), s.cloud_path, s.placements.items,
-                          s.selected, None, s.pens)
-        # a job with variable data is written when it is marked, with the serial it takes
-        job = None if is_templated(s.placements.items) else self.mark_panel.job()
-        try:
-            written = save_project(path, project, s.cloud, job)
-        except InsituError as e:
-            self.show_error(str(e))
-            return False
-        s.project_path, s.cloud_path = path, written.cloud
-        self.saved.mark_clean()
-        self._remember(path)
-        self.setWindowTitle(f"insitu — {path.name}")
-        self.show_message(f"saved {path}")
-        return True
-
-    def _remember(self, path: Path) -> None:
-        recent = [str(path)] + [p for p in self.recent_files() if p != str(path)]
-        self.settings.setValue("recent_projects", recent[:MAX_RECENT])
-        self._update_recent()
-
-    def recent_files(self) -> list[str]:
-        v = self.settings.value("recent_projects", [])
-        return [v] if isinstance(v, str) else list(v or [])
-
-    def _update_recent(self) -> None:
-        self.recent_menu.clear()
-        for p in self.recent_files():
-            self.recent_menu.addAction(p, lambda p=p: self.open_file(Path(p)))
-        self.recent_menu.setEnabled(bool(self.recent_files()))
-
     # -- drag and drop -------------------------------------------------------------------
     def dragEnterEvent(self, e) -> None:
         if e.mimeData().hasUrls():
             e.acceptProposedAction()
 
     def dropEvent(self, e) -> None:
+        from pathlib import Path
+
         for url in e.mimeData().urls():
             path = Path(url.toLocalFile())
             if open_files.kind_of(path) is not None:
@@ -473,7 +286,7 @@ class MainWindow(QMainWindow):
                 self.docks["place"].raise_()
             else:
                 self.show_error(f"{path.name}: not a pattern (SVG, DXF, image), a project, a "
-                                "point cloud (.ply) or a mark job (.json)")
+                                "point cloud (.ply) or a mark job (.json)", "drop")
 
     def closeEvent(self, e) -> None:
         """Quit only when no marking runs (or the operator aborts it) and nothing unsaved is

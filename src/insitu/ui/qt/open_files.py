@@ -45,7 +45,7 @@ def open_file(window, path: Path) -> None:
     else:
         from insitu.marking import read_job
         window.runner.start("open", lambda p, c, f: read_job(path),
-                            lambda job: _job_opened(window, path, job),
+                            lambda job: job_opened(window, path, job),
                             lambda m, _c: window.show_error(m))
 
 
@@ -57,7 +57,7 @@ def _cloud_opened(window, path: Path, cloud) -> None:
     window.show_message(f"opened {path}: {len(cloud):,} points; the session's cloud")
 
 
-def _job_opened(window, path: Path, job) -> None:
+def job_opened(window, path: Path, job) -> None:
     s = window.session
     s.placements.reset()
     s.set_job_file(JobFile(path, job))

@@ -19,6 +19,9 @@ from insitu.formats.pens import Pen, read_pens, write_pens
 from insitu.formats.validation import validation_message
 
 PENS_FILES = "insitu pens (*.json)"
+CHOOSER_TIP = "The pen (laser set) this pattern is marked with"
+EDIT_TIP = "Edit the pens: power, frequency, speeds, passes, delays, wobble"
+LOCKED = "pens cannot change while a job marks: it runs with the pens it was armed with"
 COLUMNS: tuple[tuple[str, str], ...] = (
     ("Name", "name"), ("Colour", "colour"), ("Power %", "power_pct"),
     ("Frequency kHz", "frequency_khz"), ("Speed mm/s", "mark_speed_mm_s"),
@@ -103,6 +106,14 @@ class PensEditor(QDialog):
         session.pens_changed.connect(self.refresh)
         self._filling = False
         self.refresh()
+
+    def set_locked(self, locked: bool) -> None:
+        """While a job marks: the table and its buttons greyed, saying why."""
+        self.table.setEnabled(not locked)
+        for b in (self.add_button, self.remove_button, self.make_default_button,
+                  self.import_button):
+            b.setEnabled(not locked)
+        self.error.setText(LOCKED if locked else "")
 
     def refresh(self) -> None:
         self._filling = True
@@ -189,12 +200,19 @@ class PenChooser(QComboBox):
     def __init__(self, session, parent=None):
         super().__init__(parent)
         self.session = session
-        self.setToolTip("The pen (laser set) this pattern is marked with")
+        self.setToolTip(CHOOSER_TIP)
         for sig in (session.pens_changed, session.selection_changed,
                     session.placements.changed):
             sig.connect(self.refresh)
         self.currentIndexChanged.connect(self._chosen)
         self._filling = False
+        self.locked = False
+        self.refresh()
+
+    def set_locked(self, locked: bool) -> None:
+        """No pen is chosen while a job marks (the job runs with the pens it was armed
+        with)."""
+        self.locked = locked
         self.refresh()
 
     def refresh(self) -> None:
@@ -207,7 +225,8 @@ class PenChooser(QComboBox):
                 self.setItemData(self.count() - 1, QColor(p.colour), Qt.DecorationRole)
                 self.setItemData(self.count() - 1, p.summary(), Qt.ToolTipRole)
             current = self.session.current()
-            self.setEnabled(current is not None)
+            self.setEnabled(current is not None and not self.locked)
+            self.setToolTip(LOCKED if self.locked else CHOOSER_TIP)
             if current is not None:
                 self.setCurrentIndex(pens.names.index(self.session.pen_of(current).name))
         finally:
@@ -237,7 +256,8 @@ class PensRow(QWidget):
         self.label = QLabel(self)
         self.label.setWordWrap(True)
         self.button = QPushButton("Pens…", self)
-        self.button.setToolTip("Edit the pens: power, frequency, speeds, passes, delays, wobble")
+        self.button.setToolTip(EDIT_TIP)
+        self.locked = False
         self.button.clicked.connect(self.open_editor)
         lay = QHBoxLayout(self)
         lay.setContentsMargins(0, 0, 0, 0)
@@ -254,9 +274,17 @@ class PensRow(QWidget):
         self.label.setText("pens: " + (", ".join(f"{n} ({s.pens.pen(n).summary()})"
                                                  for n in used) or "none used yet"))
 
+    def set_locked(self, locked: bool) -> None:
+        """While a job marks, the pens are not edited (the editor shows them, greyed)."""
+        self.button.setToolTip(LOCKED if locked else EDIT_TIP)
+        if self.editor is not None:
+            self.editor.set_locked(locked)
+        self.locked = locked
+
     def open_editor(self) -> PensEditor:
         if self.editor is None:
             self.editor = PensEditor(self.session, self)
+            self.editor.set_locked(self.locked)
         self.editor.show()
         self.editor.raise_()
         return self.editor

@@ -7,6 +7,7 @@ from __future__ import annotations
 from dataclasses import replace
 from pathlib import Path
 
+import numpy as np
 from PySide6.QtCore import Qt
 from PySide6.QtGui import QBrush, QColor
 from PySide6.QtWidgets import QFileDialog, QInputDialog, QSizePolicy, QVBoxLayout, QWidget
@@ -15,7 +16,8 @@ from insitu.errors import InsituError
 from insitu.marking import PROJECTIONS
 from insitu.patterns import FILE_SUFFIXES, is_spec
 from insitu.marking import Placement
-from insitu.ui.model.scene_data import base_pattern, code_hatch
+from insitu.ui.model.free_spot import free_spot
+from insitu.ui.model.scene_data import base_pattern, code_hatch, handles
 from insitu.ui.qt.forms import load_form
 from insitu.ui.qt.pens_panel import add_pen_chooser
 
@@ -25,6 +27,14 @@ PATTERN_FILES = f"Patterns ({' '.join('*' + s for s in FILE_SUFFIXES)})"
 
 def short_name(spec: str) -> str:
     return spec if is_spec(spec) else Path(spec).name
+
+
+def _loads(p: Placement) -> bool:
+    try:
+        handles(p)
+    except InsituError:
+        return False
+    return True
 
 STATUS_LINES = 6
 """Lines of the verdict the Place dock shows; its tooltip holds them all."""
@@ -68,24 +78,35 @@ class PlacePanel(QWidget):
 
     # -- adding --------------------------------------------------------------------------
     def add_pattern(self, spec: str) -> bool:
-        """Place pattern ``spec`` (file, ``text:"…"``, ``qr:"…"``) on the cloud's middle,
-        a third of its width wide; False (and a message) if it cannot be loaded."""
+        """Place pattern ``spec`` (file, ``text:"…"``, ``qr:"…"``) on the part's free top
+        (:func:`~insitu.ui.model.free_spot.free_spot`: the highest flat level, off walls,
+        holes and the other patterns, nearest the view's centre), a third of the cloud's
+        width wide or as much as fits there; without a cloud at the view's centre. False
+        (and a message) if it cannot be loaded."""
         try:
-            base_pattern(spec)
+            size = base_pattern(spec).size
         except InsituError as e:
-            self.window_.show_error(str(e))
+            self.window_.show_error(str(e), "place")
             return False
-        at, width = (0.0, 0.0), 10.0
+        centre = self.window_.view.camera.centre
+        at, width = (round(float(centre[0]), 1), round(float(centre[1]), 1)), 10.0
         cloud = self.session.cloud
         if cloud is not None and len(cloud):
             lo, hi = cloud.points[:, :2].min(0), cloud.points[:, :2].max(0)
-            at = tuple(round(float(v), 1) for v in (lo + hi) / 2)
             width = round(max(float(min(hi - lo)) / 3, 1.0), 1)
+            aspect = float(np.hypot(1.0, size[1] / size[0])) if size[0] > 0 else 1.0
+            taken = [handles(p).corners for p in self.session.placements.items
+                     if _loads(p)]
+            spot = free_spot(cloud.points, taken, width * aspect / 2, at)
+            if spot is not None:
+                at = spot.xy
+                width = round(max(min(width, 2 * spot.room_mm / aspect), 1.0), 1)
         placement = Placement(spec, at, width)
         hatch = code_hatch(placement)
         if hatch is not None:  # a code is hatched along its modules: an outline does not read
             placement = replace(placement, hatch_mm=hatch[0], hatch_angle_deg=hatch[1])
         self.session.add_placement(placement)
+        self.window_.clear_message("place")
         return True
 
     def _import(self) -> None:

@@ -1,12 +1,16 @@
 """The Scan dock: source (rig or recording), height calibration, region, spacing, exposure;
 Scan / Cancel, progress and the summary. The scan runs on a worker; each frame goes to the
-camera dock and its points to the 3-D view."""
+camera dock and its points to the 3-D view. The session's cloud is replaced only by a scan
+that finished (one undo step): a cancelled or failed one leaves it as it was and offers the
+lines it measured beside it (Use the partial cloud)."""
 
 from __future__ import annotations
 
 from pathlib import Path
 
-from PySide6.QtWidgets import QFileDialog, QVBoxLayout, QWidget
+from PySide6.QtCore import Signal
+from PySide6.QtWidgets import (QAbstractSpinBox, QCheckBox, QComboBox, QFileDialog, QLineEdit,
+                               QPushButton, QVBoxLayout, QWidget)
 
 from insitu.formats.project import ScanSettings
 from insitu.ui.model import operations as ops
@@ -14,8 +18,17 @@ from insitu.ui.model.operations import NO_RIG
 from insitu.ui.qt.forms import load_form
 
 
+BUSY = ("scan", "mark", "preview", "produce")
+"""Tasks that use the station: a scan waits for them."""
+CONNECTING = "the rig is connecting…"
+
+
 class ScanPanel(QWidget):
-    """``window``: the main window (session, runner, station, camera image, messages)."""
+    """``window``: the main window (session, runner, station, camera image, messages).
+    ``settings_changed``: a setting a project keeps was edited. ``partial``: the lines a
+    cancelled or failed scan measured (a ScanResult; None: none offered)."""
+
+    settings_changed = Signal()
 
     def __init__(self, window, parent=None):
         super().__init__(parent)
@@ -31,6 +44,22 @@ class ScanPanel(QWidget):
         ui.heightCalEdit.editingFinished.connect(
             lambda: window.load_height_cal(self._path(ui.heightCalEdit.text())))
         ui.sourceCombo.currentIndexChanged.connect(self._source_changed)
+        self.partial = None
+        self.partial_button = QPushButton("", ui)
+        self.partial_button.setObjectName("partialButton")
+        self.partial_button.setToolTip("make the lines measured before the scan stopped the "
+                                       "session's cloud (Undo brings the cloud back)")
+        self.partial_button.clicked.connect(self.use_partial)
+        self.partial_button.hide()
+        ui.layout().insertWidget(ui.layout().indexOf(ui.summaryLabel) + 1, self.partial_button)
+        for w in ui.findChildren(QAbstractSpinBox):
+            w.editingFinished.connect(self.settings_changed.emit)
+        for w in ui.findChildren(QLineEdit):
+            w.editingFinished.connect(self.settings_changed.emit)
+        for w in ui.findChildren(QCheckBox):
+            w.toggled.connect(lambda _b: self.settings_changed.emit())
+        for w in ui.findChildren(QComboBox):
+            w.currentIndexChanged.connect(lambda _i: self.settings_changed.emit())
         self._region_enabled(True)
         window.session.rig_changed.connect(self._can_scan)
         self._source_changed(0)
@@ -85,10 +114,13 @@ class ScanPanel(QWidget):
         station: the one truth the status bar shows too); a refusal that no longer holds
         goes."""
         w = self.window_
-        live, busy = self.ui.sourceCombo.currentIndex() == 0, w.runner.running("scan")
+        live = self.ui.sourceCombo.currentIndex() == 0
+        busy = [n for n in BUSY if w.runner.running(n)]
         no_rig = live and w.station is None
         self.ui.scanButton.setEnabled(not busy and not no_rig)
-        self.ui.scanButton.setToolTip(NO_RIG if no_rig else "")
+        self.ui.scanButton.setToolTip(
+            (CONNECTING if w.connecting else NO_RIG) if no_rig else
+            f"waits while the station is busy ({busy[0]})" if busy else "")
         if not no_rig and self.ui.summaryLabel.text() == NO_RIG:
             self.ui.summaryLabel.setText("")
             w.clear_message("scan")
@@ -119,7 +151,9 @@ class ScanPanel(QWidget):
             station, settings, cal, progress, cancel, frame), self._done, self._failed)
         if task is None:
             return
-        w.session.set_cloud(None)
+        self.offer_partial(None)
+        w.view.set_cloud(None)              # the new cloud grows here; the session keeps its
+        w.clear_message("scan")
         self.ui.progressBar.setValue(0)
         self.ui.summaryLabel.setText("scanning…")
         task.progress.connect(self._progress)
@@ -140,19 +174,44 @@ class ScanPanel(QWidget):
         self.ui.summaryLabel.setText(
             f"{s.points:,} points from {s.frames_with_line} of {s.frames} lines ({s.method}), "
             f"z {s.bounds_min[2]:.2f} … {s.bounds_max[2]:.2f} mm, {s.seconds:.1f} s")
-        self.window_.show_message(f"scan done: {s.points:,} points")
+        self.window_.show_message(f"scan done: {s.points:,} points", "scan")
 
     def _failed(self, message: str, cancelled: bool) -> None:
-        """Show why; a cancel or a device fault keeps the lines measured before it."""
-        task = self.window_.runner.tasks.get("scan")
+        """Show why; the session's cloud stays as it was (shown again), the lines measured
+        before are offered beside it — taken at once when there was no cloud to keep."""
+        w = self.window_
+        task = w.runner.tasks.get("scan")
         partial = getattr(task.error, "partial", None) if task is not None else None
-        if partial is not None:
-            self.window_.session.set_cloud(partial.cloud)
-            message += f" (kept {len(partial.cloud):,} points measured before)"
+        w.binding.show_cloud()
+        if partial is not None and len(partial.cloud):
+            if w.session.cloud is None:
+                w.session.set_cloud(partial.cloud)
+                message += f" (kept {len(partial.cloud):,} points measured before)"
+            else:
+                self.offer_partial(partial)
+                message += " (the cloud before it is kept)"
         self.ui.summaryLabel.setText(message)
-        self.window_.show_error(message, "scan")
+        w.show_error(message, "scan")
+
+    def offer_partial(self, partial) -> None:
+        """Offer ``partial`` (a ScanResult) beside the session's cloud; None: nothing."""
+        self.partial = partial
+        self.partial_button.setVisible(partial is not None)
+        if partial is not None:
+            lines = max(self.ui.progressBar.maximum(), partial.summary.frames)
+            self.partial_button.setText(f"Use the partial cloud ({len(partial.cloud):,} "
+                                        f"points, {partial.summary.frames} of {lines} lines)")
+
+    def use_partial(self) -> None:
+        """The partial cloud becomes the session's (Undo brings back the one before)."""
+        if self.partial is not None:
+            self.window_.session.set_cloud(self.partial.cloud)
+            self.window_.show_message("the partial cloud is the session's cloud (Undo brings "
+                                      "back the one before)", "scan")
+            self.offer_partial(None)
 
     def _busy(self, name: str, busy: bool) -> None:
-        if name == "scan":
+        if name in BUSY:
             self._can_scan()
+        if name == "scan":
             self.ui.cancelButton.setEnabled(busy)

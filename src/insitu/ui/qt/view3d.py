@@ -1,11 +1,13 @@
 """The 3-D view: a QOpenGLWidget showing the cloud (coloured by height or by the camera's
 ambient gray), the scan field, the scan region and the patterns, over a mm grid on z = 0
 with the x/y/z axes, and with rulers, a scale bar and a colour bar painted over it
-(:mod:`.view_overlay`). Orthographic top view for placing, perspective for looking; orbit
-(left drag), pan (right or middle drag), zoom (wheel), and, on the selected pattern, move
-(drag inside it), turn (drag the round handle) and scale (drag the corner handle); shift +
-drag draws the scan region on z = 0. It emits what the operator asked for; the window
-applies it to the session."""
+(:mod:`.view_overlay`). Orthographic top view for placing, perspective for looking: a click
+takes the keyboard's focus and selects the pattern under it; on the selected pattern, move
+(drag inside it), turn (drag the round handle) and scale (drag the corner handle); a left
+drag on empty space draws a selection box in the top view (as in a laser's layout program)
+and orbits in the others (Alt + drag orbits the top view); pan (right or middle drag), zoom
+(wheel); shift + drag draws the scan region on z = 0. It emits what the operator asked for;
+the window applies it to the session."""
 
 from __future__ import annotations
 
@@ -22,6 +24,7 @@ from insitu.ui.qt.gl_renderer import Renderer
 from insitu.ui.qt.view_overlay import AXIS_COLOURS, HANDLE_PX
 
 SETTLE_MS = 250                 # full detail this long after the view stopped moving
+SELECT_MIN_PX = 4               # a shorter drag on empty space is a click, not a box
 GRID_COLOUR = (0.5, 0.53, 0.58, 0.22)
 GRID_MAJOR_COLOUR = (0.6, 0.63, 0.68, 0.45)
 
@@ -34,6 +37,8 @@ class View3D(QOpenGLWidget):
     rotate_dragged = Signal(float, float, object)               # mouse x, y
     scale_dragged = Signal(float, float, float, float, object)  # drag start x, y; mouse x, y
     region_drawn = Signal(object)           # (x0, x1, y0, y1) mm
+    box_selected = Signal(object)           # (x0, x1, y0, y1) mm, on the plane of the handles
+    clicked_at = Signal(float, float)       # x, y mm: a press, on the plane of the handles
     gl_ready = Signal(str)                  # the renderer's name
     projection_changed = Signal(bool)       # orthographic?
 
@@ -42,6 +47,7 @@ class View3D(QOpenGLWidget):
         self.setObjectName("view3d")
         self.setMinimumSize(320, 240)
         self.setMouseTracking(False)
+        self.setFocusPolicy(Qt.FocusPolicy.StrongFocus)
         self.camera = OrbitCamera()
         self.camera.set_view("top")
         self.renderer = Renderer()
@@ -163,14 +169,25 @@ class View3D(QOpenGLWidget):
                                                             self.handle_z)])
         return "move" if poly.containsPoint(QPointF(x, y), Qt.OddEvenFill) else None
 
+    def is_top(self) -> bool:
+        """The orthographic view straight down (placing)."""
+        return self.camera.ortho and self.camera.elevation_deg > 89.0
+
     # -- mouse ---------------------------------------------------------------------------
     def mousePressEvent(self, e: QMouseEvent) -> None:
+        self.setFocus(Qt.FocusReason.MouseFocusReason)
         x, y = e.position().x(), e.position().y()
         kind = "orbit"
         if e.button() == Qt.LeftButton and e.modifiers() & Qt.ShiftModifier:
             kind = "region"
         elif e.button() == Qt.LeftButton:
-            kind = self._hit(x, y) or "orbit"
+            kind = self._hit(x, y)
+            if kind is None:                # another pattern under the mouse: select it
+                xy = self.world_at(x, y, self.handle_z)
+                if xy is not None:
+                    self.clicked_at.emit(float(xy[0]), float(xy[1]))
+                kind = self._hit(x, y) or ("select" if self.is_top() and not
+                                           e.modifiers() & Qt.AltModifier else "orbit")
         elif e.button() in (Qt.RightButton, Qt.MiddleButton):
             kind = "pan"
         z = 0.0 if kind == "region" else self.handle_z
@@ -208,6 +225,14 @@ class View3D(QOpenGLWidget):
 
     def mouseReleaseEvent(self, e: QMouseEvent) -> None:
         d, self._drag = self._drag, None
+        if d is not None and d["kind"] == "select":
+            a = d["start_xy"]
+            b = self.world_at(e.position().x(), e.position().y(), self.handle_z)
+            moved = np.hypot(*(np.subtract(d["start_px"], (e.position().x(),
+                                                            e.position().y()))))
+            if a is not None and b is not None and moved >= SELECT_MIN_PX:
+                self.box_selected.emit((float(min(a[0], b[0])), float(max(a[0], b[0])),
+                                        float(min(a[1], b[1])), float(max(a[1], b[1]))))
         if d is not None and d["kind"] == "region":
             a = d["start_xy"]
             b = self.world_at(e.position().x(), e.position().y(), 0.0)

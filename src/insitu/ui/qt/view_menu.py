@@ -1,16 +1,13 @@
 """The View menu of the main window: the preset views (keys 1–4; the top view orthographic),
-the Orthographic toggle, Frame all (F or Home) and Camera colours (C: the cloud coloured by
-the ambient camera frame instead of by height; disabled, saying why, for a cloud without
-that frame)."""
+the Orthographic toggle, Frame all (F or Home), Camera colours (C: the cloud coloured by the
+ambient camera frame instead of by height; disabled, saying why, for a cloud without that
+frame), and every dock and the toolbar, to show one again after it was closed."""
 
 from __future__ import annotations
 
 from PySide6.QtGui import QAction, QKeySequence
-from PySide6.QtWidgets import QMenu
+from PySide6.QtWidgets import QMenu, QToolBar
 
-from insitu.ui.model.session import Session
-from insitu.ui.qt.scene_binding import SceneBinding
-from insitu.ui.qt.view3d import View3D
 
 NO_AMBIENT = ("this cloud has no camera picture: it was measured without an ambient "
               "(laser-off) frame")
@@ -20,10 +17,11 @@ NO_CLOUD = "no point cloud: scan or open one"
 class ViewMenu:
     """Fills ``menu`` and keeps its toggles in step with the view and the session."""
 
-    def __init__(self, menu: QMenu, view: View3D, binding: SceneBinding, session: Session):
+    def __init__(self, menu: QMenu, window):
+        view, binding, session = window.view, window.binding, window.session
         self.view, self.binding, self.session = view, binding, session
         menu.setToolTipsVisible(True)
-        parent = menu.parent()
+        parent = window
 
         def action(text, slot, keys=(), checkable=False) -> QAction:
             a = QAction(text, parent)
@@ -42,6 +40,12 @@ class ViewMenu:
         self.frame = action("Frame all", lambda: binding.frame_all(), ["F", "Home"])
         self.camera_colours = action("Camera colours", view.set_camera_colours, ["C"],
                                      checkable=True)
+        menu.addSeparator()
+        docks = menu.addMenu("&Docks")
+        for dock in window.docks.values():
+            docks.addAction(dock.toggleViewAction())
+        for bar in window.findChildren(QToolBar):
+            docks.addAction(bar.toggleViewAction())
         session.cloud_changed.connect(self.update_state)
         session.live_points_added.connect(lambda _p: self.update_state())
         self.update_state()

@@ -66,12 +66,17 @@ def _outline_and_handles(view, p: QPainter) -> None:
 
 
 def _region(view, p: QPainter) -> None:
+    """The scan region (yellow) or the selection box (cyan, dashed) while it is drawn."""
     d = view._drag
-    if not d or d["kind"] != "region":
+    if not d or d["kind"] not in ("region", "select"):
         return
     a, b = d["start_px"], d["now_px"]
-    p.setPen(QColor(240, 200, 50))
-    p.setBrush(QColor(240, 200, 50, 40))
+    if d["kind"] == "select":
+        p.setPen(QPen(QColor(80, 220, 255), 1, Qt.DashLine))
+        p.setBrush(QColor(80, 220, 255, 30))
+    else:
+        p.setPen(QColor(240, 200, 50))
+        p.setBrush(QColor(240, 200, 50, 40))
     p.drawRect(QRectF(min(a[0], b[0]), min(a[1], b[1]), abs(b[0] - a[0]), abs(b[1] - a[1])))
 
 
