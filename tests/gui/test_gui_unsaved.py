@@ -23,7 +23,7 @@ from insitu.sim.devices import MARK_LOG_ENV, SimController
 from insitu.ui.model.session import RigChoice
 from insitu.ui.qt.main_window import MainWindow
 
-window, height_cal_file = wf.window, wf.height_cal_file
+window = wf.window
 SRC = Path(__file__).parents[2] / "src"
 PATTERN = dict(spec='text:"AB"', at=(0.0, 28.0), width=12.0)
 HATCH_MM = 0.5                  # 53 paths: long enough to stop, short enough to finish
@@ -218,8 +218,11 @@ def test_no_path_marked_twice_after_the_application_is_killed_unsaved(qtbot, tmp
     answer(["Continue the cut path", "Resume"])
     qtbot.mouseClick(panel.resume_button, Qt.LeftButton)
     fire(qtbot, w)
-    qtbot.waitUntil(lambda: panel.last_result is not None and not w.runner.running("mark"),
-                    timeout=WAIT_MS)
+
+    def finished():
+        assert panel.last_result is not None and not w.runner.running("mark"), \
+            panel.ui.resultLabel.text()
+    qtbot.waitUntil(finished, timeout=WAIT_MS)
     assert panel.last_result.state == "done"
     marked = mark_log(log)
     assert max(marked.values()) == 1                    # no mark twice, across the kill

@@ -205,6 +205,38 @@ def test_a_path_the_board_finished_before_the_kill_is_not_marked_again(tmp_path)
     assert restarted.lists == GalvoDriver(HEAD).compile(job, first_path=2)
 
 
+def test_a_list_that_never_reached_the_board_is_a_cut_path_with_nothing_marked(tmp_path):
+    """A fault (or an abort) between "started 2" and path 2's list: the board's last list is
+    path 1's, complete — path 2 has 0 marks, and continue marks it whole, once."""
+    job = job_of()
+    lists = GalvoDriver(HEAD).compile(job)
+    prog, first = cut_run(tmp_path, job, sum(map(len, lists[:2])))
+    assert history(job, prog).cut == 2 and history(job, prog).cut_position == 0
+    board = Board()
+    run_job(job, GalvoDriver(HEAD), board, prog, resume=True, cut_path="continue")
+    assert first.marks + board.marks == all_marks(job)
+
+
+def test_killed_before_the_list_was_sent_continue_marks_the_path_once(tmp_path):
+    """Killed after "started 2" was written and before its list reached the board: the board
+    (after the restart) reports path 1's list complete, so path 2 is continued from its
+    start."""
+    job = job_of(4)
+    prog = progress_path_for(tmp_path / "job.json")
+    run_job(job, GalvoDriver(HEAD), Board(), prog)
+    jpath = prog.with_name("job.journal.jsonl")
+    lines = jpath.read_text().splitlines()
+    jpath.write_text("\n".join(lines[:6]) + "\n")       # begin, 0, 0, 1, 1, started 2
+    restarted = Board()
+    lists = GalvoDriver(HEAD).compile(job)
+    restarted.pos = ListPosition(list_digest(lists[1]), len(lists[1]))
+    with pytest.raises(SafetyError, match="the board reported 0 marks done"):
+        run_job(job, GalvoDriver(HEAD), restarted, prog, resume=True)
+    run_job(job, GalvoDriver(HEAD), restarted, prog, resume=True, cut_path="continue")
+    marks = [c.args for cmds in lists[2:] for c in cmds if c.op == "mark_abs_3d"]
+    assert restarted.marks == marks
+
+
 def test_resume_list():
     cmds = GalvoDriver(HEAD).compile(job_of(1))[0]
     marks = [c for c in cmds if c.op == "mark_abs_3d"]

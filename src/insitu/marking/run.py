@@ -116,11 +116,22 @@ def _board_marks(job, driver, controller, s: JournalSummary) -> int | None:
     first, skip = rec.get("first"), rec.get("skip_marks", 0)
     if type(first) is not int or not 0 <= first <= s.cut or type(skip) is not int:
         return None
-    cmds = driver.compile(job, first_path=first)[s.cut - first]
+    lists = driver.compile(job, first_path=first)
+    cmds, before = lists[s.cut - first], lists[s.cut - first - 1] if s.cut > first else None
     if skip:
-        cmds = resume_list(driver.compile(job, first_path=s.cut)[0], skip)
-    done = position_of(controller, cmds)
+        cmds, before = resume_list(driver.compile(job, first_path=s.cut)[0], skip), None
+    done = board_done(controller, cmds, before)
     return None if done is None else skip + _marks(cmds[:done])
+
+
+def board_done(controller, cmds, before=None) -> int | None:
+    """Commands of ``cmds`` the board reports done; 0 when its last list is ``before`` (the
+    list sent just before ``cmds``), complete — ``cmds`` never reached it (a kill or an abort
+    between the journal's "started" and the list); None: the board does not tell."""
+    done = position_of(controller, cmds)
+    if done is None and before is not None and position_of(controller, before) == len(before):
+        return 0
+    return done
 
 
 def _plan(job, driver, controller, s: JournalSummary | None, choice: str | None, where: Path):
@@ -218,13 +229,13 @@ def _send(job, controller, items, jr: Journal | None, s: JournalSummary, ppath, 
     write_progress(ppath, s, "running")
     current, err, last = None, None, time.monotonic()
     try:
-        for k, cmds, first, skip in items:
+        for i, (k, cmds, first, skip) in enumerate(items):
             if cancel is not None and cancel.is_set():
                 note("end", state="cancelled", error=None)
                 write_progress(ppath, s, "cancelled")
                 return RunResult("cancelled", len(s.done | s.skipped), total, start, *cut)
             note("started", path=k, list=list_digest(cmds), first=first, skip_marks=skip)
-            current = (k, cmds, skip)
+            current = (k, cmds, skip, items[i - 1][1] if i else None)
             controller.execute(cmds)
             note("done", path=k)
             s.done.add(k)
@@ -243,8 +254,8 @@ def _send(job, controller, items, jr: Journal | None, s: JournalSummary, ppath, 
         msg = f"{type(e).__name__}: {e}"
         try:
             if current is not None:
-                k, cmds, skip = current
-                done = position_of(controller, cmds)
+                k, cmds, skip, before = current
+                done = board_done(controller, cmds, before)
                 marks = None if done is None else skip + _marks(cmds[:done])
                 note("cut", path=k, position=marks)
                 s.cut, s.cut_position = k, marks
