@@ -17,7 +17,7 @@ WAIT_MS = 30_000
 def connect(qtbot, w: MainWindow) -> str:
     w.connect_action.trigger()
     qtbot.waitUntil(lambda: not w.runner.running("connect"), timeout=WAIT_MS)
-    return w.message_label.text()
+    return w.message_label.full_text()
 
 
 def test_opening_a_project_runs_none_of_its_rigs_code(qtbot, tmp_path: Path):
@@ -30,7 +30,7 @@ def test_opening_a_project_runs_none_of_its_rigs_code(qtbot, tmp_path: Path):
     assert w.session.rig_choice.rig_file == rig and not w.runner.running("connect")
     assert w.station is None and w.head_label.text() == "scan head: not connected"
     assert w.connect_action.text() == "&Connect rig rig.json"
-    assert "rig not connected" in w.message_label.text()
+    assert "rig not connected" in w.message_label.full_text()
     assert not marker.exists()
     msg = connect(qtbot, w)                     # the operator connects: the station refuses
     assert "native library" in msg and lib.name in msg and "not allowed" in msg

@@ -61,7 +61,7 @@ def test_mark_arms_shows_the_job_and_fires_only_when_confirmed(qtbot, window):
     mark, world = window.mark_panel.ui, window.station.world
     qtbot.mouseClick(mark.previewButton, Qt.LeftButton)        # the pilot needs no arming
     qtbot.waitUntil(lambda: not window.runner.running("preview"), timeout=WAIT_MS)
-    assert "pilot preview" in window.message_label.text()
+    assert "pilot preview" in window.message_label.full_text()
     qtbot.mouseClick(mark.markButton, Qt.LeftButton)
     dlg = window.mark_panel.arm_dialog
     qtbot.waitUntil(lambda: dlg.isVisible(), timeout=WAIT_MS)
@@ -323,13 +323,13 @@ def test_a_refusal_on_its_row_and_in_the_status_bar_then_cleared(qtbot, window, 
     item = window.place_panel.ui.patternList.item(0)
     assert item.toolTip().startswith("refused:") and item.foreground().color().red() > 200
     assert item.foreground().color().green() < 150
-    assert window.message_label.text().startswith("placement 1 refused:")
+    assert window.message_label.full_text().startswith("placement 1 refused:")
     assert mark.resultLabel.text() == "" and mark.timeLabel.text() == ""   # not "done: …"
     assert "refused" in mark.jobLabel.text()
     window.session.update_selected(at_mm=(0.0, 28.0))               # OK again
     planned(qtbot, window)
     item = window.place_panel.ui.patternList.item(0)
-    assert window.message_label.text() == "" and item.toolTip() == ""
+    assert window.message_label.full_text() == "" and item.toolTip() == ""
 
 
 def test_scan_and_the_status_bar_agree_on_the_rig(qtbot, tmp_path):
@@ -344,10 +344,10 @@ def test_scan_and_the_status_bar_agree_on_the_rig(qtbot, tmp_path):
     from insitu.formats.project import RigChoice
     w.connect_rig(RigChoice(binning=4))
     qtbot.waitUntil(lambda: w.station is not None, timeout=WAIT_MS)
-    assert w.message_label.text() == "rig connected" and ui.scanButton.isEnabled()
+    assert w.message_label.full_text() == "rig connected" and ui.scanButton.isEnabled()
     assert ui.summaryLabel.text() == ""                             # no "connect the rig first"
     w.disconnect_rig()
-    assert w.message_label.text() == "" and not ui.scanButton.isEnabled()
+    assert w.message_label.full_text() == "" and not ui.scanButton.isEnabled()
     w.runner.wait_all()
 
 

@@ -215,7 +215,7 @@ def test_a_corrupt_project_gives_one_line_and_keeps_the_session(qtbot, window, t
     bad.write_text('{"format": "insitu-project/1", "schema_version": 1, "cloud": 5}')
     window.open_project(bad)
     qtbot.waitUntil(lambda: not window.runner.running("open"), timeout=WAIT_MS)
-    text = window.message_label.text()
+    text = window.message_label.full_text()
     assert text.startswith(str(bad)) and "cloud" in text and "\n" not in text
     assert window.session.cloud is not None and window.session.project_path is None
 
@@ -228,7 +228,7 @@ def test_drop_a_pattern_file_and_a_bad_pattern(qtbot, window):
     assert [p.pattern for p in window.session.placements.items] == [
         str(ROOT / "patterns" / "part.dxf")]
     assert not window.place_panel.add_pattern(str(ROOT / "missing.svg"))
-    assert "missing.svg" in window.message_label.text()
+    assert "missing.svg" in window.message_label.full_text()
     assert len(window.session.placements.items) == 1
 
 
@@ -237,7 +237,9 @@ def test_the_height_calibration_page_shows_residuals_and_a_picture(qtbot, window
     page.ui.recordingEdit.setText(str(DATA / "height-cal-b4"))
     page.ui.outputEdit.setText(str(tmp_path / "h.json"))
     qtbot.mouseClick(page.ui.runButton, Qt.LeftButton)
-    qtbot.waitUntil(lambda: page.ui.residualsTable.rowCount() > 0, timeout=WAIT_MS)
+    def done():
+        assert page.ui.residualsTable.rowCount() > 0, page.ui.notesLabel.text()
+    qtbot.waitUntil(done, timeout=4 * WAIT_MS)          # a fit of 20 planes
     keys = [page.ui.residualsTable.item(r, 0).text()
             for r in range(page.ui.residualsTable.rowCount())]
     assert any(k.startswith("sheet_") for k in keys)
@@ -266,7 +268,7 @@ def test_a_device_fault_mid_scan_keeps_what_was_measured(qtbot, window, monkeypa
     assert "camera: frame timed out" in text and "kept" in text
     assert window.session.cloud is not None and len(window.session.cloud) > 100
     assert window.station.world.laser.kind == "off"
-    assert window.message_label.text() == text
+    assert window.message_label.full_text() == text
 
 
 def test_a_mark_in_a_codes_quiet_zone_is_refused_where_it_is_placed(qtbot, window):
@@ -338,7 +340,9 @@ def test_variable_data_previews_the_next_serial_and_marking_takes_it(qtbot, wind
     qtbot.waitUntil(mark.markButton.isEnabled, timeout=WAIT_MS)
     window.mark_panel.mark()                                          # refused: no counter
     fire(qtbot, window)
-    qtbot.waitUntil(lambda: "no serial counter" in mark.resultLabel.text(), timeout=WAIT_MS)
+    def refused():
+        assert "no serial counter" in mark.resultLabel.text(), mark.resultLabel.text()
+    qtbot.waitUntil(refused, timeout=WAIT_MS)
     assert window.mark_panel.last_result is None
     counter = tmp_path / "serial.counter.json"
     with locked(counter) as c:
@@ -351,7 +355,9 @@ def test_variable_data_previews_the_next_serial_and_marking_takes_it(qtbot, wind
                         and not window.runner.running("mark"), timeout=WAIT_MS)
         window.mark_panel.mark()
         fire(qtbot, window)
-        qtbot.waitUntil(lambda: window.mark_panel.last_result is not None, timeout=WAIT_MS)
+        def marked():
+            assert window.mark_panel.last_result is not None, mark.resultLabel.text()
+        qtbot.waitUntil(marked, timeout=3 * WAIT_MS)     # marked, imaged, read back
         assert window.mark_panel.last_result.state == "done"
         rec = read_job(tmp_path / "m.job.json").model_extra["variable_data"]
         assert rec["serial"] == serial and rec["texts"][0]["text"] == f"SN{serial:04d}"
