@@ -178,3 +178,16 @@ def test_a_frame_draws_at_most_its_budget_of_points():
     assert r.budget(True, 10**7) == INTERACTIVE_POINTS and r.budget(False, 10**7) == REST_POINTS
     small = 500 * 720                                   # a small view needs fewer points
     assert r.budget(True, small) < r.budget(False, small) < REST_POINTS
+
+
+def test_the_colour_bars_ticks_are_round_steps_between_its_ends():
+    from insitu.ui.qt.view_overlay import bar_ticks
+
+    ticks = bar_ticks(-0.3, 24.7, 30.0, 210.0)
+    values = [v for v, _ in ticks]
+    assert values == pytest.approx([-0.3, 5, 10, 15, 20, 24.7])
+    assert ticks[0][1] == 210.0 and ticks[-1][1] == 30.0           # lo at the bottom
+    ys = [y for _, y in ticks]
+    assert all(a > b for a, b in zip(ys, ys[1:]))
+    assert len(bar_ticks(0.0, 0.9, 0, 100)) <= 7
+    assert bar_ticks(1.0, 1.0, 0, 100) == [(1.0, 100)]

@@ -18,7 +18,7 @@ from insitu.ui.model.session import RigChoice
 DATA = Path(__file__).parents[1] / "data"
 SCAN = DATA / "scan-step-block-b4"
 ROOT = Path(__file__).parents[2]
-WAIT_MS = 30_000
+WAIT_MS = 60_000
 
 
 @pytest.fixture

@@ -1,7 +1,10 @@
 """The Production dock: a recipe marked on part after part (``insitu produce``) — the recipe,
 Start / Stop, the current part's cloud in the 3-D view with the located reference's outline
-over it, the read-back picture and the log as a table. File ▸ Save as recipe turns the
-session's cloud (the part's first scan) and placements into a recipe."""
+over it (nothing else of the session drawn), the read-back picture and the log as a table
+whose rows say a refusal's reason in words (the whole of it in their tooltip). File ▸ Save
+as recipe turns the session's cloud (the part's first scan) and placements into a
+``.recipe.json``, once the cloud shows the part's whole top
+(:mod:`insitu.services.reference_check`)."""
 
 from __future__ import annotations
 
@@ -16,8 +19,13 @@ from PySide6.QtWidgets import (QCheckBox, QFileDialog, QFormLayout, QHBoxLayout,
 
 from insitu.errors import InsituError
 
-COLUMNS = ("part", "serial", "outcome", "x_mm", "y_mm", "angle_deg", "fitness", "decoded",
-           "grade", "offset_mm", "error")
+COLUMNS = (("part", "part"), ("outcome", "outcome"), ("reason", "error"), ("serial", "serial"),
+           ("x mm", "x_mm"), ("y mm", "y_mm"), ("angle °", "angle_deg"),
+           ("fitness", "fitness"), ("decoded", "decoded"), ("grade", "grade"),
+           ("offset mm", "offset_mm"))
+"""(header, the log record's field) of the table's columns."""
+RECIPE_SUFFIX = ".recipe.json"
+RECIPE_FILES = f"recipes (*{RECIPE_SUFFIX} *.json)"
 OUTLINE_COLOUR = (1.0, 0.55, 0.1, 1.0)
 
 
@@ -50,7 +58,7 @@ class ProductionPanel(QWidget):
         self._bridge = _Bridge(self)
         self._bridge.record.connect(self._record)
         self._bridge.stage.connect(lambda k, s: self.status.setText(f"part {k}: {s}…"))
-        self.recipeEdit = QLineEdit(placeholderText="recipe (.json)")
+        self.recipeEdit = QLineEdit(placeholderText=f"recipe ({RECIPE_SUFFIX})")
         browse = QPushButton("…", clicked=self._browse)
         self.recipeLabel = QLabel("no recipe", wordWrap=True)
         self.logEdit = QLineEdit(placeholderText="log (.jsonl; default beside the recipe)")
@@ -64,7 +72,7 @@ class ProductionPanel(QWidget):
         self.readbackImage = QLabel(alignment=Qt.AlignCenter, minimumHeight=120)
         self.readbackLabel = QLabel("", wordWrap=True)
         self.table = QTableWidget(0, len(COLUMNS))
-        self.table.setHorizontalHeaderLabels(COLUMNS)
+        self.table.setHorizontalHeaderLabels([h for h, _ in COLUMNS])
         row = QHBoxLayout()
         row.addWidget(self.recipeEdit, 1)
         row.addWidget(browse)
@@ -90,7 +98,7 @@ class ProductionPanel(QWidget):
         window.runner.busy_changed.connect(self._busy)
 
     def _browse(self) -> None:
-        path, _ = QFileDialog.getOpenFileName(self, "Open recipe", "", "recipes (*.json)")
+        path, _ = QFileDialog.getOpenFileName(self, "Open recipe", "", RECIPE_FILES)
         if path:
             self.open_recipe(path)
 
@@ -119,7 +127,7 @@ class ProductionPanel(QWidget):
         if text:
             return Path(text)
         path = Path(self.recipeEdit.text())
-        return path.with_name(path.name.removesuffix(".json") + ".production.jsonl")
+        return path.with_name(recipe_stem(path) + ".production.jsonl")
 
     def start(self) -> None:
         """Run the recipe on the connected station, off the GUI thread."""
@@ -136,6 +144,8 @@ class ProductionPanel(QWidget):
         log, count, resume = self.log_path(), self.countSpin.value(), self.resumeCheck.isChecked()
         self.table.setRowCount(0)
         self.records = []
+        self.window_.binding.clear_overlays()
+        self.window_.view.set_lines("located", np.zeros((0, 3), np.float32), OUTLINE_COLOUR)
         bridge = self._bridge
 
         def work(progress, cancel, on_frame):
@@ -170,7 +180,7 @@ class ProductionPanel(QWidget):
 
     def _record(self, rec) -> None:
         """A part's record: a row of the table, its cloud and the located outline in the
-        view, its read-back picture."""
+        view (nothing else drawn), its read-back picture."""
         from insitu.formats.pointcloud import read_ply
         from insitu.geometry.pose import pose_matrix
 
@@ -178,14 +188,19 @@ class ProductionPanel(QWidget):
         d = rec.model_dump()
         row = self.table.rowCount()
         self.table.insertRow(row)
-        for col, key in enumerate(COLUMNS):
+        tip = record_words(rec)
+        for col, (_h, key) in enumerate(COLUMNS):
             v = d[key]
-            text = "" if v is None else f"{v:.3f}" if isinstance(v, float) else str(v)
-            self.table.setItem(row, col, QTableWidgetItem(text))
+            item = QTableWidgetItem("" if v is None else f"{v:.3f}" if isinstance(v, float)
+                                    else str(v))
+            item.setToolTip(tip)
+            self.table.setItem(row, col, item)
+        self.table.resizeColumnToContents(COLUMNS.index(("outcome", "outcome")))
         self.table.scrollToBottom()
         folder = self.log_path().parent
         cloud = folder / f"part-{rec.part:04d}.cloud.ply"
         view = self.window_.view
+        self.window_.binding.clear_overlays()
         if cloud.exists():
             view.set_cloud(read_ply(cloud).points)
         outline = np.zeros((0, 3), np.float32)
@@ -198,38 +213,76 @@ class ProductionPanel(QWidget):
             image = QImage(str(picture))
             self.readbackImage.setPixmap(QPixmap.fromImage(image).scaledToWidth(
                 max(self.readbackImage.width(), 200), Qt.SmoothTransformation))
-        self.readbackLabel.setText(
-            f"part {rec.part}, serial {rec.serial}: {rec.outcome}"
-            + ("" if rec.decoded is None else f"; read {rec.decoded!r} "
-               f"({'= plan' if rec.decode_ok else 'NOT the plan'}), grade {rec.grade}, "
-               f"offset {rec.offset_mm} mm"))
+        self.readbackLabel.setText(tip)
+        self.readbackLabel.setToolTip(tip)
 
 
-def save_session_as_recipe(window, path: Path) -> Path:
+def record_words(rec) -> str:
+    """A part's record in words: "part 2, serial 7: marked; read '007' (= plan), grade B,
+    offset 0.05 mm" or "part 3: refused — part not found: …"."""
+    serial = "" if rec.serial is None else f", serial {rec.serial}"
+    text = f"part {rec.part}{serial}: {rec.outcome}"
+    if rec.error:
+        text += f" — {rec.error}"
+    if rec.decoded is not None:
+        text += (f"; read {rec.decoded!r} ({'= plan' if rec.decode_ok else 'NOT the plan'}), "
+                 f"grade {rec.grade}, offset {rec.offset_mm} mm")
+    return text
+
+
+def recipe_stem(path: Path) -> str:
+    """"r" of r.recipe.json (or of r.json)."""
+    name = Path(path).name
+    for suffix in (RECIPE_SUFFIX, ".json"):
+        if name.endswith(suffix):
+            return name.removesuffix(suffix)
+    return name
+
+
+def save_session_as_recipe(window, path: Path):
     """The session's cloud (written beside the recipe when it is not on disk) as the part's
-    reference and its placements in that cloud's frame, as a recipe at ``path``."""
+    reference and its placements in that cloud's frame, as a recipe at ``path``; returns the
+    reference's :class:`~insitu.services.reference_check.ReferenceCheck`. InsituError,
+    nothing written, when the cloud cannot serve as the reference (the part cut by the
+    scan's edge, too little of its top measured)."""
     from insitu.formats.pointcloud import write_ply
     from insitu.formats.recipe import Recipe, write_recipe
+    from insitu.services.reference_check import check_reference
 
     s = window.session
     if s.cloud is None or not s.placements.items:
         raise InsituError("Save as recipe needs a scanned cloud and at least one placement")
+    check = check_reference(s.cloud.points, s.cloud.attributes.get("line"))
+    if check.level == "refused":
+        raise InsituError(f"{path.name}: not saved: {check.text}")
     reference = s.cloud_path
     if reference is None or not Path(reference).exists():
-        reference = path.with_name(path.name.removesuffix(".json") + ".reference.ply")
+        reference = path.with_name(recipe_stem(path) + ".reference.ply")
         write_ply(reference, s.cloud)
     write_recipe(path, Recipe(Path(reference).absolute(), "cloud", tuple(s.placements.items),
                               workpiece=s.rig_choice.workpiece
                               if s.rig_choice.rig_file is None else None,
                               serial_start=1))
-    return path
+    return check
+
+
+def recipe_path(path: str | Path) -> Path:
+    """``path`` named as a recipe: ``….recipe.json``."""
+    path = Path(path)
+    return path if path.name.endswith(RECIPE_SUFFIX) else \
+        path.with_name(recipe_stem(path) + RECIPE_SUFFIX)
 
 
 def save_recipe_dialog(window) -> None:
-    """File ▸ Save as recipe…"""
-    path, _ = QFileDialog.getSaveFileName(window, "Save as recipe", "", "recipes (*.json)")
-    if path:
-        try:
-            save_session_as_recipe(window, Path(path))
-        except InsituError as e:
-            window.statusBar().showMessage(str(e))
+    """File ▸ Save as recipe…: the reference's check said in the status bar."""
+    path, _ = QFileDialog.getSaveFileName(window, "Save as recipe", "", RECIPE_FILES)
+    if not path:
+        return
+    path = recipe_path(path)
+    try:
+        check = save_session_as_recipe(window, path)
+    except InsituError as e:
+        window.show_error(str(e), "recipe")
+        return
+    say = window.show_error if check.level == "warning" else window.show_message
+    say(f"saved {path}; {check.text}", "recipe")

@@ -130,6 +130,16 @@ class SceneBinding:
         self.view.handle_z = handle_z
         self.view.update()
 
+    def clear_overlays(self) -> None:
+        """Nothing of the session drawn over the view's cloud (a production part's): no
+        pattern, handle, warning or pilot outline, until the session changes."""
+        empty = np.zeros((0, 3), np.float32)
+        for name in ("placed", "selected", "warnings", "pilot", *self._pen_layers):
+            self.view.set_lines(name, empty, sd.PLACED_COLOUR)
+        self._pen_layers = set()
+        self.view.handles = None
+        self.view.update()
+
     def _warning_cross(self, xy, width_mm: float) -> np.ndarray:
         """A cross at (x, y) on the cloud (its nearest point's height)."""
         z = self.top_z

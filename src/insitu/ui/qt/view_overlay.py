@@ -1,7 +1,8 @@
 """What the 3-D view paints over its OpenGL picture with a QPainter: the rulers along the
-bottom and left edges (mm), the scale bar, the colour bar (height colours with the cloud's
-z range in mm, or the camera's gray), the axis names, and the selected pattern's outline and
-handles; the scan region while it is drawn."""
+bottom and left edges (x and y mm, in the top view only: in the others a screen distance is
+no distance on the part), the scale bar, the colour bar (height colours with the cloud's z
+range in mm, or the camera's gray, with ticks), the axis names, and the selected pattern's
+outline and handles; the scan region or the selection box while it is drawn."""
 
 from __future__ import annotations
 
@@ -34,7 +35,8 @@ def paint(view, p: QPainter) -> None:
     _axis_names(view, p)
     _outline_and_handles(view, p)
     _region(view, p)
-    _rulers(view, p, w, h)
+    if view.is_top():
+        _rulers(view, p, w, h)
     _scale_bar(view, p, w, h)
     _colour_bar(view, p, w)
 
@@ -134,6 +136,22 @@ def colour_bar_range(view) -> tuple[str, float, float] | None:
     return ("height", *r.z_range)
 
 
+def bar_ticks(lo: float, hi: float, top_px: float, bottom_px: float, most: int = 6
+              ) -> list[tuple[float, float]]:
+    """(value, y px) of the colour bar's ticks: round steps (1, 2 or 5 × 10ⁿ) between ``lo``
+    (at ``bottom_px``) and ``hi`` (at ``top_px``), at most ``most``, the ends included."""
+    span = hi - lo
+    if not np.isfinite(span) or span <= 0:
+        return [(lo, bottom_px)]
+    raw = span / max(most - 1, 1)
+    step = min(m * 10.0 ** np.floor(np.log10(raw)) for m in (1, 2, 5, 10)
+               if m * 10.0 ** np.floor(np.log10(raw)) >= raw)
+    inner = np.arange(np.ceil(lo / step) * step, hi, step)
+    inner = inner[(inner - lo > 0.4 * step) & (hi - inner > 0.4 * step)]
+    values = [lo, *inner.tolist(), hi]
+    return [(v, bottom_px + (v - lo) / span * (top_px - bottom_px)) for v in values]
+
+
 def _colour_bar(view, p: QPainter, w: int) -> None:
     shown = colour_bar_range(view)
     if shown is None:
@@ -154,9 +172,9 @@ def _colour_bar(view, p: QPainter, w: int) -> None:
     p.setBrush(g)
     p.drawRect(rect)
     right = Qt.AlignRight | Qt.AlignVCenter
-    top, bottom = (f"{hi:.1f} mm", f"{lo:.1f} mm") if kind == "height" else \
-        (f"{hi:.2f}", f"{lo:.2f}")
-    p.drawText(QRectF(rect.left() - 80, rect.top() - 8, 76, 16), right, top)
-    p.drawText(QRectF(rect.left() - 80, rect.bottom() - 8, 76, 16), right, bottom)
+    unit = " mm" if kind == "height" else ""
+    for v, y in bar_ticks(lo, hi, rect.top(), rect.bottom()):
+        p.drawLine(QPointF(rect.left() - 4, y), QPointF(rect.left(), y))
+        p.drawText(QRectF(rect.left() - 80, y - 8, 74, 16), right, mm_text(v) + unit)
     p.drawText(QRectF(rect.left() - 80, rect.top() - 26, 80 + BAR_W, 16), right,
                "height z" if kind == "height" else "camera gray")
