@@ -378,7 +378,7 @@ def test_a_click_on_the_calibration_picture_opens_it_full_size(qtbot, window, tm
     page.ui.recordingEdit.setText(str(DATA / "height-cal-b4"))
     page.ui.outputEdit.setText(str(tmp_path / "h.json"))
     qtbot.mouseClick(page.ui.runButton, Qt.LeftButton)
-    qtbot.waitUntil(lambda: page.picture is not None, timeout=WAIT_MS)
+    qtbot.waitUntil(lambda: page.picture is not None, timeout=2 * WAIT_MS)   # a fit
     shown = page.ui.pictureLabel.pixmap()
     qtbot.mouseClick(page.ui.pictureLabel, Qt.LeftButton)
     win = page.picture_window

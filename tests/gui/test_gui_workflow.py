@@ -239,7 +239,7 @@ def test_the_height_calibration_page_shows_residuals_and_a_picture(qtbot, window
     qtbot.mouseClick(page.ui.runButton, Qt.LeftButton)
     def done():
         assert page.ui.residualsTable.rowCount() > 0, page.ui.notesLabel.text()
-    qtbot.waitUntil(done, timeout=4 * WAIT_MS)          # a fit of 20 planes
+    qtbot.waitUntil(done, timeout=2 * WAIT_MS)          # a fit of 20 planes
     keys = [page.ui.residualsTable.item(r, 0).text()
             for r in range(page.ui.residualsTable.rowCount())]
     assert any(k.startswith("sheet_") for k in keys)

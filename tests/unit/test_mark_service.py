@@ -106,3 +106,28 @@ def test_mark_on_the_station_records_progress_and_images_the_part(tmp_path):
     assert read_progress(run.progress_path)["state"] == "done"
     assert run.image is not None and run.image.ndim == 2 and png.stat().st_size > 0
     assert quiet.progress_path is None and quiet.image is None and quiet.result.completed == 1
+
+
+def test_the_boards_pace_from_its_runs_sets_the_next_estimate():
+    """A board that took 4 × the plan's seconds: the next job's estimate and the first
+    time-left figure are 4 × the plan's, said so in words."""
+    from types import SimpleNamespace
+
+    from insitu.marking import RunResult, estimate_time, path_seconds
+    from insitu.services.mark import _learn_pace, board_seconds
+    from insitu.ui.model.time_left import TimeLeft
+
+    job = make_job([np.array([[x, 0, 0], [x, 40, 0.0]]) for x in range(20)])
+    driver = GalvoDriver(TwoMirrorHead(350.0, 12.0))
+    station = SimpleNamespace(driver=driver, mark_pace=None)
+    plan = estimate_time(job, driver.timing).total_s
+    assert board_seconds(job, station).total_s == pytest.approx(plan)
+    _learn_pace(station, job, RunResult("done", 20, 20, 0), 0, 4.0 * plan)
+    assert station.mark_pace == pytest.approx(4.0)
+    t = board_seconds(job, station)
+    assert t.total_s == pytest.approx(4.0 * plan) and "pace: 4.0 ×" in t.words()
+    left = TimeLeft(path_seconds(job, driver.timing), 0, station.mark_pace)
+    assert left.update(1, 4.0 * float(path_seconds(job, driver.timing)[0])) == \
+        pytest.approx(4.0 * plan * 19 / 20, rel=0.05)
+    _learn_pace(station, job, RunResult("done", 20, 20, 0), 0, 2.0 * plan)
+    assert station.mark_pace == pytest.approx(3.0)          # remembered, not replaced
