@@ -110,3 +110,25 @@ def test_a_cancelled_or_failed_rescan_keeps_the_cloud_rescan_cancel(qtbot, windo
     assert window.session.cloud is partial and not panel.partial_button.isVisible()
     window.undo_action.trigger()                        # and Undo brings the good one back
     assert window.session.cloud is good and window.view.renderer.points.count == n
+
+
+def test_a_picture_window_closes_with_esc_or_its_close_button(qtbot):
+    from PySide6.QtGui import QPixmap
+    from PySide6.QtWidgets import QDialogButtonBox
+
+    from insitu.ui.qt.image_window import ImageWindow
+
+    pix = QPixmap(64, 48)
+    pix.fill(Qt.gray)
+    for close in ("esc", "button"):
+        win = ImageWindow(pix, "report", None)
+        qtbot.addWidget(win)
+        win.show()
+        qtbot.waitExposed(win)
+        win.view.setFocus()
+        if close == "esc":
+            QTest.keyClick(win.view, Qt.Key_Escape)
+        else:
+            qtbot.mouseClick(win.buttons.button(QDialogButtonBox.StandardButton.Close),
+                             Qt.LeftButton)
+        assert not win.isVisible(), close

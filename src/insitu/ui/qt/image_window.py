@@ -1,12 +1,13 @@
 """A picture at full size in its own window (an :class:`~insitu.ui.qt.image_view.ImageView`:
 the wheel or + / − zooms, dragging pans, 0 fits it to the window, 1 shows it pixel for
-pixel). Used for the calibration reports (a click on the picture of a Calibrate page)."""
+pixel; Esc or Close closes it). Used for the calibration reports (a click on the picture of a
+Calibrate page)."""
 
 from __future__ import annotations
 
 from PySide6.QtCore import QEvent, QObject, Qt, Signal
 from PySide6.QtGui import QPixmap
-from PySide6.QtWidgets import QDialog, QLabel, QVBoxLayout, QWidget
+from PySide6.QtWidgets import QDialog, QDialogButtonBox, QLabel, QVBoxLayout, QWidget
 
 from insitu.ui.qt.image_view import ImageView
 
@@ -21,9 +22,12 @@ class ImageWindow(QDialog):
         self.view.show_qimage(pixmap.toImage(), None, title)
         hint = QLabel(f"{pixmap.width()} × {pixmap.height()} px — wheel or +/− zooms, drag "
                       "pans, 0 fits, 1 is pixel for pixel")
+        self.buttons = QDialogButtonBox(QDialogButtonBox.StandardButton.Close, self)
+        self.buttons.rejected.connect(self.reject)
         lay = QVBoxLayout(self)
         lay.addWidget(self.view)
         lay.addWidget(hint)
+        lay.addWidget(self.buttons)
         self.resize(min(pixmap.width() + 40, 1400), min(pixmap.height() + 70, 1000))
 
 
