@@ -48,7 +48,7 @@ from insitu.geometry.beams import line_commands  # noqa: E402
 from insitu.reconstruct.packing import line_ids  # noqa: E402
 from insitu.formats.json_file import load_json_model, save_json_model  # noqa: E402
 from insitu.formats.sequence import Sequence, SequenceWriter  # noqa: E402
-from insitu.reconstruct.bands import Sheets, survey  # noqa: E402
+from insitu.reconstruct.bands import Packing, Sheets, survey  # noqa: E402
 from insitu.services import calibrate_height, camera_model, scan_live, scan_replay  # noqa: E402
 from insitu.vision.extract import CentreSettings  # noqa: E402
 from insitu.services.scan import plan_lines  # noqa: E402
@@ -244,7 +244,8 @@ def independent_table(folder: Path, cache: Path) -> None:
         part = true_part(truth) if truth["workpiece"]["name"] == "step-block" else PosedArc(truth)
         xs = sorted({f.line.start[0] for f in Sequence.open(src).frames})
         base = None
-        for label, rec in (("1", src), ("packed", summed(src, cache / name))):
+        for label, rec in (("1", src), ("packed", summed(src, cache / name)),
+                           ("packed, 8 a frame", summed(src, cache / f"{name}-8", most=8))):
             res = scan_replay(rec, cal)
             pts = res.cloud.points
             e = errors(part, pts, 1.0)
@@ -290,9 +291,9 @@ def off_surface(part, pts: np.ndarray, tol: float = 1.5) -> int:
     return int(np.sum(best > tol))
 
 
-def summed(src: Path, out: Path, gap_mm: float = 8.0) -> Path:
-    """``src``'s frames summed (clipped to the camera's range) into frames of lines ≥
-    ``gap_mm`` apart, after survey frames of lines as far apart as the head's focus range
+def summed(src: Path, out: Path, gap_mm: float = 8.0, most: int = Packing().most_lines) -> Path:
+    """``src``'s frames summed (clipped to the camera's range) into frames of at most
+    ``most`` lines ≥ ``gap_mm`` apart (as ``auto`` packs), after survey frames of lines as far apart as the head's focus range
     needs (:func:`insitu.reconstruct.bands.survey`): a recording of `lines` frames."""
     seq = Sequence.open(src)
     frames = seq.frames
@@ -304,7 +305,7 @@ def summed(src: Path, out: Path, gap_mm: float = 8.0) -> Path:
     groups: list[list[int]] = []
     for i in order:
         for g in groups:
-            if all(abs(xs[i] - xs[j]) >= gap_mm for j in g):
+            if len(g) < most and all(abs(xs[i] - xs[j]) >= gap_mm for j in g):
                 g.append(i)
                 break
         else:

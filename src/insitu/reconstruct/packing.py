@@ -3,7 +3,7 @@ bands never share a pixel (:mod:`insitu.reconstruct.bands`).
 
 Packed frames need the heights the surface can have: narrower than the head's focus range,
 or the bands of lines a few millimetres apart overlap. First *survey* frames measure them:
-the region's first and last lines and lines every half focus-range stride between
+the region's first and last lines and lines every third of the focus-range stride between
 (:func:`~insitu.reconstruct.bands.survey`), those of one frame as far apart as the whole
 focus range's bands need, so they tell their lines apart with no height range; the heights
 they measured, widened by :attr:`~insitu.reconstruct.bands.Packing.height_mm`, then bound
@@ -12,7 +12,8 @@ gives heights only). A height range known beforehand (a recipe's part, the opera
 
 ``lines_per_frame``: None or 1, one line a frame (no survey); an int K, the lines of each pass
 dealt into ⌈N / K⌉ frames of lines ⌈N / K⌉ lines apart (where their bands still overlap, those
-pixels give no point); ``"auto"``, as many per frame as the measured heights allow.
+pixels give no point); ``"auto"``, as many per frame as the measured heights allow, at most
+:attr:`~insitu.reconstruct.bands.Packing.most_lines`.
 """
 
 from __future__ import annotations
@@ -123,8 +124,10 @@ class FramePlan:
         for p in passes(self.lines):
             bands = [self.sheets.band(*self.lines[i], self.z_range, self.packing.margin_px)
                      for i in p]
-            s = (stride(bands, self.packing.guard_px) if self.per_frame == AUTO
-                 else int(np.ceil(len(p) / self.per_frame)))
+            most = self.packing.most_lines if self.per_frame == AUTO else self.per_frame
+            s = int(np.ceil(len(p) / most))
+            if self.per_frame == AUTO:
+                s = max(s, stride(bands, self.packing.guard_px))
             for f in frames(len(p), s):
                 pick = [p[j] for j in f]
                 out.append(Frame(tuple(self.lines[i] for i in pick),
