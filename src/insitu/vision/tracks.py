@@ -98,12 +98,12 @@ def track_length(row: np.ndarray, ok: np.ndarray, max_jump: float,
     k, W = row.shape
     node = np.arange(k * W).reshape(k, W)
     src, dst = [np.zeros(0, np.int64)], [np.zeros(0, np.int64)]
-    for d in range(1, min(LINK, W - 1) + 1):
-        for a in range(k):
-            for b in range(k):
-                m = ok[a, :-d] & ok[b, d:] & (np.abs(row[a, :-d] - row[b, d:]) <= max_jump * d)
-                src.append(node[a, :-d][m])
-                dst.append(node[b, d:][m])
+    for d in range(1, min(LINK, W - 1) + 1):                  # (k, k, W − d) at once
+        m = (ok[:, None, :-d] & ok[None, :, d:]
+             & (np.abs(row[:, None, :-d] - row[None, :, d:]) <= max_jump * d))
+        a, b, c = np.nonzero(m)
+        src.append(node[a, c])
+        dst.append(node[b, c + d])
     label = _components(k * W, np.concatenate(src), np.concatenate(dst)).reshape(k, W)
     col = np.broadcast_to(np.arange(W), (k, W))[ok]
     track = np.full((k, W), -1)
