@@ -38,11 +38,12 @@ peaks. Common keyword arguments of the methods:
   :mod:`insitu.vision.laser_image`); None: everywhere.
 * min_run: a ridge of fewer valid columns is no stripe (a glint, a lamp, a short edge):
   dropped (:func:`~insitu.vision.chains.short_ridges`; 0: none is).
-* ridge: each column's candidates are the brightest of its pixels on a ridge (its white
-  top-hat over ±window rows passes the contrast threshold), and a peak's contrast is over its
-  own sides (the least of 3 px just beyond its half maximum), not over the band's ends: a line
-  on a black square beside a white one is a ridge, though the white square is brighter, and
-  of two ridges the brighter is the laser's (photographs; False: the brightest pixel).
+* ridge: each column's candidates are its pixels on a ridge (its white top-hat over ±window
+  rows passes the contrast threshold) brightest within ±window rows, and a peak's contrast is
+  over its own sides (the least of 3 px just beyond its half maximum), not over the band's
+  ends: a line on a black square beside a white one is a ridge, though the white square is
+  brighter. Of a column's candidates the one on the longest track across the columns is kept
+  (:mod:`insitu.vision.tracks`; photographs; False: the brightest pixel and ``continuity``).
 
 A stripe's clipped core is a plateau: its row is the plateau's middle, its background is
 taken beyond the plateau, and the band the methods work in (``Detection.window``) grows by
