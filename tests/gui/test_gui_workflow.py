@@ -240,9 +240,15 @@ def test_the_height_calibration_page_shows_residuals_and_a_picture(qtbot, window
     def done():
         assert page.ui.residualsTable.rowCount() > 0, page.ui.notesLabel.text()
     qtbot.waitUntil(done, timeout=2 * WAIT_MS)          # a fit of 20 planes
-    keys = [page.ui.residualsTable.item(r, 0).text()
-            for r in range(page.ui.residualsTable.rowCount())]
-    assert any(k.startswith("sheet_") for k in keys)
+    table = page.ui.residualsTable
+    rows = {table.item(r, 0).text(): [table.item(r, c).text() for c in range(1, 4)]
+            for r in range(table.rowCount())}
+    held_out = rows["height error on planes left out of the fit, RMS"]
+    assert held_out[0].endswith(" mm") and held_out[1].startswith("pass ≤ 0.05")
+    v = float(held_out[0].split()[0])                   # binning 4: coarse, not a failure
+    assert v < 0.1 and held_out[2] == page.level == ("pass" if v <= 0.05 else "check")
+    assert page.ui.notesLabel.text().startswith(f"height calibration: {page.level}")
+    assert not any("_" in name for name in rows)                  # words, not raw names
     assert not page.ui.pictureLabel.pixmap().isNull()
     assert (tmp_path / "h.json").exists()
     qtbot.waitUntil(lambda: window.session.height_cal_path == tmp_path / "h.json",

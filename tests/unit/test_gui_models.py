@@ -294,3 +294,19 @@ def test_arm_rows_say_what_will_be_marked():
     assert rows["extent, mm"] == "x 0.00 … 10.00, y 0.00 … 5.00, z 1.00 … 2.00"
     assert "workpiece arc" in rows["planned on"] and rows["run"] == "resume, cut path: skip"
     assert rows["laser"].startswith("30 %, 20 kHz")
+
+
+def test_a_calibrations_verdict_names_its_figures_against_their_limits():
+    from insitu.ui.model.calibration_verdict import verdict
+
+    res = {"sheet_rms_mm": 0.021, "sheet_cv_rms_mm": 0.023, "sheet_points": 117600.0}
+    level, line, rows = verdict("height", res)
+    assert level == "pass" and line.startswith("height calibration: pass — ")
+    assert rows[0].name == "height error on planes left out of the fit, RMS"
+    assert rows[0].value == "0.023 mm" and rows[0].level == "pass"
+    assert ("sheet points", "117,600") in [(r.name, r.value) for r in rows]
+    assert verdict("height", {**res, "sheet_cv_rms_mm": 0.07})[0] == "check"
+    level, line, _ = verdict("height", {**res, "sheet_rms_mm": 0.4})
+    assert level == "fail" and "record it again" in line and "0.4 mm" in line
+    assert verdict("camera", {"rms_px": float("nan")})[0] == "fail"
+    assert verdict("field", {"points": 400.0})[0] == "check"          # nothing to judge by

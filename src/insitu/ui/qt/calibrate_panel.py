@@ -1,20 +1,25 @@
 """The Calibrate dock: one guided page each for the camera, the height calibration and the
-field correction — recording in, file out, then its residuals and a picture."""
+field correction — recording in, file out, then its verdict (pass / check / fail, its
+figures in words against their limits: :mod:`insitu.ui.model.calibration_verdict`) and a
+picture."""
 
 from __future__ import annotations
 
 from pathlib import Path
 
 from PySide6.QtCore import Qt
-from PySide6.QtGui import QPixmap
+from PySide6.QtGui import QColor, QPixmap
 from PySide6.QtWidgets import (QFileDialog, QTableWidgetItem, QTabWidget, QVBoxLayout,
                                QWidget)
 
 from insitu.ui.model import operations as ops
+from insitu.ui.model.calibration_verdict import verdict
 from insitu.ui.qt.image_view import to_qimage
 from insitu.ui.qt.forms import load_form
 from insitu.ui.qt.image_window import Clicks, ImageWindow
 
+LEVEL_COLOURS = {"pass": QColor(90, 200, 110), "check": QColor(240, 190, 60),
+                 "fail": QColor(255, 107, 94)}
 GUIDES = {
     "camera": "Record the checkerboard in several poses, with the head's axis lines drawn on "
               "it lying on the plate (insitu sim record camera-calibration). Gives the "
@@ -42,6 +47,7 @@ class CalibratePage(QWidget):
         ui.runButton.clicked.connect(self.run)
         window.runner.busy_changed.connect(self._busy)
         self.picture: QPixmap | None = None         # the report at full size
+        self.level: str | None = None               # the last verdict: pass, check, fail
         self.picture_window: ImageWindow | None = None
         self._clicks = Clicks(self)
         ui.pictureLabel.installEventFilter(self._clicks)
@@ -83,12 +89,21 @@ class CalibratePage(QWidget):
 
     def _done(self, outcome: ops.CalibrationOutcome) -> None:
         ui = self.ui
-        ui.notesLabel.setText(f"wrote {outcome.path}: {outcome.notes}")
-        ui.residualsTable.setRowCount(len(outcome.residuals))
-        for row, (k, v) in enumerate(outcome.residuals.items()):
-            ui.residualsTable.setItem(row, 0, QTableWidgetItem(k))
-            ui.residualsTable.setItem(row, 1, QTableWidgetItem(f"{v:.4g}"))
-        ui.residualsTable.resizeColumnsToContents()
+        level, line, rows = verdict(self.kind, outcome.residuals)
+        self.level = level
+        ui.notesLabel.setText(f"{line}\nwrote {outcome.path}: {outcome.notes}")
+        ui.notesLabel.setStyleSheet(f"color: {LEVEL_COLOURS[level].name()};")
+        table = ui.residualsTable
+        table.setColumnCount(4)
+        table.setHorizontalHeaderLabels(["figure", "value", "limit", "verdict"])
+        table.setRowCount(len(rows))
+        for r, row in enumerate(rows):
+            for c, text in enumerate((row.name, row.value, row.limit, row.level)):
+                item = QTableWidgetItem(text)
+                if row.level:
+                    item.setForeground(LEVEL_COLOURS[row.level])
+                table.setItem(r, c, item)
+        table.resizeColumnsToContents()
         self.picture = pix = QPixmap.fromImage(to_qimage(outcome.picture))
         ui.pictureLabel.setPixmap(pix.scaled(ui.pictureLabel.width(), 240, Qt.KeepAspectRatio,
                                              Qt.SmoothTransformation))

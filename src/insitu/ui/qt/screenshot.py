@@ -9,7 +9,8 @@ camera (centre, distance, angles, field of view, orthographic), the image size, 
 scale's z range, the colour bar's range, the grid step, the GL renderer, the cloud's points
 and the projected pattern's points (N, 3) mm — what a test needs to check the picture.
 ``--extra VIEW:COLOURS:PATH`` saves more pictures of the same window (COLOURS: height or
-camera), the k-th one's view as ``V-k.png`` and ``V-k.json`` too.
+camera), the k-th one's view as ``V-k.png`` and ``V-k.json`` too. ``--docks DIR`` saves
+each dock as the operator sees it then, raised in turn, as ``DIR/gui-dock-NAME.png``.
 """
 
 from __future__ import annotations
@@ -49,7 +50,7 @@ def build(app: QApplication, replay: Path, height_cal: Path | None, pattern: str
     window.resize(1280, 800)
     window.show()
     window.connect_rig(RigChoice(binning=binning))
-    wait_until(app, lambda: window.station is not None, what="the rig")
+    wait_until(app, lambda: window.station is not None, 120, "the rig")
     if height_cal is not None:
         window.load_height_cal(height_cal)
         wait_until(app, lambda: window.session.height_cal is not None, 60, "the height cal")
@@ -91,6 +92,19 @@ def grab(window: MainWindow) -> QImage:
     return img
 
 
+def save_docks(app: QApplication, window: MainWindow, folder: Path) -> list[Path]:
+    """Each dock raised in turn and saved as ``folder/gui-dock-NAME.png``."""
+    out = []
+    for name, dock in window.docks.items():
+        dock.show()
+        dock.raise_()
+        for _ in range(10):
+            app.processEvents(QEventLoop.AllEvents, 20)
+        out.append(folder / f"gui-dock-{name}.png")
+        dock.grab().save(str(out[-1]))
+    return out
+
+
 def view_info(window: MainWindow) -> dict:
     view, s = window.view, window.session
     cam = view.camera
@@ -125,6 +139,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--camera-colours", action="store_true")
     ap.add_argument("--extra", action="append", default=[], metavar="VIEW:COLOURS:PATH")
     ap.add_argument("--view-png", type=Path)
+    ap.add_argument("--docks", type=Path, metavar="DIR", help="a picture of every dock")
     args = ap.parse_args(argv)
     QSurfaceFormat.setDefaultFormat(surface_format())
     app = QApplication.instance() or QApplication(sys.argv[:1])
@@ -144,6 +159,8 @@ def main(argv: list[str] | None = None) -> int:
                 args.view_png.with_name(f"{args.view_png.stem}-{k}{args.view_png.suffix}")
             window.view.grabFramebuffer().save(str(v))
             v.with_suffix(".json").write_text(json.dumps(view_info(window)))
+    if args.docks is not None:
+        save_docks(app, window, args.docks)
     window.saved.mark_clean()        # a scripted session: nothing to save
     window.close()
     return 0
