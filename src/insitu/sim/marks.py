@@ -17,8 +17,9 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from insitu.geometry.camera import CameraModel
-from insitu.sim.render import NOMINAL_EXPOSURE_MS, area_rays, edge_pixels, lens_blur_px
+from insitu.sim.render import NOMINAL_EXPOSURE_MS, lens_blur_px
 from insitu.sim.rig import SimRig
+from insitu.sim.room_light import area_rays, edge_pixels, room_shade
 from insitu.sim.scene import Scene
 
 MARK_CONTRAST = 0.75      # a mark's centre reflects 25 % of the bare surface's light
@@ -89,7 +90,7 @@ def mark_darkness(points: np.ndarray, burns: list[Burn],
 class RoomLightView:
     """What the true camera of ``rig`` sees of ``scene`` under room light, cast once: one ray
     per pixel centre, and in the pixels an edge crosses (:func:`~insitu.sim.render.
-    edge_pixels`) ``_EDGE_SUB``² rays over the pixel's area. ``hit`` (H·W,) bool, ``points``
+    edge_pixels`) ``EDGE_SUB``² rays over the pixel's area. ``hit`` (H·W,) bool, ``points``
     (M, 3) float32 mm where the hit pixels' centres meet, ``shade`` (M,) float32 DN at the
     nominal exposure (albedo, textured unless ``ideal``, shaded by the normal; an edge's
     pixels their area's mean), ``blur_px``: the lens PSF's σ at the scene's depth."""
@@ -129,11 +130,11 @@ class RoomLightView:
         light (N,) float32 DN at the nominal exposure (0 where nothing is met)."""
         origin, dirs = rig.camera.rays(uv)
         hits = scene.cast(np.broadcast_to(origin, dirs.shape), dirs)
-        p, part, nrm = hits.points[hits.hit], hits.part[hits.hit], hits.normals[hits.hit]
+        p, part = hits.points[hits.hit], hits.part[hits.hit]
         albedo = (np.array([scene.materials[i].albedo for i in part]) if ideal
                   else scene.albedo(p, part))
         shade = np.zeros(len(uv), np.float32)
-        shade[hits.hit] = rig.optics.ambient_dn * albedo * (0.6 + 0.4 * np.abs(nrm[:, 2]))
+        shade[hits.hit] = room_shade(rig, scene, hits, albedo)
         return hits, shade
 
 

@@ -22,12 +22,12 @@ from scipy.special import erf, gammaincinv, ndtr
 
 from insitu.geometry.beams import line_commands
 from insitu.sim.rig import LENS_FOCAL_MM, PIXEL_PITCH_MM, SimRig
+from insitu.sim.room_light import ambient_image
 from insitu.sim.scene import Scene
 
 NOMINAL_EXPOSURE_MS = 10.0
 _SAMPLE_SPACING_PX = 0.3
 _MAP_SCALE = 2          # the camera's mirror map: 1/2 of the frame's size
-_EDGE_SUB = 4           # room light: 4 × 4 rays in a pixel an edge crosses
 _MIRROR_SUB = 3         # mirror pixels: 3 × 3 rays per pixel (the line is narrower than a pixel)
 
 
@@ -293,48 +293,15 @@ class Renderer:
             self._camera_maps()
         return self._ambient
 
-    def _room_light(self, uv: np.ndarray):
-        """For pixel positions ``uv`` (N, 2): (room light DN at the nominal exposure, part
-        index (−1: none), the normal's |z|, depth along the camera's axis mm) (N,) each; the
-        hits and the rays' directions (N, 3)."""
-        origin, dirs = self.cam.rays(uv)
-        hits = self.scene.cast(np.broadcast_to(origin, dirs.shape), dirs)
-        o = self.rig.optics
-        pts, part = hits.points[hits.hit], hits.part[hits.hit]
-        nz = np.abs(hits.normals[hits.hit, 2])
-        fall = 1.0 + o.ambient_gradient * (pts[:, 0] + 0.5 * pts[:, 1]) / 100.0
-        out = [np.zeros(len(uv)), np.full(len(uv), -1.0), np.zeros(len(uv)), np.zeros(len(uv))]
-        out[0][hits.hit] = o.ambient_dn * self.scene.albedo(pts, part) * fall * (0.6 + 0.4 * nz)
-        out[1][hits.hit], out[2][hits.hit] = part, nz
-        out[3][hits.hit] = self.cam.to_camera(pts)[:, 2]
-        return out, hits, dirs
-
     def _camera_maps(self) -> None:
-        """One ray cast of the camera's pixels at 1/2 size gives the ambient image and the
-        mirror map. Ambient: that cast, enlarged, except in the pixels a part's edge or a wall
-        crosses, where ``_EDGE_SUB`` × ``_EDGE_SUB`` rays integrate the pixel's area (an edge
-        falls between pixels as on the sensor); then the lens PSF at the scene's depth.
-        Mirror map: where a pixel's ray meets a face with a mirror fraction and its
-        reflection meets a surface, the pixel is cast again with 3 × 3 rays and the points
-        they meet reflected are kept."""
+        """One ray cast of the camera's pixels at 1/2 size gives the ambient image
+        (:func:`insitu.sim.room_light.ambient_image`) and the mirror map: where a pixel's ray
+        meets a face with a mirror fraction and its reflection meets a surface, the pixel is
+        cast again with 3 × 3 rays and the points they meet reflected are kept."""
         H, W = self.cam.height, self.cam.width
-        h, w = (H + _MAP_SCALE - 1) // _MAP_SCALE, (W + _MAP_SCALE - 1) // _MAP_SCALE
-        u, v = np.meshgrid(np.arange(w) * _MAP_SCALE + (_MAP_SCALE - 1) / 2,
-                           np.arange(h) * _MAP_SCALE + (_MAP_SCALE - 1) / 2)
-        (shade, part_id, nz, depth), hits, dirs = self._room_light(
-            np.column_stack([u.ravel(), v.ravel()]))
-        img = cv2.resize(shade.reshape(h, w).astype(np.float32), (W, H),
-                         interpolation=cv2.INTER_LINEAR)
-        edge = edge_pixels(part_id.reshape(h, w), nz.reshape(h, w), depth.reshape(h, w))
-        edge = cv2.resize(cv2.dilate(edge.astype(np.uint8), np.ones((3, 3), np.uint8)),
-                          (W, H), interpolation=cv2.INTER_NEAREST)
-        rows, cols = np.nonzero(edge)
-        if len(rows):
-            img[rows, cols] = self._room_light(area_rays(rows, cols))[0][0] \
-                .reshape(len(rows), -1).mean(1)
-        seen = part_id >= 0
-        blur = float(self._lens_blur_px(np.median(depth[seen]))) if seen.any() else 0.0
-        self._ambient = cv2.GaussianBlur(img, (0, 0), blur) if blur > 0.05 else img
+        w = (W + _MAP_SCALE - 1) // _MAP_SCALE
+        self._ambient, hits, dirs = ambient_image(self.rig, self.scene, _MAP_SCALE,
+                                                  self._lens_blur_px)
         pts, part, nrm = hits.points[hits.hit], hits.part[hits.hit], hits.normals[hits.hit]
         # mirror pixels: every frame pixel of a map pixel on a mirror-like face, sub-sampled
         cell = np.flatnonzero(hits.hit)[self.scene.material_field(part, "mirror") > 0]
@@ -380,30 +347,6 @@ def lens_blur_px(rig: SimRig, depth_mm) -> np.ndarray:
     f, s = LENS_FOCAL_MM, o.camera_focus_mm
     blur_circle = f * f / (o.f_number * (s - f)) * np.abs(depth_mm - s) / depth_mm
     return np.sqrt(diffraction**2 + (blur_circle / 4 / pitch) ** 2)
-
-
-def edge_pixels(part: np.ndarray, nz: np.ndarray, depth: np.ndarray) -> np.ndarray:
-    """(H, W) bool: the pixels an edge crosses, from what each pixel's centre ray met —
-    ``part`` index, its normal's |z|, ``depth`` mm (H, W) each — a neighbour's differing:
-    another part, a wall beside a top, a step down. An edge within a pixel lies between
-    its centre and a neighbour's, so both are marked."""
-    edge = np.zeros(part.shape, bool)
-    for key, tol in ((part, 0.5), (nz, 0.05), (depth, 0.5)):
-        for a in (0, 1):
-            d = np.abs(np.diff(key, axis=a)) > tol
-            lo, hi = [slice(None)] * 2, [slice(None)] * 2
-            lo[a], hi[a] = slice(None, -1), slice(1, None)
-            edge[tuple(lo)] |= d
-            edge[tuple(hi)] |= d
-    return edge
-
-
-def area_rays(rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
-    """(K·n², 2) pixel positions (u, v) of ``_EDGE_SUB``² rays spread evenly over each pixel
-    (``rows``, ``cols`` (K,)), a pixel's rays together: their mean is the pixel's area."""
-    sub = (np.arange(_EDGE_SUB) + 0.5) / _EDGE_SUB - 0.5
-    du, dv = (g.ravel() for g in np.meshgrid(sub, sub))
-    return np.column_stack([(cols[:, None] + du).ravel(), (rows[:, None] + dv).ravel()])
 
 
 def _splat(img: np.ndarray, W: int, H: int, uv: np.ndarray, sigma: np.ndarray,

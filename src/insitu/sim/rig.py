@@ -40,6 +40,9 @@ class Optics:
     spot_power: float = 6.0e3       # DN·mm² for a whole spot, albedo 1
     ambient_dn: float = 30.0        # room light on an albedo-1 surface facing up
     ambient_gradient: float = 0.25  # room light's fall-off across the field, ± fraction
+    lamp_share: float = 0.0         # of the room light, the share from one lamp (the rest
+    lamp_deg: tuple[float, float] = (30.0, 45.0)   # diffuse): its azimuth, elevation; the
+    #                                 parts cast shadows in its light (docs/simulator.md)
     speckle_contrast: float = 0.35  # image-plane (subjective) speckle; along-line: Material
     secondary_fraction: float = 0.25
     electrons_per_dn: float = 8.0

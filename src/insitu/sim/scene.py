@@ -58,13 +58,17 @@ class Hits:
 class Scene:
     """Workpieces (the first is usually the table) in one Open3D RaycastingScene."""
 
-    def __init__(self, parts: list[Workpiece], seed: int = 0):
+    def __init__(self, parts: list[Workpiece], seed: int = 0,
+                 materials: dict[str, Material] | None = None):
+        """``materials``: a part's material by name, in place of :data:`MATERIALS`' (another
+        finish: its texture, its albedo against the table's)."""
         self.parts = list(parts)
         self._scene = o3d.t.geometry.RaycastingScene()
         self._ids = [self._scene.add_triangles(p.o3d_tensor_mesh()) for p in self.parts]
         self._id_to_part = np.full(max(self._ids) + 2, -1, dtype=np.int64)
         self._id_to_part[np.array(self._ids)] = np.arange(len(self._ids))
-        self.materials = [MATERIALS.get(p.name, DEFAULT_MATERIAL) for p in self.parts]
+        chosen = {**MATERIALS, **(materials or {})}
+        self.materials = [chosen.get(p.name, DEFAULT_MATERIAL) for p in self.parts]
         rng = np.random.default_rng(seed)
         # Surface texture: a few random plane waves per part (wavelengths 0.4–25 mm).
         self._waves = [

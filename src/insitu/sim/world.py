@@ -44,7 +44,8 @@ class SimWorld:
     ``board``: a calibration board in view (anything with ``frame(laser) -> image``, see
     :mod:`insitu.sim.board`), None when there is none. ``clock``: the station's time, which
     the devices advance by ``timing`` (:mod:`insitu.sim.clock`); ``head_xy``: where the
-    head's last list left it (mm on z = 0)."""
+    head's last list left it (mm on z = 0); ``materials``: parts' materials by name in place
+    of the catalogue's (:class:`insitu.sim.scene.Scene`)."""
 
     rig: SimRig
     parts: list[Workpiece] = field(default_factory=list)
@@ -56,6 +57,7 @@ class SimWorld:
     clock: StationClock = field(default_factory=StationClock)
     timing: SimTiming = field(default_factory=SimTiming)
     head_xy: np.ndarray = field(default_factory=lambda: np.zeros(2))
+    materials: dict | None = None
     _renderer: Renderer | None = field(default=None, repr=False)
 
     def scene_parts(self) -> list[Workpiece]:
@@ -66,15 +68,17 @@ class SimWorld:
 
     def renderer(self) -> Renderer:
         if self._renderer is None:
-            self._renderer = Renderer(self.rig, Scene(self.scene_parts(), seed=self.seed),
-                                      seed=self.seed)
+            self._renderer = Renderer(self.rig, self._scene(), seed=self.seed)
         return self._renderer
 
     def invalidate(self) -> None:
         """The scene changed (stage moved, part placed): rebuild it on the next frame, keeping
         the sensor's speckle and noise generator."""
         if self._renderer is not None:
-            self._renderer.set_scene(Scene(self.scene_parts(), seed=self.seed))
+            self._renderer.set_scene(self._scene())
+
+    def _scene(self) -> Scene:
+        return Scene(self.scene_parts(), seed=self.seed, materials=self.materials)
 
     def footprint(self, margin: float = 3.0) -> tuple[float, float, float, float]:
         """The parts' footprint plus a margin (2 × along y), (x0, x1, y0, y1) mm."""
