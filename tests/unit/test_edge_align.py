@@ -159,3 +159,16 @@ def test_a_step_beside_a_higher_wall_is_no_edge_of_its_own():
     s, n = edge_distance(ref.heights, e, np.array([[-0.054, -0.999], [0.0, -1.0]]))
     assert np.isnan(s[0])
     assert s[1] == pytest.approx(0.06, abs=0.02) and n[1] == pytest.approx([0, -1], abs=0.02)
+
+
+def test_a_samples_direction_is_its_lines_on_the_top():
+    """A line running along +y over a 10 mm top ends at y = 0; beyond the edge the floor's
+    points lie 1.5 mm aside in x (the light plane leans). The sample's direction is the line's
+    along the top, not the jump to the floor (which made a line grazing an edge look as if it
+    crossed it square, and held the part across it: a step block 0.06 mm off in x)."""
+    y = np.arange(-5.0, 5.0, 0.1)
+    top = y < 0
+    pts = np.column_stack([np.where(top, 0.0, 1.5), y, np.where(top, 10.0, 0.0)])
+    found = edge_samples(pts, np.zeros(len(y), int), ~top)
+    assert len(found) == 1
+    assert np.allclose(found.dirs[0], [0.0, 1.0], atol=1e-6)

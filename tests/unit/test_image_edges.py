@@ -1,6 +1,7 @@
 """Locating from the room-light frame's edges (:mod:`insitu.locate.image_edges`): the
 insert turned to within 0.04° by them (its scan lines' ends leave 0.05–0.15°); a frame
-without the part, of another size, or showing it elsewhere is not used, and says why;
+without the part or of another size is not used, and says why; one showing it elsewhere
+refuses the part;
 ``insitu scan --room-light`` writes the frame, ``insitu locate --room-light`` needs the camera."""
 
 import numpy as np
@@ -11,7 +12,7 @@ from insitu.cli.main import app
 from insitu.formats.images import read_image
 from insitu.geometry.pose import pose_matrix
 from insitu.locate.image_edges import align_image
-from insitu.locate.part import LocateRefused, locate_part
+from insitu.locate.part import LocateRefused, LocateSettings, locate_part
 from insitu.locate.reference import reference_from_mesh
 from insitu.services.room_light import station_room_light
 from insitu.services.station import simulated
@@ -21,6 +22,9 @@ from insitu.sim.world import SimWorld, sim_world
 from test_locate import synthetic_scan
 
 POSE = (6.0, -4.0, 37.0)
+LOOSE = LocateSettings(tolerance_mm=0.1, turn_bound_deg=0.5)
+"""The insert's turn is known to 0.1° (1σ) at binning 2: the gate lifted, these tests are
+about which edges place it."""
 
 
 @pytest.fixture(scope="module")
@@ -51,7 +55,8 @@ def test_the_frames_edges_turn_the_insert_within_four_hundredths_of_a_degree(rig
     assert not isinstance(fit, str), fit
     xy, turn = _errors(np.degrees(fit.angle_rad), fit.xy_mm, POSE)
     assert xy < 0.01 and turn < 0.04, (xy, turn)
-    assert fit.edges > 0.8 * fit.visible and fit.sigma_deg < 0.02
+    # its σ counts a bias and a tilt per side (0.1 px): a 16 mm part's turn to 0.1°
+    assert fit.edges > 0.8 * fit.visible and turn < fit.sigma_deg < 0.15
 
 
 def test_a_frame_without_the_part_or_of_another_camera_is_not_used(rig, insert):
@@ -64,19 +69,23 @@ def test_a_frame_without_the_part_or_of_another_camera_is_not_used(rig, insert):
 
 
 def test_locate_takes_the_frames_edges_only_where_they_agree_with_the_scan(rig, insert):
-    points, lines = synthetic_scan("insert", POSE, noise=0.02)
+    points, lines = synthetic_scan("insert", POSE, noise=0.05)
     near = (POSE[2] - 30.0, POSE[2] + 30.0)
-    alone = locate_part(insert, points, lines=lines, prefer_angle=near).best
+    alone = locate_part(insert, points, LOOSE, lines=lines, prefer_angle=near).best
     here = _frame(sim_world("insert", rig=rig, pose=POSE))
-    got = locate_part(insert, points, lines=lines, prefer_angle=near, camera=rig.camera,
-                      image=here).best
+    got = locate_part(insert, points, LOOSE, lines=lines, prefer_angle=near,
+                      camera=rig.camera, image=here).best
     assert got.image_edges > 0 and got.image_note == ""
     xy, turn = _errors(got.angle_deg, (got.x_mm, got.y_mm), POSE)
     assert xy < 0.01 and turn < 0.04, (xy, turn)
+    # a frame of the part 0.4 mm away (it moved): the two disagree beyond their σ — refused,
+    # neither pose given; the refused one is the scan's
     elsewhere = _frame(sim_world("insert", rig=rig, pose=(POSE[0] + 0.4, POSE[1], POSE[2])))
-    kept = locate_part(insert, points, lines=lines, prefer_angle=near, camera=rig.camera,
-                       image=elsewhere).best
-    assert kept.image_edges == 0 and kept.image_note.startswith("not used")
+    with pytest.raises(LocateRefused, match="do not agree.*did the part move") as e:
+        locate_part(insert, points, LOOSE, lines=lines, prefer_angle=near, camera=rig.camera,
+                    image=elsewhere)
+    kept = e.value.best
+    assert kept.image_edges == 0
     assert (kept.x_mm, kept.y_mm, kept.angle_deg) == (alone.x_mm, alone.y_mm, alone.angle_deg)
 
 
@@ -95,8 +104,8 @@ def test_the_frame_places_a_part_the_scan_lines_leave_unheld(rig, insert):
     with pytest.raises(LocateRefused, match="not pinned down"):
         locate_part(insert, points, lines=lines, prefer_angle=near)
     here = _frame(sim_world("insert", rig=rig, pose=POSE))
-    got = locate_part(insert, points, lines=lines, prefer_angle=near, camera=rig.camera,
-                      image=here).best
+    got = locate_part(insert, points, LOOSE, lines=lines, prefer_angle=near,
+                      camera=rig.camera, image=here).best
     xy, turn = _errors(got.angle_deg, (got.x_mm, got.y_mm), POSE)
     assert got.image_edges > 0 and xy < 0.01 and turn < 0.04, (xy, turn)
     elsewhere = _frame(sim_world("insert", rig=rig, pose=(POSE[0] + 0.6, POSE[1], POSE[2])))

@@ -73,12 +73,16 @@ def test_pose_of_a_synthetic_scan_is_recovered(refs, truth):
 
 
 def test_the_edge_step_is_what_makes_it_precise(refs):
-    """Without the scan lines (no edges) flat tops leave x, y to the ICP: worse."""
+    """Without the scan lines (no edges) flat tops leave x, y to the ICP: worse, and with no
+    σ to hold it to the tolerance, refused — saying what would give it."""
     truth = (12.0, -7.0, 33.0)
     pts, lines = synthetic_scan("step-block", truth)
     with_edges = _err(locate_part(refs["step-block"], pts, lines=lines), truth)
-    without = _err(locate_part(refs["step-block"], pts), truth)
-    assert with_edges[0] < 0.02 and without[0] > 2 * with_edges[0]
+    with pytest.raises(LocateRefused, match="records no scan lines.*insitu scan") as e:
+        locate_part(refs["step-block"], pts)
+    b = e.value.best
+    without = np.hypot(b.x_mm - truth[0], b.y_mm - truth[1])
+    assert with_edges[0] < 0.02 and without > 2 * with_edges[0]
 
 
 def test_a_part_square_to_the_lines_is_refused_or_right(refs):
@@ -101,7 +105,7 @@ def test_edges_along_the_lines_do_not_pin_the_pose(refs):
     truth = (5.0, 3.0, 0.0)
     pts, lines = synthetic_scan("step-block", truth)
     with pytest.raises(LocateRefused, match="not pinned down"):
-        locate_part(refs["step-block"], pts, LocateSettings(max_sigma_mm=1e-4), lines=lines)
+        locate_part(refs["step-block"], pts, LocateSettings(tolerance_mm=1e-4), lines=lines)
 
 
 def test_no_part_is_refused(refs):
@@ -134,9 +138,11 @@ def test_a_symmetric_part_is_refused_without_a_breaker(refs, name, fold):
     with pytest.raises(LocateRefused, match="ambiguous: .* and .* fit nearly equally") as e:
         locate_part(refs[name], pts, lines=lines)
     assert e.value.reason == "ambiguous"
-    # the window picks exactly one of the symmetric poses: the right one
-    pose = locate_part(refs[name], pts, lines=lines, prefer_angle=(truth[2] - 40,
-                                                                    truth[2] + 40))
+    # the window picks exactly one of the symmetric poses: the right one (the small
+    # insert's turn is known to 0.09° (1σ): its bound lifted)
+    from insitu.locate.part import LocateSettings
+    pose = locate_part(refs[name], pts, LocateSettings(turn_bound_deg=0.5), lines=lines,
+                       prefer_angle=(truth[2] - 40, truth[2] + 40))
     mm, deg = _err(pose, truth)
     assert mm < 0.03 and deg < 0.05
     assert pose.second is not None and pose.second.score > pose.best.score - 0.05
@@ -159,7 +165,7 @@ def test_a_first_scan_as_reference(refs):
     truth = (10.0, -5.0, 55.0)                  # 25° further and shifted
     pts, lines = synthetic_scan("step-block", truth)
     try:
-        pose = locate_part(ref, pts, LocateSettings(max_sigma_mm=0.1), lines=lines)
+        pose = locate_part(ref, pts, LocateSettings(tolerance_mm=0.2, turn_bound_deg=0.5), lines=lines)
     except LocateRefused as e:
         assert e.reason in ("poor-fit", "ambiguous")
         assert "25." in str(e) or "24." in str(e) or "23." in str(e)   # it was close
@@ -230,9 +236,9 @@ def test_pose_of_a_small_simulated_scan(refs):
     truth = (8.0, -6.0, 140.0)
     with simulated(sim_world("step-block", binning=4, pose=truth)) as station:
         cloud = scan_live(station).cloud
-    with pytest.raises(LocateRefused, match="not pinned down .* scan finer"):
+    with pytest.raises(LocateRefused, match="not pinned down .* what would pin it down: a crossed pass .*, the room-light frame"):
         locate_cloud(refs["step-block"], cloud)
-    pose = locate_cloud(refs["step-block"], cloud, LocateSettings(max_sigma_mm=0.1))
+    pose = locate_cloud(refs["step-block"], cloud, LocateSettings(tolerance_mm=0.2, turn_bound_deg=0.5))
     mm, deg = _err(pose, truth)
     assert mm < 0.2 and deg < 0.15, (mm, deg)
     assert pose.best.edges > 50
@@ -256,3 +262,21 @@ def test_edges_that_are_not_the_references_are_refused(refs):
     inside[:, 2] = 15.0
     mixed = np.vstack([ep, inside]), np.vstack([up, up])
     assert align_edges(refs["step-block"].heights, *mixed) is None
+
+
+def test_the_command_holds_the_pose_to_its_tolerance(tmp_path, refs):
+    """POSE.json carries the pose's 1σ at the rim and the tolerance it was held to; a
+    tolerance its edges cannot give is refused (nothing written), saying what would."""
+    truth = (8.0, -3.0, -64.0)
+    pts, lines = synthetic_scan("step-block", truth)
+    write_ply(tmp_path / "scan.ply", PointCloud(pts, {"line": lines}))
+    res = _run("sim", "export-part", "step-block", "-o", tmp_path / "sb.stl")
+    res = _run("locate", tmp_path / "sb.stl", tmp_path / "scan.ply", "-o", tmp_path / "p.json")
+    assert res.exit_code == 0, res.output
+    d = json.loads((tmp_path / "p.json").read_text())
+    assert 0 < 2 * d["sigma_rim_mm"] <= d["tolerance_mm"] == 0.05 and d["turn_bound_deg"] == 0.1
+    res = _run("locate", tmp_path / "sb.stl", tmp_path / "scan.ply", "-o", tmp_path / "q.json",
+               "--tolerance", 0.001)
+    assert res.exit_code == 1 and not (tmp_path / "q.json").exists()
+    flat = " ".join(res.output.split())
+    assert "not pinned down to the tolerance" in flat and "what would pin it down" in flat

@@ -120,6 +120,7 @@ BOUNDS: dict[str, Bound] = {
     "correction_mm": Bound(-100, 100, "mm", "a landing error of a scan head is below 100 mm"),
     "smoothing": Bound(0, 1e6, "", "a spline's smoothing factor"),
     "tolerance_mm": Bound(1e-6, 100, "mm", "a landing-error tolerance"),
+    "turn_bound_deg": Bound(1e-6, 90, "°", "how far a located turn may be off"),
     # -- command-line options --
     "binning": Bound(1, 16, "", "the simulated camera is 2448×2048 px: 16 leaves 153×128"),
     "spacing_mm": Bound(0.001, 100, "mm", "scan line spacing: 1 µm … 100 mm"),

@@ -51,6 +51,9 @@ class PoseFile(CalibrationEnvelope):
     edge_samples: Count = 0
     sigma_mm: Rmse | None = None
     sigma_deg: Deg | None = None
+    sigma_rim_mm: Rmse | None = None
+    tolerance_mm: Rmse | None = None
+    turn_bound_deg: Deg | None = None
     second: SolutionSpec | None = None
     table_z_mm: Mm | None = None
     points: Count = 0

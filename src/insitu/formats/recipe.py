@@ -1,7 +1,8 @@
 """The production recipe: what to mark on every part of a run, in the part's own frame.
 
     {"format": "insitu-recipe/1", "schema_version": 1, "saved": "...Z",
-     "reference": {"mesh": "part.stl"},            # or {"cloud": "first-scan.ply"}
+     "reference": {"mesh": "part.stl"},            # or {"cloud": "first-scan.ply",
+                                                   #     "room_light": "first-room.png"}
      "workpiece": "step-block",                    # the simulated rig's part (optional)
      "placements": [{"pattern": "qr:\\"{serial:05d}\\"", "at_mm": [0, 20], "width_mm": 8,
                      ...}],                        # the project file's placements, part frame
@@ -11,11 +12,15 @@
               "speed_mm_s": 2000,                   # region: world (x0, x1, y0, y1) mm
               "cross": true, "cross_spacing_mm": 0.5,   # a crossed pass (absent: none)
               "second_look": true},                # along y only: crossed when unheld
-     "locate": {"prefer_angle_deg": null},         # which of a symmetric part's turns
+     "locate": {"prefer_angle_deg": null,          # which of a symmetric part's turns
+                "tolerance_mm": 0.05, "turn_bound_deg": 0.1},  # 2σ at its rim, 3σ of its turn
      "serial": {"counter": "serial.counter.json", "start": 1, "fields": {}}}
 
 Paths are relative to the recipe's folder. The reference defines the part's frame: a mesh in
-it, or the cloud of a first scan (its world frame is then the part's). ``scan.region`` null:
+it, or the cloud of a first scan (its world frame is then the part's) with, optionally, the
+room-light frame that scan took (its outline is fitted there). ``locate.tolerance_mm``,
+``turn_bound_deg``: a part is marked only when its pose is known to 2σ within the first at
+its rim and its turn to 3σ within the second (absent: 0.05 mm, 0.1°). ``scan.region`` null:
 where the part lies, grown by ``margin_mm`` (the simulated rig knows where; a real rig needs
 the region). ``scan.cross``: a second, crossed pass (lines at 45° to x, ``cross_spacing_mm``
 apart, null: ``spacing_mm``), so every edge of the part is crossed by some line whatever its
@@ -54,6 +59,7 @@ COUNTER = "serial.counter.json"
 class _Reference(_Strict):
     mesh: str | None = None
     cloud: str | None = None
+    room_light: str | None = None
 
     @model_validator(mode="after")
     def _one(self):
@@ -82,6 +88,8 @@ class _Scan(_Strict):
 
 class _Locate(_Strict):
     prefer_angle_deg: Annotated[tuple[float, float], each_within("angle_deg")] | None = None
+    tolerance_mm: within("tolerance_mm") = 0.05
+    turn_bound_deg: within("turn_bound_deg") = 0.1
 
 
 class _Serial(_Strict):
@@ -130,7 +138,10 @@ class Recipe:
     (LaserParams fields); ``prefer_angle_deg``: (lo, hi) degrees, the turn about z to keep
     of a symmetric part's (None: refuse an ambiguous one); ``counter``: the serial counter,
     created with first serial ``serial_start`` when missing; ``fields``: values of the
-    texts' own fields; ``workpiece``: the simulated rig's part (None: its default)."""
+    texts' own fields; ``workpiece``: the simulated rig's part (None: its default);
+    ``reference_room_light``: a cloud reference's room-light frame, its outline fitted there
+    (None: none); ``tolerance``: (mm, degrees) a located pose's 2σ at the part's rim and 3σ
+    of its turn must lie within."""
 
     reference: Path
     reference_kind: str
@@ -142,6 +153,8 @@ class Recipe:
     serial_start: int | None = None
     fields: dict[str, str] = field(default_factory=dict)
     workpiece: str | None = None
+    reference_room_light: Path | None = None
+    tolerance: tuple[float, float] = (0.05, 0.1)
 
 
 def reference_kind(path: str | Path) -> str:
@@ -167,12 +180,15 @@ def recipe_json(recipe: Recipe, path: Path) -> str:
     data = _Recipe(
         format=RECIPE_FORMAT, schema_version=SCHEMA_VERSION,
         saved=datetime.now(timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ"),
-        reference={recipe.reference_kind: _rel(recipe.reference, folder)},
+        reference={recipe.reference_kind: _rel(recipe.reference, folder),
+                   "room_light": (None if recipe.reference_room_light is None else
+                                  _rel(recipe.reference_room_light, folder))},
         workpiece=recipe.workpiece, placements=placements, laser=_Laser(**recipe.laser),
         scan=_Scan(region=s.region, margin_mm=s.margin_mm, spacing_mm=s.spacing_mm,
                    exposure_ms=s.exposure_ms, speed_mm_s=s.speed_mm_s, cross=s.cross,
                    cross_spacing_mm=s.cross_spacing_mm, second_look=s.second_look),
-        locate=_Locate(prefer_angle_deg=recipe.prefer_angle_deg),
+        locate=_Locate(prefer_angle_deg=recipe.prefer_angle_deg,
+                       tolerance_mm=recipe.tolerance[0], turn_bound_deg=recipe.tolerance[1]),
         serial=_Serial(counter=_rel(counter, folder), start=recipe.serial_start,
                        fields=dict(recipe.fields)))
     out = data.model_dump(mode="json")
@@ -218,4 +234,7 @@ def read_recipe(path: str | Path, placement: Callable[..., Any],
                         s.cross, s.cross_spacing_mm, s.second_look),
         prefer_angle_deg=d.locate.prefer_angle_deg,
         counter=_abs(d.serial.counter, folder, "serial.counter", path, must_exist=False),
-        serial_start=d.serial.start, fields=dict(d.serial.fields), workpiece=d.workpiece)
+        serial_start=d.serial.start, fields=dict(d.serial.fields), workpiece=d.workpiece,
+        reference_room_light=(None if d.reference.room_light is None else _abs(
+            d.reference.room_light, folder, "reference.room_light", path)),
+        tolerance=(d.locate.tolerance_mm, d.locate.turn_bound_deg))

@@ -33,6 +33,7 @@ import numpy as np
 from insitu.geometry.camera import CameraModel
 from insitu.geometry.pose import rot_z
 from insitu.locate.height_image import HeightImage, sample
+from insitu.locate.uncertainty import SCAN_BIAS_MM, FitTerms, covariance
 
 DROP_MM = 0.5
 FLAT_MM = 0.15
@@ -114,7 +115,8 @@ def edge_samples(points: np.ndarray, lines: np.ndarray, table: np.ndarray,
             near = (l2[j] == l2[i]) & (np.linalg.norm(q[j, :2] - q[i, :2], axis=1) <= REACH_MM)
             fall = np.maximum(fall, np.where(near, q[i, 2] - q[j, 2], 0.0))
         k = i[ok & (fall > DROP_MM)]
-        d = q[k + 1, :2] - q[k - 1, :2]
+        d = q[k, :2] - q[k - HOLD_PTS, :2]        # along the top: the next point, on the
+        #                                           floor, lies shifted across the line
         out.append((q[k], d / np.maximum(np.linalg.norm(d, axis=1, keepdims=True), 1e-12)))
     return EdgeSamples(*(np.vstack([o[j] for o in out]) for j in range(2)))
 
@@ -150,6 +152,22 @@ def _along(points: np.ndarray, lines: np.ndarray,
             if len(d) > 1 else np.array([0.0, 1.0])
         out[g] = d @ axis
     return out
+
+
+def crossed(points: np.ndarray, lines: np.ndarray, min_deg: float = 20.0) -> bool:
+    """Whether the scan lines (``lines`` (N,) index of ``points`` (N, 3)) run in two
+    directions at least ``min_deg`` apart in x, y (a crossed pass)."""
+    order = np.argsort(lines, kind="stable")
+    angles = []
+    for g in np.split(order, np.flatnonzero(np.diff(lines[order])) + 1):
+        if len(g) >= 10:
+            d = points[g, :2] - points[g, :2].mean(axis=0)
+            v = np.linalg.svd(d[:: max(1, len(d) // 100)], full_matrices=False)[2][0]
+            angles.append(np.degrees(np.arctan2(v[1], v[0])) % 180.0)
+    if not angles:
+        return False
+    gap = (np.asarray(angles) - angles[0] + 90.0) % 180.0 - 90.0
+    return bool(np.ptp(gap) >= min_deg)
 
 
 def edge_distance(heights: HeightImage, e: np.ndarray,
@@ -209,9 +227,12 @@ def _normal(heights: HeightImage, xy: np.ndarray) -> np.ndarray:
 class EdgeFit:
     """A corrected point is ``Rz(angle_rad) @ p + shift_mm`` (x, y only); ``b_mm``: how far
     inside its edge a top's last point lies, along its line (on average: what the line's
-    end loses); ``samples`` used; ``sigma_mm``, ``sigma_deg``: 1σ of the shift (its worst
-    direction) and of the turn, from the residuals' spread — large when the edges the lines
-    cross do not pin the part down (edges along the lines)."""
+    end loses); ``samples`` used; ``cov`` (3, 3): the covariance of the turn (rad, about
+    ``centre_mm`` (2,), part frame) and the shift (mm) (:func:`insitu.locate.uncertainty.
+    covariance`: segments of an edge vary together, each edge may be off by ``bias_mm``
+    along its lines); None when a direction was left free; ``sigma_mm``, ``sigma_deg``: 1σ
+    of the shift (its worst direction; across the free direction when one was) and of the
+    turn — large when the edges the lines cross do not pin the part down."""
 
     angle_rad: float
     shift_mm: np.ndarray
@@ -219,10 +240,14 @@ class EdgeFit:
     samples: int
     sigma_mm: float
     sigma_deg: float
+    cov: np.ndarray | None = None
+    centre_mm: np.ndarray | None = None
+    terms: FitTerms | None = None
 
 
 def align_edges(heights: HeightImage, e: np.ndarray, u: np.ndarray, iterations: int = 20,
-                free: np.ndarray | None = None) -> EdgeFit | None:
+                free: np.ndarray | None = None, bias_mm: float = SCAN_BIAS_MM,
+                reference_mm: float = 0.0) -> EdgeFit | None:
     """The correction that moves the edge samples ``e`` (K, 3), part frame, with outward
     directions ``u`` (K, 2), onto the reference's edges, each inside by one inset b along
     its line (b·ν across the edge): first the turn, the shift and b (Huber weights; a
@@ -234,7 +259,8 @@ def align_edges(heights: HeightImage, e: np.ndarray, u: np.ndarray, iterations: 
     edges cannot hold the turn and the shift. ``free``: a unit
     direction (2,), part frame, the shift is not fitted along (the one the edges hold least,
     :func:`unheld`): the turn and the shift across it only; ``sigma_mm`` is then the
-    latter's."""
+    latter's. ``bias_mm``: 1σ of an edge's own inset about the part's (step heights, the
+    light on a wall), ``reference_mm`` of the reference's edges, for the covariance."""
     if len(e) < MIN_SAMPLES:
         return None
     across = None if free is None else np.array([-free[1], free[0]])
@@ -243,19 +269,40 @@ def align_edges(heights: HeightImage, e: np.ndarray, u: np.ndarray, iterations: 
     if first is None:
         return None
     (theta, t, b), _, A, r, cut = first
-    sigma_deg = float(np.degrees(_spread(r) * np.sqrt(np.linalg.inv(A)[0, 0])))
     second = _fit(heights, e, u, c, (theta, t, b), across, False, iterations, cut)
     if second is None:
         return None
     (theta, t, b), found, A, r, _ = second
     if (np.linalg.norm(_moved(e, u, c, theta, t)[0][:, :2] - e[:, :2], axis=1).max() > SEARCH_MM
-            or _near_edges(heights, e, u, c, theta, t) < MIN_FOUND * len(e)):
+            or near_edges(heights, e, u, c, theta, t) < MIN_FOUND * len(e)):
         return None                  # moved beyond where its samples look for their edges
+    terms = _terms(heights, e, u, c, theta, t, b, across, cut)
+    if terms is None:
+        return None
+    cov = covariance(terms, bias_mm, reference_mm=reference_mm)
     k = 2 if across is None else 1
-    cov = _spread(r) ** 2 * np.linalg.inv(A)
     R = rot_z(theta)[:2, :2]
     return EdgeFit(float(theta), c - R @ c + t, b, found,
-                   float(np.sqrt(np.linalg.eigvalsh(cov[:k, :k]).max())), sigma_deg)
+                   float(np.sqrt(np.linalg.eigvalsh(cov[1:k + 1, 1:k + 1]).max())),
+                   float(np.degrees(np.sqrt(cov[0, 0]))),
+                   cov[:3, :3] if across is None else None, c + t, terms)
+
+
+def _terms(heights: HeightImage, e: np.ndarray, u: np.ndarray, c: np.ndarray, theta: float,
+           t: np.ndarray, b: float, across: np.ndarray | None, cut: np.ndarray
+           ) -> FitTerms | None:
+    """The fit's :class:`~insitu.locate.uncertainty.FitTerms` at its end (turn, shift — along
+    ``across`` only when given — and inset; the weights of its last stage)."""
+    s, n, nu, d, ok = _residuals(heights, e, u, c, theta, t)
+    r = (s - b) * nu
+    w = _weights(r, SHIFT_HUBER_MM, np.inf) * ~np.isin(np.flatnonzero(ok), cut)
+    J = np.column_stack([-n[:, 0] * d[:, 1] + n[:, 1] * d[:, 0],
+                         n if across is None else (n @ across)[:, None], -nu])
+    scale = np.sqrt(np.maximum(np.diag(J.T @ (J * w[:, None])), 1e-30))
+    if (w > 0).sum() < MIN_SAMPLES or np.linalg.cond(
+            J.T @ (J * w[:, None]) / np.outer(scale, scale)) > 1e4:
+        return None
+    return FitTerms(J, w, r, d + c + t, n, e[ok, 2], nu, _spread(r))
 
 
 def _fit(heights: HeightImage, e: np.ndarray, u: np.ndarray, c: np.ndarray, start: tuple,
@@ -309,7 +356,7 @@ def _residuals(heights: HeightImage, e: np.ndarray, u: np.ndarray, c: np.ndarray
     return s[ok], n[ok], nu[ok], pe[ok, :2] - c - t, ok
 
 
-def _near_edges(heights: HeightImage, e: np.ndarray, u: np.ndarray, c: np.ndarray,
+def near_edges(heights: HeightImage, e: np.ndarray, u: np.ndarray, c: np.ndarray,
                 theta: float, t: np.ndarray) -> int:
     """How many samples lie by one of the reference's edges at the correction: found along
     their line or across it (a line that runs off an edge at a grazing angle ends far from
@@ -342,49 +389,3 @@ def _solve(J: np.ndarray, w: np.ndarray, r: np.ndarray):
 def _spread(r: np.ndarray) -> float:
     """Robust 1σ of residuals r (MAD)."""
     return float(1.4826 * np.median(np.abs(r - np.median(r))))
-
-
-def unheld(heights: HeightImage, e: np.ndarray, u: np.ndarray
-           ) -> tuple[int, np.ndarray | None]:
-    """Why :func:`align_edges` may find no fit at this pose: the edge samples ``e`` (K, 3),
-    part frame, directions ``u`` (K, 2), that find the reference's edge, and the unit
-    direction (2,) part frame of the shift their edges hold least, with the inset (the
-    least eigenvector of Σ [n, −ν][n, −ν]ᵀ / K; None: no sample found). Edges that all
-    face one way leave the shift along them free; edges facing two ways alone leave it free
-    along their bisector, where moving the part and insetting both edges alike look the
-    same (a triangle whose third side runs along the lines, a corner of two sides)."""
-    s, n = edge_distance(heights, e, u)
-    nu = np.einsum("ij,ij->i", n, u)
-    ok = np.isfinite(s) & (nu > MIN_COS)
-    if not ok.any():
-        return 0, None
-    J = np.column_stack([n[ok], -nu[ok]])
-    d = np.linalg.eigh(J.T @ J / ok.sum())[1][:2, 0]
-    return int(ok.sum()), d / max(float(np.linalg.norm(d)), 1e-12)
-
-
-def unheld_reason(heights: HeightImage, e: np.ndarray, u: np.ndarray,
-                  angle_rad: float) -> tuple[str, np.ndarray | None]:
-    """Why the edges give no fit at a pose, and the direction (2,) part frame they hold
-    least (None: too few samples to say): too few of the scan's edge samples (``e``, ``u``
-    in the part's frame) lie by the reference's edges, or those found leave a direction
-    free (named in the world frame; ``angle_rad``: the world → part turn)."""
-    found, free = unheld(heights, e, u)
-    near = _near_edges(heights, e, u, np.zeros(2), 0.0, np.zeros(2))
-    if found < MIN_SAMPLES or near < MIN_FOUND * len(e):
-        return (f"{found} of the scan's {len(e)} edge samples find the reference's edges "
-                f"along their lines and {near} lie by one (at least {MIN_SAMPLES} and "
-                f"{MIN_FOUND:.0%} needed)"), None
-    name, faces = direction_name(rot_z(-angle_rad)[:2, :2] @ free)   # part frame → world
-    return (f"the {found} edge samples the scan lines give hold the part along {faces} "
-            f"only: nothing holds it along {name}; turn the part or the scan, or scan "
-            f"crossed, so that lines cross an edge facing "
-            f"{name if name[0] == '(' else '±' + name}"), free
-
-
-def direction_name(d: np.ndarray) -> tuple[str, str]:
-    """A world direction (2,) named ("x", "y" or its components) and the edges across it
-    ("±y", "±x", …)."""
-    near = np.cos(np.radians(20))
-    return (("x", "±y") if abs(d[0]) > near else ("y", "±x") if abs(d[1]) > near
-            else (f"({d[0]:+.2f}, {d[1]:+.2f})", f"({-d[1]:+.2f}, {d[0]:+.2f})"))

@@ -27,6 +27,7 @@ from insitu.geometry.camera import CameraModel
 from insitu.locate.edge_align import edge_distance
 from insitu.geometry.pose import rot_z
 from insitu.locate.height_image import HeightImage, sample
+from insitu.locate.uncertainty import FRAME_BIAS_PX, FitTerms, covariance
 
 STEEP = 1.0
 """Slope (of the height image blurred as for its normals) above which a pixel lies on an
@@ -85,21 +86,32 @@ def outline(heights: HeightImage) -> Outline:
     s, normal = edge_distance(heights, np.column_stack([start, z]), n)
     ok = np.isfinite(s)
     edge, n = start[ok] + s[ok, None] * n[ok], n[ok]
-    near, far, below = sample([heights.z], *heights.pixel(np.concatenate(
-        [edge - INSIDE_MM * n, edge - (INSIDE_MM + SLOPE_MM) * n, edge + START_MM * n])))[0] \
-        .reshape(3, -1)
-    top = near + (near - far) * INSIDE_MM / SLOPE_MM   # a sloping top carried on to its edge
+    top, below = edge_heights(heights, edge, n)
     _, keep = np.unique(np.floor(edge / SPACING_MM).astype(np.int64), axis=0,
                         return_index=True)
     return Outline(np.column_stack([edge, top])[keep], normal[ok][keep], below[keep])
+
+
+def edge_heights(heights: HeightImage, edge: np.ndarray, n: np.ndarray
+                 ) -> tuple[np.ndarray, np.ndarray]:
+    """(the top's height at each edge point ``edge`` (K, 2) — from ``INSIDE_MM`` inside along
+    its outward normal ``n`` (K, 2), carried on at its slope to the edge —, the height
+    ``START_MM`` beyond it) (K,) each, mm."""
+    near, far, below = sample([heights.z], *heights.pixel(np.concatenate(
+        [edge - INSIDE_MM * n, edge - (INSIDE_MM + SLOPE_MM) * n, edge + START_MM * n])))[0] \
+        .reshape(3, -1)
+    return near + (near - far) * INSIDE_MM / SLOPE_MM, below
 
 
 @dataclass(frozen=True)
 class ImageFit:
     """The pose from the frame's edges: ``angle_rad`` and ``xy_mm`` (2,) of the part frame's
     origin in the world; ``edges``: outline points whose edge was found and used, of
-    ``visible``; ``sigma_mm``, ``sigma_deg``: 1σ of the shift (its worst direction) and of
-    the turn, from the distances' spread; ``rms_mm`` that spread (robust)."""
+    ``visible``; ``cov`` (3, 3): the covariance of the turn (rad, about the origin) and the
+    shift (mm, world) (:func:`insitu.locate.uncertainty.covariance`: segments of an edge
+    vary together, each edge's grey step may be off by ``bias_px``); ``sigma_mm``,
+    ``sigma_deg``: 1σ of the shift (its worst direction) and of the turn; ``rms_mm`` the
+    distances' robust spread about the fit."""
 
     angle_rad: float
     xy_mm: np.ndarray
@@ -108,17 +120,23 @@ class ImageFit:
     sigma_mm: float
     sigma_deg: float
     rms_mm: float
+    cov: np.ndarray | None = None
+    terms: FitTerms | None = None
 
 
 def align_image(image: np.ndarray, camera: CameraModel, heights: HeightImage,
                 edges: Outline, T_world_part: np.ndarray,
-                max_spread_mm: float = MAX_SPREAD_MM) -> ImageFit | str:
+                max_spread_mm: float = MAX_SPREAD_MM,
+                bias_px: float = FRAME_BIAS_PX, search_px: float = SEARCH_PX,
+                reference_mm: float = 0.0) -> ImageFit | str:
     """The pose that puts ``edges`` (the reference's, :func:`outline`; ``heights`` its height
     image) on the edges of ``image`` (H, W) grey, a frame of ``camera`` under the room light
     with the part as the scan found it, starting from ``T_world_part`` (4, 4; a turn about
     z and a shift). Why not, as a sentence, when the frame is not the camera's, too few
     outline points are in view or show an edge, the edges found scatter about the fit, or
-    the fit does not settle (``max_spread_mm``: at most this robust 1σ about the fit)."""
+    the fit does not settle (``max_spread_mm``: at most this robust 1σ about the fit).
+    ``search_px``: how far from the outline's image each edge is looked for;
+    ``reference_mm``: 1σ of the outline's own edges, for the covariance."""
     if image.shape[:2] != (camera.height, camera.width):
         return (f"the frame is {image.shape[1]}×{image.shape[0]} px, the camera "
                 f"{camera.width}×{camera.height}")
@@ -127,16 +145,18 @@ def align_image(image: np.ndarray, camera: CameraModel, heights: HeightImage,
     clipped = (np.asarray(image) >= full).astype(np.float32)
     angle = float(np.arctan2(T_world_part[1, 0], T_world_part[0, 0]))
     t = np.asarray(T_world_part[:3, 3], np.float64)
-    seen = _visible(heights, edges, camera, angle, t) & ~_sliver(edges, camera, angle, t)
+    width = wall_px(edges, camera, angle, t)
+    seen = visible(heights, edges, camera, angle, t) & ~((width > 0) & (width < WALL_PX))
     if seen.sum() < MIN_POINTS:
         return f"{seen.sum()} of the outline's {len(edges.points)} points in view"
     p, n = edges.points[seen], edges.normals[seen]
-    offs = np.arange(-SEARCH_PX, SEARCH_PX + 1e-9, STEP_PX)
+    reach = np.where(width[seen] > 0, width[seen] / 2, np.inf)
+    offs = np.arange(-search_px, search_px + 1e-9, STEP_PX)
     for _ in range(ITERATIONS):
         R = rot_z(angle)[:2, :2]
         pw = np.column_stack([p[:, :2] @ R.T + t[:2], p[:, 2] + t[2]])
         nw = n @ R.T
-        found, e = _edge_points(grey, clipped, camera, pw, nw, offs)
+        found, e, px_mm = edge_points(grey, clipped, camera, pw, nw, offs, reach)
         if found.sum() < max(MIN_POINTS, MIN_FOUND * len(p)):
             return (f"{found.sum()} of the {len(p)} outline points in view show an edge in "
                     f"the frame (at least {max(MIN_POINTS, int(MIN_FOUND * len(p)))} needed)")
@@ -159,23 +179,27 @@ def align_image(image: np.ndarray, camera: CameraModel, heights: HeightImage,
     if mad > max_spread_mm:
         return (f"the frame's edges scatter {mad:.3f} mm about the outline (at most "
                 f"{max_spread_mm:g}): not the part's edges")
-    cov = mad ** 2 * np.linalg.inv(A)
+    terms = FitTerms(J, w, r, p[found, :2], n[found], p[found, 2], px_mm[found], mad)
+    cov = covariance(terms, bias_px, reference_mm=reference_mm)
     if (abs(x[0]) > max(np.sqrt(cov[0, 0]), SETTLE_RAD)
             or np.linalg.norm(x[1:]) > max(np.sqrt(np.trace(cov[1:, 1:])), SETTLE_MM)):
         return (f"the fit to the frame's edges did not settle in {ITERATIONS} steps (the last "
                 f"{np.degrees(x[0]):+.4f}°, {np.linalg.norm(x[1:]):.4f} mm)")
     return ImageFit(angle, t[:2].copy(), int(found.sum()), len(p),
                     float(np.sqrt(np.linalg.eigvalsh(cov[1:, 1:]).max())),
-                    float(np.degrees(np.sqrt(cov[0, 0]))), mad)
+                    float(np.degrees(np.sqrt(cov[0, 0]))), mad, cov, terms)
 
 
-def _edge_points(grey: np.ndarray, clipped: np.ndarray, camera: CameraModel, pw: np.ndarray,
-                 nw: np.ndarray, offs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(found (K,) bool, the edge in x, y (K, 2) world, mm) for outline points ``pw``
-    (K, 3) world with normals ``nw`` (K, 2): along the normal's image, within the offsets
-    ``offs`` px, the steepest grey step (its slope above ``CONTRAST`` times the median),
-    cut at the point's height; none where a pixel on the way is at full scale (``clipped``
-    (H, W) 1: a step cut off there has its steepest slope moved toward the dark side)."""
+def edge_points(grey: np.ndarray, clipped: np.ndarray, camera: CameraModel, pw: np.ndarray,
+                nw: np.ndarray, offs: np.ndarray, reach: np.ndarray | None = None
+                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(found (K,) bool, the edge in x, y (K, 2) world, mm, mm a pixel across the edge
+    (K,)) for outline points ``pw`` (K, 3) world with normals ``nw`` (K, 2): along the
+    normal's image, within the offsets ``offs`` px (outward at most ``reach`` (K,) px: short
+    of the foot of a wall the camera sees, whose step beyond the top's may be the steeper),
+    the steepest grey step (its slope above ``CONTRAST`` times the median), cut at the
+    point's height; none where a pixel on the way is at full scale (``clipped`` (H, W) 1: a
+    step cut off there has its steepest slope moved toward the dark side)."""
     uv = camera.project(pw)
     step = camera.project(np.column_stack([pw[:, :2] + 0.05 * nw, pw[:, 2]])) - uv
     d = step / np.maximum(np.linalg.norm(step, axis=1, keepdims=True), 1e-12)
@@ -186,6 +210,8 @@ def _edge_points(grey: np.ndarray, clipped: np.ndarray, camera: CameraModel, pw:
                  for s in sample([grey, clipped], q[..., 0].ravel(), q[..., 1].ravel()))
     slope = np.abs(np.gradient(prof, STEP_PX, axis=1))
     noise = float(np.median(slope))           # the slope off the edges: noise, texture
+    if reach is not None:
+        slope = np.where(offs[None, :] <= reach[:, None], slope, 0.0)
     j = np.argmax(slope, axis=1)
     k = np.arange(len(pw))
     peak = (j > 0) & (j < len(offs) - 1) & (slope[k, j] > CONTRAST * max(noise, 1e-3))
@@ -196,24 +222,32 @@ def _edge_points(grey: np.ndarray, clipped: np.ndarray, camera: CameraModel, pw:
     px = uv + (offs[j] + frac * STEP_PX)[:, None] * d
     o, dirs = camera.rays(np.nan_to_num(px))
     e = o[:2] + dirs[:, :2] * ((pw[:, 2] - o[2]) / dirs[:, 2])[:, None]
-    return inside & peak & ~(cut > 0).any(axis=1), e
+    px_mm = 0.05 / np.maximum(np.linalg.norm(step, axis=1), 1e-12)
+    return inside & peak & ~(cut > 0).any(axis=1), e, px_mm
 
 
-def _sliver(edges: Outline, camera: CameraModel, angle: float, t: np.ndarray) -> np.ndarray:
+def sliver(edges: Outline, camera: CameraModel, angle: float, t: np.ndarray) -> np.ndarray:
     """(K,) bool: the outline points whose wall the camera sees as a sliver less than
     ``WALL_PX`` wide (turned nearly edge-on to it): its grey blends into the edge's step and
     moves it outward (0.12 px on the insert's side 7° from edge-on). A wall seen wider has
-    its own step beyond the top's; one facing away is hidden behind the top."""
+    its own step beyond the top's (:func:`wall_px`); one facing away is hidden behind the
+    top."""
+    width = wall_px(edges, camera, angle, t)
+    return (width > 0) & (width < WALL_PX)
+
+
+def wall_px(edges: Outline, camera: CameraModel, angle: float, t: np.ndarray) -> np.ndarray:
+    """(K,) how wide, px, the camera sees the wall below each outline point, outward across
+    its edge (≤ 0: hidden behind the top) at the pose (turn ``angle`` rad, shift ``t``)."""
     R = rot_z(angle)[:2, :2]
     xy, nw = edges.points[:, :2] @ R.T + t[:2], edges.normals @ R.T
     top = camera.project(np.column_stack([xy, edges.points[:, 2] + t[2]]))
     foot = camera.project(np.column_stack([xy, edges.below + t[2]]))
     out = camera.project(np.column_stack([xy + 0.05 * nw, edges.points[:, 2] + t[2]])) - top
-    width = np.einsum("ij,ij->i", foot - top, out / np.linalg.norm(out, axis=1, keepdims=True))
-    return (width > 0) & (width < WALL_PX)
+    return np.einsum("ij,ij->i", foot - top, out / np.linalg.norm(out, axis=1, keepdims=True))
 
 
-def _visible(heights: HeightImage, edges: Outline, camera: CameraModel, angle: float,
+def visible(heights: HeightImage, edges: Outline, camera: CameraModel, angle: float,
              t: np.ndarray) -> np.ndarray:
     """(K,) bool: the outline points the part does not hide from ``camera`` at the pose
     (turn ``angle`` rad, shift ``t`` (3,)): the height image lies below the ray from each

@@ -13,11 +13,15 @@ from dataclasses import dataclass
 from functools import cached_property
 
 import numpy as np
-from scipy.spatial import cKDTree
+from scipy.spatial import ConvexHull, cKDTree
 
 from insitu.errors import MeasurementError
 from insitu.locate.height_image import HeightImage, mesh_height_image, splat_image
+from insitu.geometry.camera import CameraModel
+from insitu.locate.edge_align import edge_samples
 from insitu.locate.image_edges import Outline, outline
+from insitu.locate.outline_fit import OutlineFit, fit_outline, stamp
+from insitu.locate.uncertainty import SCAN_REFERENCE_MM
 
 UP_NZ = -0.2
 """Mesh faces whose normal's z is below this face the table: no camera above sees them."""
@@ -32,7 +36,9 @@ class PartReference:
     the surfaces visible from above; ``base_z_mm``: the height it rests on (a mesh's lowest
     z; a scan's table); ``kind``: "mesh" or "cloud"; ``source``: where it came from (a file
     name); ``spacing_mm``: the samples' mean spacing; ``heights``: the part and the table
-    around it seen from above (:mod:`insitu.locate.height_image`)."""
+    around it seen from above (:mod:`insitu.locate.height_image`); ``fitted``: a scan's
+    outline fitted from its room-light frame (:mod:`insitu.locate.outline_fit`; None: a
+    mesh's, or none fitted)."""
 
     points: np.ndarray
     normals: np.ndarray
@@ -41,6 +47,7 @@ class PartReference:
     source: str
     spacing_mm: float
     heights: HeightImage
+    fitted: OutlineFit | None = None
 
     @cached_property
     def tree(self) -> cKDTree:
@@ -59,11 +66,26 @@ class PartReference:
         """(2,) x, y mm: centre of the top's area, seen from above."""
         return self.top[:, :2].mean(axis=0) if len(self.top) else self.points[:, :2].mean(0)
 
+    @property
+    def outline_sigma_mm(self) -> float:
+        """1σ of its outline's edges, each, mm: 0 for a mesh (exact), a scan's
+        (:data:`insitu.locate.uncertainty.SCAN_REFERENCE_MM`) otherwise."""
+        if self.kind == "mesh":
+            return 0.0
+        return SCAN_REFERENCE_MM["fitted" if self.fitted is not None else "splat"]
+
+    @cached_property
+    def rim(self) -> np.ndarray:
+        """(M, 2) x, y mm: the corners of the top's convex hull seen from above — where a turn
+        and a shift move the part furthest (the uncertainty at the part's rim)."""
+        xy = self.top[:, :2] if len(self.top) >= 3 else self.points[:, :2]
+        return xy[ConvexHull(xy).vertices]
+
     @cached_property
     def outline(self) -> Outline:
-        """The edges of its top seen from above (:func:`insitu.locate.image_edges.outline`),
-        for a room-light frame's edges."""
-        return outline(self.heights)
+        """The edges of its top seen from above, for a room-light frame's edges: the fitted
+        one, else the height image's (:func:`insitu.locate.image_edges.outline`)."""
+        return self.fitted.outline if self.fitted is not None else outline(self.heights)
 
     def coarse(self, voxel_mm: float):
         """(points (K, 3), normals (K, 3), FPFH features (33, K)) on a ``voxel_mm`` grid, for
@@ -159,10 +181,16 @@ def above_table(points: np.ndarray, table_z: float | None, band_mm: float) -> np
 
 
 def reference_from_cloud(points: np.ndarray, source: str, band_mm: float = 0.5,
-                         table_z: float | None = None) -> PartReference:
+                         table_z: float | None = None, image: np.ndarray | None = None,
+                         camera: CameraModel | None = None,
+                         lines: np.ndarray | None = None) -> PartReference:
     """A first scan of the part (N, 3) mm as its reference: the table (found, or at
     ``table_z``) taken away, normals estimated over 1 mm and turned up. The part frame is
-    the scan's world frame. MeasurementError when no part stands above the table."""
+    the scan's world frame. With ``image``, ``camera``'s room-light frame of the part as
+    scanned, its outline is fitted there (:func:`insitu.locate.outline_fit.fit_outline`;
+    checked by the scan's edges when ``lines`` (N,) gives each point's scan line) and its
+    height image's edges redrawn on it. MeasurementError when no part stands above the
+    table, or when the frame gives no outline."""
     import open3d as o3d
 
     pts = np.asarray(points, np.float64)
@@ -176,5 +204,13 @@ def reference_from_cloud(points: np.ndarray, source: str, band_mm: float = 0.5,
     pcd.orient_normals_to_align_with_direction([0.0, 0.0, 1.0])
     spacing = float(np.median(cKDTree(part).query(part[::max(1, len(part) // 2000)], k=2)[0][:, 1]))
     base = float(table) if table is not None else float(part[:, 2].min())
+    heights, fit = splat_image(pts, part, base), None
+    if image is not None and camera is not None:
+        scan = (None if lines is None else
+                edge_samples(pts, np.asarray(lines), ~above_table(pts, table, band_mm), camera))
+        fit = fit_outline(heights, image, camera, scan)
+        if isinstance(fit, str):
+            raise MeasurementError(f"{source}: its room-light frame gives no outline: {fit}")
+        heights = stamp(heights, fit.anchored)
     return PartReference(part, np.asarray(pcd.normals), base, "cloud", source, spacing,
-                         splat_image(pts, part, base))
+                         heights, fit)

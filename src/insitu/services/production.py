@@ -28,14 +28,15 @@ from insitu.errors import DeviceError, FormatError, InsituError
 from insitu.formats.pointcloud import PointCloud, read_ply, write_ply
 from insitu.formats.production_log import PartRecord, append_record, read_log
 from insitu.formats.recipe import Recipe
-from insitu.geometry.camera import CameraModel
-from insitu.geometry.pose import flat_pose, pose_matrix
+from insitu.geometry.pose import pose_matrix
 from insitu.marking import LaserParams, MarkJob, history, progress_path_for, read_job
 from insitu.locate.part import LocateRefused
 from insitu.services import mark as mark_svc
 from insitu.services import serials
 from insitu.services.mark_job import JobRequest, WrittenJob, write_mark_job
 from insitu.services.height import crossed_model
+from insitu.services.locate import Located, Locator
+from insitu.services.locate import recipe_locator as recipe_locator  # the commands' entry
 from insitu.services.scan import Cancelled, ScanResult, scan_live
 from insitu.services.station import Station
 
@@ -57,22 +58,6 @@ class NoWait:
 
 
 @dataclass(frozen=True)
-class Located:
-    """Where the part lies: ``T_world_part`` (4, 4) maps part mm into the world; the
-    registration's ``fitness`` (0 … 1) and inlier ``rmse_mm``; ``image_edges``: the
-    room-light frame's edge points that gave x, y and the turn (0: the scan's edges did)."""
-
-    T_world_part: np.ndarray
-    fitness: float
-    rmse_mm: float
-    image_edges: int = 0
-
-    def pose(self) -> tuple[float, float, float]:
-        """(x mm, y mm, angle_deg about +z)."""
-        return flat_pose(self.T_world_part)
-
-
-@dataclass(frozen=True)
 class PartReading:
     """What the camera read of the marked part, one value for the log: ``decoded`` texts
     (" | " between codes; None: no code read), whether every mark is what was planned
@@ -83,30 +68,6 @@ class PartReading:
     ok: bool | None = None
     grade: str | None = None
     offset_mm: float | None = None
-
-
-Locator = Callable[[PointCloud, "np.ndarray | None"], Located]
-
-
-def recipe_locator(recipe: Recipe, camera: CameraModel | None = None) -> Locator:
-    """``locate(cloud, room_light) -> Located`` against the recipe's reference (read once:
-    :func:`insitu.services.locate.load_reference`), keeping a symmetric part's turn within
-    the recipe's ``prefer_angle_deg``; ``camera``: the one the scans are measured through
-    (:func:`insitu.services.height.scan_camera`; None: unknown, a less precise turn) and
-    ``room_light`` its frame of the part, laser off (None: none), whose edges then give x, y
-    and the turn; it raises the registration's one-line refusal (part not found, partly
-    scanned, poor fit, ambiguous). ``locate.reference``: the reference."""
-    from insitu.services.locate import load_reference, locate_cloud
-
-    reference = load_reference(recipe.reference)
-
-    def locate(cloud: PointCloud, room_light: np.ndarray | None = None) -> Located:
-        pose = locate_cloud(reference, cloud, prefer_angle=recipe.prefer_angle_deg,
-                            camera=camera, image=room_light)
-        return Located(pose.T_world_part, pose.best.fitness, pose.best.rmse_mm,
-                       pose.best.image_edges)
-    locate.reference = reference
-    return locate
 
 
 ReadBackFn = Callable[[Station, list, PointCloud, Path], PartReading]

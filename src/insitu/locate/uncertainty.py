@@ -1,0 +1,167 @@
+"""How well a located pose is known: the covariance of a fit's turn and shift from its edge
+points, counting the errors that do not average out along an edge.
+
+The edge steps (:mod:`insitu.locate.edge_align`, :mod:`insitu.locate.image_edges`) fit a turn
+and a shift (and the scan's inset) by weighted least squares on distances across the part's
+edges. Treating those distances as independent gives a σ that shrinks as 1/√N with the points
+an edge gives — and misses what they share: a line-end that overshoots the same way all along
+one edge, a room light that moves an edge's grey step by the same fraction of a pixel (a lit
+wall, a shadow), a pixel grid an edge runs along. So:
+
+* **Segments** (:data:`SEGMENT_MM` of an edge) are the units that vary independently: the
+  covariance is the cluster-robust (sandwich) one over segments, as a block bootstrap over
+  them would give (Liang & Zeger 1986; the small-sample factor G/(G − p)); never below the
+  independent points' own.
+* **Edges** (points chained :data:`LINK_MM` apart at most, facing within :data:`EDGE_DEG`,
+  on one level within :data:`LEVEL_MM`) may each be off as a whole by a bias that no
+  residual shows (an edge moved as a whole moves the fit with it): a random bias per edge of
+  ``bias_mm``, and one growing linearly along it to ± ``bias_mm`` at its ends (an edge
+  turned), are added (their covariance through the fit).
+* The σ that counts is at the part's rim: the largest 1σ displacement the turn and shift give
+  any point of the part's outline (:func:`rim_sigma`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
+from scipy.spatial import cKDTree
+
+SEGMENT_MM = 3.0
+EDGE_DEG = 20.0
+LEVEL_MM = 0.5
+LINK_MM = 2.0
+SCAN_BIAS_MM = 0.02
+"""1σ of one edge's inset about the part's, along its lines (the scan's edge step), and of the
+change along it end to end. Chosen on the simulated corpus' tuning half
+(benchmarks/locate_corpus.py; binning 2, 17 poses): every pose within 2.2σ at its rim and
+1.6σ in its turn (the independent points' σ: 4.5σ)."""
+FRAME_BIAS_PX = 0.1
+"""The same for one edge's grey step in the room-light frame, camera pixels. Chosen on the
+same half under four room lights (69 frames): every pose within 2.3σ at its rim (the arc at
+51° under a low lamp, 0.048 mm: a lit wall beside its top) and 2.1σ in its turn (the
+independent points' σ: 27σ)."""
+
+
+@dataclass(frozen=True)
+class FitTerms:
+    """What a weighted least-squares edge fit ended on: ``J`` (K, p) its Jacobian (turn in
+    rad, shift in mm, …), ``w`` (K,) weights, ``r`` (K,) residuals across the edges, mm;
+    ``xy`` (K, 2) the points (a fixed frame, mm), ``normals`` (K, 2) their edges' outward
+    normals, ``z`` (K,) their heights, mm; ``along`` (K,) how much of a bias along the
+    point's own direction shows across its edge (1: biases act across the edge; the scan's
+    ν); ``spread_mm`` the residuals' robust 1σ."""
+
+    J: np.ndarray
+    w: np.ndarray
+    r: np.ndarray
+    xy: np.ndarray
+    normals: np.ndarray
+    z: np.ndarray
+    along: np.ndarray
+    spread_mm: float
+
+
+SCAN_REFERENCE_MM = {"fitted": 0.1, "splat": 0.15}
+"""1σ of a scan reference's outline, per edge, across it (and its change end to end): fitted
+from its room-light frame, its edges lie where the frame's grey steps and the lines' ends put
+them — both 0.03–0.13 mm out on some edges and not others (a lit wall, a line's end spilling
+past a top); its height image alone (the splat of its lines), 0.15–0.3 mm out beside walls."""
+
+
+def edges_of(xy: np.ndarray, normals: np.ndarray, z: np.ndarray) -> np.ndarray:
+    """(K,) int: the edge each point lies on — points chained less than ``LINK_MM`` apart
+    whose normals differ by less than ``EDGE_DEG`` and heights by less than ``LEVEL_MM``."""
+    pairs = cKDTree(xy).query_pairs(LINK_MM, output_type="ndarray")
+    if len(pairs):
+        a, b = pairs.T
+        same = ((np.einsum("ij,ij->i", normals[a], normals[b]) > np.cos(np.radians(EDGE_DEG)))
+                & (np.abs(z[a] - z[b]) < LEVEL_MM))
+        pairs = pairs[same]
+    graph = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])) if len(pairs)
+                       else ([], ([], [])), shape=(len(xy), len(xy)))
+    return connected_components(graph, directed=False)[1]
+
+
+def along_edges(xy: np.ndarray, edges: np.ndarray) -> np.ndarray:
+    """(K,) each point's position along its edge (``edges`` (K,) of :func:`edges_of`), mm
+    from the edge's middle along its main direction, over the edge's half length (−1 … 1)."""
+    out = np.zeros(len(xy))
+    for e in np.unique(edges):
+        sel = np.flatnonzero(edges == e)
+        d = xy[sel] - xy[sel].mean(axis=0)
+        axis = np.linalg.svd(d, full_matrices=False)[2][0] if len(sel) > 1 else np.zeros(2)
+        s = d @ axis
+        out[sel] = (s - (s.max() + s.min()) / 2) / max(np.ptp(s) / 2, 1e-9)
+    return out
+
+
+def segments_of(xy: np.ndarray, edges: np.ndarray, length_mm: float) -> np.ndarray:
+    """(K,) int: pieces ``length_mm`` long along each edge (``edges`` (K,) of
+    :func:`edges_of`), along the edge's main direction."""
+    out = np.zeros(len(xy), np.int64)
+    start = 0
+    for e in np.unique(edges):
+        sel = np.flatnonzero(edges == e)
+        d = xy[sel] - xy[sel].mean(axis=0)
+        axis = np.linalg.svd(d, full_matrices=False)[2][0] if len(sel) > 1 else np.zeros(2)
+        piece = np.floor((d @ axis - (d @ axis).min()) / length_mm).astype(np.int64)
+        out[sel] = start + piece
+        start += int(piece.max()) + 1
+    return out
+
+
+def covariance(t: FitTerms, bias_mm: float, segment_mm: float = SEGMENT_MM,
+               reference_mm: float = 0.0) -> np.ndarray:
+    """(p, p) covariance of the fit's unknowns (:class:`FitTerms`' columns): the larger (by
+    trace) of the independent points' (spread² · A⁻¹) and the cluster-robust one over
+    segments, plus a random bias per edge of 1σ ``bias_mm`` and one that changes linearly
+    along it, ± ``bias_mm`` at its ends (an edge turned: its bias grows with the distance to
+    the camera, the light falls off along it); ``reference_mm``: the same, across the edge,
+    for the reference's own outline (a scan's: :data:`SCAN_REFERENCE_MM`)."""
+    J, w, r = t.J, t.w, t.r
+    p = J.shape[1]
+    A = J.T @ (J * w[:, None])
+    Ai = np.linalg.inv(A)
+    iid = t.spread_mm ** 2 * Ai
+    edge = edges_of(t.xy, t.normals, t.z)
+    seg = segments_of(t.xy, edge, segment_mm)
+    G = int(seg.max()) + 1 if len(seg) else 0
+    score = np.zeros((G, p))
+    np.add.at(score, seg, J * (w * r)[:, None])
+    robust = Ai @ (score.T @ score) @ Ai * (G / max(G - p, 1))
+    cov = robust if np.trace(robust) > np.trace(iid) else iid
+    E = int(edge.max()) + 1 if len(edge) else 0
+    pos = along_edges(t.xy, edge)[:, None]
+    for scale, along in ((bias_mm, t.along), (reference_mm, np.ones(len(w)))):
+        if scale > 0:
+            lever = np.zeros((2 * E, p))
+            wj = J * (w * along)[:, None]
+            np.add.at(lever, edge, wj)
+            np.add.at(lever, E + edge, wj * pos)
+            cov = cov + scale ** 2 * Ai @ (lever.T @ lever) @ Ai
+    return cov
+
+
+def rim_sigma(cov: np.ndarray, rim: np.ndarray) -> float:
+    """The largest 1σ displacement, mm, at the points ``rim`` (M, 2) mm (relative to where
+    the turn is about) of a turn and shift with covariance ``cov`` (3, 3): turn (rad), x, y
+    (mm) first."""
+    if not np.all(np.isfinite(cov[:3, :3])):
+        return float("inf")
+    worst = 0.0
+    for q in rim:
+        D = np.array([[-q[1], 1.0, 0.0], [q[0], 0.0, 1.0]])
+        worst = max(worst, float(np.linalg.eigvalsh(D @ cov[:3, :3] @ D.T).max()))
+    return float(np.sqrt(worst))
+
+
+def rim_moved(rim: np.ndarray, T_a: np.ndarray, T_b: np.ndarray) -> float:
+    """How far, mm, two poses (4, 4; part → world) put the points ``rim`` (M, 2), part frame,
+    apart at most."""
+    q = np.column_stack([rim, np.zeros(len(rim))])
+    return float(np.linalg.norm((q @ T_a[:3, :3].T + T_a[:3, 3])[:, :2]
+                                - (q @ T_b[:3, :3].T + T_b[:3, 3])[:, :2], axis=1).max())
