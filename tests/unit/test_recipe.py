@@ -28,10 +28,12 @@ def _flat(output: str) -> str:
 
 @pytest.fixture
 def reference(tmp_path):
+    """A first scan's cloud: a 6 × 6 mm block 3 mm high on the table (no scan lines)."""
     path = tmp_path / "ref.ply"
-    g = np.meshgrid(np.arange(-5, 5.01, 0.5), np.arange(-5, 5.01, 0.5))
-    write_ply(path, PointCloud(np.column_stack([g[0].ravel(), g[1].ravel(),
-                                                np.zeros(g[0].size)])))
+    g = np.meshgrid(np.arange(-10, 10.01, 0.5), np.arange(-10, 10.01, 0.5))
+    x, y = g[0].ravel(), g[1].ravel()
+    write_ply(path, PointCloud(np.column_stack([x, y, np.where(
+        (np.abs(x) <= 3) & (np.abs(y) <= 3), 3.0, 0.0)])))
     return path
 
 
@@ -175,3 +177,34 @@ def test_a_mesh_reference_is_sampled_in_the_part_frame(tmp_path):
     (tmp_path / "empty.obj").write_text("# nothing\n")
     with pytest.raises(FormatError, match=r"empty\.obj: no triangles"):
         recipe_locator(Recipe(tmp_path / "empty.obj", "mesh", ()))
+
+
+def test_recipe_new_reports_a_scan_references_outline(tmp_path, reference):
+    """A scan reference without its room-light frame: the recipe is written, with a warning
+    saying what would place its parts within 0.05 mm; the frame without the camera it was
+    taken through is refused; the tolerance is kept."""
+    out = tmp_path / "r.json"
+    res = runner.invoke(app, ["recipe", "new", str(reference), "--pattern", "text:A;size=2",
+                              "--at", "0", "0", "-o", str(out), "--tolerance", "0.08"])
+    assert res.exit_code == 0, res.output
+    flat = _flat(res.output)
+    assert "its scan lines' ends only" in flat and "--reference-room-light" in flat
+    back = read_recipe(out, Placement, PROJECTIONS)
+    assert back.tolerance == (0.08, 0.1) and back.reference_room_light is None
+    res = runner.invoke(app, ["recipe", "new", str(reference), "--pattern", "text:A;size=2",
+                              "--at", "0", "0", "-o", str(tmp_path / "s.json"),
+                              "--reference-room-light", str(tmp_path / "room.png")])
+    assert res.exit_code == 1 and "needs --height-cal" in res.output
+    assert not (tmp_path / "s.json").exists()
+
+
+def test_a_scan_references_room_light_frame_reads_back(tmp_path, reference):
+    frame = tmp_path / "room.png"
+    frame.write_bytes(b"")
+    path = tmp_path / "r.json"
+    write_recipe(path, _recipe(reference, reference_room_light=frame, tolerance=(0.03, 0.2)))
+    raw = json.loads(path.read_text())
+    assert raw["reference"] == {"cloud": "ref.ply", "room_light": "room.png"}
+    assert raw["locate"]["tolerance_mm"] == 0.03 and raw["locate"]["turn_bound_deg"] == 0.2
+    back = read_recipe(path, Placement, PROJECTIONS)
+    assert back.reference_room_light == frame and back.tolerance == (0.03, 0.2)

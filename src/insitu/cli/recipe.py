@@ -65,64 +65,86 @@ def read(path: Path):
     return read_recipe(path, Placement, PROJECTIONS)
 
 
+Reference = Annotated[Path, typer.Argument(
+    metavar="REFERENCE", help="The part in its own frame: a mesh (.stl, .obj, .ply with faces) "
+                              "or the cloud of a first scan (.ply).")]
+Output = Annotated[Path, typer.Option("-o", "--output", help="Recipe to write (.json).")]
+Workpiece = Annotated[str | None, typer.Option(
+    help="Simulated rig: the part on the table (a catalogue name or mesh).")]
+Region = Annotated[tuple[float, float, float, float] | None, typer.Option(
+    metavar="X0 X1 Y0 Y1", callback=bounded("position_mm"),
+    help="Scan region, world mm (default: where the part lies, grown by --margin; a real rig "
+         "needs one).")]
+Margin = Annotated[float, typer.Option(callback=bounded("length_mm"),
+                                       help="Margin around the part, mm.")]
+Spacing = Annotated[float, typer.Option(callback=bounded("spacing_mm"),
+                                        help="Scan line spacing, mm (locating pins a part by "
+                                             "the edges the lines cross).")]
+Cross = Annotated[bool, typer.Option(
+    help="Scan each part twice over: lines along y, then a crossed pass at 45° to x, so every "
+         "edge is crossed whatever the part's turn (Method 2 needs a height calibration "
+         "recorded with crossed lines).")]
+CrossSpacing = Annotated[float, typer.Option(
+    callback=bounded("spacing_mm"),
+    help="The crossed pass's line spacing, mm (it only has to cross the edges the first pass "
+         "runs along, so it may be coarser).")]
+SecondLook = Annotated[bool, typer.Option(
+    help="With --no-cross: when the lines along y leave a part's pose unheld (its edges run "
+         "along them), scan it again crossed over where it lies.")]
+Power = Annotated[float, typer.Option(callback=bounded("power_pct"),
+                                      help="Laser power, % of full.")]
+Frequency = Annotated[float, typer.Option(callback=bounded("frequency_khz"),
+                                          help="Pulse frequency, kHz.")]
+Speed = Annotated[float, typer.Option(callback=bounded("mark_speed_mm_s"),
+                                      help="Mark speed, mm/s.")]
+PreferAngle = Annotated[tuple[float, float] | None, typer.Option(
+    metavar="LO HI", callback=bounded("angle_deg"),
+    help="A symmetric part: keep the turn about z within LO … HI degrees (default: refuse an "
+         "ambiguous part).")]
+Counter = Annotated[Path | None, typer.Option(
+    help="Serial counter for {serial} (default: serial.counter.json beside the recipe).")]
+SerialStart = Annotated[int | None, typer.Option(
+    help="Create the counter with this first serial when it does not exist.")]
+Fields = Annotated[list[str] | None, typer.Option(
+    "--var", metavar="NAME=VALUE", help="A value for {NAME} in the pattern's text.")]
+ReferenceRoomLight = Annotated[Path | None, typer.Option(
+    "--reference-room-light", metavar="FRAME.png",
+    help="A scan REFERENCE's room-light frame (insitu scan --room-light when it was scanned; "
+         "needs --height-cal): its outline is fitted there and checked now.")]
+HeightCal = Annotated[Path | None, typer.Option(
+    "--height-cal", help="The height calibration the scan REFERENCE was measured with (its "
+                         "camera places the frame's edges).")]
+Tolerance = Annotated[float, typer.Option(
+    metavar="MM", callback=bounded("tolerance_mm"),
+    help="Mark a part only when its pose is known to 2σ within this at its rim, mm.")]
+TurnBound = Annotated[float, typer.Option(
+    "--turn-bound", metavar="DEG", callback=bounded("turn_bound_deg"),
+    help="And its turn to 3σ within this, degrees.")]
+
+
 @app.command("new")
 @one_line_errors
-def new(
-    reference: Annotated[Path, typer.Argument(
-        metavar="REFERENCE", help="The part in its own frame: a mesh (.stl, .obj, .ply with "
-                                  "faces) or the cloud of a first scan (.ply).")],
-    pattern: Pattern, at: At,
-    out: Annotated[Path, typer.Option("-o", "--output", help="Recipe to write (.json).")],
-    width: Width = None, rotate: Rotate = 0.0, mode: Mode = "planar", hatch: Hatch = None,
-    hatch_angle: HatchAngle = 0.0, beam: Beam = BEAM_MM,
-    workpiece: Annotated[str | None, typer.Option(
-        help="Simulated rig: the part on the table (a catalogue name or mesh).")] = None,
-    region: Annotated[tuple[float, float, float, float] | None, typer.Option(
-        metavar="X0 X1 Y0 Y1", callback=bounded("position_mm"),
-        help="Scan region, world mm (default: where the part lies, grown by --margin; a real "
-             "rig needs one).")] = None,
-    margin: Annotated[float, typer.Option(callback=bounded("length_mm"),
-                                          help="Margin around the part, mm.")] = 5.0,
-    spacing: Annotated[float, typer.Option(callback=bounded("spacing_mm"),
-                                           help="Scan line spacing, mm (locating pins a "
-                                                "part by the edges the lines cross).")] = 0.25,
-    cross: Annotated[bool, typer.Option(
-        help="Scan each part twice over: lines along y, then a crossed pass at 45° to x, so "
-             "every edge is crossed whatever the part's turn (Method 2 needs a height "
-             "calibration recorded with crossed lines).")] = True,
-    cross_spacing: Annotated[float, typer.Option(
-        callback=bounded("spacing_mm"),
-        help="The crossed pass's line spacing, mm (it only has to cross the edges the "
-             "first pass runs along, so it may be coarser).")] = 0.5,
-    second_look: Annotated[bool, typer.Option(
-        help="With --no-cross: when the lines along y leave a part's pose unheld (its edges "
-             "run along them), scan it again crossed over where it lies.")] = True,
-    power: Annotated[float, typer.Option(callback=bounded("power_pct"),
-                                         help="Laser power, % of full.")] = 30.0,
-    frequency: Annotated[float, typer.Option(callback=bounded("frequency_khz"),
-                                             help="Pulse frequency, kHz.")] = 20.0,
-    speed: Annotated[float, typer.Option(callback=bounded("mark_speed_mm_s"),
-                                         help="Mark speed, mm/s.")] = 500.0,
-    prefer_angle: Annotated[tuple[float, float] | None, typer.Option(
-        metavar="LO HI", callback=bounded("angle_deg"),
-        help="A symmetric part: keep the turn about z within LO … HI degrees (default: "
-             "refuse an ambiguous part).")] = None,
-    counter: Annotated[Path | None, typer.Option(
-        help="Serial counter for {serial} (default: serial.counter.json beside the "
-             "recipe).")] = None,
-    serial_start: Annotated[int | None, typer.Option(
-        help="Create the counter with this first serial when it does not exist.")] = None,
-    fields: Annotated[list[str] | None, typer.Option(
-        "--var", metavar="NAME=VALUE", help="A value for {NAME} in the pattern's text.")] = None,
-) -> None:
+def new(reference: Reference, pattern: Pattern, at: At, out: Output, width: Width = None,
+        rotate: Rotate = 0.0, mode: Mode = "planar", hatch: Hatch = None,
+        hatch_angle: HatchAngle = 0.0, beam: Beam = BEAM_MM, workpiece: Workpiece = None,
+        region: Region = None, margin: Margin = 5.0, spacing: Spacing = 0.25,
+        cross: Cross = True, cross_spacing: CrossSpacing = 0.5, second_look: SecondLook = True,
+        power: Power = 30.0, frequency: Frequency = 20.0, speed: Speed = 500.0,
+        prefer_angle: PreferAngle = None, counter: Counter = None,
+        serial_start: SerialStart = None, fields: Fields = None,
+        reference_room_light: ReferenceRoomLight = None, height_cal: HeightCal = None,
+        tolerance: Tolerance = 0.05, turn_bound_deg: TurnBound = 0.1) -> None:
     """Write a recipe: the part's REFERENCE and one pattern placed on it (add more with
     'insitu recipe add'). Positions and turns are in the reference's frame; each part of a
-    run is located and the placements moved where it lies."""
+    run is located and the placements moved where it lies. A scan REFERENCE is checked
+    first: how much of its outline its room-light frame and its lines show, how well lines
+    and circles fit it."""
     from insitu.formats.recipe import Recipe, RecipeScan, reference_kind, write_recipe
     from insitu.patterns.fields import parse_fields
 
     check_output(out, ".json")
     kind = reference_kind(reference)
+    check_reference(reference, kind, reference_room_light, height_cal)
     recipe = Recipe(
         reference=reference.absolute(), reference_kind=kind,
         placements=(_placement(pattern, at, width, rotate, mode, hatch, hatch_angle, beam),),
@@ -132,9 +154,31 @@ def new(
                         second_look=second_look),
         prefer_angle_deg=prefer_angle,
         counter=None if counter is None else counter.absolute(), serial_start=serial_start,
-        fields=parse_fields(fields or []), workpiece=workpiece)
+        fields=parse_fields(fields or []), workpiece=workpiece,
+        reference_room_light=(None if reference_room_light is None
+                              else reference_room_light.absolute()),
+        tolerance=(tolerance, turn_bound_deg))
     write_recipe(out, recipe)
     console.print(f"wrote {out}: reference {reference} ({kind}), 1 placement", highlight=False)
+
+
+def check_reference(reference: Path, kind: str, room_light: Path | None,
+                    height_cal: Path | None) -> None:
+    """A table of what the reference gives locating (a mesh's exact outline, or a scan's
+    outline fitted from its room-light frame: :func:`insitu.services.reference_outline.
+    outline_findings`), warnings in yellow."""
+    from insitu.services.reference_outline import outline_findings, scan_reference
+
+    table = Table(title=f"reference {reference.name}", show_header=False)
+    if kind == "mesh":
+        table.add_row("kind", "CAD mesh: its outline exact")
+        console.print(table)
+        return
+    ref = scan_reference(reference, room_light, height_cal)
+    table.add_row("kind", f"a scan: {len(ref.points):,} points above the table")
+    for level, label, text in outline_findings(ref):
+        table.add_row(Text(label, "yellow") if level == "warning" else label, text)
+    console.print(table)
 
 
 @app.command("add")
@@ -160,7 +204,11 @@ def show(recipe_path: RecipeArg) -> None:
 
     r = read(recipe_path)
     table = Table(title=str(recipe_path), show_header=False)
-    table.add_row("reference", f"{r.reference} ({r.reference_kind})")
+    table.add_row("reference", f"{r.reference} ({r.reference_kind})" + (
+        f", its room-light frame {r.reference_room_light}" if r.reference_room_light else ""))
+    table.add_row("tolerance", f"a part is marked when its pose is known to 2σ within "
+                               f"{r.tolerance[0]:g} mm at its rim, its turn to 3σ within "
+                               f"{r.tolerance[1]:g}°")
     if r.workpiece:
         table.add_row("simulated part", r.workpiece)
     for i, p in enumerate(r.placements, 1):

@@ -46,6 +46,11 @@ MIN_POINTS = 200
 SIGMAS = 2.0
 """A pose is given when this many σ at the part's rim lie within the tolerance."""
 UNHELD_MM = 1.0
+CONSISTENT = 2.0
+"""The scan's and the frame's poses further apart at the part's rim than this many σ of the
+two together: one of them carries a bias its σ does not count (another renderer's room light
+moved the arc's edges 0.055 mm, 4σ of the frame's own), and the pose given takes half that
+distance as its 1σ at the rim."""
 WIDE = 3
 """How far the room-light frame's edges may move a pose the scan's edges did not hold (the
 ICP's along the direction they left free: a few tenths of a mm, 0.64 at a step block lying
@@ -219,10 +224,18 @@ def _imaged(ref: PartReference, best: Solution, image: np.ndarray, camera: Camer
             f"{'' if np.isfinite(scan) else 'not used: '}its edges put the part {moved:.3f} mm "
             f"(at the rim) from the scan's pose, more than the {allowed:.3f} mm the two may "
             "differ"))
+    together = float(np.hypot(scan, sigma))
+    if np.isfinite(scan) and moved > CONSISTENT * together:   # one of the two is biased
+        floor, note = moved / 2, (f"its edges and the scan's put the part {moved:.3f} mm apart "
+                                  f"at the rim, beyond {CONSISTENT:g}σ of the two together "
+                                  f"({together:.3f} mm): either may be the biased one, 1σ at "
+                                  f"the rim taken as {moved / 2:.3f} mm")
+        best = replace(best, sigma_rim_mm=max(scan, floor), image_note=note)
+        framed = replace(framed, image_sigma_rim_mm=max(sigma, floor), image_note=note)
     if not _margin(framed, s) < _margin(best, s):
-        return replace(best, image_note=f"not used: its edges hold the pose to {sigma:.3f} mm "
-                                        f"at the part's rim and {fit.sigma_deg:.3f}° (1σ), "
-                                        f"the scan's to {scan:.3f} mm and {best.sigma_deg:.3f}°")
+        return best if best.image_note else replace(best, image_note=(
+            f"not used: its edges hold the pose to {sigma:.3f} mm at the part's rim and "
+            f"{fit.sigma_deg:.3f}° (1σ), the scan's to {scan:.3f} mm and {best.sigma_deg:.3f}°"))
     return framed
 
 

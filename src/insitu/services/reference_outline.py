@@ -1,0 +1,65 @@
+"""What a scan reference gives locating: its outline fitted from its own room-light frame and
+its lines (:mod:`insitu.locate.outline_fit`), how much of it they show and how well lines and
+circles fit it — with what to do where it falls short (``insitu recipe new`` reports it)."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+from insitu.errors import ConfigError
+from insitu.locate.reference import PartReference
+
+COVERED_BELOW = 0.5
+"""The frame shows less of the outline than this: a warning."""
+AGREE_MM = 0.05
+"""The frame's edges and the lines' ends further apart than this on an edge: a warning."""
+
+
+def scan_reference(reference: Path, room_light: Path | None,
+                   height_cal: Path | None) -> PartReference:
+    """The scan ``reference`` with its outline fitted from ``room_light`` (a frame of the
+    camera of ``height_cal``; ConfigError when the frame comes without it)."""
+    from insitu.services.common import camera_model
+    from insitu.services.height import load_height_calibration
+    from insitu.services.locate import load_reference
+
+    if room_light is not None and height_cal is None:
+        raise ConfigError("--reference-room-light needs --height-cal: the frame's edges are "
+                          "placed through the camera the reference was scanned with")
+    camera = (None if height_cal is None else
+              camera_model(load_height_calibration(height_cal).camera))
+    return load_reference(reference, room_light=room_light, camera=camera)
+
+
+def outline_findings(ref: PartReference) -> list[tuple[str, str, str]]:
+    """(level "info" | "warning", label, text) of a scan reference's outline."""
+    fit = ref.fitted
+    if fit is None:
+        return [("warning", "outline", "its scan lines' ends only (0.15–0.3 mm out beside "
+                 "walls): give the reference's room-light frame (--reference-room-light), or "
+                 "a CAD mesh, for parts to be placed within 0.05 mm")]
+    kinds = [p.kind for p in fit.pieces]
+    worst = max(fit.pieces, key=lambda p: p.rms_mm)
+    offsets = [abs(p.offset_mm) for p in fit.pieces if math.isfinite(p.offset_mm)]
+    crossed = fit.length_mm(crossed=True) / max(fit.length_mm(), 1e-9)
+    out = [("info", "outline", f"{kinds.count('line')} straight and {kinds.count('circle')} "
+            f"round edges, {fit.length_mm():.1f} mm; the frame shows {fit.covered:.0%} of "
+            "the scan's outline"),
+           ("info", "fit", f"edge points within {worst.rms_mm:.3f} mm (rms, worst edge) of "
+            "their line or circle"),
+           ("info", "lines", f"{crossed:.0%} of it crossed from two directions; the frame's "
+            "edges " + (f"within {max(offsets):.3f} mm of where the lines end" if offsets
+                        else "not crossed by the lines"))]
+    if fit.covered < COVERED_BELOW:
+        out.append(("warning", "coverage", f"the frame shows only {fit.covered:.0%} of the "
+                    "outline (walls seen edge-on, tops alike): light the part so its edges "
+                    "stand out, or use a CAD mesh"))
+    if crossed < 0.5:
+        out.append(("warning", "crossed", "scan the reference crossed (insitu scan --cross): "
+                    "its lines cross too little of the outline from two directions"))
+    if offsets and max(offsets) > AGREE_MM:
+        out.append(("warning", "agreement", f"the frame and the lines disagree by up to "
+                    f"{max(offsets):.3f} mm on an edge: its parts will be located less "
+                    "precisely (or refused)"))
+    return out
