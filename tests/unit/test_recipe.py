@@ -189,6 +189,7 @@ def test_recipe_new_reports_a_scan_references_outline(tmp_path, reference):
     assert res.exit_code == 0, res.output
     flat = _flat(res.output)
     assert "its scan lines' ends only" in flat and "--reference-room-light" in flat
+    assert re.search(r"the scan shows \d+% of the part's top", flat), flat
     back = read_recipe(out, Placement, PROJECTIONS)
     assert back.tolerance == (0.08, 0.1) and back.reference_room_light is None
     res = runner.invoke(app, ["recipe", "new", str(reference), "--pattern", "text:A;size=2",

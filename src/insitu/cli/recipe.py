@@ -165,8 +165,12 @@ def new(reference: Reference, pattern: Pattern, at: At, out: Output, width: Widt
 def check_reference(reference: Path, kind: str, room_light: Path | None,
                     height_cal: Path | None) -> None:
     """A table of what the reference gives locating (a mesh's exact outline, or a scan's
-    outline fitted from its room-light frame: :func:`insitu.services.reference_outline.
-    outline_findings`), warnings in yellow."""
+    top coverage, :mod:`insitu.services.reference_check`, and its outline fitted from its
+    room-light frame, :func:`insitu.services.reference_outline.outline_findings`), warnings
+    in yellow; ConfigError when the scan cannot vouch for the parts located against it."""
+    from insitu.errors import ConfigError
+    from insitu.formats.pointcloud import read_ply
+    from insitu.services.reference_check import check_reference as top_coverage
     from insitu.services.reference_outline import outline_findings, scan_reference
 
     table = Table(title=f"reference {reference.name}", show_header=False)
@@ -174,8 +178,14 @@ def check_reference(reference: Path, kind: str, room_light: Path | None,
         table.add_row("kind", "CAD mesh: its outline exact")
         console.print(table)
         return
+    cloud = read_ply(reference)
+    cover = top_coverage(cloud.points, cloud.attributes.get("line"))
+    if cover.level == "refused":
+        raise ConfigError(f"{reference}: {cover.text}")
     ref = scan_reference(reference, room_light, height_cal)
     table.add_row("kind", f"a scan: {len(ref.points):,} points above the table")
+    table.add_row(Text("coverage", "yellow") if cover.level == "warning" else "coverage",
+                  cover.text)
     for level, label, text in outline_findings(ref):
         table.add_row(Text(label, "yellow") if level == "warning" else label, text)
     console.print(table)
