@@ -76,6 +76,13 @@ def test_grey_at_is_bilinear_in_fractions_of_full_scale(dtype, full):
     assert got.dtype == np.float32 and np.allclose(got, expect, atol=1e-6)
 
 
+def test_grey_at_takes_full_scale_from_the_cameras_bits():
+    img = np.full((8, 8), 2048, np.uint16)                 # a Mono12 frame's mid grey
+    uv = np.array([[3.0, 4.0]])
+    assert grey_at(img, uv, 12)[0] == pytest.approx(2048 / 4095, abs=1e-6)
+    assert grey_at(img, uv)[0] == pytest.approx(2048 / 65535, abs=1e-6)
+
+
 def test_ply_keeps_ambient_and_refuses_it_out_of_range(tmp_path):
     pts = np.random.default_rng(1).normal(size=(50, 3))
     amb = np.linspace(0, 1, 50).astype(np.float32)

@@ -116,3 +116,13 @@ CounterPath = Annotated[Path | None, typer.Option(
                       "job).")]
 SerialStart = Annotated[int | None, typer.Option(
     "--serial-start", help="Create the serial counter, its first serial this.")]
+
+
+def rig_height_calibration(rig: Path) -> Path | None:
+    """The height calibration the rig file names (None: none): ``--height-cal``'s default on
+    a real rig."""
+    from insitu.formats.json_file import load_json_model
+    from insitu.formats.rig import RigConfig
+
+    cfg = load_json_model(rig, RigConfig)
+    return cfg.resolve(cfg.height_calibration)

@@ -12,7 +12,7 @@ from rich.text import Text
 
 from insitu.cli.common import bounded, check_output, console, fail, one_line_errors, progress_bar
 from insitu.cli.job import on_signals
-from insitu.cli.options import Field, Rig, Seed
+from insitu.cli.options import Field, Rig, Seed, rig_height_calibration
 from insitu.errors import InsituError
 from insitu.formats.production_log import STAGES
 from insitu.formats.project import SIM_BINNING
@@ -61,33 +61,35 @@ def part_line(rec) -> Text:
     return Text.assemble((f"part {rec.part} {rec.outcome}", style), ": " + "; ".join(bits))
 
 
+RecipeFile = Annotated[Path, typer.Argument(metavar="RECIPE.json",
+                                            help="Production recipe (insitu recipe new).")]
+Count = Annotated[int, typer.Option(callback=bounded("parts"),
+                                    help="Parts in the run (numbered 1 … N).")]
+RandomPoses = Annotated[int | None, typer.Option(
+    metavar="SEED", callback=bounded("seed"),
+    help="Simulated rig: each part on the table at a random pose (±25 mm, any turn), drawn "
+         "from SEED and its number.")]
+ResumeRun = Annotated[bool, typer.Option(
+    help="Continue the run of the log: finish the interrupted part with its own serial (its "
+         "job's journal says what is marked again), then the next parts.")]
+Log = Annotated[Path | None, typer.Option(
+    help="The run's log (.jsonl; a .csv is written beside it, and each part's job and cloud in "
+         "its folder). Default: RECIPE's name + .production.jsonl.")]
+Wait = Annotated[bool | None, typer.Option(
+    "--wait/--no-wait", help="Wait for Enter before each part (default: on a real rig; the "
+                             "simulated rig puts each part on by itself).")]
+HeightCal = Annotated[Path | None, typer.Option(
+    "--height-cal", help="Height calibration of the scans (default: the rig file's; none: "
+                         "Method 1).")]
+Binning = Annotated[int, typer.Option(callback=bounded("binning"),
+                                      help="Simulated rig: divide the image size by this.")]
+
+
 @one_line_errors
-def produce(
-    recipe: Annotated[Path, typer.Argument(metavar="RECIPE.json", help="Production recipe "
-                                                                       "(insitu recipe new).")],
-    rig: Rig = None, field: Field = None,
-    count: Annotated[int, typer.Option(callback=bounded("parts"),
-                                       help="Parts in the run (numbered 1 … N).")] = 1,
-    random_poses: Annotated[int | None, typer.Option(
-        metavar="SEED", callback=bounded("seed"),
-        help="Simulated rig: each part on the table at a random pose (±25 mm, any turn), "
-             "drawn from SEED and its number.")] = None,
-    resume: Annotated[bool, typer.Option(
-        help="Continue the run of the log: finish the interrupted part with its own serial "
-             "(its job's journal says what is marked again), then the next parts.")] = False,
-    log: Annotated[Path | None, typer.Option(
-        help="The run's log (.jsonl; a .csv is written beside it, and each part's job and "
-             "cloud in its folder). Default: RECIPE's name + .production.jsonl.")] = None,
-    wait: Annotated[bool | None, typer.Option(
-        "--wait/--no-wait", help="Wait for Enter before each part (default: on a real rig; "
-                                 "the simulated rig puts each part on by itself).")] = None,
-    height_cal: Annotated[Path | None, typer.Option(
-        "--height-cal", help="Height calibration of the scans (default: the rig file's; "
-                             "none: Method 1).")] = None,
-    seed: Seed = 0,
-    binning: Annotated[int, typer.Option(callback=bounded("binning"), help="Simulated rig: "
-                                         "divide the image size by this.")] = SIM_BINNING,
-) -> None:
+def produce(recipe: RecipeFile, rig: Rig = None, field: Field = None, count: Count = 1,
+            random_poses: RandomPoses = None, resume: ResumeRun = False, log: Log = None,
+            wait: Wait = None, height_cal: HeightCal = None, seed: Seed = 0,
+            binning: Binning = SIM_BINNING) -> None:
     """For each part: wait for the start (Enter, or at once), scan the region, locate the part,
     move the recipe's placements where it lies, check and mark them as one job, read the mark
     back, and log one line (LOG.jsonl and LOG.csv). A part not found or refused by the checks
@@ -96,7 +98,6 @@ def produce(
     with the same serial and goes on. Serials are never reused or skipped."""
     from insitu import services
     from insitu.cli.recipe import read
-    from insitu.cli.scan import _rig_height_calibration
     from insitu.formats.production_log import read_log
     from insitu.services import production
     from insitu.services.height import scan_camera
@@ -107,7 +108,7 @@ def produce(
                                                        + ".production.jsonl")
     check_output(log, ".jsonl")
     if height_cal is None and rig is not None:
-        height_cal = _rig_height_calibration(rig)
+        height_cal = rig_height_calibration(rig)
     cal = services.load_height_calibration(height_cal) if height_cal is not None else None
     cancel = threading.Event()
     with connect(rig, r.workpiece or "step-block", seed, binning, field=field) as station:

@@ -10,7 +10,8 @@ import typer
 from rich.table import Table
 
 from insitu.cli.common import bounded, check_output, console, fail, one_line_errors, progress_bar
-from insitu.cli.options import CrossScan, CrossSpacing, PartPose, Rig, Seed, Workpiece
+from insitu.cli.options import (CrossScan, CrossSpacing, PartPose, Rig, Seed, Workpiece,
+                                 rig_height_calibration)
 from insitu.formats.atomic import atomic_write_bytes
 from insitu.formats.project import SIM_BINNING
 from insitu.formats.validation import one_of
@@ -76,7 +77,7 @@ def scan(out: Output, replay: Replay = None, height_cal: HeightCal = None,
     if room_light is not None:
         check_output(room_light, ".png")
     if height_cal is None and rig is not None and replay is None:
-        height_cal = _rig_height_calibration(rig)
+        height_cal = rig_height_calibration(rig)
     cal = _calibration(method, height_cal, height_model)
     packing = {"heights": _heights(part_heights)}
     with progress_bar("scanning", "lines") as progress:
@@ -150,15 +151,6 @@ def scan_time_text(s) -> str:
         return f"{cpu}, wall {s.seconds:.1f} s"
     return (f"station {s.station_s:.2f} s, {cpu}: a cycle of {max(s.station_s, s.cpu_s):.2f} s "
             f"(the slower of the two); wall {s.seconds:.1f} s")
-
-
-def _rig_height_calibration(rig: Path) -> Path | None:
-    """The height calibration the rig file names (None: none)."""
-    from insitu.formats.json_file import load_json_model
-    from insitu.formats.rig import RigConfig
-
-    cfg = load_json_model(rig, RigConfig)
-    return cfg.resolve(cfg.height_calibration)
 
 
 def _live(station, out: Path, **kw):

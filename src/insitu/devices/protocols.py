@@ -42,6 +42,20 @@ class RoiCamera(Camera, Protocol):
         ...
 
 
+@runtime_checkable
+class BitDepthCamera(Camera, Protocol):
+    """A camera whose frames hold fewer significant bits than their words (a GenICam Mono10 or
+    Mono12 camera delivers 0 … 1023 or 0 … 4095 in uint16)."""
+
+    pixel_bits: int
+
+
+def pixel_bits_of(camera: Camera) -> int | None:
+    """The camera's significant bits (docs/formats.md ``pixel_bits``; None: its frames' own
+    depth)."""
+    return camera.pixel_bits if isinstance(camera, BitDepthCamera) else None
+
+
 def check_in_field(field_size_mm, *points) -> None:
     """What a scan head does before it draws: SafetyError naming the first of ``points``
     ((2,) mm on z = 0 each) outside the field ``field_size_mm`` (width, height) centred on the

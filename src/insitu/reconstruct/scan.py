@@ -160,7 +160,7 @@ class ScanReconstructor:
         chunk = (pts[ok], centres.peak[ok], np.full(ok.sum(), index, np.int32),
                  np.clip(centres.contrast[ok] / centres.full_scale, 0, 1))
         if self._ambient is not None:
-            chunk += (grey_at(self._ambient, centres.uv[ok]),)
+            chunk += (grey_at(self._ambient, centres.uv[ok], self.pixel_bits),)
         self._chunks.append(chunk)
         return int(ok.sum())
 
@@ -226,10 +226,11 @@ def density_inliers(points: np.ndarray, radius_mm: float, neighbours: int) -> np
     return np.isfinite(d[:, -1])
 
 
-def grey_at(image: np.ndarray, uv: np.ndarray) -> np.ndarray:
+def grey_at(image: np.ndarray, uv: np.ndarray, bits: int | None = None) -> np.ndarray:
     """(M,) float32 grey values of ``image`` (H, W) uint8 or uint16 at the sub-pixel
-    positions ``uv`` (M, 2) px (bilinear; edges clamped), 0..1 of the dtype's full scale."""
-    full = 255.0 if image.dtype == np.uint8 else 65535.0
+    positions ``uv`` (M, 2) px (bilinear; edges clamped), 0..1 of full scale: 2^bits − 1
+    (a Mono12 camera's 16-bit PNG holds 0 … 4095), or the dtype's when ``bits`` is None."""
+    full = float(2 ** bits - 1) if bits else (255.0 if image.dtype == np.uint8 else 65535.0)
     grey = map_coordinates(image, (uv[:, 1], uv[:, 0]), order=1, mode="nearest",
                            output=np.float32)
     return np.clip(grey / np.float32(full), 0, 1)

@@ -10,7 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
-from insitu.devices.protocols import ExposureCamera
+from insitu.devices.protocols import ExposureCamera, pixel_bits_of
 from insitu.errors import ConfigError, DeviceError
 from insitu.formats.sequence import SequenceWriter
 from insitu.geometry.beams import axis_lines
@@ -35,7 +35,8 @@ def _writer(station: Station, out: Path, kind: str, mirrors: bool = False,
             **kw) -> SequenceWriter:
     rig = station.rig
     camera = rig.camera.to_dict() if kind != "camera-calibration" else None
-    return SequenceWriter(out, kind, rig.head.spec(mirrors), camera=camera, **kw)
+    return SequenceWriter(out, kind, rig.head.spec(mirrors), camera=camera,
+                          pixel_bits=pixel_bits_of(station.devices.camera), **kw)
 
 
 def _exposure(camera, exposure_ms: float | None) -> float | None:

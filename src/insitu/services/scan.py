@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from insitu.devices.clock import StepTimer
-from insitu.devices.protocols import Camera, ScanHead
+from insitu.devices.protocols import Camera, ScanHead, pixel_bits_of
 from insitu.devices.replay import ReplayCamera
 from insitu.errors import DeviceError, InsituError, MeasurementError
 from insitu.formats.pointcloud import PointCloud, write_ply
@@ -219,7 +219,7 @@ def scan_live(station: Station, spacing: float = 0.5, region=None,
     lines = plan_lines(region, spacing, cross, height_cal, cross_spacing)
     rec = reconstructor(rig.camera, rig.head.pivot_height_mm, rig.head.lens == "telecentric",
                         rig.head.z_range_mm, height_cal, model, "live scan", cross,
-                        getattr(station.devices.camera, "pixel_bits", None))
+                        pixel_bits_of(station.devices.camera))
     plan = FramePlan(lines, rec.sheets, rig.head.z_range_mm, lines_per_frame, packing, heights)
     camera, head = station.devices.camera, station.devices.head
     if exposure_ms is not None:
