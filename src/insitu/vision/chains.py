@@ -99,19 +99,29 @@ def carry_ends(img: np.ndarray, ok: np.ndarray, row: np.ndarray, gmax: np.ndarra
             c = end + d * k
             if not 0 <= c < W or not searched[c]:
                 break
-            at = row[end] + slope * d * k
+            at = float(row[end]) + slope * d * k
             if ok[c] and not (k <= SHARED and upper * (row[c] - at) < -2.0
                               and (locked is None or not locked[c])):
                 break
-            rr = np.clip(int(round(at)) + np.arange(-1, 2), 0, H - 1)
-            a, b, e = (img[rr, min(max(x, 0), W - 1)].astype(np.float64)
-                       for x in (c - 1, c, c + 1))
-            v = median3(a, b, e)
-            j = int(np.argmax(v))
-            if v[j] < min_peak or v[j] - bg[end] < thr:
+            r, v = _peak_near(img, int(round(at)), c)
+            if v < min_peak or v - bg[end] < thr:
                 break
-            ok[c], row[c], gmax[c], bg[c] = True, rr[j], v[j], bg[end]
+            ok[c], row[c], gmax[c], bg[c] = True, r, v, bg[end]
     return ok, row, gmax, bg
+
+
+def _peak_near(img: np.ndarray, at: int, c: int) -> tuple[int, float]:
+    """Of rows at − 1, at, at + 1 of column c (clipped to ``img``), the first with the
+    greatest median of its 3 px along the row, and that median (scalars: a few pixels)."""
+    H, W = img.shape
+    best_r, best = 0, -np.inf
+    for r in (at - 1, at, at + 1):
+        r = min(max(r, 0), H - 1)
+        a, b, e = (float(img[r, min(max(x, 0), W - 1)]) for x in (c - 1, c, c + 1))
+        m = max(min(a, b), min(max(a, b), e))
+        if m > best:
+            best_r, best = r, m
+    return best_r, best
 
 
 def ridges_of(cols: np.ndarray, row: np.ndarray, bridge: int, max_jump: float) -> np.ndarray:

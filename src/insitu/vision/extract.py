@@ -14,16 +14,18 @@ frame: at least ``smooth_grains`` correlation lengths of the frame's own wander
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass, replace
+from functools import lru_cache
 
-import cv2
 import numpy as np
-from scipy.ndimage import correlate1d
-from scipy.signal import savgol_filter
+from numpy.lib.stride_tricks import sliding_window_view
+from scipy.signal import savgol_coeffs
 
 from insitu.errors import ConfigError
 from insitu.formats.validation import one_of
 from insitu.vision.centres import CENTRE_METHODS, line_centres
-from insitu.vision.detect import LineCentres
+from insitu.vision.detect import LineCentres, frame_noise
+from insitu.vision.laser_image import check_bits
+from insitu.vision.steger import moment_solve
 
 
 @dataclass(frozen=True)
@@ -58,6 +60,10 @@ class CentreSettings:
         return asdict(self)
 
 
+CROP_MARGIN = 64
+"""Pixels round the band that the centres of a banded frame are measured in (:func:`band_crop`):
+the median filter, 2 × the default ±12-row window for a clipped plateau's run and its flanks,
+Steger's derivatives of a line up to ≈ 25 px wide."""
 PAPER_SETTINGS = CentreSettings(method="gray", k=0.5, smooth_half_window=0, smooth_grains=0.0,
                                 background=False, extend_ends=False)
 MAX_HALF_WINDOW = 25
@@ -66,18 +72,29 @@ MAX_HALF_WINDOW = 25
 def extract_centres(image: np.ndarray, settings: CentreSettings = CentreSettings(),
                     band: tuple[np.ndarray, np.ndarray] | None = None,
                     along_rows: bool = True, upper: int = 0,
-                    pixel_bits: int | None = None) -> LineCentres:
+                    pixel_bits: int | None = None, crop: bool = True) -> LineCentres:
     """Centres of the line in ``image`` (H, W): one per column when the line runs along the
     rows, else one per row (the image is searched across the line either way). ``band``:
     (lo, hi) per column (rows) or per row (columns) where the line can be; ghosts outside it
-    are ignored. ``upper``: the side of the line's cross coordinate a higher surface puts it
-    (+1 larger, −1 smaller, 0 unknown; :func:`~insitu.vision.detect.detect`). ``pixel_bits``:
-    the frame's significant bits (a Mono12 camera's: 12; None: the dtype's), which every
-    threshold is a fraction of. u, v are image coordinates in both cases."""
-    img = image if along_rows else cv2.transpose(image)
+    are ignored, and only the band's rectangle (:func:`band_crop`) is read (``crop`` False:
+    the whole frame is filtered; the centres are the same). ``upper``: the side of the line's
+    cross coordinate a higher surface puts it (+1 larger, −1 smaller, 0 unknown;
+    :func:`~insitu.vision.detect.detect`). ``pixel_bits``: the frame's significant bits (a
+    Mono12 camera's: 12; None: the dtype's), which every threshold is a fraction of. u, v are
+    image coordinates in both cases."""
+    view = np.asarray(image) if along_rows else np.asarray(image).T
     options = {o: getattr(settings, o) for o in CENTRE_METHODS[settings.method].options}
+    if band is None or not crop:
+        img, r0, c0 = np.ascontiguousarray(view), 0, 0
+    else:
+        check_bits(view, pixel_bits)
+        (rows, cols), band = band_crop(view.shape, band)
+        img, r0, c0 = np.ascontiguousarray(view[rows, cols]), rows.start, cols.start
+        options["noise"] = frame_noise(view)
     c = line_centres(img, settings.method, direction="rows", band=band, upper=upper,
                      pixel_bits=pixel_bits, **options)
+    if r0 or c0:
+        c = replace(c, u=c.u + c0, v=c.v + r0)
     if settings.smooth_half_window:
         half = settings.smooth_half_window
         if settings.smooth_grains:
@@ -88,12 +105,39 @@ def extract_centres(image: np.ndarray, settings: CentreSettings = CentreSettings
     return c if along_rows else replace(c, u=c.v, v=c.u)
 
 
+def band_crop(shape: tuple[int, int], band, margin: int = CROP_MARGIN
+              ) -> tuple[tuple[slice, slice], tuple[np.ndarray, np.ndarray]]:
+    """The rectangle (rows, cols) of a frame of ``shape`` (H, W) that holds ``band`` (lo, hi)
+    (rows per column, each (W,) or scalar; NaN: a column not searched) and ``margin`` px
+    round it, clipped to the frame, and the band in the rectangle's rows and columns. Every
+    pixel the centre methods read about a line inside the band (the median filter, the ±window
+    rows, a clipped plateau's run, Steger's derivatives) lies in the margin, so the rectangle's
+    centres are the frame's."""
+    H, W = shape
+    lo, hi = (np.broadcast_to(np.asarray(b, np.float64), (W,)) for b in band)
+    with np.errstate(invalid="ignore"):
+        cols = np.flatnonzero(np.isfinite(lo) & np.isfinite(hi) & (lo <= hi)
+                              & (hi >= 0) & (lo <= H - 1))
+    if not len(cols):
+        return (slice(0, min(H, 1)), slice(0, min(W, 1))), (lo[:1], hi[:1])
+    r0 = int(np.clip(np.floor(lo[cols].min()) - margin, 0, H - 1))
+    r1 = int(np.clip(np.ceil(hi[cols].max()) + margin + 1, r0 + 1, H))
+    c0, c1 = max(int(cols[0]) - margin, 0), min(int(cols[-1]) + margin + 1, W)
+    return (slice(r0, r1), slice(c0, c1)), (lo[c0:c1] - r0, hi[c0:c1] - r0)
+
+
 def runs(u: np.ndarray, v: np.ndarray, jump_px: float) -> list[slice]:
     """Slices of (u, v) (sorted by u) where columns follow each other and v does not jump
     off the line's own slope (:func:`_jumps`)."""
-    brk = np.nonzero((np.diff(u) > 1.5) | _jumps(u, v, jump_px))[0] + 1
-    edges = np.concatenate([[0], brk, [len(u)]])
+    edges = _run_edges(u, v, jump_px)
     return [slice(a, b) for a, b in zip(edges[:-1], edges[1:]) if b > a]
+
+
+def _run_edges(u: np.ndarray, v: np.ndarray, jump_px: float) -> np.ndarray:
+    """The :func:`runs` as (k + 1,) indices: run i is [edges[i], edges[i + 1]) (for u
+    non-empty; [0, 0] for none)."""
+    brk = np.flatnonzero((np.diff(u) > 1.5) | _jumps(u, v, jump_px)) + 1
+    return np.r_[0, brk, len(u)]
 
 
 def _jumps(u: np.ndarray, v: np.ndarray, jump_px: float) -> np.ndarray:
@@ -124,7 +168,7 @@ def wander_correlation_px(c: LineCentres, jump_px: float = 1.0, min_run: int = 8
     acf = np.zeros(max_lag + 1)
     for r in runs(u, v, jump_px):
         if r.stop - r.start >= min_run:
-            res = v[r] - savgol_filter(v[r], 61 if r.stop - r.start > 61 else min_run - 1, 2)
+            res = v[r] - quadratic_trend(v[r], 61 if r.stop - r.start > 61 else min_run - 1)
             res -= res.mean()
             f = np.fft.rfft(res, 2 * len(res))
             acf += np.fft.irfft(f * np.conj(f))[:max_lag + 1]
@@ -133,6 +177,26 @@ def wander_correlation_px(c: LineCentres, jump_px: float = 1.0, min_run: int = 8
     rho = acf / acf[0]
     end = np.argmax(rho[1:] <= 0) + 1 if (rho[1:] <= 0).any() else len(rho)
     return float(1.0 + 2.0 * rho[1:end].sum())
+
+
+def quadratic_trend(v: np.ndarray, window: int) -> np.ndarray:
+    """Savitzky–Golay quadratic of ``v`` (n,) over an odd ``window`` ≤ n (scipy's savgol_filter,
+    mode "interp": the ends from the quadratic fitted to the first and last window points),
+    as one convolution and two small products."""
+    coeffs, ends = _savgol_matrices(window)
+    h = window // 2
+    out = np.empty(len(v))
+    out[h:len(v) - h] = np.convolve(v, coeffs, mode="valid")
+    out[:h], out[len(v) - h:] = ends[:h] @ v[:window], ends[window - h:] @ v[-window:]
+    return out
+
+
+@lru_cache(maxsize=8)
+def _savgol_matrices(window: int) -> tuple[np.ndarray, np.ndarray]:
+    """The interior's convolution coefficients (window,) and the least-squares quadratic's
+    hat matrix (window, window) of the positions 0 … window − 1."""
+    V = np.vander(np.arange(window, dtype=np.float64), 3)
+    return savgol_coeffs(window, 2), V @ np.linalg.pinv(V)
 
 
 def smooth_centres(c: LineCentres, half_window: int = 7, jump_px: float = 1.0,
@@ -162,14 +226,19 @@ def smooth_centres(c: LineCentres, half_window: int = 7, jump_px: float = 1.0,
         return c
     order = np.argsort(c.u, kind="stable")
     u, v = c.u[order], c.v[order]
-    keep = np.ones(len(u), bool)
     peak = c.peak[order]
-    for r in runs(u, v, jump_px):
-        bright = np.nonzero(peak[r] >= end_fraction * np.median(peak[r]))[0]
-        a, b = r.start + bright[0], r.start + bright[-1] + 1
-        keep[r.start:a] = keep[b:r.stop] = False
-        if b - a < drop_short:
-            keep[a:b] = False
+    edges = _run_edges(u, v, jump_px)
+    level = 0.0
+    if end_fraction > 0:
+        level = np.repeat([end_fraction * np.median(peak[a:b]) for a, b in
+                           zip(edges[:-1], edges[1:])], np.diff(edges))
+    at = np.arange(len(u))
+    bright = peak >= level
+    first = np.minimum.reduceat(np.where(bright, at, len(u)), edges[:-1])
+    last = np.maximum.reduceat(np.where(bright, at, -1), edges[:-1])
+    piece = np.repeat(np.arange(len(first)), np.diff(edges))
+    keep = ((at >= first[piece]) & (at <= last[piece])
+            & (last - first + 1 >= drop_short)[piece])
     idx = order[keep]
     fields = {f: getattr(c, f)[idx] for f in c.__dataclass_fields__
               if isinstance(getattr(c, f), np.ndarray) and len(getattr(c, f)) == len(c)}
@@ -178,10 +247,17 @@ def smooth_centres(c: LineCentres, half_window: int = 7, jump_px: float = 1.0,
     return replace(c, **fields)
 
 
+def _window_sums(grid: np.ndarray, centre: np.ndarray, h: int) -> np.ndarray:
+    """(n, 2h + 1): grid[centre + j] for j = −h … h (zero beyond the grid)."""
+    padded = np.concatenate([np.zeros(h), grid, np.zeros(h)])
+    return sliding_window_view(padded, 2 * h + 1)[centre]
+
+
 def _local_quadratic(col: np.ndarray, v: np.ndarray, h: int, jump_px: float) -> np.ndarray:
     """v (n,) px smoothed as :func:`smooth_centres` says; col (n,) increasing columns. The
     stretches are laid on one grid with ≥ 2h + 1 empty cells between them, so that the moment
-    sums Σ j^p and Σ v·j^p over each window (j = −h … h) are 8 correlations of the grid."""
+    sums Σ j^p and Σ v·j^p over each point's window (j = −h … h) are products of the
+    grid's windows with the powers of j (the 3 × 3 normal equations: :func:`moment_solve`)."""
     n = len(v)
     if n < 2:
         return v.copy()
@@ -192,23 +268,18 @@ def _local_quadratic(col: np.ndarray, v: np.ndarray, h: int, jump_px: float) -> 
     base = np.r_[0, np.cumsum(span + 2 * h + 2)[:-1]]
     which = np.repeat(np.arange(len(first)), last - first + 1)
     pos = col - col[first][which] + base[which]
-    grid = np.zeros((2, int(pos[-1]) + 1))
-    np.add.at(grid[0], pos, 1.0)
-    np.add.at(grid[1], pos, v)
-    j = np.arange(-h, h + 1, dtype=np.float64)
-    M = [correlate1d(grid[0], j**p, mode="constant") for p in range(5)]
-    T = [correlate1d(grid[1], j**p, mode="constant") for p in range(3)]
+    size = int(pos[-1]) + 1
     lo, hi = base[which] + h, base[which] + span[which] - h
     centre = np.where(hi >= lo, np.clip(pos, lo, np.maximum(lo, hi)),
                       base[which] + span[which] // 2)
-    m = [a[centre] for a in M]
-    t = [a[centre] for a in T]
-    A = np.stack([np.stack(m[0:3], -1), np.stack(m[1:4], -1), np.stack(m[2:5], -1)], -2)
-    quad = (m[0] >= 5) & (np.abs(np.linalg.det(A)) > 1e-9)
-    A[~quad] = np.eye(3)
-    a = np.linalg.solve(A, np.where(quad[:, None], np.stack(t, -1), 0.0)[..., None])[..., 0]
+    powers = np.arange(-h, h + 1, dtype=np.float64)[:, None] ** np.arange(5)   # (2h+1, 5)
+    m, t = (_window_sums(np.bincount(pos, w, size), centre, h) @ powers[:, :k]
+            for w, k in ((None, 5), (v, 3)))
+    m, t = m.T, t.T
+    det, a = moment_solve(m, t)
+    quad = (m[0] >= 5) & (np.abs(det) > 1e-9)
     x = (pos - centre).astype(np.float64)
-    out = a[:, 0] + a[:, 1] * x + a[:, 2] * x * x
+    out = a[0] + a[1] * x + a[2] * x * x
     det2 = m[0] * m[2] - m[1] ** 2
     line = ~quad & (m[0] >= 2) & (np.abs(det2) > 1e-9)
     with np.errstate(divide="ignore", invalid="ignore"):

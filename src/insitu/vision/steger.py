@@ -48,16 +48,27 @@ def _flank_fit(g, inside, x, sat_mask, floor, unit=1.0):
     ly = np.log(np.maximum(g, unit)).astype(np.float64)
     xs = x.astype(np.float64)
     m = np.stack([(wgt * xs**p).sum(axis=0) for p in range(5)])   # moments (5, n)
-    A = np.stack([m[0:3], m[1:4], m[2:5]], axis=-1).transpose(1, 0, 2)    # (n, 3, 3)
-    b = np.stack([(wgt * ly * xs**p).sum(axis=0) for p in range(3)], axis=-1)
+    det, coef = moment_solve(m, [(wgt * ly * xs**p).sum(axis=0) for p in range(3)])
     ok = (use[: k].any(axis=0) & use[k + 1:].any(axis=0) & (use.sum(axis=0) >= 3)
-          & (np.abs(np.linalg.det(A)) > 1e-9 * np.maximum(m[0], 1) ** 3))
-    A = np.where(ok[:, None, None], A, np.eye(3))
-    coef = np.linalg.solve(A, np.where(ok[:, None], b, 0)[..., None])[..., 0]
+          & (np.abs(det) > 1e-9 * np.maximum(m[0], 1) ** 3))
     with np.errstate(divide="ignore", invalid="ignore"):
-        vertex = -coef[:, 1] / (2 * coef[:, 2])
-    ok &= (coef[:, 2] < 0) & (np.abs(vertex) <= k)
+        vertex = -coef[1] / (2 * coef[2])
+        ok &= (coef[2] < 0) & (np.abs(vertex) <= k)
     return np.where(ok, vertex, np.nan)
+
+
+def moment_solve(m, t):
+    """The determinant (n,) of the normal equations of a quadratic fitted by moments,
+    [[m0, m1, m2], [m1, m2, m3], [m2, m3, m4]] · a = t (m: 5 arrays (n,), t: 3), and their
+    solution a (3 arrays (n,): constant, linear, quadratic), by cofactors (inf or NaN where
+    the determinant is 0)."""
+    cof = (m[2] * m[4] - m[3] ** 2, m[2] * m[3] - m[1] * m[4], m[1] * m[3] - m[2] ** 2,
+           m[0] * m[4] - m[2] ** 2, m[1] * m[2] - m[0] * m[3], m[0] * m[2] - m[1] ** 2)
+    det = m[0] * cof[0] + m[1] * cof[1] + m[2] * cof[2]
+    with np.errstate(divide="ignore", invalid="ignore"):       # A⁻¹ = its cofactors / det
+        a = [(cof[i] * t[0] + cof[j] * t[1] + cof[k] * t[2]) / det
+             for i, j, k in ((0, 1, 2), (1, 3, 4), (2, 4, 5))]
+    return det, a
 
 
 def _segment(mask, at):
@@ -100,7 +111,8 @@ def gaussian_peak(image: np.ndarray, min_peak: float = 40.0, window: int = 12, m
                   *, band=None, min_contrast: float = 20.0, snr: float = 6.0,
                   continuity: bool = True, saturation: float | None = None,
                   extend_ends: bool = True, upper: int = 0, scale: float | None = None,
-                  allow=None, min_run: int = 0, ridge: bool = False) -> LineCentres:
+                  allow=None, min_run: int = 0, ridge: bool = False,
+                  noise: float | None = None) -> LineCentres:
     """Per-column Gaussian peak: 3-point log-parabola through the raw maximum and its two
     neighbours (background subtracted). Saturated or degenerate columns: the plateau's centre
     from a log-parabola fitted to its unsaturated flanks, else the centroid of the pixels above
@@ -110,7 +122,7 @@ def gaussian_peak(image: np.ndarray, min_peak: float = 40.0, window: int = 12, m
     img = as_image(image)
     det = detect(img, median, band, window, min_peak, min_contrast, snr, continuity,
                  extend_ends=extend_ends, upper=upper, scale=scale, allow=allow,
-                 min_run=min_run, ridge=ridge)
+                 min_run=min_run, ridge=ridge, noise=noise)
     c, r, bg, w, unit = det.cols, det.row, det.bg, det.window, det.full_scale / 255
     sat = saturation_level(img, saturation, scale)
     x = np.arange(-w, w + 1)[:, None]
@@ -172,20 +184,34 @@ def _hermite_root(y0, d0, y1, d1):
 
 def _derivatives(img, r, c, sigma):
     """Gaussian derivatives Iu, Iv, Iuu, Ivv, Iuv, each (n, 2M+1), at rows r-M..r+M of columns
-    c (M = _M + 1): a (n, 2M+2R+1, 2R+1) patch per column, separable kernels, borders clipped."""
+    c (M = _M + 1): a (n, 2M+2R+1, 2R+1) patch per column (borders clipped), filtered along u
+    by the three kernels at once, then along v as products with their banded (Toeplitz)
+    matrices — five matrix products in all."""
     H, W = img.shape
     R, M = int(np.ceil(3.5 * sigma)), _M + 1
-    h0, h1, h2 = gaussian_kernels(sigma, R)
-    rows = np.clip(r[:, None, None] + np.arange(-M - R, M + R + 1)[None, :, None], 0, H - 1)
-    cols = np.clip(c[:, None, None] + np.arange(-R, R + 1)[None, None, :], 0, W - 1)
-    P = img[rows, cols].astype(np.float32)
-    A0, A1, A2 = P @ h0, P @ h1, P @ h2                           # along u: (n, 2M+2R+1)
+    L, K, n = 2 * M + 2 * R + 1, 2 * R + 1, len(r)
+    kernels = gaussian_kernels(sigma, R)
+    if n and r.min() >= M + R and r.max() < H - M - R and c.min() >= R and c.max() < W - R:
+        P = sliding_window_view(img, (L, K))[r - M - R, c - R]
+    else:
+        rows = np.clip(r[:, None, None] + np.arange(-M - R, M + R + 1)[None, :, None], 0, H - 1)
+        P = img[rows, np.clip(c[:, None, None] + np.arange(-R, R + 1)[None, None, :], 0, W - 1)]
+    A = (P.reshape(n * L, K).astype(np.float32) @ np.stack(kernels, 1)).reshape(n, L, 3)
+    T0, T1, T2 = (_banded(h, 2 * M + 1, L) for h in kernels)
+    k = 2 * M + 1
+    a0 = np.ascontiguousarray(A[:, :, 0]) @ np.hstack([T1, T2])
+    a1 = np.ascontiguousarray(A[:, :, 1]) @ np.hstack([T0, T1])
+    a2 = np.ascontiguousarray(A[:, :, 2]) @ T0
+    return a1[:, :k], a0[:, :k], a2, a0[:, k:], a1[:, k:]
 
-    def along_v(a, h):
-        return sliding_window_view(a, 2 * R + 1, axis=1) @ h
 
-    return (along_v(A1, h0), along_v(A0, h1), along_v(A2, h0), along_v(A0, h2),
-            along_v(A1, h1))
+def _banded(h, rows, length):
+    """(length, rows) float32: column i holds kernel ``h`` at i … i + len(h) − 1, so that a
+    product with it correlates each row of an (n, length) array with h at ``rows`` places."""
+    T = np.zeros((length, rows), np.float32)
+    for i in range(rows):
+        T[i:i + len(h), i] = h
+    return T
 
 
 def _normals(Iuu, Ivv, Iuv):
@@ -207,7 +233,7 @@ def steger(image: np.ndarray, sigma: float | None = None, min_peak: float = 40.0
            snr: float = 6.0, continuity: bool = True, saturation: float | None = None,
            min_curvature: float | None = None, extend_ends: bool = True,
            upper: int = 0, scale: float | None = None, allow=None,
-           min_run: int = 0, ridge: bool = False) -> LineCentres:
+           min_run: int = 0, ridge: bool = False, noise: float | None = None) -> LineCentres:
     """Steger centres of a line running along the rows of ``image`` (tilts to ≈ 60° work).
 
     Per column: Gaussian derivatives at the 7 rows around the detected peak; the Hessian's
@@ -227,7 +253,7 @@ def steger(image: np.ndarray, sigma: float | None = None, min_peak: float = 40.0
     img = as_image(image)
     det = detect(img, median, band, window, min_peak, min_contrast, snr, continuity,
                  extend_ends=extend_ends, upper=upper, scale=scale, allow=allow,
-                 min_run=min_run, ridge=ridge)
+                 min_run=min_run, ridge=ridge, noise=noise)
     c, r, n, w, unit = det.cols, det.row, len(det.cols), det.window, det.full_scale / 255
     x = np.arange(-w, w + 1)[:, None]
     g, inside = gather(det.pre, r[None, :] + x, c)
@@ -256,15 +282,15 @@ def steger(image: np.ndarray, sigma: float | None = None, min_peak: float = 40.0
     (y0, d0), (yn, dn), (yp, dp) = ((at(gcol, k + i), at(dcol, k + i)) for i in (0, 1, -1))
     down = np.sign(y0) != np.sign(yn)
     refined = down | (np.sign(yp) != np.sign(y0))
-    s = np.where(down, _hermite_root(y0, d0, yn, dn), _hermite_root(yp, dp, y0, d0) - 1.0)
+    s = _hermite_root(np.where(down, y0, yp), np.where(down, d0, dp), np.where(down, yn, y0),
+                      np.where(down, dn, d0)) - np.where(down, 0.0, 1.0)
     u = np.where(refined, c, c + bt * bu)
     v = r + (k - _M - 1) + np.where(refined, s, bt * bv)
-    raw, _ = gather(img, r[None, :] + x, c)
     level = saturation_level(img, saturation, scale)
-    sat = raw[w - 2:w + 3].max(axis=0) >= level
+    sat = gather(img, r[None, :] + x[w - 2:w + 3], c)[0].max(axis=0) >= level
     if sat.any():                                 # clipped plateau: the flank fit instead
-        v[sat] = r[sat] + _plateau_centre(raw[:, sat], inside[:, sat], x, raw[:, sat] >= level,
-                                          det.noise, unit)
+        raw, _ = gather(img, r[None, sat] + x, c[sat])
+        v[sat] = r[sat] + _plateau_centre(raw, inside[:, sat], x, raw >= level, det.noise, unit)
         u[sat], found[sat] = c[sat], True
     keep = found & np.isfinite(u) & np.isfinite(v)
     return LineCentres(u[keep].astype(np.float64), v[keep].astype(np.float64),
