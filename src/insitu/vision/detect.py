@@ -195,19 +195,14 @@ def _half_width(pre, row, gmax, w, cols) -> np.ndarray:
 
 
 def _search(pre, band, allow, fill, ridge, thr):
-    """The (W, H) array of each column's candidate values (a copy, ours to overwrite):
-    ``pre`` transposed, ``fill`` outside the column's band, where not allowed and (ridge > 0)
-    where the column's white top-hat over 2·ridge + 1 rows stays below ``thr``; the first
-    row of each column's band (W,), the most rows a band has, and the searched columns
-    (W,) bool."""
+    """The (W, n) array of each column's candidate values at rows top … top + n − 1 (a
+    copy, ours to overwrite): ``pre`` transposed, ``fill`` outside the column's band, where
+    not allowed and (ridge > 0) where the column's white top-hat over 2·ridge + 1 rows stays
+    below ``thr``; the first row of each column's band (W,), the most rows a band has, the
+    searched columns (W,) bool, and top (the rows all bands span; 0, all rows, with allow or
+    ridge)."""
     H, W = pre.shape
-    search = cv2.transpose(pre)
-    blocked = None if allow is None else ~cv2.transpose(allow.astype(np.uint8)).astype(bool)
-    if ridge:
-        hat = cv2.morphologyEx(search, cv2.MORPH_TOPHAT, np.ones((1, 2 * ridge + 1), np.uint8),
-                               borderType=cv2.BORDER_REPLICATE)
-        blocked = hat < thr if blocked is None else blocked | (hat < thr)
-    lo, searched, span = np.zeros(W, np.int64), np.ones(W, bool), H
+    lo, hi, searched, span = np.zeros(W, np.int64), None, np.ones(W, bool), H
     if band is not None:
         blo, bhi = (np.broadcast_to(np.asarray(b, np.float64), (W,)) for b in band)
         with np.errstate(invalid="ignore"):
@@ -217,8 +212,18 @@ def _search(pre, band, allow, fill, ridge, thr):
         lo = np.where(searched, np.clip(flo, 0, H - 1), 0).astype(np.int64)
         hi = np.where(searched, np.clip(fhi, 0, H - 1), -1).astype(np.int64)
         span = max(int((hi - lo).max()) if W else 0, 0) + 1
+    top, bottom = 0, H
+    if hi is not None and allow is None and not ridge and searched.any():
+        top, bottom = int(lo[searched].min()), int(hi[searched].max()) + 1
+    search = cv2.transpose(pre[top:bottom])
+    blocked = None if allow is None else ~cv2.transpose(allow.astype(np.uint8)).astype(bool)
+    if ridge:
+        hat = cv2.morphologyEx(search, cv2.MORPH_TOPHAT, np.ones((1, 2 * ridge + 1), np.uint8),
+                               borderType=cv2.BORDER_REPLICATE)
+        blocked = hat < thr if blocked is None else blocked | (hat < thr)
+    if hi is not None:
         dt = np.int16 if H < 2**15 else np.int64                 # the compares' speed
-        rows = np.arange(H, dtype=dt)
+        rows = np.arange(top, bottom, dtype=dt)
         inside = (rows >= lo.astype(dt)[:, None]) & (rows <= hi.astype(dt)[:, None])
         if blocked is None and fill == 0:
             np.multiply(search, inside, out=search, casting="unsafe")
@@ -226,14 +231,14 @@ def _search(pre, band, allow, fill, ridge, thr):
             blocked = ~inside if blocked is None else blocked | ~inside
     if blocked is not None:
         np.putmask(search, blocked, fill)
-    return search, lo, span, searched
+    return search, lo, span, searched, top
 
 
-def _peak_rows(search, lo, fill):
+def _peak_rows(search, lo, fill, top):
     """Each column's row of its greatest candidate (the first of equals), or the first row of
-    its band where it has none (all ``fill``)."""
+    its band where it has none (all ``fill``); ``search``'s first row is ``top``."""
     j = np.argmax(search, axis=1)
-    return np.where(search[np.arange(len(j)), j] == fill, lo, j)
+    return np.where(search[np.arange(len(j)), j] == fill, lo, j + top)
 
 
 def detect(image, median=3, band=None, window=12, min_peak=40.0, min_contrast=20.0,
@@ -252,7 +257,7 @@ def detect(image, median=3, band=None, window=12, min_peak=40.0, min_contrast=20
     noise = noise_sigma(pre) if noise is None else float(noise)
     fill = np.iinfo(pre.dtype).min if pre.dtype.kind == "u" else -np.inf
     thr = max(min_contrast, snr * noise)
-    search, lo, span, searched = _search(pre, band, allow, fill, w if ridge else 0, thr)
+    search, lo, span, searched, top = _search(pre, band, allow, fill, w if ridge else 0, thr)
 
     def candidate(j, cols=None):
         """Stats of the peaks at rows j of the columns ``cols`` (the tracks' candidates), or
@@ -274,13 +279,14 @@ def detect(image, median=3, band=None, window=12, min_peak=40.0, min_contrast=20
             candidates(search, fill, w, candidate), max_jump)
         locked = ambiguous
     else:
-        j1 = _peak_rows(search, lo, fill)
+        j1 = _peak_rows(search, lo, fill, top)
         row, gmax, bg, contrast, ok, run = candidate(j1)
         ambiguous, locked = np.zeros(W, bool), np.zeros(W, bool)
     if not ridge and continuity and W > 2 and span > 2 * w + 1:
-        guard = np.clip(j1[:, None] + np.arange(-w, w + 1)[None, :], 0, H - 1)
-        search.reshape(-1)[guard + (np.arange(W) * H)[:, None]] = fill
-        row2, gmax2, bg2, contrast2, ok2, run2 = candidate(_peak_rows(search, lo, fill))
+        n = search.shape[1]
+        guard = np.clip(j1[:, None] - top + np.arange(-w, w + 1)[None, :], 0, n - 1)
+        search.reshape(-1)[guard + (np.arange(W) * n)[:, None]] = fill
+        row2, gmax2, bg2, contrast2, ok2, run2 = candidate(_peak_rows(search, lo, fill, top))
         ambiguous = ok & ok2
         if ambiguous.any():
             s1, s2, lab1, lab2 = chain_support(row, row2, ok, ok2, contrast, contrast2,

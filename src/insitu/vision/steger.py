@@ -271,10 +271,11 @@ def steger(image: np.ndarray, sigma: float | None = None, min_peak: float = 40.0
               & (np.abs(t * nu) <= _T_MAX) & (np.abs(t * nv) <= _T_MAX))
     ok[:, [0, -1]] = False                                        # outer rows: neighbours only
     k = np.argmax(np.where(ok, -lam, -np.inf), axis=1)            # strongest line pixel
-    found = ok[np.arange(n), k]
+    each = np.arange(n)
+    found = ok[each, k]
 
     def at(a, kk):
-        return np.take_along_axis(a, kk[:, None], axis=1)[:, 0]
+        return a[each, kk]
 
     bu, bv, bt = at(nu, k), at(nv, k), at(t, k)
     gcol = bu[:, None] * Iu + bv[:, None] * Iv                    # n·∇I down the column
