@@ -132,3 +132,19 @@ def test_a_picture_window_closes_with_esc_or_its_close_button(qtbot):
             qtbot.mouseClick(win.buttons.button(QDialogButtonBox.StandardButton.Close),
                              Qt.LeftButton)
         assert not win.isVisible(), close
+
+
+def test_the_height_page_records_on_the_rig_and_cancel_stops_it(qtbot, window, tmp_path):
+    page = window.calibrate_panel.pages["height"]
+    assert not window.calibrate_panel.pages["camera"].record_button.isEnabled()
+    folder = tmp_path / "rec"
+    page.ui.recordingEdit.setText(str(folder))
+    qtbot.mouseClick(page.record_button, Qt.LeftButton)
+    qtbot.waitUntil(lambda: page.ui.progressBar.value() >= 2, timeout=WAIT_MS)
+    assert page.cancel_button.isEnabled() and not page.record_button.isEnabled()
+    qtbot.mouseClick(page.cancel_button, Qt.LeftButton)
+    qtbot.waitUntil(lambda: not window.runner.running(page.record_name), timeout=WAIT_MS)
+    assert "recording cancelled" in page.ui.notesLabel.text() and not folder.exists()
+    world = window.station.world
+    assert world.laser.kind == "off" and world.parts            # the part back on the table
+    assert page.record_button.isEnabled() and not page.cancel_button.isEnabled()

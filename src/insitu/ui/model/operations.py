@@ -157,3 +157,42 @@ def calibrate(kind: str, folder: Path, out: Path, progress: Progress) -> Calibra
         raise ValueError(kind)
     picture = cv2.imread(str(out.with_suffix(".png")), cv2.IMREAD_COLOR)
     return CalibrationOutcome(dict(cal.residuals), cal.notes or "", picture, out)
+
+
+RECORDED = {"height": "height-calibration", "field": "field-calibration"}
+"""The calibrations recorded on the connected rig (the camera's needs the board moved)."""
+
+
+def record_calibration(station: Station, kind: str, folder: Path, progress: Progress,
+                       cancel: threading.Event) -> Path:
+    """Record the ``kind`` calibration ("height" or "field") on ``station`` into the new
+    ``folder``; setting ``cancel`` stops it between frames (Cancelled, the head off, the
+    folder removed). On the simulated rig the parts go back on the table after."""
+    import shutil
+
+    from insitu.errors import ConfigError
+    from insitu.services.record import record
+
+    if kind not in RECORDED:
+        raise ConfigError(f"{kind} calibration: recorded with insitu sim record "
+                          "camera-calibration (the board is moved between views)")
+    folder = Path(folder)
+    if folder.exists() and any(folder.iterdir()):
+        raise ConfigError(f"{folder}: not empty: choose a new folder for the recording")
+
+    def step(done: int, total: int) -> None:
+        if cancel.is_set():
+            raise services.Cancelled(f"{kind} calibration: recording cancelled")
+        progress(done, total)
+
+    world = station.world
+    parts = list(world.parts) if world is not None else None
+    try:
+        return record(station, RECORDED[kind], folder, progress=step)
+    except BaseException:
+        shutil.rmtree(folder, ignore_errors=True)
+        raise
+    finally:
+        if world is not None:
+            world.parts = parts
+            world.invalidate()

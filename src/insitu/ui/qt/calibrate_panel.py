@@ -1,5 +1,6 @@
 """The Calibrate dock: one guided page each for the camera, the height calibration and the
-field correction — recording in, file out, then its verdict (pass / check / fail, its
+field correction — recorded on the connected rig (Record, its progress, Cancel; the height
+and field pages) or a recording chosen, file out, then its verdict (pass / check / fail, its
 figures in words against their limits: :mod:`insitu.ui.model.calibration_verdict`) and a
 picture."""
 
@@ -9,8 +10,8 @@ from pathlib import Path
 
 from PySide6.QtCore import Qt
 from PySide6.QtGui import QColor, QPixmap
-from PySide6.QtWidgets import (QFileDialog, QTableWidgetItem, QTabWidget, QVBoxLayout,
-                               QWidget)
+from PySide6.QtWidgets import (QFileDialog, QHBoxLayout, QPushButton, QTableWidgetItem,
+                               QTabWidget, QVBoxLayout, QWidget)
 
 from insitu.ui.model import operations as ops
 from insitu.ui.model.calibration_verdict import verdict
@@ -45,6 +46,22 @@ class CalibratePage(QWidget):
         ui.recordingBrowse.clicked.connect(self._browse_recording)
         ui.outputBrowse.clicked.connect(self._browse_output)
         ui.runButton.clicked.connect(self.run)
+        self.record_button = QPushButton("Record on the rig", ui)
+        self.cancel_button = QPushButton("Cancel", ui, enabled=False)
+        row = QHBoxLayout()
+        row.addWidget(self.record_button)
+        row.addWidget(self.cancel_button)
+        ui.layout().insertLayout(ui.layout().indexOf(ui.runButton), row)
+        if kind in ops.RECORDED:
+            self.record_button.setToolTip("record it now on the connected rig into the "
+                                          "recording folder (a new one)")
+            self.record_button.clicked.connect(self.record)
+            self.cancel_button.clicked.connect(
+                lambda: window.runner.cancel(self.record_name))
+        else:
+            self.record_button.setEnabled(False)
+            self.record_button.setToolTip("the board is moved between views: insitu sim "
+                                          "record camera-calibration")
         window.runner.busy_changed.connect(self._busy)
         self.picture: QPixmap | None = None         # the report at full size
         self.level: str | None = None               # the last verdict: pass, check, fail
@@ -56,6 +73,35 @@ class CalibratePage(QWidget):
     @property
     def task_name(self) -> str:
         return f"calibrate-{self.kind}"
+
+    @property
+    def record_name(self) -> str:
+        return f"record-{self.kind}"
+
+    def record(self) -> None:
+        """Record the calibration on the connected rig into the recording folder (default
+        calib/KIND-recording beside the project), off the GUI thread."""
+        w, station = self.window_, self.window_.station
+        busy = [n for n in ("scan", "mark", "preview", "produce") if w.runner.running(n)]
+        if station is None or busy:
+            self.ui.notesLabel.setText("connect the rig first" if station is None else
+                                       f"the station is busy ({busy[0]})")
+            return
+        folder = Path(self.ui.recordingEdit.text().strip() or f"calib/{self.kind}-recording")
+        if not folder.is_absolute() and w.session.project_path is not None:
+            folder = w.session.project_path.parent / folder
+        kind = self.kind
+        task = w.runner.start(self.record_name, lambda p, c, _f: ops.record_calibration(
+            station, kind, folder, p, c), self._recorded, self._failed)
+        if task is not None:
+            self.ui.notesLabel.setText(f"recording into {folder}…")
+            self.ui.progressBar.setValue(0)
+            task.progress.connect(lambda d, t: (self.ui.progressBar.setMaximum(t),
+                                                self.ui.progressBar.setValue(d)))
+
+    def _recorded(self, folder: Path) -> None:
+        self.ui.recordingEdit.setText(str(folder))
+        self.ui.notesLabel.setText(f"recorded {folder}: Calibrate fits it")
 
     def _browse_recording(self) -> None:
         folder = QFileDialog.getExistingDirectory(self, f"Recorded {self.kind} calibration")
@@ -129,6 +175,9 @@ class CalibratePage(QWidget):
     def _busy(self, name: str, busy: bool) -> None:
         if name == self.task_name:
             self.ui.runButton.setEnabled(not busy)
+        if name == self.record_name:
+            self.record_button.setEnabled(not busy)
+            self.cancel_button.setEnabled(busy)
 
 
 class CalibratePanel(QTabWidget):
