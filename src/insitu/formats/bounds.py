@@ -63,6 +63,14 @@ BOUNDS: dict[str, Bound] = {
     "delay_us": Bound(0, 100000, "µs", _DELAY),
     "corner_deg": Bound(0, 180, "°", "a turn angle"),
     "passes": Bound(1, 100, "", "a pen marks each path 1 … 100 times (deep engraving)"),
+    "depth_mm": Bound(0.001, 20, "mm", "an engraving's depth: 1 µm … a deep mould cavity"),
+    "rescan_every": Bound(1, 1000, "passes", "an engraving measures after 1 … 1000 passes"),
+    "laser_power_w": Bound(0.01, 20000, "W", "marking sources: 10 mW diodes … 20 kW fibre"),
+    "spot_um": Bound(1, 5000, "µm", "a focused spot: 1 µm … 5 mm"),
+    "threshold_j_cm2": Bound(0.001, 1000, "J/cm²", "ablation thresholds: 0.01 J/cm² "
+                             "(polymers, fs) … tens of J/cm² (ceramics, long pulses)"),
+    "penetration_um": Bound(0.001, 1000, "µm", "effective penetration depths: 10 nm "
+                            "(metals, fs) … hundreds of µm (wood, CO2)"),
     "wobble_amplitude_mm": Bound(0.001, 5, "mm", "a wobble widens a line by up to a few mm "
                                  "(welding, bold marks)"),
     "wobble_hz": Bound(1, 50000, "Hz", "galvos follow a wobble circle up to a few kHz; 50 kHz "

@@ -23,6 +23,7 @@ from insitu.reconstruct.packing import FramePlan, RecordedPlan
 from insitu.reconstruct.plan import check_region, scan_lines
 from insitu.reconstruct.scan import ScanReconstructor
 from insitu.reconstruct.turned_sheet import CROSS_ANGLE_DEG
+from insitu.vision.extract import CentreSettings
 from insitu.formats.calibration import HeightCalibration
 from insitu.services.common import Progress, camera_model
 from insitu.services.height import (centre_settings, check_same_camera, crossed_model,
@@ -124,19 +125,22 @@ def _finish(rec: ScanReconstructor, t0: StepTimer, rig: RigRecord | None = None,
 def reconstructor(camera: CameraModel, pivot_height_mm: float, telecentric: bool,
                   z_range_mm: tuple[float, float], height_cal: HeightCalibration | None,
                   model: str | None, where: str, cross: bool = False,
+                  centres: CentreSettings | None = None,
                   pixel_bits: int | None = None) -> ScanReconstructor:
     """Method 1 without a height calibration, else Method 2 with it (``model``: "sheet",
     "paper" or None for the calibration's default; with ``cross`` also its crossed lines'
     model, MeasurementError when it has none). The line is searched where the focus range
-    ``z_range_mm`` can put it; ``pixel_bits``: the frames' significant bits (None: their
+    ``z_range_mm`` can put it; its centres found with ``centres`` (None: as the calibration
+    was made, else the default); ``pixel_bits``: the frames' significant bits (None: their
     dtype's)."""
     if height_cal is None:
-        return ScanReconstructor(camera, pivot_height_mm, telecentric, z_range_mm=z_range_mm,
+        return ScanReconstructor(camera, pivot_height_mm, telecentric,
+                                 settings=centres or CentreSettings(), z_range_mm=z_range_mm,
                                  pixel_bits=pixel_bits)
     check_same_camera(height_cal, camera.width, camera.height, where)
     cal_camera, hmodel = height_model(height_cal, model)
     return ScanReconstructor(cal_camera, pivot_height_mm, telecentric, hmodel,
-                             centre_settings(height_cal), z_range_mm,
+                             centres or centre_settings(height_cal), z_range_mm,
                              cross_model=crossed_model(height_cal) if cross else None,
                              pixel_bits=pixel_bits)
 
@@ -197,13 +201,15 @@ def scan_live(station: Station, spacing: float = 0.5, region=None,
               speed_mm_s: float | None = None, cross: bool = False,
               cross_spacing: float | None = None, lines_per_frame: int | str | None = None,
               heights: tuple[float, float] | None = None,
-              packing: Packing = Packing()) -> ScanResult:
+              packing: Packing = Packing(),
+              centres: CentreSettings | None = None) -> ScanResult:
     """Drive the station: step the line over ``region`` (x0, x1, y0, y1) mm (default: the
     station's, which a real rig does not have), with ``cross`` a second pass of crossed
     lines over it ``cross_spacing`` mm apart (:func:`plan_lines`), and reconstruct each
     frame as it arrives
     (``on_frame`` sees each; ``exposure_ms``: the camera's, default its own, for each line;
-    ``speed_mm_s``: the head's line sweep speed, default its own). ``lines_per_frame``:
+    ``speed_mm_s``: the head's line sweep speed, default its own; ``centres``: how line
+    centres are found, default as the height calibration was made). ``lines_per_frame``:
     None or 1, K or "auto" (:mod:`insitu.reconstruct.packing`: a survey frame bounds the
     heights, unless ``heights`` (low, high) mm are known, then the lines are packed by
     them; a frame of K lines is exposed K times as long). First a frame with the laser off
@@ -218,7 +224,7 @@ def scan_live(station: Station, spacing: float = 0.5, region=None,
     check_region(region, rig.head.field_size_mm)
     lines = plan_lines(region, spacing, cross, height_cal, cross_spacing)
     rec = reconstructor(rig.camera, rig.head.pivot_height_mm, rig.head.lens == "telecentric",
-                        rig.head.z_range_mm, height_cal, model, "live scan", cross,
+                        rig.head.z_range_mm, height_cal, model, "live scan", cross, centres,
                         pixel_bits_of(station.devices.camera))
     plan = FramePlan(lines, rec.sheets, rig.head.z_range_mm, lines_per_frame, packing, heights)
     camera, head = station.devices.camera, station.devices.head

@@ -16,7 +16,11 @@ again: a burn along the last one's samples counts as its next pass (``Burn.passe
 the inspection camera sees darker.
 
 Burns are kept on the world (``SimWorld.burns``), so a resumed job on a new controller adds to
-the same marks and :class:`SimInspectionCamera` sees them all.
+the same marks and :class:`SimInspectionCamera` sees them all. On a part of an ablation
+material (the blanks, :mod:`insitu.sim.ablation`) a burn removes material instead: each
+sample carries the pulses fired while the spot crossed it (frequency × time at the mark
+speed) and the height of the focus on its beam, and the world's surface goes down under them
+(an engraving is seen by its shape, not by a darker colour).
 
 Test instrumentation: when ``INSITU_SIM_MARK_LOG`` names a file, the controller appends what it
 executes there — ``L digest n`` when a list of n commands starts, ``J i`` / ``M i x0 y0 z0 x1
@@ -229,7 +233,7 @@ class SimController:
     @property
     def scene(self) -> Scene:
         """Where the marks burn: the given scene, else the world's as it is now."""
-        return self._scene if self._scene is not None else self.world.renderer().scene
+        return self._scene if self._scene is not None else self.world.renderer(False).scene
 
     # -- Controller --------------------------------------------------------------------------
     def execute(self, commands: Sequence[Command]) -> None:
@@ -256,6 +260,7 @@ class SimController:
             self._position = ListPosition(digest, i + 1)
         if not self._stopped:
             self._note(f"E {digest} {len(commands)}", sync=True)
+        self.world.save_engravings(every_s=1.0)
 
     def laser_off(self) -> None:
         self._stopped = True
@@ -263,6 +268,7 @@ class SimController:
         self.laser_is_on = self.pilot_is_on = False
         self.world.laser = LaserState()
         self._note("O", sync=True)
+        self.world.save_engravings()
 
     def check(self, lists) -> None:
         """No limits beyond the driver's."""
@@ -320,15 +326,19 @@ class SimController:
             focus = self.joint[2] + t[:, 0] * (target[2] - self.joint[2])
             if self._open:
                 cmd, focus = cmd[1:], focus[1:]     # the start was burnt by the previous move
-            self._open.append(self.burn_at(cmd, focus))
+            pulses = np.full(len(cmd), self.frequency_khz * 1e3 * length / n / self.speed["mark"])
+            if not self._open:
+                pulses[0] = 0.0                     # the path's first sample: the spot arrives
+            self._open.append((*self.burn_at(cmd, focus), pulses))
         elif self.pilot_is_on:
             self.pilot_trace.append(np.vstack([a, b]))
         self.joint = target
 
-    def burn_at(self, cmd: np.ndarray, focus_mm: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def burn_at(self, cmd: np.ndarray, focus_mm: np.ndarray) -> tuple[np.ndarray, ...]:
         """(N, 2) commands on z = 0 and (N,) focus shifts → where the true beam meets the
-        true surface (N, 3) and the 1/e² spot diameter there (N,), mm; NaN where it meets
-        nothing."""
+        true surface (N, 3) and the 1/e² spot diameter there (N,), mm (NaN where it meets
+        nothing), the z of the focus on each beam (N,) mm and the scene part it met (N,)
+        (−1: none)."""
         rig, head = self.world.rig, self.world.rig.head
         origins, dirs = rig.beams.rays(cmd)
         hits = self.scene.cast(origins, dirs)
@@ -340,13 +350,18 @@ class SimController:
         s_hit = np.einsum("ij,ij->i", hits.points - origins, dirs)
         width = 2.0 * rig.optics.beam_radius_mm(s_hit - s_focus)
         pts = np.where(hits.hit[:, None], hits.points, np.nan)
-        return pts, np.where(hits.hit, width + 2.0 * self.wobble_mm, np.nan)
+        focus_z = origins[:, 2] + s_focus * dirs[:, 2]
+        return (pts, np.where(hits.hit, width + 2.0 * self.wobble_mm, np.nan), focus_z,
+                hits.part)
 
     def _close_burn(self) -> None:
         if self._open:
-            pts = np.vstack([p for p, _ in self._open])
-            w = np.concatenate([w for _, w in self._open])
+            pts, w, focus_z, part, pulses = (np.concatenate(a) for a in zip(*self._open))
+            self._open = []
             burn = Burn(pts, w, self.power_pct)
+            if self.world.ablate(pts, part, focus_z, pulses, self.power_pct,
+                                 self.frequency_khz):
+                return
             last = self.burns[-1] if self.burns else None
             if last is not None and self.world.burns and self.world.burns[-1] is last and (
                     last.again(burn)):
@@ -355,7 +370,6 @@ class SimController:
             else:
                 self.burns.append(burn)
                 self.world.burns.append(burn)
-        self._open = []
 
 
 MARK_LOG_ENV = "INSITU_SIM_MARK_LOG"

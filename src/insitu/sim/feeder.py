@@ -43,6 +43,6 @@ class SimFeeder:
         (4, 4), the truth (read only by tests and benchmarks)."""
         pose = part_pose(self.seed, part)
         self.world.parts = [_part(self.workpiece, *pose)]
-        self.world.burns = []
+        self.world.burns, self.world.engravings = [], {}
         self.world.invalidate()
         return pose_matrix(*pose)

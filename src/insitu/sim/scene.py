@@ -41,6 +41,12 @@ MATERIALS = {
                     **_METAL),
     "insert": Material(albedo=0.25, specular=0.45, shininess=120.0, texture=0.08, mirror=0.55,
                        **_METAL),
+    # the engraving blanks (sim/ablation.py holds how each ablates)
+    "blank-stainless": Material(albedo=0.45, specular=0.35, shininess=60.0, texture=0.10,
+                                mirror=0.35, **_METAL),
+    "blank-anodised": Material(albedo=0.35, specular=0.15, shininess=20.0, texture=0.06,
+                               mirror=0.10, speckle_cv=0.30, speckle_corr_mm=0.25),
+    "blank-beech": Material(albedo=0.55, specular=0.05, shininess=8.0, texture=0.20, **_MATTE),
 }
 DEFAULT_MATERIAL = Material(mirror=0.45, **_METAL)  # machined parts without an entry
 

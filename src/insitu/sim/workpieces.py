@@ -254,6 +254,9 @@ _CATALOGUE: dict[str, tuple[Callable, dict]] = {
     "freeform": (_freeform, {"width": 60.0, "length": 60.0, "base": 6.0, "amp": 2.5,
                              "wavelength_x": 50.0, "wavelength_y": 60.0, "bump": 2.0,
                              "bump_x": 8.0, "bump_y": -6.0, "bump_sigma": 9.0}),
+    "blank-stainless": (_plate, {"width": 40.0, "length": 40.0, "thickness": 5.0, "top_z": 5.0}),
+    "blank-anodised": (_plate, {"width": 40.0, "length": 40.0, "thickness": 5.0, "top_z": 5.0}),
+    "blank-beech": (_plate, {"width": 40.0, "length": 40.0, "thickness": 8.0, "top_z": 8.0}),
     "plate": (_plate, {"width": 260.0, "length": 260.0, "thickness": 10.0, "top_z": 0.0}),
     "table": (_plate, {"width": 400.0, "length": 400.0, "thickness": 20.0, "top_z": 0.0}),
 }
@@ -327,6 +330,20 @@ def random_pose(rng: np.random.Generator, half_mm: float = 25.0) -> Pose:
     """A pose drawn uniformly: x, y within ±``half_mm`` mm, any turn (−180 … 180°)."""
     x, y = rng.uniform(-half_mm, half_mm, 2)
     return float(x), float(y), float(rng.uniform(-180.0, 180.0))
+
+
+def to_part(part: Workpiece, x, y) -> tuple[np.ndarray, np.ndarray]:
+    """World (x, y) mm → the placed part's own frame."""
+    p = part.params
+    return meshes.unplace(x, y, p.get("x", 0.0), p.get("y", 0.0), p.get("angle_deg", 0.0))
+
+
+def to_world(part: Workpiece, u, v) -> tuple[np.ndarray, np.ndarray]:
+    """The placed part's own frame (u, v) mm → world (x, y)."""
+    a = np.radians(part.params.get("angle_deg", 0.0))
+    u, v = np.asarray(u, float), np.asarray(v, float)
+    return (part.params.get("x", 0.0) + np.cos(a) * u - np.sin(a) * v,
+            part.params.get("y", 0.0) + np.sin(a) * u + np.cos(a) * v)
 
 
 def part_matrix(part: Workpiece) -> np.ndarray:

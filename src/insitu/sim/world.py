@@ -1,21 +1,35 @@
 """The simulated station's world: the true rig, the parts on the table, the calibration plate
-or board, the laser's state and the marks burnt so far. The simulated devices
-(:mod:`insitu.sim.devices`) share one world, as ophyd's simulated detectors respond to
-simulated motors."""
+or board, the laser's state, the marks burnt so far and the material they removed. The
+simulated devices (:mod:`insitu.sim.devices`) share one world, as ophyd's simulated detectors
+respond to simulated motors.
+
+The material removed from a part (:mod:`insitu.sim.ablation`) changes its surface for every
+camera frame after it; it outlives the program when ``INSITU_SIM_ENGRAVING`` names a file (as
+the part would stay on a real table): the world reads it when made and writes it when the
+controller's laser goes off, and at most once a second in between.
+"""
 
 from __future__ import annotations
 
+import io
+import json
+import os
+import time
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from insitu.devices.clock import StationClock
+from insitu.formats.atomic import atomic_write_bytes
+from insitu.sim.ablation import ABLATION, Engraving, MarkingBeam, ablate, engraved_part
 from insitu.sim.clock import SimTiming
 from insitu.sim.render import Renderer
 from insitu.sim.rig import SimRig, default_rig
 from insitu.sim.scene import Scene
 from insitu.sim.workpieces import (Pose, Workpiece, load_mesh_workpiece, make_workpiece,
-                                   part_matrix, workpiece_at)
+                                   part_matrix, to_part, workpiece_at)
+
+ENGRAVING_ENV = "INSITU_SIM_ENGRAVING"
 
 
 @dataclass
@@ -45,7 +59,9 @@ class SimWorld:
     :mod:`insitu.sim.board`), None when there is none. ``clock``: the station's time, which
     the devices advance by ``timing`` (:mod:`insitu.sim.clock`); ``head_xy``: where the
     head's last list left it (mm on z = 0); ``materials``: parts' materials by name in place
-    of the catalogue's (:class:`insitu.sim.scene.Scene`)."""
+    of the catalogue's (:class:`insitu.sim.scene.Scene`); ``engravings``: the material removed
+    from ``parts[i]`` (:class:`~insitu.sim.ablation.Engraving`, only parts of an ablation
+    material); ``beam``: the true marking laser."""
 
     rig: SimRig
     parts: list[Workpiece] = field(default_factory=list)
@@ -58,18 +74,108 @@ class SimWorld:
     timing: SimTiming = field(default_factory=SimTiming)
     head_xy: np.ndarray = field(default_factory=lambda: np.zeros(2))
     materials: dict | None = None
+    engravings: dict[int, Engraving] = field(default_factory=dict)
+    beam: MarkingBeam = field(default_factory=MarkingBeam)
     _renderer: Renderer | None = field(default=None, repr=False)
+    _built: dict = field(default_factory=dict, repr=False)  # i → (engraving, version, part)
+    _rng: np.random.Generator | None = field(default=None, repr=False)
+    _saved: float = field(default=0.0, repr=False)
+
+    def __post_init__(self) -> None:
+        self._rng = np.random.default_rng([self.seed, 331])
+        self._load_engravings()
 
     def scene_parts(self) -> list[Workpiece]:
-        """The table, or the calibration plate on the Z stage in its place."""
+        """The table, or the calibration plate on the Z stage in its place, and the parts with
+        the material removed from them."""
+        parts = [self._engraved(i) for i in range(len(self.parts))]
         if self.plate_z is not None:
-            return [make_workpiece("plate", top_z=self.plate_z)] + list(self.parts)
-        return [make_workpiece("table")] + list(self.parts)
+            return [make_workpiece("plate", top_z=self.plate_z)] + parts
+        return [make_workpiece("table")] + parts
 
-    def renderer(self) -> Renderer:
+    def _engraved(self, i: int) -> Workpiece:
+        eng = self.engravings.get(i)
+        if eng is None:
+            return self.parts[i]
+        built = self._built.get(i)
+        if built is None or built[0] is not eng or built[1] != eng.version:
+            built = self._built[i] = (eng, eng.version, engraved_part(self.parts[i], eng))
+        return built[2]
+
+    def renderer(self, fresh: bool = True) -> Renderer:
+        """The camera's renderer; ``fresh``: its scene with the material removed so far (a
+        marking controller takes the scene as it is: a burn's position hardly moves as the
+        floor goes down, and the removal itself is computed on the engraving's grid)."""
         if self._renderer is None:
             self._renderer = Renderer(self.rig, self._scene(), seed=self.seed)
+        elif fresh and any(i not in self._built or self._built[i][0] is not e
+                           or self._built[i][1] != e.version
+                           for i, e in self.engravings.items()):
+            self.invalidate()
         return self._renderer
+
+    def ablate(self, points: np.ndarray, scene_part: np.ndarray, focus_z: np.ndarray,
+               pulses: np.ndarray, power_pct: float, frequency_khz: float) -> bool:
+        """Remove material where a burn's samples met a part of an ablation material:
+        ``points`` (N, 3) world mm, ``scene_part`` (N,) their index in the scene's parts (0:
+        the table), ``focus_z`` (N,) z of the focus on each sample's beam, ``pulses`` (N,)
+        fired there. Returns whether any part was engraved."""
+        done = False
+        for k in np.unique(scene_part[scene_part > 0]):
+            i = int(k) - 1
+            part = self.parts[i]
+            material = ABLATION.get(part.name)
+            if material is None:
+                continue
+            sel = scene_part == k
+            u, v = to_part(part, points[sel, 0], points[sel, 1])
+            uv = np.column_stack([u, v])
+            eng = self.engravings.setdefault(i, Engraving(material, seed=self.seed + 7919 * i))
+            eng.cover(part, uv.min(0), uv.max(0))
+            done |= ablate(eng, self.beam, uv, focus_z[sel], pulses[sel], power_pct,
+                           frequency_khz, self._rng)
+        return done
+
+    def true_depth(self, x: np.ndarray, y: np.ndarray, index: int = 0) -> np.ndarray:
+        """Depth (mm) removed from ``parts[index]`` at world (x, y): the truth that scores a
+        measured pocket (0 where nothing was removed)."""
+        eng = self.engravings.get(index)
+        if eng is None:
+            return np.zeros(np.shape(x))
+        return eng.depth_at(*to_part(self.parts[index], x, y))
+
+    # -- the engraved parts outlive the program (INSITU_SIM_ENGRAVING) -----------------------
+    def _key(self, i: int) -> str:
+        return json.dumps([self.parts[i].name, self.parts[i].params], sort_keys=True)
+
+    def _load_engravings(self) -> None:
+        path = os.environ.get(ENGRAVING_ENV)
+        if not path or not os.path.exists(path):
+            return
+        with np.load(path, allow_pickle=False) as z:
+            for i in range(len(self.parts)):
+                key = f"p{i}"
+                if f"{key}_removed" in z and str(z[f"{key}_key"]) == self._key(i):
+                    material = ABLATION[self.parts[i].name]
+                    eng = Engraving(material, seed=self.seed + 7919 * i)
+                    eng.restore(self.parts[i], z[f"{key}_origin"], z[f"{key}_removed"])
+                    eng.version = int(z[f"{key}_version"])
+                    self.engravings[i] = eng
+
+    def save_engravings(self, every_s: float = 0.0) -> None:
+        """Write the engravings to ``INSITU_SIM_ENGRAVING`` (when set), at most every
+        ``every_s`` seconds."""
+        path = os.environ.get(ENGRAVING_ENV)
+        if not path or not self.engravings or time.monotonic() - self._saved < every_s:
+            return
+        arrays = {}
+        for i, eng in self.engravings.items():
+            arrays |= {f"p{i}_removed": eng.removed, f"p{i}_key": np.array(self._key(i)),
+                       f"p{i}_origin": eng.origin, f"p{i}_version": np.array(eng.version)}
+        buf = io.BytesIO()
+        np.savez(buf, **arrays)
+        atomic_write_bytes(path, buf.getvalue())
+        self._saved = time.monotonic()
 
     def invalidate(self) -> None:
         """The scene changed (stage moved, part placed): rebuild it on the next frame, keeping
@@ -104,11 +210,13 @@ class SimWorld:
         else:
             self.parts[index] = make_workpiece(part.name, **{**part.params, "x": x, "y": y,
                                                              "angle_deg": angle})
+        self._built.pop(index, None)             # its engraving moves with it
         self.invalidate()
 
     def clear_table(self) -> None:
         """Take the parts off the table (for a calibration on the plate)."""
         self.parts = []
+        self.engravings, self._built = {}, {}
         self.invalidate()
 
 

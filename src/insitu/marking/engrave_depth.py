@@ -1,0 +1,284 @@
+"""How deep a pocket is, measured by the scan lines that cross it: its floor and the top
+around it from the same lines, per point and as a map over the pocket's cells.
+
+The top: the scan's points outside the pocket, farther than ``wall_band_mm`` from its outline
+and within ``ring_mm`` of it, fit a quadratic surface z(x, y) plus an offset per line, shrunk
+towards 0 by the evidence the line's own top points give (a line's height error is shared by
+its floor points, so the floor is referred to the top of the same lines). A floor point's
+depth is top(x, y) + offset(line) − z.
+
+The wall's neighbourhood: a point within ``wall_band_mm`` of the outline is neither floor nor
+top. There the line (as wide as the beam) straddles the edge, the centre detector's kernel
+carries the step along the line, and the camera loses the floor behind the wall on its side;
+``benchmarks/engrave.py walls`` measures the bias against the distance to the wall.
+
+The map: a cell's depth is the Gaussian-weighted mean of the floor points around its centre
+(σ ``kernel_mm``), with its standard error; each cell of the pocket is
+  measured   — enough floor points around it (``min_points`` effective), centre beyond the band;
+  wall       — its centre within the band: the value the kernel brings from the floor inside;
+  hidden     — the camera (or the beam) cannot reach it past the wall at the depth around it;
+  unmeasured — too few points for another reason.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import shapely
+from scipy.ndimage import distance_transform_edt
+from scipy.spatial import cKDTree
+
+from insitu.errors import MeasurementError
+
+STATES = ("measured", "wall", "hidden", "unmeasured")
+MEASURED, WALL, HIDDEN, UNMEASURED = range(4)
+OUTSIDE = -1
+_RASTER_MM = 0.01
+
+
+@dataclass(frozen=True)
+class DepthSettings:
+    """``wall_band_mm``: points this close to the outline are left out (floor and top);
+    ``ring_mm``: top points up to this far outside; ``cell_mm``: the map's cells;
+    ``kernel_mm``: σ of the weights that average floor points into a cell; ``min_points``:
+    effective points for a cell to count as measured."""
+
+    wall_band_mm: float = 0.2
+    ring_mm: float = 2.0
+    cell_mm: float = 0.25
+    kernel_mm: float = 0.2
+    min_points: float = 8.0
+
+
+@dataclass(frozen=True)
+class PocketCells:
+    """The cells over a pocket: ``origin`` (x, y) world mm of cell (0, 0)'s centre,
+    ``cell_mm`` apart, ``inside`` (ny, nx) bool: the cell's centre lies in the pocket,
+    ``edge_mm`` (ny, nx): its centre's distance to the outline (> 0 inside)."""
+
+    origin: np.ndarray
+    cell_mm: float
+    inside: np.ndarray
+    edge_mm: np.ndarray
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        return self.inside.shape
+
+    def centres(self) -> tuple[np.ndarray, np.ndarray]:
+        """(ny, nx) world x and y of the cells' centres."""
+        ny, nx = self.shape
+        return np.meshgrid(self.origin[0] + self.cell_mm * np.arange(nx),
+                           self.origin[1] + self.cell_mm * np.arange(ny))
+
+    def index(self, x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(row, col) of the cell holding each world point, clipped to the grid."""
+        ny, nx = self.shape
+        col = np.clip(np.round((np.asarray(x) - self.origin[0]) / self.cell_mm), 0, nx - 1)
+        row = np.clip(np.round((np.asarray(y) - self.origin[1]) / self.cell_mm), 0, ny - 1)
+        return row.astype(int), col.astype(int)
+
+
+class Outline:
+    """A pocket's region (shapely, world x, y mm) rasterised at 0.01 mm with its signed
+    distance: :meth:`distance` of any point to the outline, > 0 inside."""
+
+    def __init__(self, region, margin_mm: float):
+        if region.is_empty:
+            raise MeasurementError("the pocket's region is empty")
+        self.region = region
+        x0, y0, x1, y1 = region.bounds
+        self.origin = np.array([x0 - margin_mm, y0 - margin_mm])
+        nx = int(np.ceil((x1 - x0 + 2 * margin_mm) / _RASTER_MM)) + 1
+        ny = int(np.ceil((y1 - y0 + 2 * margin_mm) / _RASTER_MM)) + 1
+        gx, gy = np.meshgrid(self.origin[0] + _RASTER_MM * np.arange(nx),
+                             self.origin[1] + _RASTER_MM * np.arange(ny))
+        inside = shapely.contains_xy(region, gx, gy)
+        self._signed = (distance_transform_edt(inside) - distance_transform_edt(~inside)
+                        ) * _RASTER_MM
+
+    def distance(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
+        """(N,) signed distance (mm) of world points to the outline; −inf off the raster."""
+        ny, nx = self._signed.shape
+        col = np.round((np.asarray(x) - self.origin[0]) / _RASTER_MM).astype(int)
+        row = np.round((np.asarray(y) - self.origin[1]) / _RASTER_MM).astype(int)
+        ok = (col >= 0) & (col < nx) & (row >= 0) & (row < ny)
+        out = np.full(np.shape(x), -np.inf)
+        out[ok] = self._signed[row[ok], col[ok]]
+        return out
+
+    def cells(self, cell_mm: float) -> PocketCells:
+        """The cells over the region (its bounding box, one cell beyond)."""
+        x0, y0, x1, y1 = self.region.bounds
+        origin = np.floor(np.array([x0, y0]) / cell_mm) * cell_mm - cell_mm / 2
+        nx = int(np.ceil((x1 - origin[0]) / cell_mm)) + 1
+        ny = int(np.ceil((y1 - origin[1]) / cell_mm)) + 1
+        gx, gy = np.meshgrid(origin[0] + cell_mm * np.arange(nx),
+                             origin[1] + cell_mm * np.arange(ny))
+        edge = self.distance(gx, gy)
+        return PocketCells(origin, cell_mm, edge > 0, edge)
+
+
+@dataclass(frozen=True)
+class DepthMap:
+    """A pocket measured: per cell (``cells``' grid) its ``depth`` mm (NaN: none), standard
+    error ``sem`` mm, effective ``points`` and ``state`` (an index of :data:`STATES`,
+    :data:`OUTSIDE` off the pocket); ``floor`` (M, 3): each floor point's x, y and depth;
+    ``top_rms``: the top model's residual rms, ``point_sigma``: a floor point's depth
+    scatter (robust), mm."""
+
+    cells: PocketCells
+    depth: np.ndarray
+    sem: np.ndarray
+    points: np.ndarray
+    state: np.ndarray
+    floor: np.ndarray
+    top_rms: float
+    point_sigma: float
+
+    def mean_depth(self) -> tuple[float, float]:
+        """The floor's mean depth and its standard error, mm (points beyond 4σ left out)."""
+        d = self.floor[:, 2]
+        if len(d) == 0:
+            return float("nan"), float("nan")
+        med = np.median(d)
+        keep = np.abs(d - med) <= 4 * max(self.point_sigma, 1e-6)
+        return float(d[keep].mean()), float(self.point_sigma / np.sqrt(max(keep.sum(), 1)))
+
+    def count(self, state: int) -> int:
+        return int((self.state == state).sum())
+
+
+def measure_depth(points: np.ndarray, line: np.ndarray, region, settings: DepthSettings,
+                  outline: Outline | None = None, cells: PocketCells | None = None,
+                  viewpoints: np.ndarray | None = None) -> DepthMap:
+    """The pocket ``region`` (shapely, world mm) measured by a scan's ``points`` (N, 3) mm,
+    ``line`` (N,) the scan line of each. ``viewpoints`` (K, 3): where the camera and the beam
+    come from (world mm), for the cells they cannot reach past a wall (None: not checked).
+    MeasurementError when the scan has too few top or floor points."""
+    s = settings
+    outline = outline or Outline(region, s.ring_mm + s.cell_mm)
+    cells = cells or outline.cells(s.cell_mm)
+    dist = outline.distance(points[:, 0], points[:, 1])
+    top = (dist <= -s.wall_band_mm) & (dist >= -s.ring_mm)
+    floor = dist >= s.wall_band_mm
+    if top.sum() < 20:
+        raise MeasurementError(f"the scan has {int(top.sum())} points on the top around the "
+                               "pocket: scan beyond its outline")
+    if floor.sum() < 5:
+        raise MeasurementError(f"the scan has {int(floor.sum())} points on the pocket's floor")
+    top_at, top_rms = _top_model(points[top], line[top])
+    d = top_at(points[floor], line[floor]) - points[floor, 2]
+    fx, fy = points[floor, 0], points[floor, 1]
+    depth, sem, neff, sigma, keep = _cell_means(cells, fx, fy, d, s.kernel_mm)
+    state = np.full(cells.shape, OUTSIDE, np.int8)
+    state[cells.inside] = UNMEASURED
+    ok = cells.inside & (neff >= s.min_points)
+    state[ok & (cells.edge_mm >= s.wall_band_mm)] = MEASURED
+    state[cells.inside & (cells.edge_mm < s.wall_band_mm)] = WALL
+    if viewpoints is not None:
+        near = _nearest_depth(depth, ok)
+        blocked = unreachable(cells, near, outline, viewpoints)
+        state[(state == UNMEASURED) & blocked] = HIDDEN
+        state[(state == WALL) & blocked & ~ok] = HIDDEN
+    depth = np.where(state == OUTSIDE, np.nan, np.where(neff > 0, depth, np.nan))
+    floor_pts = np.column_stack([fx, fy, d])[keep]
+    return DepthMap(cells, depth, sem, neff, state, floor_pts, top_rms, sigma)
+
+
+def _top_model(p: np.ndarray, line: np.ndarray):
+    """Fit the top: a quadratic surface plus per-line offsets shrunk by their evidence
+    (a random effect). Returns (f(points, lines) → top z, residual rms)."""
+    c0, scale = p[:, :2].mean(0), np.maximum(p[:, :2].std(0), 1e-6)
+
+    def basis(q):
+        u, v = ((q[:, :2] - c0) / scale).T
+        return np.column_stack([np.ones(len(q)), u, v, u * u, u * v, v * v])
+
+    A, z = basis(p), p[:, 2]
+    keep = np.ones(len(z), bool)
+    offset = np.zeros(len(z))
+    lines, inv = np.unique(line, return_inverse=True)
+    b = np.zeros(len(lines))
+    for _ in range(3):
+        coef = np.linalg.lstsq(A[keep], (z - offset)[keep], rcond=None)[0]
+        r = z - A @ coef
+        n = np.bincount(inv[keep], minlength=len(lines)).astype(float)
+        mean = np.bincount(inv[keep], r[keep], minlength=len(lines)) / np.maximum(n, 1)
+        within = np.median(np.abs(r[keep] - mean[inv[keep]])) * 1.4826
+        noise = within ** 2 / np.maximum(n, 1)
+        between = max(np.var(mean[n > 0]) - np.mean(noise[n > 0]), 0.0)
+        b = np.where(n > 0, mean * between / (between + noise), 0.0)
+        offset = b[inv]
+        res = z - A @ coef - offset
+        keep = np.abs(res) <= 4 * max(np.median(np.abs(res)) * 1.4826, 1e-6)
+    rms = float(np.sqrt(np.mean(res[keep] ** 2)))
+    known = dict(zip(lines.tolist(), b))
+
+    def top_at(q: np.ndarray, q_line: np.ndarray) -> np.ndarray:
+        off = np.array([known.get(k, 0.0) for k in q_line.tolist()])
+        return basis(q) @ coef + off
+    return top_at, rms
+
+
+def _cell_means(cells: PocketCells, x, y, d, kernel_mm: float):
+    """Per cell the Gaussian-weighted mean depth of the floor points, its standard error
+    and effective points; the robust point scatter; which points were kept (beyond 4σ of
+    their cell's mean: left out, a ghost or a dropped centre)."""
+    shape = cells.shape
+    gx, gy = cells.centres()
+    tree = cKDTree(np.column_stack([x, y]))
+    keep = np.ones(len(d), bool)
+    for _ in range(2):
+        depth, wsum, w2sum = np.zeros(shape), np.zeros(shape), np.zeros(shape)
+        near = tree.query_ball_point(np.column_stack([gx.ravel(), gy.ravel()]), 3 * kernel_mm)
+        for k, idx in enumerate(near):
+            idx = np.asarray(idx, int)
+            idx = idx[keep[idx]]
+            if len(idx) == 0:
+                continue
+            w = np.exp(-((x[idx] - gx.flat[k]) ** 2 + (y[idx] - gy.flat[k]) ** 2)
+                       / (2 * kernel_mm ** 2))
+            i, j = divmod(k, shape[1])
+            depth[i, j] = (w * d[idx]).sum() / w.sum()
+            wsum[i, j], w2sum[i, j] = w.sum(), (w * w).sum()
+        row, col = cells.index(x, y)
+        resid = d - depth[row, col]
+        sigma = float(np.median(np.abs(resid[keep])) * 1.4826)
+        keep = np.abs(resid) <= 4 * max(sigma, 1e-6)
+    neff = np.where(w2sum > 0, wsum ** 2 / np.where(w2sum > 0, w2sum, 1), 0.0)
+    sem = np.where(neff > 0, sigma / np.sqrt(np.maximum(neff, 1e-9)), np.inf)
+    return depth, sem, neff, sigma, keep
+
+
+def _nearest_depth(depth: np.ndarray, ok: np.ndarray) -> np.ndarray:
+    """(ny, nx) each cell's depth, or its nearest measured cell's where it has none."""
+    if not ok.any():
+        return np.zeros(depth.shape)
+    _, (ri, ci) = distance_transform_edt(~ok, return_indices=True)
+    return np.where(ok, depth, depth[ri, ci])
+
+
+def unreachable(cells: PocketCells, depth: np.ndarray, outline: Outline,
+                viewpoints: np.ndarray) -> np.ndarray:
+    """(ny, nx) bool: cells of the pocket that a ray to one of ``viewpoints`` (K, 3) world mm
+    leaves through a wall: from the floor at ``depth`` (mm below the top) it must rise out of
+    the pocket before it passes the outline."""
+    gx, gy = cells.centres()
+    out = np.zeros(cells.shape, bool)
+    inside = cells.inside & (depth > 0)
+    if not inside.any():
+        return out
+    px, py, d = gx[inside], gy[inside], depth[inside]
+    blocked = np.zeros(len(px), bool)
+    for vp in np.asarray(viewpoints, float):
+        h = np.hypot(vp[0] - px, vp[1] - py)
+        rise = max(vp[2], 1.0)                       # the top is far below the viewpoint
+        reach = d * h / rise                         # horizontal run until the top's height
+        u = np.column_stack([vp[0] - px, vp[1] - py]) / np.maximum(h, 1e-9)[:, None]
+        for t in np.linspace(0.0, 1.0, 9)[1:]:
+            qx, qy = px + u[:, 0] * reach * t, py + u[:, 1] * reach * t
+            blocked |= outline.distance(qx, qy) <= 0
+    out[inside] = blocked
+    return out

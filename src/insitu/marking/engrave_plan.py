@@ -1,0 +1,142 @@
+"""An engraving's rounds, planned per cell of the pocket from what its measurements say.
+
+The model: a cell's depth grows by its own rate with every pass (depth = rate × passes; a
+wood's rings, the anodic layer's thickness and the walls' taper make the rate differ from cell
+to cell). Every measurement of a cell (its depth m at P passes, standard error s) adds to the
+least-squares fit of its rate through the origin; the cells' rates are pulled towards the
+pocket's rate by how much of their spread the measurements' noise explains (a random effect:
+τ², the rates' true spread, is what their spread has beyond the noise). So a noisy
+measurement moves a cell's estimate only by what it is worth, and passes never chase noise.
+
+Each round's passes: the depth still missing over the cell's rate, at most ``rescan_every``;
+while the floor is far, :data:`APPROACH` of it (the next measurement corrects the rate), once
+no cell it sees is more than a pass or so short, the rounded rest. A cell at its depth gets no
+more energy. A cell the last measurement could not see (a wall hides it, or no points) gets
+passes only while its passes at :data:`RATE_MARGIN` × its rate stay short of the target: it
+is never over-burnt, and is reported when that leaves it short.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.ndimage import distance_transform_edt
+
+from insitu.marking.engrave_depth import (HIDDEN, MEASURED, OUTSIDE, UNMEASURED, WALL,
+                                          DepthMap, PocketCells)
+
+APPROACH = 0.9          # while far: this fraction of the passes the model says are missing
+RATE_MARGIN = 1.15      # a cell not seen is planned as if it ablated this much faster
+_FIELDS = ("passes", "spp", "sp2", "rate", "rate_var", "estimate")
+
+
+@dataclass
+class CellHistory:
+    """Per cell (ny, nx): ``passes`` given so far (fractional where a round was cut short);
+    ``spp`` Σ P·m/s² and ``sp2`` Σ P²/s² over its measurements (depth m mm at P passes,
+    standard error s mm); ``rate`` (mm per pass) and its variance ``rate_var``;
+    ``estimate`` the depth it is believed at now (mm)."""
+
+    passes: np.ndarray
+    spp: np.ndarray
+    sp2: np.ndarray
+    rate: np.ndarray
+    rate_var: np.ndarray
+    estimate: np.ndarray
+
+    @classmethod
+    def start(cls, shape, rate_mm: float) -> "CellHistory":
+        z = np.zeros(shape)
+        return cls(z.copy(), z.copy(), z.copy(), np.full(shape, rate_mm),
+                   np.full(shape, (0.3 * rate_mm) ** 2), z.copy())
+
+    def to_dict(self) -> dict:
+        return {k: getattr(self, k).tolist() for k in _FIELDS}
+
+    @classmethod
+    def from_dict(cls, d: dict) -> "CellHistory":
+        return cls(*(np.asarray(d[k], float) for k in _FIELDS))
+
+    def given(self, passes: np.ndarray) -> None:
+        """``passes`` (ny, nx) more marked: the estimates move on at the cells' rates."""
+        self.passes = self.passes + passes
+        self.estimate = self.rate * self.passes
+
+
+@dataclass(frozen=True)
+class Learnt:
+    """What the measurements so far teach: the pocket's ``rate_mm`` per pass, its standard
+    error, the spread of the cells' rates (``spread_mm``, their σ beyond the noise) and the
+    ``cells`` it came from."""
+
+    rate_mm: float
+    rate_sem_mm: float
+    spread_mm: float
+    cells: int
+
+
+def owners(cells: PocketCells) -> tuple[np.ndarray, np.ndarray]:
+    """(ny, nx) row and column of the pocket cell each cell belongs to: itself inside the
+    pocket, else its nearest inside cell (an edge cell whose centre lies outside)."""
+    _, (r, c) = distance_transform_edt(~cells.inside, return_indices=True)
+    return r, c
+
+
+def learn(history: CellHistory, dm: DepthMap, nominal_rate_mm: float) -> Learnt:
+    """Add the measurement ``dm`` to ``history`` and fit the rates again (see the module
+    docstring); the nominal rate stands until a measured cell has passes."""
+    seen = (np.isin(dm.state, (MEASURED, WALL)) & np.isfinite(dm.depth)
+            & np.isfinite(dm.sem) & (history.passes > 0))
+    s2 = np.where(seen, np.maximum(dm.sem, 1e-4) ** 2, np.inf)
+    history.spp = history.spp + np.where(seen, history.passes * np.nan_to_num(dm.depth) / s2, 0)
+    history.sp2 = history.sp2 + np.where(seen, history.passes ** 2 / s2, 0)
+    fit = (history.sp2 > 0) & (dm.state == MEASURED)
+    if fit.sum() < 3:
+        return Learnt(nominal_rate_mm, float("nan"), float("nan"), 0)
+    raw = history.spp[fit] / history.sp2[fit]
+    noise = 1.0 / history.sp2[fit]
+    rate = float(np.average(raw, weights=1 / noise))
+    tau2 = max(float(np.var(raw) - np.mean(noise)), 0.0)
+    rate_sem2 = float(np.var(raw) / fit.sum())
+    has = history.sp2 > 0
+    prior = 1.0 / max(tau2, 1e-12)
+    post = np.where(has, (history.spp + rate * prior) / (history.sp2 + prior), rate)
+    history.rate = post
+    history.rate_var = np.where(has, 1.0 / (history.sp2 + prior), tau2) + rate_sem2
+    history.estimate = history.rate * history.passes
+    return Learnt(rate, float(np.sqrt(rate_sem2)), float(np.sqrt(tau2)), int(fit.sum()))
+
+
+@dataclass(frozen=True)
+class RoundPlan:
+    """The passes (ny, nx) int each cell gets in the next round; ``finishing``: the last
+    approach (rounded rest); ``held``: cells short of the target that get no more (the camera
+    does not see them and their allowance is spent)."""
+
+    passes: np.ndarray
+    finishing: bool
+    held: np.ndarray
+
+    @property
+    def layers(self) -> int:
+        return int(self.passes.max()) if self.passes.size else 0
+
+
+def plan_round(history: CellHistory, state: np.ndarray, target_mm: float,
+               rescan_every: int) -> RoundPlan:
+    """The next round's passes per cell (``state``: the last depth map's cell states; all
+    measured before the first measurement)."""
+    inside = state != OUTSIDE
+    rate = np.maximum(history.rate, 1e-6)
+    need = np.where(inside, (target_mm - history.estimate) / rate, 0.0)
+    blind = inside & np.isin(state, (HIDDEN, UNMEASURED))
+    allowed = np.floor(target_mm / (RATE_MARGIN * rate) - history.passes + 1e-9)
+    seen = inside & ~blind
+    far = np.floor(APPROACH * need)
+    finishing = not (far[seen] >= 1).any() if seen.any() else True
+    n = np.round(need) if finishing else far
+    n = np.where(blind, np.minimum(n, allowed), n)
+    n = np.clip(np.where(inside, n, 0), 0, rescan_every).astype(int)
+    held = blind & (need >= 0.5) & (n == 0)
+    return RoundPlan(n, finishing, held)
