@@ -12,8 +12,10 @@ Each round's passes: the depth still missing over the cell's rate, at most ``res
 while the floor is far, :data:`APPROACH` of it (the next measurement corrects the rate), once
 no cell it sees is more than a pass or so short, the rounded rest. A cell at its depth gets no
 more energy. A cell the last measurement could not see (a wall hides it, or no points) gets
-passes only while its passes at :data:`RATE_MARGIN` × its rate stay short of the target: it
-is never over-burnt, and is reported when that leaves it short.
+passes only while its passes at its highest likely rate (:data:`RATE_MARGIN` × its rate, or
+its rate plus three times the σ of the cells' spread and of the rate's estimate, whichever is
+higher) stay short of the target: it is never over-burnt, and is reported when that leaves it
+short.
 """
 
 from __future__ import annotations
@@ -131,7 +133,8 @@ def plan_round(history: CellHistory, state: np.ndarray, target_mm: float,
     rate = np.maximum(history.rate, 1e-6)
     need = np.where(inside, (target_mm - history.estimate) / rate, 0.0)
     blind = inside & np.isin(state, (HIDDEN, UNMEASURED))
-    allowed = np.floor(target_mm / (RATE_MARGIN * rate) - history.passes + 1e-9)
+    rate_hi = np.maximum(RATE_MARGIN * rate, rate + 3.0 * np.sqrt(history.rate_var))
+    allowed = np.floor(target_mm / rate_hi - history.passes + 1e-9)
     seen = inside & ~blind
     far = np.floor(APPROACH * need)
     finishing = not (far[seen] >= 1).any() if seen.any() else True

@@ -14,8 +14,8 @@ see (``held``: they had passes only while the model said they were short, never 
 record (``engrave.json``) is rewritten after every step: a resume counts the passes of a round
 cut short from its journal and measures the pocket before anything else.
 
-Station time: marking from each job's :func:`~insitu.marking.estimate_time`, scanning as the
-scan's frames (its room-light frame and its lines) at :data:`FRAME_PERIOD_S`.
+Station time: the station's own clock (:mod:`insitu.devices.clock`) over each round's marking
+and each depth scan; a real rig's, which has none, the wall clock's.
 """
 
 from __future__ import annotations
@@ -27,6 +27,7 @@ from pathlib import Path
 
 import numpy as np
 
+from insitu.devices.clock import StepTime, StepTimer
 from insitu.errors import ConfigError, FormatError, MeasurementError, SafetyError
 from insitu.formats.calibration import HeightCalibration
 from insitu.formats.materials import DEFAULT_MATERIALS, MaterialTable
@@ -51,9 +52,9 @@ from insitu.services.scan import Cancelled, scan_live
 from insitu.services.station import Station
 from insitu.vision.extract import CentreSettings
 
-FRAME_PERIOD_S = 0.05
-"""A frame of the station's camera: a 5 MP GigE camera's 20 frames/s."""
 MAX_ROUNDS = 60
+MAX_PASSES = 1000
+"""The most passes an engraving plans (at the table's rate): a deeper target is beyond reach."""
 DEPTH_CENTRES = dict(method="gaussian", smooth_half_window=0, smooth_grains=0.0)
 """How a depth scan finds line centres: across the line only (a Gaussian per row), nothing
 smoothed along it, so a wall's step is not carried onto the floor beside it."""
@@ -118,6 +119,8 @@ class _Engraving:
         plan = plan_mark(req.cloud, placement, station.driver,
                          pens=PenTable(default=pen.name, pens=(pen,)))
         self.pattern = plan.pattern
+        self.limits = Limits.of(station.rig.head)
+        self._check_reach(req, np.vstack([p.points for p in plan.job.paths]))
         region = self.pattern.to_shapely()
         if region.is_empty or region.area <= 0:
             raise FormatError(f"pattern {placement.pattern}: no filled area to engrave (only "
@@ -127,8 +130,21 @@ class _Engraving:
         self.cells: PocketCells = self.outline.cells(s.cell_mm)
         x0, y0, x1, y1 = region.bounds
         self.top = Surface(req.cloud, region=(x0 - 2, x1 + 2, y0 - 2, y1 + 2))
-        self.limits = Limits.of(station.rig.head)
         self.last: DepthMap | None = None
+
+    def _check_reach(self, req: EngraveRequest, targets: np.ndarray) -> None:
+        """Refuse a depth the table's rate would need more than :data:`MAX_PASSES` for, or
+        whose floor leaves the focus range (``targets`` (N, 3): the pattern on the top)."""
+        passes = req.depth_mm / self.nominal
+        if passes > MAX_PASSES:
+            raise ConfigError(f"depth {req.depth_mm:g} mm is beyond reach in {req.material}: "
+                              f"{passes:.0f} passes at the table's {self.nominal * 1e3:.2f} "
+                              f"µm per pass (at most {MAX_PASSES})", field="depth_mm")
+        try:
+            check_targets(targets - [0.0, 0.0, req.depth_mm], self.limits)
+        except SafetyError as e:
+            raise SafetyError(f"depth {req.depth_mm:g} mm: the pocket's floor {e}",
+                              e.where_mm) from None
 
     # -- steps ---------------------------------------------------------------------------
     def new_record(self) -> EngraveRecord:
@@ -162,26 +178,29 @@ class _Engraving:
         self.save(record, history)
         self.notify(f"round {k}: {rnd.layers} layers, {len(pts)} paths, "
                     f"{estimate_time(job).total_s:.1f} s of marking")
+        timer = StepTimer(self.station.clock)
         try:
             result = mark(job, self.station.driver, self.station.devices.controller,
                           progress_path_for(job_path), cancel=cancel, progress=progress)
         except Cancelled:
-            self.cut_short(record, history, "cancelled")
+            self.cut_short(record, history, "cancelled", timer.elapsed())
             return False
         except BaseException:
-            self.cut_short(record, history, "interrupted")
+            self.cut_short(record, history, "interrupted", timer.elapsed())
             raise
         if result.state != "done":
-            self.cut_short(record, history, "cancelled")
+            self.cut_short(record, history, "cancelled", timer.elapsed())
             return False
         history.given(passes)
         record.layers += rnd.layers
-        rnd.state, rnd.marking_s = "marked", estimate_time(job).total_s
+        rnd.state, rnd.marking_s = "marked", _seconds(timer.elapsed())
         self.save(record, history)
         return True
 
-    def cut_short(self, record: EngraveRecord, history: CellHistory, state: str) -> None:
-        """The last round stopped early: its passes counted from its journal."""
+    def cut_short(self, record: EngraveRecord, history: CellHistory, state: str,
+                  spent: StepTime | None = None) -> None:
+        """The last round stopped early: its passes counted from its journal; its marking
+        time ``spent`` (None: a resume, which knows the share of the job's estimate done)."""
         rnd = record.rounds[-1]
         job_path = self.req.report_dir / rnd.job
         job = read_job(job_path)
@@ -193,8 +212,9 @@ class _Engraving:
                              np.asarray(rnd.passes, float))
         history.given(given)
         record.layers += rnd.layers
-        t = estimate_time(job)
-        rnd.state, rnd.marking_s = "cut", t.total_s * float(done.mean()) if len(done) else 0.0
+        rnd.state = "cut"
+        rnd.marking_s = (_seconds(spent) if spent is not None else
+                         estimate_time(job).total_s * float(done.mean()) if len(done) else 0.0)
         record.state = state
         self.save(record, history)
         self.notify(f"round {len(record.rounds)} {state} after {int(done.sum())} of "
@@ -219,9 +239,11 @@ class _Engraving:
         settings = CentreSettings(**{**(centre_settings(req.height_cal).to_dict()
                                         if req.height_cal is not None else {}),
                                      **DEPTH_CENTRES})
+        timer = StepTimer(self.station.clock)
         try:
             scan = scan_live(self.station, req.spacing_mm, region, req.height_cal,
-                             centres=settings, cancel=cancel, progress=progress)
+                             centres=settings, cancel=cancel, progress=progress,
+                             room_light=False)
         except Cancelled:
             record.state = "cancelled"
             self.save(record, history)
@@ -233,7 +255,8 @@ class _Engraving:
         learnt = learn(history, dm, self.nominal)
         k = len(record.measures) + 1
         record.measures.append(_summary(len(record.rounds), dm, learnt, history, req.depth_mm,
-                                        scan.summary.frames + 1))
+                                        scan.summary.frames,
+                                        _seconds(timer.elapsed())))
         self.last = dm
         depth_picture(req.report_dir / f"measure-{k:02d}.png", dm, req.depth_mm,
                       f"measure {k}, after round {len(record.rounds)}")
@@ -251,8 +274,8 @@ def engrave(station: Station, req: EngraveRequest, cancel: threading.Event | Non
     returns or raises; the record says how far it got. Refused (SafetyError, nothing marked)
     like any mark; ConfigError for a report folder holding another engraving, or a finished
     or interrupted one without ``resume``."""
-    req.report_dir.mkdir(exist_ok=True)
     e = _Engraving(station, req, notify)
+    req.report_dir.mkdir(exist_ok=True)
     record = read_record(req.report_dir)
     if record is None:
         if req.resume:
@@ -319,7 +342,7 @@ def _resumed(e: _Engraving, record: EngraveRecord, req: EngraveRequest) -> CellH
 
 
 def _summary(round_no: int, dm: DepthMap, learnt: Learnt, history: CellHistory,
-             target: float, frames: int) -> dict:
+             target: float, frames: int, seconds: float) -> dict:
     """A measurement as the record keeps it (mm; NaN as None)."""
     mean, sem = dm.mean_depth()
     seen = np.isin(dm.state, (0, 1))
@@ -337,8 +360,13 @@ def _summary(round_no: int, dm: DepthMap, learnt: Learnt, history: CellHistory,
             "at_depth": int((np.abs(err) <= half).sum()), "short": int((err < -half).sum()),
             "over": int((err > half).sum()),
             "cell_p95_mm": num(np.percentile(np.abs(err), 95)) if len(err) else None,
-            "frames": frames, "scan_s": round(frames * FRAME_PERIOD_S, 3),
+            "frames": frames, "scan_s": round(seconds, 3),
             "hidden_at_mm": _centres(dm.cells, dm.state == 2)}
+
+
+def _seconds(t: StepTime) -> float:
+    """A step's station seconds (a real rig's: the wall clock's)."""
+    return float(t.station if t.station is not None else t.wall)
 
 
 def _centres(cells: PocketCells, mask: np.ndarray) -> list[list[float]]:
@@ -348,7 +376,7 @@ def _centres(cells: PocketCells, mask: np.ndarray) -> list[list[float]]:
 
 def station_seconds(record: EngraveRecord) -> dict[str, float]:
     """The station's seconds: marking (each round's estimate, the part marked of a round cut
-    short), scanning (frames at :data:`FRAME_PERIOD_S`) and their total."""
+    short) and scanning, by the station's clock, and their total."""
     marking = sum(r.marking_s for r in record.rounds)
     scanning = sum(m["scan_s"] for m in record.measures)
     return {"marking": round(marking, 1), "scanning": round(scanning, 1),

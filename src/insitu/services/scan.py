@@ -202,7 +202,7 @@ def scan_live(station: Station, spacing: float = 0.5, region=None,
               cross_spacing: float | None = None, lines_per_frame: int | str | None = None,
               heights: tuple[float, float] | None = None,
               packing: Packing = Packing(),
-              centres: CentreSettings | None = None) -> ScanResult:
+              centres: CentreSettings | None = None, room_light: bool = True) -> ScanResult:
     """Drive the station: step the line over ``region`` (x0, x1, y0, y1) mm (default: the
     station's, which a real rig does not have), with ``cross`` a second pass of crossed
     lines over it ``cross_spacing`` mm apart (:func:`plan_lines`), and reconstruct each
@@ -212,12 +212,12 @@ def scan_live(station: Station, spacing: float = 0.5, region=None,
     centres are found, default as the height calibration was made). ``lines_per_frame``:
     None or 1, K or "auto" (:mod:`insitu.reconstruct.packing`: a survey frame bounds the
     heights, unless ``heights`` (low, high) mm are known, then the lines are packed by
-    them; a frame of K lines is exposed K times as long). First a frame with the laser off
-    under the room light, auto-exposed (:func:`~insitu.services.room_light.
-    station_room_light`), gives each point its ``ambient`` grey value; the camera then
-    reads out only the region the lines can reach (a camera that can). The laser is off
-    when this returns or raises; a device fault raises :class:`ScanInterrupted` with what
-    was measured before it."""
+    them; a frame of K lines is exposed K times as long). First, with ``room_light``, a
+    frame with the laser off under the room light, auto-exposed
+    (:func:`~insitu.services.room_light.station_room_light`), gives each point its
+    ``ambient`` grey value; the camera then reads out only the region the lines can reach
+    (a camera that can). The laser is off when this returns or raises; a device fault
+    raises :class:`ScanInterrupted` with what was measured before it."""
     t0 = StepTimer(station.clock)
     region = tuple(region) if region is not None else station.default_region()
     rig = station.rig
@@ -233,7 +233,8 @@ def scan_live(station: Station, spacing: float = 0.5, region=None,
     if speed_mm_s is not None:
         head.set_line_speed(speed_mm_s)
     return _scan(camera, head, plan, rec, t0, "lines", progress, cancel, on_frame,
-                 station.record, lambda: station_room_light(station).image,
+                 station.record,
+                 (lambda: station_room_light(station).image) if room_light else None,
                  roi=region_of_interest(rec, lines))
 
 

@@ -1,0 +1,57 @@
+"""Engraving to depth end to end on the simulated rig: a small pocket in stainless steel
+measured between rounds until it is at depth (scored by the simulator's truth), its report
+and journal; then a resume of the finished record is refused, and a stopped one measures
+first."""
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from insitu.errors import ConfigError
+from insitu.marking import Placement
+from insitu.marking.engrave_depth import DepthSettings
+from insitu.marking.journal import journal_path_for
+from insitu.services.engrave import EngraveRequest, engrave
+from insitu.services.scan import scan_live
+from insitu.services.station import connect
+
+SQUARE = ('<svg xmlns="http://www.w3.org/2000/svg" width="1.5mm" height="1.5mm" '
+          'viewBox="0 0 1.5 1.5"><rect width="1.5" height="1.5"/></svg>')
+TARGET = 0.03
+
+
+def test_a_small_pocket_is_engraved_to_depth_measured_between_rounds(tmp_path):
+    svg = tmp_path / "sq.svg"
+    svg.write_text(SQUARE)
+    out = tmp_path / "report"
+    with connect(None, "blank-stainless", 0) as station:
+        cloud = scan_live(station, 0.5, (-4, 4, -4, 4), room_light=False).cloud
+        req = EngraveRequest(out, Placement(str(svg), (0.0, 0.0), None, 0.0), cloud, TARGET,
+                             rescan_every=4, settings=DepthSettings(ring_mm=1.0))
+        notes: list[str] = []
+        outcome = engrave(station, req, notify=notes.append)
+        world = station.world
+        g = np.meshgrid(np.linspace(-0.5, 0.5, 41), np.linspace(-0.5, 0.5, 41))
+        truth = world.true_depth(*g)
+    rec = outcome.record
+    assert rec.state == "done", notes
+    # the floor's truth (beyond the walls' taper): at depth within a pass or so
+    assert abs(truth.mean() - TARGET) <= 0.006
+    assert np.percentile(np.abs(truth - TARGET), 95) <= 0.012
+    # each round measured; the rate learnt from the first measurement on, not the table's
+    assert len(rec.measures) == len(rec.rounds) >= 2
+    assert rec.measures[0]["rate_cells"] > 0
+    assert abs(rec.measures[-1]["rate_mm"] - rec.nominal_rate_mm) > 0.0003
+    # the last measurement against the truth: within 5 µm
+    assert abs(rec.measures[-1]["mean_mm"] - truth.mean()) <= 0.005
+    for name in ("engrave.json", "depth-map.png", "histogram.png", "measure-01.png"):
+        assert (out / name).stat().st_size > 0
+    assert journal_path_for(out / rec.rounds[0].job).exists()
+    seconds = rec.outcome["station_s"]
+    assert seconds["marking"] > 0 and seconds["scanning"] > 0
+    with pytest.raises(ConfigError, match="the engraving is finished"):
+        with connect(None, "blank-stainless", 0) as station:
+            engrave(station, EngraveRequest(Path(out), req.placement, cloud, TARGET,
+                                            rescan_every=4, resume=True,
+                                            settings=DepthSettings(ring_mm=1.0)))

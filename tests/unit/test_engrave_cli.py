@@ -1,0 +1,45 @@
+"""``insitu engrave`` refuses bad input with one line, the laser off and nothing written."""
+
+import numpy as np
+import pytest
+from typer.testing import CliRunner
+
+from insitu.cli.main import app
+from insitu.formats.pointcloud import PointCloud, write_ply
+
+runner = CliRunner()
+SQUARE = ('<svg xmlns="http://www.w3.org/2000/svg" width="2mm" height="2mm" viewBox="0 0 2 2">'
+          '<rect width="2" height="2"/></svg>')
+
+
+def _cloud(path, x0, x1, y0, y1, z, step=0.25):
+    g = np.meshgrid(np.arange(x0, x1 + 1e-9, step), np.arange(y0, y1 + 1e-9, step))
+    xy = np.column_stack([g[0].ravel(), g[1].ravel()])
+    write_ply(path, PointCloud(np.column_stack([xy, np.full(len(xy), z)])))
+    return path
+
+
+@pytest.mark.parametrize("args, message", [
+    (("--material", "glass"), "--material: no material 'glass'; the materials are "
+                              "'stainless-steel'"),
+    (("--depth", "4"), "depth 4 mm is beyond reach in stainless-steel: 698 passes"),
+    (("--depth", "30"), "--depth: 30 is outside"),
+    (("--at", "98", "0"), "outside the scan field"),
+])
+def test_bad_input_is_refused_in_one_line_and_nothing_is_written(tmp_path, args, message):
+    (tmp_path / "sq.svg").write_text(SQUARE)
+    cloud = _cloud(tmp_path / "c.ply", -6, 6, -6, 6, 5.0)
+    edge = _cloud(tmp_path / "edge.ply", 90, 106, -6, 6, 5.0)
+    base = {"--cloud": cloud, "--pattern": tmp_path / "sq.svg", "--at": ("0", "0"),
+            "--depth": "0.2", "--workpiece": "blank-stainless", "-o": tmp_path / "rep"}
+    if args[0] == "--at":
+        base["--cloud"] = edge
+    base[args[0]] = args[1:] if len(args) > 2 else args[1]
+    argv = ["engrave"]
+    for k, v in base.items():
+        argv += [k, *(v if isinstance(v, tuple) else (v,))]
+    res = runner.invoke(app, [str(a) for a in argv])
+    assert res.exit_code != 0
+    lines = [ln for ln in res.output.splitlines() if ln.strip()]
+    assert len(lines) == 1 and message in " ".join(res.output.split()), res.output
+    assert not (tmp_path / "rep").exists()

@@ -1,0 +1,132 @@
+"""Engraving to depth without the renderer: the depth map from scan points (floor against the
+top of the same lines), the cells a wall hides, and the planner closed on a synthetic pocket
+(cells at depth get no energy, hidden cells never over-burnt and reported)."""
+
+import numpy as np
+import pytest
+import shapely
+
+from insitu.marking.engrave_depth import (HIDDEN, MEASURED, OUTSIDE, DepthMap, DepthSettings,
+                                          Outline, PocketCells, measure_depth, unreachable)
+from insitu.marking.engrave_layers import layer_paths, passes_given
+from insitu.marking.engrave_plan import RATE_MARGIN, CellHistory, learn, plan_round
+
+TARGET = 0.2
+
+
+def _cells(n=12, cell=0.25) -> PocketCells:
+    inside = np.ones((n, n), bool)
+    return PocketCells(np.zeros(2), cell, inside, np.full((n, n), 1.0))
+
+
+def _map(cells, depth, state, sem=0.002) -> DepthMap:
+    return DepthMap(cells, np.where(state == MEASURED, depth, np.nan),
+                    np.full(cells.shape, sem), np.full(cells.shape, 20.0), state,
+                    np.zeros((0, 3)), 0.01, 0.02)
+
+
+def test_cells_at_depth_get_no_more_energy():
+    cells = _cells()
+    h = CellHistory.start(cells.shape, 0.005)
+    h.given(np.full(cells.shape, 20.0))
+    depth = np.full(cells.shape, 0.1)
+    depth[:, 6:] = TARGET                        # half the pocket is at depth
+    state = np.full(cells.shape, MEASURED)
+    learn(h, _map(cells, depth, state), 0.005)
+    plan = plan_round(h, state, TARGET, rescan_every=10)
+    assert np.all(plan.passes[:, 6:] == 0)
+    assert np.all(plan.passes[:, :6] >= 8)
+    assert not plan.held.any()
+
+
+def test_closed_loop_reaches_the_depth_and_never_over_burns_hidden_cells():
+    rng = np.random.default_rng(5)
+    cells = _cells(16)
+    true_rate = 0.0045 * (1 + 0.08 * rng.standard_normal(cells.shape))   # nominal: 0.0057
+    hidden = np.zeros(cells.shape, bool)
+    hidden[:, :3] = True                          # a wall hides three columns from the camera
+    h = CellHistory.start(cells.shape, 0.0057)
+    state = np.full(cells.shape, MEASURED)
+    depth = np.zeros(cells.shape)
+    for _ in range(40):
+        plan = plan_round(h, state, TARGET, rescan_every=10)
+        if plan.layers == 0:
+            break
+        depth += plan.passes * true_rate
+        h.given(plan.passes)
+        state = np.where(hidden, HIDDEN, MEASURED)
+        learn(h, _map(cells, depth + rng.normal(0, 0.002, cells.shape), state), 0.0057)
+    else:
+        pytest.fail("the loop did not stop")
+    seen = depth[~hidden] - TARGET
+    assert abs(seen.mean()) <= 0.005 and np.percentile(np.abs(seen), 95) <= 0.01
+    assert depth[hidden].max() <= TARGET + 1e-9          # never over-burnt
+    assert np.array_equal(plan.held, hidden & (depth < TARGET - 0.5 * h.rate))
+    assert plan.held.any()                                # and the short ones are reported
+    # they had passes only while the margin allowed: at RATE_MARGIN × the rate, not beyond
+    assert np.all(h.passes[hidden] <= TARGET / (RATE_MARGIN * h.rate[hidden]) + 1e-6)
+    # a hidden cell ablating 25 % faster than the pocket's cells is not over-burnt either
+    fast = np.where(hidden, h.passes * 1.25 * h.rate, 0.0)
+    assert fast.max() <= TARGET + 1e-9
+
+
+def test_open_loop_on_a_slower_material_stays_short():
+    """What counting passes gives: the nominal rate's passes, 20 % short on a slower blank."""
+    passes = round(TARGET / 0.0057)
+    assert passes * 0.0057 * 0.8 < TARGET - 0.03
+
+
+def test_depth_from_the_floor_and_the_top_of_the_same_lines():
+    """A 3 × 3 mm pocket 0.1 mm deep on a tilted top, scanned by lines each with its own
+    height error (shared by its floor and top points): the depth comes out per cell."""
+    rng = np.random.default_rng(2)
+    region = shapely.box(-1.5, -1.5, 1.5, 1.5)
+    lines = np.arange(-4.0, 4.01, 0.1)
+    pts, line = [], []
+    for k, x in enumerate(lines):
+        y = np.arange(-4.0, 4.0, 0.02)
+        top = 5.0 + 0.01 * x + 0.02 * y
+        inside = (np.abs(x) < 1.5) & (np.abs(y) < 1.5)
+        z = top - np.where(inside, 0.1, 0.0) + 0.004 * rng.standard_normal() \
+            + 0.003 * rng.standard_normal(len(y))
+        pts.append(np.column_stack([np.full(len(y), x), y, z]))
+        line.append(np.full(len(y), k))
+    dm = measure_depth(np.vstack(pts), np.concatenate(line), region, DepthSettings())
+    mean, sem = dm.mean_depth()
+    assert mean == pytest.approx(0.1, abs=0.001) and sem < 0.0005
+    measured = dm.state == MEASURED
+    assert measured.sum() >= 64
+    assert np.nanmax(np.abs(dm.depth[measured] - 0.1)) < 0.005
+    assert np.all(dm.state[~dm.cells.inside] == OUTSIDE)
+
+
+def test_cells_behind_a_wall_are_unreachable():
+    """A 0.5 mm deep, 1 mm wide slot seen from a camera 100 mm off to +x at 350 mm: the
+    floor's +x side (under the wall towards the camera) is hidden, the −x side seen."""
+    region = shapely.box(-0.5, -3.0, 0.5, 3.0)
+    outline = Outline(region, 1.0)
+    cells = outline.cells(0.1)
+    depth = np.full(cells.shape, 0.5)
+    blocked = unreachable(cells, depth, outline, np.array([[100.0, 0.0, 350.0]]))
+    gx, _ = cells.centres()
+    assert blocked[cells.inside & (gx > 0.4)].all()
+    assert not blocked[cells.inside & (gx < 0.2)].any()
+
+
+def test_a_round_cut_short_counts_the_passes_of_its_marked_paths():
+    cells = _cells(8)
+    passes = np.full(cells.shape, 2)
+    square = [np.array([[0.0, 0.0], [1.75, 0.0], [1.75, 1.75], [0.0, 1.75], [0.0, 0.0]])]
+    paths = layer_paths(square, cells, passes, 0.05, lambda xy: np.full(len(xy), 5.0),
+                        np.zeros(cells.shape), np.full(cells.shape, 0.005), 0)
+    assert {layer for layer, _ in paths} == {1, 2}
+    # the second layer's floor is planned one pass lower: the focus follows it down
+    z = {layer: p[0, 2] for layer, p in paths}
+    assert z[1] - z[2] == pytest.approx(0.005)
+    pts = [p for _, p in paths]
+    done = np.zeros(len(pts), bool)
+    done[:len(pts) // 2] = True                  # the first layer marked, the second not
+    given = passes_given(pts, done, cells, passes.astype(float))
+    inner = given[1:-1, 1:-1]            # a cell holds 4 … 6 of a layer's lines 0.05 mm apart
+    assert inner.mean() == pytest.approx(1.0, abs=0.05)
+    assert inner == pytest.approx(np.ones_like(inner), abs=0.25)
