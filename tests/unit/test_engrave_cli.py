@@ -22,7 +22,7 @@ def _cloud(path, x0, x1, y0, y1, z, step=0.25):
 @pytest.mark.parametrize("args, message", [
     (("--material", "glass"), "--material: no material 'glass'; the materials are "
                               "'stainless-steel'"),
-    (("--depth", "4"), "depth 4 mm is beyond reach in stainless-steel: 698 passes"),
+    (("--depth", "8"), "depth 8 mm is beyond reach in stainless-steel: 1396 passes"),
     (("--depth", "30"), "--depth: 30 is outside"),
     (("--at", "98", "0"), "outside the scan field"),
 ])
