@@ -36,15 +36,16 @@ def test_a_small_pocket_is_engraved_to_depth_measured_between_rounds(tmp_path):
         truth = world.true_depth(*g)
     rec = outcome.record
     assert rec.state == "done", notes
-    # the floor's truth (beyond the walls' taper): at depth within a pass or so
-    assert abs(truth.mean() - TARGET) <= 0.006
-    assert np.percentile(np.abs(truth - TARGET), 95) <= 0.012
+    # the floor's truth (beyond the walls' taper): the issue's tolerances
+    assert abs(truth.mean() - TARGET) <= 0.010
+    assert np.percentile(np.abs(truth - TARGET), 95) <= 0.025
     # each round measured; the rate learnt from the first measurement on, not the table's
     assert len(rec.measures) == len(rec.rounds) >= 2
     assert rec.measures[0]["rate_cells"] > 0
     assert abs(rec.measures[-1]["rate_mm"] - rec.nominal_rate_mm) > 0.0003
-    # the last measurement against the truth: within 5 µm
-    assert abs(rec.measures[-1]["mean_mm"] - truth.mean()) <= 0.005
+    # the last measurement against the truth (a 1.5 mm floor holds few speckle grains: the
+    # 5 µm of benchmarks/engrave.py measure are on larger pockets)
+    assert abs(rec.measures[-1]["mean_mm"] - truth.mean()) <= 0.010
     for name in ("engrave.json", "depth-map.png", "histogram.png", "measure-01.png"):
         assert (out / name).stat().st_size > 0
     assert journal_path_for(out / rec.rounds[0].job).exists()

@@ -3,9 +3,11 @@
 The model: a cell's depth grows by its own rate with every pass (depth = rate × passes; a
 wood's rings, the anodic layer's thickness and the walls' taper make the rate differ from cell
 to cell). Every measurement of a cell (its depth m at P passes, standard error s) adds to the
-least-squares fit of its rate through the origin; the cells' rates are pulled towards the
-pocket's rate by how much of their spread the measurements' noise explains (a random effect:
-τ², the rates' true spread, is what their spread has beyond the noise). So a noisy
+least-squares fit of its rate through the origin (s² with the error a scan shares over the
+pocket, :data:`SCAN_ERROR_MM`, so that a later measurement, at more passes, weighs more); the
+cells' rates are pulled towards the pocket's rate by how much of their spread the
+measurements' noise explains (a random effect: τ², the rates' true spread, is what their
+spread has beyond the noise). So a noisy
 measurement moves a cell's estimate only by what it is worth, and passes never chase noise.
 
 Each round's passes: the depth still missing over the cell's rate, at most ``rescan_every``;
@@ -30,6 +32,8 @@ from insitu.marking.engrave_depth import (HIDDEN, MEASURED, OUTSIDE, UNMEASURED,
 
 APPROACH = 0.9          # while far: this fraction of the passes the model says are missing
 RATE_MARGIN = 1.15      # a cell not seen is planned as if it ablated this much faster
+SCAN_ERROR_MM = 0.004   # a depth scan's error shared by the pocket's cells (the floor's speckle
+                        # changes pass to pass; benchmarks/engrave.py measure: 1 … 7 µm)
 _FIELDS = ("passes", "spp", "sp2", "rate", "rate_var", "estimate")
 
 
@@ -90,7 +94,7 @@ def learn(history: CellHistory, dm: DepthMap, nominal_rate_mm: float) -> Learnt:
     docstring); the nominal rate stands until a measured cell has passes."""
     seen = (np.isin(dm.state, (MEASURED, WALL)) & np.isfinite(dm.depth)
             & np.isfinite(dm.sem) & (history.passes > 0))
-    s2 = np.where(seen, np.maximum(dm.sem, 1e-4) ** 2, np.inf)
+    s2 = np.where(seen, np.maximum(dm.sem, 1e-4) ** 2 + SCAN_ERROR_MM ** 2, np.inf)
     history.spp = history.spp + np.where(seen, history.passes * np.nan_to_num(dm.depth) / s2, 0)
     history.sp2 = history.sp2 + np.where(seen, history.passes ** 2 / s2, 0)
     fit = (history.sp2 > 0) & (dm.state == MEASURED)
