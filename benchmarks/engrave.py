@@ -6,7 +6,8 @@ measured every --rescan-every passes, re-planned per cell) against open loop (th
 material table's nominal rate says the depth takes, nothing measured — what counting passes
 gives). Per run: the floor's mean depth error against the target and the band holding 95 % of
 its cells (|truth − target|, the floor beyond the walls' 0.2 mm band sampled every 0.05 mm),
-the passes (layers), the station's seconds (marking + depth scans).
+the deepest point over the target, the passes a cell had (mean), the rounds, the station's
+seconds (marking + depth scans, the station clock).
 
 ``measure``: the depth measurement (floor against the top of the same lines,
 ``marking.engrave_depth``) against the truth on pockets cut straight into the simulated blank
@@ -39,7 +40,7 @@ from insitu.formats.materials import DEFAULT_MATERIALS
 from insitu.formats.pointcloud import PointCloud
 from insitu.marking import Placement
 from insitu.marking.engrave_depth import DepthSettings, measure_depth
-from insitu.services.engrave import DEPTH_CENTRES, EngraveRequest, engrave
+from insitu.services.engrave import DEPTH_CENTRES, EngraveRequest, engrave, station_seconds
 from insitu.services.plan import plan_mark
 from insitu.services.scan import scan_live
 from insitu.services.station import connect
@@ -93,8 +94,9 @@ def run_pocket(material: str, pattern: str, width: float | None, depth: float, c
                            st.driver).pattern.to_shapely()
         mean, band, over = _floor_truth(st.world, region, depth)
     rec = outcome.record
-    seconds = sum(r.marking_s for r in rec.rounds) + sum(m["scan_s"] for m in rec.measures)
-    return {"mean": mean, "band": band, "over": over, "passes": rec.layers,
+    seconds = station_seconds(rec)["total"]
+    passes = rec.measures[-1]["passes_mean"] if rec.measures else budget
+    return {"mean": mean, "band": band, "over": over, "passes": passes,
             "rounds": len(rec.rounds), "station_s": seconds, "state": rec.state,
             "held": (rec.outcome or {}).get("held_cells", 0)}
 
@@ -107,7 +109,7 @@ def loop(args, folder: Path) -> None:
         patterns.append(("text 10 mm", 'text:"IS";size=8', 10.0))
     t = Table(title=f"engraving {depth:g} mm: closed vs open loop (simulator's truth)")
     for col in ("material", "pocket", "loop", "mean err µm", "95 % band µm", "max over µm",
-                "passes", "rounds", "station s"):
+                "passes (cell mean)", "rounds", "station s"):
         t.add_column(col, justify="right")
     for material in materials:
         for name, pattern, width in patterns:
@@ -116,7 +118,7 @@ def loop(args, folder: Path) -> None:
                                args.rescan_every, folder)
                 t.add_row(material, name, "closed" if closed else "open",
                           f"{r['mean'] * 1e3:+.1f}", f"{r['band'] * 1e3:.1f}",
-                          f"{r['over'] * 1e3:+.1f}", str(r["passes"]), str(r["rounds"]),
+                          f"{r['over'] * 1e3:+.1f}", f"{r['passes']:.1f}", str(r["rounds"]),
                           f"{r['station_s']:.0f}")
                 console.print(f"{material} {name} {'closed' if closed else 'open'}: {r}",
                               highlight=False)
