@@ -1,14 +1,16 @@
 """Engraving to depth end to end on the simulated rig: a small pocket in stainless steel
 measured between rounds until it is at depth (scored by the simulator's truth), its report
-and journal; then a resume of the finished record is refused, and a stopped one measures
-first."""
+and journal: stopped as its first round starts, refused without --resume, resumed (measured
+first) to the end; a resume of the finished record is refused."""
 
+import threading
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 import pytest
 
-from insitu.errors import ConfigError
+from insitu.errors import ConfigError, SafetyError
 from insitu.marking import Placement
 from insitu.marking.engrave_depth import DepthSettings
 from insitu.marking.journal import journal_path_for
@@ -30,7 +32,18 @@ def test_a_small_pocket_is_engraved_to_depth_measured_between_rounds(tmp_path):
         req = EngraveRequest(out, Placement(str(svg), (0.0, 0.0), None, 0.0), cloud, TARGET,
                              rescan_every=4, settings=DepthSettings(ring_mm=1.0))
         notes: list[str] = []
-        outcome = engrave(station, req, notify=notes.append)
+        stop = threading.Event()
+
+        def note(text: str) -> None:          # ABORT as the first round starts
+            notes.append(text)
+            stop.set()
+        first = engrave(station, req, cancel=stop, notify=note)
+        assert first.record.state == "cancelled" and first.record.rounds[0].state == "cut"
+        with pytest.raises(SafetyError, match="resume it"):
+            engrave(station, req)
+        notes.clear()
+        outcome = engrave(station, replace(req, resume=True), notify=notes.append)
+        assert notes[0].startswith("measured after round 1")      # a resume measures first
         world = station.world
         g = np.meshgrid(np.linspace(-0.5, 0.5, 41), np.linspace(-0.5, 0.5, 41))
         truth = world.true_depth(*g)
@@ -39,9 +52,10 @@ def test_a_small_pocket_is_engraved_to_depth_measured_between_rounds(tmp_path):
     # the floor's truth (beyond the walls' taper): the issue's tolerances
     assert abs(truth.mean() - TARGET) <= 0.010
     assert np.percentile(np.abs(truth - TARGET), 95) <= 0.025
-    # each round measured; the rate learnt from the first measurement on, not the table's
-    assert len(rec.measures) == len(rec.rounds) >= 2
-    assert rec.measures[0]["rate_cells"] > 0
+    # each round measured (the cut one, nothing marked yet, by the resume); the rate learnt
+    # from the first measurement after passes on, not the table's
+    assert len(rec.measures) == len(rec.rounds) >= 3
+    assert rec.measures[0]["rate_cells"] == 0 and rec.measures[1]["rate_cells"] > 0
     assert abs(rec.measures[-1]["rate_mm"] - rec.nominal_rate_mm) > 0.0003
     # the last measurement against the truth (a 1.5 mm floor holds few speckle grains: the
     # 5 µm of benchmarks/engrave.py measure are on larger pockets)
