@@ -19,9 +19,8 @@ from rich.table import Table
 
 from insitu import services
 from insitu.marking import Placement
-from insitu.services.plan import plan_placements
+from insitu.services.plan import joined, plan_placements
 from insitu.services.station import connect
-from insitu.ui.model.operations import joined
 from insitu.marking import path_seconds
 from insitu.ui.model.time_left import TimeLeft
 
