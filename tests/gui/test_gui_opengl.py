@@ -77,13 +77,15 @@ def test_the_view_draws_the_cloud_by_height_and_the_projected_pattern(rendered):
     for lo, hi in ((2.0, 4.0), (9.0, 11.0), (14.0, 16.0)):    # three steps of the block
         sel = (cloud[:, 2] > lo) & (cloud[:, 2] < hi)
         expect = sd.height_colours(np.array([np.median(cloud[sel, 2])]),
-                                   tuple(info["z_range"]))[0][::-1] * 255
+                                   tuple(info["z_range"]))[0][::-1] * 255 * info["shade"]
         got = np.median(pixels(cloud[sel]), axis=0)
         # multisampling blends the 2-px points' edges with the background: got = bg + a·(c − bg)
         d = expect - BACKGROUND
         a = float((got - BACKGROUND) @ d / (d @ d))
         assert a > 0.5 and np.linalg.norm(got - BACKGROUND - a * d) < 15, (lo, hi, got, expect)
-    # the projected pattern: magenta within a pixel of where its points project
+    # the projected pattern: magenta within a pixel of where its points project, the cloud
+    # dimmed under it
+    assert info["shade"] == sd.SHADE_UNDER_PENS
     pattern = np.array(info["pattern_points"])
     assert len(pattern) > 50
     colour = np.array(sd.PROJECTED_COLOUR[2::-1]) * 255

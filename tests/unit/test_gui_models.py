@@ -310,3 +310,41 @@ def test_a_calibrations_verdict_names_its_figures_against_their_limits():
     assert level == "fail" and "record it again" in line and "0.4 mm" in line
     assert verdict("camera", {"rms_px": float("nan")})[0] == "fail"
     assert verdict("field", {"points": 400.0})[0] == "check"          # nothing to judge by
+
+
+@pytest.mark.parametrize("view", ["top", "front", "iso"])
+def test_framing_leaves_the_colour_bars_band_free(view):
+    cam = OrbitCamera()
+    cam.set_view(view)
+    lo, hi = (-40.0, -60.0, 0.0), (40.0, 60.0, 12.0)
+    cam.frame(lo, hi, aspect=1.5, reserve=0.25)
+    corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1])
+                        for z in (lo[2], hi[2])])
+    px = cam.project(corners, 600, 400)
+    assert np.isfinite(px).all()
+    assert px[:, 0].min() > 0 and px[:, 0].max() < 0.75 * 600     # left of the band
+    assert px[:, 1].min() > 0 and px[:, 1].max() < 400
+
+
+def _luminance(rgb) -> float:
+    c = np.asarray(rgb, float)
+    c = np.where(c <= 0.03928, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)
+    return float(c @ [0.2126, 0.7152, 0.0722])
+
+
+def _contrast(a, b) -> float:
+    la, lb = sorted((_luminance(a), _luminance(b)))
+    return (lb + 0.05) / (la + 0.05)
+
+
+def test_every_default_pen_stands_out_from_the_height_colours_under_it():
+    from insitu.formats.pens import DEFAULT_PENS
+
+    surface = sd.height_colours(np.linspace(0, 1, 101), (0.0, 1.0))
+    for pen in DEFAULT_PENS.pens:
+        rgb = [int(pen.colour[i:i + 2], 16) / 255 for i in (1, 3, 5)]
+        worst = min(_contrast(rgb, c * sd.SHADE_UNDER_PENS) for c in surface)
+        assert worst >= 2.0, (pen.name, worst)
+    fine = next(p for p in DEFAULT_PENS.pens if p.name == "fine")
+    rgb = [int(fine.colour[i:i + 2], 16) / 255 for i in (1, 3, 5)]
+    assert min(_contrast(rgb, c) for c in surface) < 1.3      # undimmed: lost in the map

@@ -112,11 +112,13 @@ class OrbitCamera:
         self.azimuth_deg, self.elevation_deg = VIEWS[name]
         self.ortho = name in ORTHO_VIEWS
 
-    def frame(self, lo, hi, aspect: float = 1.0) -> None:
+    def frame(self, lo, hi, aspect: float = 1.0, reserve: float = 0.0) -> None:
         """Centre on the box (lo, hi) mm and set the distance so that its eight corners
-        fill at most :data:`FRAME_MARGIN` of a view of width / height ``aspect``."""
+        fill at most :data:`FRAME_MARGIN` of a view of width / height ``aspect``, less the
+        fraction ``reserve`` of its width on the right (where the colour bar is)."""
         lo, hi = np.asarray(lo, float), np.asarray(hi, float)
         self.centre = (lo + hi) / 2
+        full_aspect, aspect = aspect, aspect * (1.0 - reserve)
         v = self.view_matrix()
         corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1])
                             for z in (lo[2], hi[2])]) - self.centre
@@ -130,6 +132,23 @@ class OrbitCamera:
             need = np.maximum(np.abs(s) / tan_h, np.abs(u) / tan_v) / FRAME_MARGIN + back
             self.distance_mm = max(float(need.max()), 1.0)
         self.distance_mm = float(np.clip(self.distance_mm, 1.0, 1e4))
+        if reserve > 0:
+            self._beside_band(s, back, tan_v * full_aspect, reserve, v[0, :3])
+
+    def _beside_band(self, s, back, tan_h: float, reserve: float, right) -> None:
+        """Move the view right by the reserved band's half width at the centre's depth, so
+        the box (corners at ``s`` across, ``back`` towards the eye, mm) lies left of the
+        band; a perspective view steps back until its nearest corners fit too."""
+        for _ in range(40):
+            half = self.distance_mm * tan_h                      # half the view's width, mm
+            shift = reserve * half
+            depth = np.ones_like(back) if self.ortho else 1 - back / self.distance_mm
+            x = (s - shift) / (half * depth)                     # −1 … 1 across the view
+            if self.ortho or (x.min() >= -1 and x.max() <= 1 - 2 * reserve) \
+                    or self.distance_mm >= 1e4:
+                break
+            self.distance_mm = min(self.distance_mm * 1.05, 1e4)
+        self.centre = self.centre + shift * np.asarray(right)
 
     # -- picking ---------------------------------------------------------------------------
     def project(self, points: np.ndarray, width: int, height: int) -> np.ndarray:

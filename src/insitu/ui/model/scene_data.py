@@ -27,6 +27,8 @@ SELECTED_COLOUR = (1.0, 1.0, 1.0, 1.0)       # white and magenta: apart from the
 PROJECTED_COLOUR = (1.0, 0.3, 1.0, 1.0)
 WARNING_COLOUR = (1.0, 0.15, 0.15, 1.0)
 PILOT_COLOUR = (1.0, 0.3, 0.3, 1.0)
+SHADE_UNDER_PENS = 0.45  # the cloud's colours dimmed while pens' paths are shown: a pen's
+                         # colour stands out from the same hue of the height map (≥ 2:1)
 AMBIENT = "ambient"      # cloud attribute: (N,) float32 0…1, the ambient (laser-off) frame's
                          # gray at the pixel each point was measured at (PLY property)
 HANDLE_OFFSET_MM = 0.25          # the rotation handle sits this fraction of the height above

@@ -48,8 +48,9 @@ void main() {{
 """
 POINT_FS = """#version 330 core
 in vec3 colour;
+uniform float shade;
 out vec4 frag;
-void main() { frag = vec4(colour, 1.0); }
+void main() { frag = vec4(colour * shade, 1.0); }
 """
 LINE_VS = """#version 330 core
 layout(location = 0) in vec3 position;
@@ -259,6 +260,7 @@ class Renderer:
         self.ambient_range = (0.0, 1.0)
         self.camera_colours = False
         self.point_size = 2.0
+        self.shade = 1.0                 # the cloud's colours × this (dimmed under pens' paths)
         self.lines: dict[str, tuple[LineBuffer, tuple[float, ...], bool]] = {}
         self._point_prog = self._line_prog = None
 
@@ -301,6 +303,7 @@ class Renderer:
         GL.glUniform1i(GL.glGetUniformLocation(prog, "camera_colours"),
                        int(self.camera_colours and self.points.has_ambient))
         GL.glUniform1f(GL.glGetUniformLocation(prog, "point_size"), self.point_size)
+        GL.glUniform1f(GL.glGetUniformLocation(prog, "shade"), self.shade)
         self.points.draw(mvp, self.budget(fast, view_px))
         GL.glUseProgram(self._line_prog)
         GL.glUniformMatrix4fv(GL.glGetUniformLocation(self._line_prog, "mvp"), 1, GL.GL_FALSE, m)

@@ -125,6 +125,7 @@ class SceneBinding:
             rgb = tuple(int(colour[i:i + 2], 16) / 255 for i in (1, 3, 5))
             self.view.set_lines(f"projected {colour}", cat(segs), (*rgb, 1.0))
         self._pen_layers = layers
+        self.view.renderer.shade = sd.SHADE_UNDER_PENS if projected else 1.0
         self.view.set_lines("warnings", cat(warn), sd.WARNING_COLOUR)
         self.view.handles = handles
         self.view.handle_z = handle_z

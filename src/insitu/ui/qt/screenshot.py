@@ -6,8 +6,9 @@ a QR code placed on its 10 mm step; the top view with camera colours, and the is
 
 ``--view-png V.png`` also saves the 3-D view's own framebuffer and ``V.json`` beside it: the
 camera (centre, distance, angles, field of view, orthographic), the image size, the colour
-scale's z range, the colour bar's range, the grid step, the GL renderer, the cloud's points
-and the projected pattern's points (N, 3) mm — what a test needs to check the picture.
+scale's z range, the cloud's shade (dimmed under pens' paths), the colour bar's range, the
+grid step, the GL renderer, the cloud's points and the projected pattern's points (N, 3) mm
+— what a test needs to check the picture.
 ``--extra VIEW:COLOURS:PATH`` saves more pictures of the same window (COLOURS: height or
 camera), the k-th one's view as ``V-k.png`` and ``V-k.json`` too. ``--docks DIR`` saves
 each dock as the operator sees it then, raised in turn, as ``DIR/gui-dock-NAME.png``.
@@ -116,6 +117,7 @@ def view_info(window: MainWindow) -> dict:
             "centre": list(map(float, cam.centre)), "distance_mm": cam.distance_mm,
             "azimuth_deg": cam.azimuth_deg, "elevation_deg": cam.elevation_deg,
             "fov_deg": cam.fov_deg, "ortho": cam.ortho, "z_range": list(view.renderer.z_range),
+            "shade": view.renderer.shade,
             "colour_bar": None if bar is None else [bar[0], bar[1], bar[2]],
             "grid_step_mm": None if view.grid is None else view.grid.step_mm,
             "renderer": view.renderer_name,

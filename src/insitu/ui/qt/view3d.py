@@ -21,7 +21,7 @@ from insitu.ui.model import view_guides as vg
 from insitu.ui.model.orbit_camera import OrbitCamera
 from insitu.ui.qt import view_overlay
 from insitu.ui.qt.gl_renderer import Renderer
-from insitu.ui.qt.view_overlay import AXIS_COLOURS, HANDLE_PX
+from insitu.ui.qt.view_overlay import AXIS_COLOURS, BAR_BAND_PX, HANDLE_PX, colour_bar_range
 
 SETTLE_MS = 250                 # full detail this long after the view stopped moving
 SELECT_MIN_PX = 4               # a shorter drag on empty space is a click, not a box
@@ -110,8 +110,11 @@ class View3D(QOpenGLWidget):
         self.update()
 
     def frame_all(self, lo, hi) -> None:
-        """Fit the box (lo, hi) mm into the view (its eight corners inside, with a margin)."""
-        self.camera.frame(lo, hi, self.width() / max(self.height(), 1))
+        """Fit the box (lo, hi) mm into the view (its eight corners inside, with a margin),
+        left of the colour bar when one is shown."""
+        w = max(self.width(), 1)
+        reserve = min(BAR_BAND_PX / w, 0.4) if colour_bar_range(self) is not None else 0.0
+        self.camera.frame(lo, hi, w / max(self.height(), 1), reserve)
         self.update()
 
     # -- GL ------------------------------------------------------------------------------

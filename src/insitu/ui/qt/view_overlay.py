@@ -15,6 +15,7 @@ from insitu.ui.model.scene_data import COLORMAP_STOPS
 
 RULER_PX = 22                    # ruler band width
 BAR_W, BAR_H = 16, 180           # colour bar, px
+BAR_BAND_PX = BAR_W + 12 + 84    # the colour bar's band with its labels, from the right edge
 HANDLE_PX = 9
 TEXT = QColor(225, 228, 232)
 BAND = QColor(48, 52, 60, 235)
@@ -160,7 +161,7 @@ def _colour_bar(view, p: QPainter, w: int) -> None:
     rect = QRectF(w - BAR_W - 12, 30, BAR_W, BAR_H)
     p.setPen(Qt.NoPen)
     p.setBrush(BAND)
-    p.drawRoundedRect(rect.adjusted(-78, -26, 6, 14), 4, 4)
+    p.drawRoundedRect(rect.adjusted(-(BAR_BAND_PX - BAR_W - 18), -26, 6, 14), 4, 4)
     g = QLinearGradient(rect.bottomLeft(), rect.topLeft())
     if kind == "height":
         for t, r, gg, b in COLORMAP_STOPS:
