@@ -26,16 +26,15 @@ from rich.console import Console
 from rich.table import Table
 from scipy.spatial import cKDTree
 
-from insitu.sim.world import SimWorld
-from insitu.services.station import simulated
-
-from insitu.sim.devices import SimCamera, SimScanHead
+from insitu.reconstruct.plan import scan_lines
 from insitu.reconstruct.scan import ScanReconstructor
 from insitu.services import calibrate_height, centre_settings, height_model
-from insitu.reconstruct.plan import scan_lines
 from insitu.services.record import record_height_calibration
+from insitu.services.station import simulated
+from insitu.sim.devices import SimCamera, SimScanHead
 from insitu.sim.rig import default_rig
 from insitu.sim.workpieces import make_workpiece
+from insitu.sim.world import SimWorld
 from insitu.vision.extract import PAPER_SETTINGS, CentreSettings
 
 console = Console(width=150)

@@ -36,19 +36,23 @@ from rich.table import Table
 from insitu.calibrate.camera import INTRINSIC_NAMES
 from insitu.calibrate.field_file import save_field_correction
 from insitu.calibrate.pose_from_spots import pose_from_spots
-from insitu.sim.world import SimWorld
-from insitu.formats.sequence import Sequence
-from insitu.geometry.camera import CameraModel
 from insitu.formats.calibration import CameraCalibration
-from insitu.services.camera import (calibrate_camera, pose_change, recalibrate_camera_pose,
-                                    spot_observations)
+from insitu.formats.sequence import Sequence
+from insitu.geometry.beams import axis_lines
+from insitu.geometry.camera import CameraModel
+from insitu.services.camera import (
+    calibrate_camera,
+    pose_change,
+    recalibrate_camera_pose,
+    spot_observations,
+)
 from insitu.services.common import camera_model
 from insitu.services.field import calibrate_field
 from insitu.services.record import record_camera_calibration, record_field_calibration
 from insitu.services.station import simulated
-from insitu.geometry.beams import axis_lines
 from insitu.sim.board import BoardViews
 from insitu.sim.rig import default_rig, move_camera
+from insitu.sim.world import SimWorld
 
 console = Console(width=150)
 

@@ -25,11 +25,10 @@ from rich.console import Console  # noqa: E402
 from rich.table import Table  # noqa: E402
 
 from insitu.reconstruct.plane import band_and_side  # noqa: E402
-from insitu.sim.world import SimWorld  # noqa: E402
 from insitu.sim.rig import NOMINAL_HEAD, default_rig  # noqa: E402
 from insitu.sim.workpieces import make_workpiece  # noqa: E402
-from insitu.vision.centres import (gray_centroid, line_centres, line_direction,  # noqa: E402
-                                   photo_centres)
+from insitu.sim.world import SimWorld  # noqa: E402
+from insitu.vision.centres import gray_centroid, line_centres, line_direction, photo_centres  # noqa: E402
 from insitu.vision.extract import extract_centres  # noqa: E402
 from insitu.vision.steger import gaussian_peak, steger  # noqa: E402
 

@@ -58,8 +58,8 @@ from insitu.reconstruct.plane import band_and_side, line_runs_along_rows  # noqa
 from insitu.services.common import camera_model  # noqa: E402
 from insitu.sim.render import NOMINAL_EXPOSURE_MS  # noqa: E402
 from insitu.sim.rig import NOMINAL_HEAD, default_rig  # noqa: E402
-from insitu.sim.world import SimWorld  # noqa: E402
 from insitu.sim.workpieces import make_workpiece  # noqa: E402
+from insitu.sim.world import SimWorld  # noqa: E402
 from insitu.vision.extract import CentreSettings, extract_centres  # noqa: E402
 
 cv2.setNumThreads(1)

@@ -26,14 +26,14 @@ from rich.console import Console
 from rich.table import Table
 
 from insitu.calibrate.field_areas import area_table, stats
-from insitu.services.station import simulated
-from insitu.sim.world import SimWorld
-from insitu.sim.devices import SimCamera, SimScanHead, SimStage
 from insitu.errors import CalibrationError
 from insitu.formats.sequence import Sequence
 from insitu.services.field import calibrate_field, measure_spots, report_png
 from insitu.services.record import record_field_calibration, record_marked_field_calibration
+from insitu.services.station import simulated
+from insitu.sim.devices import SimCamera, SimScanHead, SimStage
 from insitu.sim.rig import default_rig
+from insitu.sim.world import SimWorld
 from insitu.vision.spots import find_spot
 
 console = Console(width=150)

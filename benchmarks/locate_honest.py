@@ -26,11 +26,11 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import cv2
+import locate_corpus as corpus
 import numpy as np
 from rich.console import Console
 from rich.table import Table
 
-import locate_corpus as corpus
 from insitu.formats.camera_spec import CameraSpec
 from insitu.formats.pointcloud import read_ply
 from insitu.formats.sequence import Sequence

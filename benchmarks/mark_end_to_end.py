@@ -32,21 +32,19 @@ from rich.console import Console
 from rich.table import Table
 from scipy.spatial import cKDTree
 
-from insitu.sim.world import SimWorld
-from insitu.services.station import simulated
-from insitu.sim.devices import SimController, SimInspectionCamera
-from insitu.marking import GalvoDriver, run_job
+from insitu.marking import GalvoDriver, Placement, run_job
 from insitu.marking.project import densify
 from insitu.marking.surface import Surface
 from insitu.services import calibrate_height
 from insitu.services.field import calibrate_field
-from insitu.marking import Placement
 from insitu.services.plan import plan_mark
-from insitu.services.scan import scan_live
-from insitu.sim.world import sim_world
-from insitu.sim.marks import find_marks
 from insitu.services.record import record_height_calibration, record_marked_field_calibration
+from insitu.services.scan import scan_live
+from insitu.services.station import simulated
+from insitu.sim.devices import SimController, SimInspectionCamera
+from insitu.sim.marks import find_marks
 from insitu.sim.rig import default_rig
+from insitu.sim.world import SimWorld, sim_world
 
 console = Console(width=150)
 ROOT = Path(__file__).resolve().parents[1]

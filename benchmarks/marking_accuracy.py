@@ -25,21 +25,29 @@ import numpy as np
 from rich.console import Console
 from rich.table import Table
 
-from insitu.sim.devices import SimController
-from insitu.services.station import simulated
 from insitu.errors import SafetyError
-from insitu.marking import (GalvoDriver, Limits, check_projection, estimate_time, make_job,
-                            plan_job, project, run_job, write_job)
-from insitu.marking import Placement
+from insitu.marking import (
+    GalvoDriver,
+    Limits,
+    Placement,
+    check_projection,
+    estimate_time,
+    make_job,
+    plan_job,
+    project,
+    run_job,
+    write_job,
+)
 from insitu.marking.project import densify
 from insitu.services import calibrate_height
 from insitu.services.mark import check_codes
-from insitu.services.scan import scan_live
-from insitu.sim.world import sim_world
-from insitu.sim.marks import find_marks, render_inspection
 from insitu.services.record import record_height_calibration
-from insitu.sim.world import SimWorld
+from insitu.services.scan import scan_live
+from insitu.services.station import simulated
+from insitu.sim.devices import SimController
+from insitu.sim.marks import find_marks, render_inspection
 from insitu.sim.rig import default_rig
+from insitu.sim.world import SimWorld, sim_world
 
 console = Console(width=150)
 STEPS = ((3.0, -30.0), (5.0, -10.0), (10.0, 10.0), (15.0, 30.0))   # (height, y of its centre)

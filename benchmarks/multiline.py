@@ -40,20 +40,19 @@ sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from accuracy import coverage, height_errors  # noqa: E402
 from independent import coverage as coverage_lines  # noqa: E402
 from independent import errors, true_part  # noqa: E402
-
 from scipy.spatial import cKDTree  # noqa: E402
 
 from insitu.formats.calibration import HeightCalibration  # noqa: E402
-from insitu.geometry.beams import line_commands  # noqa: E402
-from insitu.reconstruct.packing import line_ids  # noqa: E402
 from insitu.formats.json_file import load_json_model, save_json_model  # noqa: E402
 from insitu.formats.sequence import Sequence, SequenceWriter  # noqa: E402
+from insitu.geometry.beams import line_commands  # noqa: E402
 from insitu.reconstruct.bands import Packing, Sheets, survey  # noqa: E402
+from insitu.reconstruct.packing import line_ids  # noqa: E402
 from insitu.services import calibrate_height, camera_model, scan_live, scan_replay  # noqa: E402
-from insitu.vision.extract import CentreSettings  # noqa: E402
 from insitu.services.scan import plan_lines  # noqa: E402
 from insitu.services.station import simulated  # noqa: E402
 from insitu.sim.world import sim_world  # noqa: E402
+from insitu.vision.extract import CentreSettings  # noqa: E402
 
 console = Console(width=160)
 ROOT = Path(__file__).resolve().parents[1]

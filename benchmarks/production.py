@@ -50,18 +50,18 @@ import numpy as np
 from rich.console import Console
 from rich.table import Table
 
-from insitu.formats.pointcloud import PointCloud, read_ply, write_ply
-from insitu.marking import GalvoDriver, Placement, run_job
-from insitu.locate.part import LocateRefused, locate_part
-from insitu.locate.reference import reference_from_mesh
 from insitu.formats.calibration import HeightCalibration
 from insitu.formats.json_file import load_json_model, save_json_model
+from insitu.formats.pointcloud import PointCloud, read_ply, write_ply
+from insitu.locate.part import LocateRefused, locate_part
+from insitu.locate.reference import reference_from_mesh
+from insitu.marking import GalvoDriver, Placement, run_job
 from insitu.services import calibrate_height, scan_live
-from insitu.services.plan import plan_mark
 from insitu.services.field import calibrate_field
+from insitu.services.height import scan_camera
+from insitu.services.plan import plan_mark
 from insitu.services.record import record_height_calibration, record_marked_field_calibration
 from insitu.services.room_light import station_room_light
-from insitu.services.height import scan_camera
 from insitu.services.station import simulated
 from insitu.sim.devices import SimController
 from insitu.sim.rig import default_rig
@@ -340,7 +340,7 @@ def main() -> None:
         (args.cache / "b1").mkdir(exist_ok=True)
         timing(args, rig1, height_cal(args.cache / "b1", rig1, args.seed), args.cache)
     if "produce" not in skip:
-        from production_run import report      # beside this script
+        from production_run import report  # beside this script
 
         report(argparse.Namespace(count=args.parts, binning=args.binning, seed=args.seed + 1,
                                   fault_at=7, module=0.35, spacing=0.25,

@@ -15,9 +15,9 @@ import numpy as np  # noqa: E402
 from rich.console import Console  # noqa: E402
 from rich.table import Table  # noqa: E402
 
-from insitu.sim.world import SimWorld  # noqa: E402
 from insitu.sim.rig import default_rig  # noqa: E402
 from insitu.sim.workpieces import make_workpiece  # noqa: E402
+from insitu.sim.world import SimWorld  # noqa: E402
 
 
 def main(n: int = 20) -> None:

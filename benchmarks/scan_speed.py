@@ -19,15 +19,14 @@ import numpy as np  # noqa: E402
 from rich.console import Console  # noqa: E402
 from rich.table import Table  # noqa: E402
 
-from insitu.sim.world import SimWorld  # noqa: E402
-from insitu.services.station import simulated
-
-from insitu.sim.devices import SimCamera, SimScanHead  # noqa: E402
 from insitu.reconstruct.scan import ScanReconstructor  # noqa: E402
 from insitu.services import calibrate_height, centre_settings, height_model  # noqa: E402
 from insitu.services.record import record_height_calibration  # noqa: E402
+from insitu.services.station import simulated
+from insitu.sim.devices import SimCamera, SimScanHead  # noqa: E402
 from insitu.sim.rig import default_rig  # noqa: E402
 from insitu.sim.workpieces import make_workpiece  # noqa: E402
+from insitu.sim.world import SimWorld  # noqa: E402
 from insitu.vision.extract import CentreSettings, extract_centres  # noqa: E402
 
 

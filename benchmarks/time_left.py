@@ -18,10 +18,9 @@ from rich.console import Console
 from rich.table import Table
 
 from insitu import services
-from insitu.marking import Placement
+from insitu.marking import Placement, path_seconds
 from insitu.services.plan import joined, plan_placements
 from insitu.services.station import connect
-from insitu.marking import path_seconds
 from insitu.ui.model.time_left import TimeLeft
 
 DATA = Path(__file__).parents[1] / "tests" / "data"

@@ -33,20 +33,27 @@ import numpy as np
 
 from insitu.calibrate.field_file import FieldCorrection, load_field_correction
 from insitu.errors import InsituError
-from insitu.formats.pointcloud import PointCloud, read_ply, write_ply
-from insitu.formats.project import Project, RigChoice, ScanSettings, read_project, write_project
-from insitu.formats.sequence import Sequence, SequenceWriter
-from insitu.geometry.beams import TwoMirrorHead
-from insitu.formats.pens import DEFAULT_PENS, read_pens, write_pens
-from insitu.marking import (PROJECTIONS, GalvoDriver, LaserOverride, Placement, make_job,
-                            read_job, write_job)
-from insitu.patterns.dxf import load_dxf
-from insitu.patterns.svg import load_svg
-from insitu.vision.extract import CentreSettings
 from insitu.formats.calibration import HeightCalibration
 from insitu.formats.json_file import load_json_model, save_json_model
+from insitu.formats.pens import DEFAULT_PENS, read_pens, write_pens
+from insitu.formats.pointcloud import PointCloud, read_ply, write_ply
+from insitu.formats.project import Project, RigChoice, ScanSettings, read_project, write_project
 from insitu.formats.rig import RigConfig
+from insitu.formats.sequence import Sequence, SequenceWriter
+from insitu.geometry.beams import TwoMirrorHead
+from insitu.marking import (
+    PROJECTIONS,
+    GalvoDriver,
+    LaserOverride,
+    Placement,
+    make_job,
+    read_job,
+    write_job,
+)
+from insitu.patterns.dxf import load_dxf
+from insitu.patterns.svg import load_svg
 from insitu.services.height import height_model
+from insitu.vision.extract import CentreSettings
 
 HEAD = TwoMirrorHead(350.0, 12.0)
 CAMERA = {"width": 32, "height": 24, "K": [[40.0, 0, 16.0], [0, 40.0, 12.0], [0, 0, 1]],

@@ -10,10 +10,10 @@ import shutil
 import subprocess
 from pathlib import Path
 
-from insitu.formats.sequence import Sequence
 from insitu.formats.calibration import CameraCalibration
 from insitu.formats.json_file import save_json_model
 from insitu.formats.rig import ScanHeadConfig
+from insitu.formats.sequence import Sequence
 
 RECORDED = Path(__file__).parents[1] / "data" / "scan-step-block-b4"
 

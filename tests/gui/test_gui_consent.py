@@ -4,10 +4,10 @@ and the station file allows it (a canary library whose constructor creates a fil
 
 from pathlib import Path
 
-from fakes.canary import build, project_naming
-from fakes.station import allow
 from PySide6.QtCore import QSettings
 
+from fakes.canary import build, project_naming
+from fakes.station import allow
 from insitu.formats.project import RigChoice
 from insitu.ui.qt.main_window import MainWindow
 

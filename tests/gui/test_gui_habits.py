@@ -4,9 +4,9 @@ F1 / F2 / Esc for Preview / Mark / ABORT listed in Help; a rescan that is cancel
 keeps the cloud the operator had."""
 
 import pytest
+import test_gui_workflow as wf
 from PySide6.QtCore import QPoint, Qt
 from PySide6.QtTest import QTest
-import test_gui_workflow as wf
 from test_gui_workflow import WAIT_MS, scan_recording
 
 from insitu.errors import DeviceError

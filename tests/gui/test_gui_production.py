@@ -9,18 +9,16 @@ import numpy as np
 import pytest
 from PySide6.QtCore import QSettings, Qt
 
+from insitu.errors import InsituError
 from insitu.formats.mesh import write_mesh
-from insitu.formats.production_log import read_log
+from insitu.formats.pointcloud import PointCloud
+from insitu.formats.production_log import PartRecord, read_log
 from insitu.formats.recipe import Recipe, RecipeScan, write_recipe
 from insitu.marking import Placement
 from insitu.sim.workpieces import make_workpiece
 from insitu.ui.model.session import RigChoice
 from insitu.ui.qt.main_window import MainWindow
-from insitu.errors import InsituError
-from insitu.formats.pointcloud import PointCloud
-from insitu.formats.production_log import PartRecord
-from insitu.ui.qt.production_panel import (record_words, recipe_path,
-                                           save_session_as_recipe)
+from insitu.ui.qt.production_panel import recipe_path, record_words, save_session_as_recipe
 
 DATA = Path(__file__).parents[1] / "data"
 SCAN = DATA / "scan-step-block-b4"

@@ -6,11 +6,11 @@ picture at full size."""
 
 import numpy as np
 import pytest
+import test_gui_workflow as wf
 from PySide6.QtCore import QMimeData, QPointF, QSettings, Qt, QTimer, QUrl
 from PySide6.QtGui import QAction, QDropEvent, QKeySequence
 from PySide6.QtTest import QTest
 from PySide6.QtWidgets import QApplication, QMessageBox
-import test_gui_workflow as wf
 from test_gui_workflow import DATA, WAIT_MS, fire, place, scan_recording
 
 from insitu.formats.pointcloud import write_ply
@@ -18,7 +18,6 @@ from insitu.marking import journal_path_for, read_job
 from insitu.services.serials import save_job
 from insitu.ui.qt.main_window import MainWindow
 from insitu.ui.qt.scan_panel import NO_RIG
-
 
 window = wf.window       # the workflow tests' fixture
 
@@ -294,6 +293,7 @@ def test_help_menu_guide_shortcuts_and_about(qtbot, window):
     about = window.help_windows["about"]
     assert about.isVisible()
     from PySide6.QtCore import qVersion
+
     import insitu
     assert insitu.__version__ in about.text() and qVersion() in about.text()
     assert "OpenGL" in about.text()

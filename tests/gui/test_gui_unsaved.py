@@ -11,9 +11,9 @@ from collections import Counter
 from pathlib import Path
 
 import numpy as np
+import test_gui_workflow as wf
 from PySide6.QtCore import QSettings, Qt
 from PySide6.QtWidgets import QApplication, QMessageBox
-import test_gui_workflow as wf
 from test_gui_workflow import DATA, WAIT_MS, fire, place, scan_recording
 
 from insitu.devices.galvo import list_digest

@@ -12,8 +12,8 @@ from PySide6.QtGui import QDropEvent
 from PySide6.QtTest import QTest
 
 from insitu import services
-from insitu.ui.qt.main_window import MainWindow
 from insitu.ui.model.session import RigChoice
+from insitu.ui.qt.main_window import MainWindow
 
 DATA = Path(__file__).parents[1] / "data"
 SCAN = DATA / "scan-step-block-b4"
@@ -256,8 +256,8 @@ def test_the_height_calibration_page_shows_residuals_and_a_picture(qtbot, window
 
 
 def test_a_device_fault_mid_scan_keeps_what_was_measured(qtbot, window, monkeypatch):
-    from insitu.sim.devices import SimCamera
     from insitu.errors import DeviceError
+    from insitu.sim.devices import SimCamera
 
     grab, calls = SimCamera.grab, []
 

@@ -9,8 +9,9 @@ damage."""
 from pathlib import Path
 
 import pytest
-from run_folders import shared
+
 from fakes.station import isolated_station
+from run_folders import shared
 
 # another renderer's recordings, beside the repository (their truth.json only scores)
 RECORDINGS = Path(__file__).resolve().parents[3] / "shared" / "recordings"

@@ -12,14 +12,20 @@ import pytest
 import typer
 from typer.testing import CliRunner
 
-from insitu.calibrate.camera import (BoardSpec, Detection, board_pose, calibrate_intrinsics,
-                                     detect_board, find_chessboard)
+from insitu.calibrate.camera import (
+    BoardSpec,
+    Detection,
+    board_pose,
+    calibrate_intrinsics,
+    detect_board,
+    find_chessboard,
+)
 from insitu.cli.camera import camera as camera_cmd
 from insitu.errors import CalibrationError
-from insitu.formats.sequence import Sequence, SequenceWriter
-from insitu.geometry.camera import CameraModel
 from insitu.formats.calibration import CameraCalibration
 from insitu.formats.json_file import load_json_model
+from insitu.formats.sequence import Sequence, SequenceWriter
+from insitu.geometry.camera import CameraModel
 from insitu.sim.checkerboard import board_corners, random_board_poses
 from insitu.sim.rig import default_rig
 

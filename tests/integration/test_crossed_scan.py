@@ -10,17 +10,22 @@ import numpy as np
 import pytest
 from typer.testing import CliRunner
 
+from insitu.calibrate.height_fit import LineObservation, fit_turned_sheet
 from insitu.cli.main import app
 from insitu.errors import MeasurementError
-from insitu.geometry.beams import light_plane
-from insitu.locate.edge_align import edge_samples
-from insitu.calibrate.height_fit import LineObservation, fit_turned_sheet
-from insitu.reconstruct.plan import scan_lines
-from insitu.reconstruct.turned_sheet import (CROSS_ANGLE_DEG, TurnedSheetModel, line_angle,
-                                         turned_lines, turned_offset)
 from insitu.formats.calibration import HeightCalibration
 from insitu.formats.json_file import load_json_model
 from insitu.formats.sequence import Sequence
+from insitu.geometry.beams import light_plane
+from insitu.locate.edge_align import edge_samples
+from insitu.reconstruct.plan import scan_lines
+from insitu.reconstruct.turned_sheet import (
+    CROSS_ANGLE_DEG,
+    TurnedSheetModel,
+    line_angle,
+    turned_lines,
+    turned_offset,
+)
 from insitu.services import calibrate_height, load_height_calibration, scan_live
 from insitu.services.record import record_height_calibration
 from insitu.services.station import connect, simulated

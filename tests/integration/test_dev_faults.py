@@ -15,10 +15,10 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+
 from fakes.lmc_usb import FakeLmcBoard
 from fakes.rtc import FakeBoard, build
 from fakes.station import allow
-
 from insitu.devices.lmc import LmcController, LmcSettings
 from insitu.devices.rtc import RtcController, RtcSettings
 from insitu.errors import DeviceError, SafetyError

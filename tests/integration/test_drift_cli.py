@@ -11,12 +11,12 @@ import pytest
 from typer.testing import CliRunner
 
 from insitu.calibrate.field_file import load_field_correction, save_field_correction
-from insitu.services.station import simulated
 from insitu.cli.main import app
-from insitu.sim.world import SimWorld
 from insitu.services.field import calibrate_field, check_drift
 from insitu.services.record import record_field_calibration
+from insitu.services.station import simulated
 from insitu.sim.rig import default_rig
+from insitu.sim.world import SimWorld
 
 # its module fixture made once: the module's tests on one pytest-xdist worker
 pytestmark = pytest.mark.xdist_group("drift-cli")

@@ -3,8 +3,8 @@ measured, the use cases and the commands."""
 
 import json
 import shutil
-from pathlib import Path
 from dataclasses import replace
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -12,15 +12,15 @@ import typer
 from typer.testing import CliRunner
 
 from insitu.calibrate.fiducials import find_circles
-from insitu.services.station import simulated
 from insitu.calibrate.field_file import load_field_correction
 from insitu.cli.field import correct, field
-from insitu.sim.world import SimWorld
 from insitu.errors import CalibrationError, FormatError
 from insitu.formats.sequence import Sequence, SequenceWriter
 from insitu.services.field import calibrate_field, check_drift, measure_spots
 from insitu.services.record import record_field_calibration
+from insitu.services.station import simulated
 from insitu.sim.rig import default_rig
+from insitu.sim.world import SimWorld
 
 
 def grid(n, half):

@@ -11,11 +11,11 @@ import time
 
 import numpy as np
 import pytest
-from kill_campaign import campaign
 from typer.testing import CliRunner
 
 from insitu.cli.main import app
 from insitu.marking import history, make_job, progress_path_for, read_job, read_progress, write_job
+from kill_campaign import campaign
 
 
 def _job(n, points):

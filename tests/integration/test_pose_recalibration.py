@@ -13,8 +13,13 @@ import numpy as np
 import pytest
 from typer.testing import CliRunner
 
-from insitu.calibrate.pose_from_spots import (SpotObservations, beam_points, cayley,
-                                              pose_from_spots, rotation_between)
+from insitu.calibrate.pose_from_spots import (
+    SpotObservations,
+    beam_points,
+    cayley,
+    pose_from_spots,
+    rotation_between,
+)
 from insitu.cli.main import app
 from insitu.errors import CalibrationError
 from insitu.formats.sequence import SequenceWriter

@@ -18,12 +18,12 @@ from insitu.formats.pointcloud import write_ply
 from insitu.formats.production_log import csv_path_for, read_log
 from insitu.formats.recipe import Recipe, RecipeScan, write_recipe
 from insitu.marking import Placement, read_job
+from insitu.patterns.fields import Variables
 from insitu.services import production
 from insitu.services.scan import Cancelled, scan_live
-from insitu.patterns.fields import Variables
 from insitu.services.serials import job_variables, render_placement
-from insitu.sim.marks import burnt_centre
 from insitu.services.station import connect
+from insitu.sim.marks import burnt_centre
 
 BINNING = 4
 TEXT = 'text:"{serial:03d}";size=2'
@@ -277,9 +277,10 @@ def test_mark_without_recipe_still_needs_pattern_and_at(tmp_path):
 def test_produce_command_logs_a_part_set_aside_and_refuses_to_overwrite_a_log(recipe, tmp_path):
     """The arc on the table where the recipe's step block is expected: not found, no serial;
     the command's plain progress and per-part lines; a second run needs --resume."""
+    from dataclasses import replace
+
     from insitu.cli.recipe import read
     from insitu.formats.recipe import write_recipe as write
-    from dataclasses import replace
 
     write(recipe, replace(read(recipe), workpiece="arc"))
     args = ["produce", str(recipe), "--count", "1", "--binning", str(BINNING), "--no-wait"]

@@ -1,6 +1,7 @@
 """The unit tier's station file: its own, empty until a test allows a library."""
 
 import pytest
+
 from fakes.station import isolated_station
 
 

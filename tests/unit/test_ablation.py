@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from insitu.errors import FormatError
-from insitu.formats.materials import (DEFAULT_MATERIALS, LaserSource, Material, read_materials)
+from insitu.formats.materials import DEFAULT_MATERIALS, LaserSource, Material, read_materials
 from insitu.formats.pens import Pen
 from insitu.sim.ablation import ABLATION, CELL_MM, Engraving, MarkingBeam, ablate
 from insitu.sim.workpieces import make_workpiece

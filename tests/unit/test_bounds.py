@@ -12,9 +12,9 @@ import pytest
 from typer.testing import CliRunner
 
 from insitu.cli.main import app
+from insitu.errors import InsituError
 from insitu.formats.bounds import BOUNDS, check
 from insitu.formats.pointcloud import PointCloud, write_ply
-from insitu.errors import InsituError
 
 runner = CliRunner()
 DATA = Path(__file__).parents[1] / "data"
@@ -171,8 +171,9 @@ def test_a_good_height_calibration_passes_the_bounds(tmp_path):
 
 
 def test_field_correction_out_of_bounds(tmp_path):
-    from insitu.calibrate.field_file import RBFSpec
     from pydantic import ValidationError
+
+    from insitu.calibrate.field_file import RBFSpec
 
     good = {"sigma_mm": 20.0, "mse_goal_mm2": 1e-4, "centres_mm": [[0, 0]],
             "weights_mm": [[0.1, 0.0]], "bias_mm": [0, 0]}
@@ -249,8 +250,9 @@ def test_stage_and_projection_options_out_of_bounds():
 
 
 def test_checkerboard_out_of_bounds():
-    from insitu.formats.sequence import CheckerboardSpec
     from pydantic import ValidationError
+
+    from insitu.formats.sequence import CheckerboardSpec
 
     assert CheckerboardSpec(cols=9, rows=6, square_mm=10).cols == 9
     with pytest.raises(ValidationError, match=r"square_mm\n  1e-300 is outside 0.001 … 2000 mm"):

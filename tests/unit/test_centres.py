@@ -16,8 +16,13 @@ from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 from scipy.special import ndtr
 
-from insitu.vision.centres import (LineCentres, gaussian_peak, gray_centroid, line_centres,
-                                   line_direction)
+from insitu.vision.centres import (
+    LineCentres,
+    gaussian_peak,
+    gray_centroid,
+    line_centres,
+    line_direction,
+)
 from insitu.vision.steger import gaussian_kernels, steger
 
 METHODS = {"gray": gray_centroid, "gaussian": gaussian_peak, "steger": steger}

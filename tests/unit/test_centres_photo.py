@@ -16,8 +16,8 @@ import pytest
 from typer.testing import CliRunner
 
 from insitu.cli.main import app
-from insitu.sim.checkerboard import render_checkerboard
 from insitu.sim.board import board_on_plate
+from insitu.sim.checkerboard import render_checkerboard
 from insitu.sim.render import Renderer
 from insitu.sim.rig import default_rig
 from insitu.sim.scene import Scene

@@ -8,8 +8,8 @@ from pathlib import Path
 import genicam
 import numpy as np
 import pytest
-from fakes.station import allow
 
+from fakes.station import allow
 from insitu.devices.camera_genicam import GenICamCamera
 from insitu.devices.protocols import Camera
 from insitu.errors import ConfigError, DeviceError

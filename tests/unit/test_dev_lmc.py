@@ -5,8 +5,8 @@ import struct
 
 import numpy as np
 import pytest
-from fakes.lmc_usb import FakeLmcBoard
 
+from fakes.lmc_usb import FakeLmcBoard
 from insitu.devices.galvo import Controller, joint_from_targets
 from insitu.devices.lmc import LmcController, LmcSettings, packets
 from insitu.errors import DeviceError, SafetyError

@@ -6,8 +6,8 @@ import time
 
 import numpy as np
 import pytest
-from fakes.lmc_usb import FakeLmcBoard
 
+from fakes.lmc_usb import FakeLmcBoard
 from insitu.devices.galvo import nominal_commands
 from insitu.devices.lmc import LmcController, LmcSettings
 from insitu.devices.projection import GalvoLineProjector

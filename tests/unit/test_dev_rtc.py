@@ -5,14 +5,14 @@ import time
 
 import numpy as np
 import pytest
+
 from fakes.rtc import FakeBoard, build
 from fakes.station import allow
-
 from insitu.devices.galvo import Command, Controller, joint_from_targets
 from insitu.devices.rtc import RtcController, RtcSettings
 from insitu.errors import ConfigError, DeviceError, SafetyError
 from insitu.geometry.beams import TwoMirrorHead
-from insitu.marking import GalvoDriver, LaserParams, LaserOverride, make_job, run_job, run_preview
+from insitu.marking import GalvoDriver, LaserOverride, LaserParams, make_job, run_job, run_preview
 
 HEAD = TwoMirrorHead(350.0, 12.0)
 K = 2000.0

@@ -3,8 +3,8 @@
 import threading
 
 import pytest
-from fakes.grbl import GrblPeer
 
+from fakes.grbl import GrblPeer
 from insitu.devices.protocols import Stage
 from insitu.devices.stage_grbl import GrblStage, parse_status
 from insitu.errors import DeviceError

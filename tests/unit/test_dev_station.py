@@ -11,15 +11,15 @@ from pathlib import Path
 import cv2
 import numpy as np
 import pytest
+
 from fakes.grbl import GrblPeer
 from fakes.rtc import FakeBoard, build
 from fakes.station import allow
-
 from insitu.errors import ConfigError
-from insitu.formats.sequence import Sequence
 from insitu.formats.calibration import CameraCalibration
 from insitu.formats.json_file import load_json_model, save_json_model
 from insitu.formats.rig import RigConfig, ScanHeadConfig
+from insitu.formats.sequence import Sequence
 from insitu.services import ScanInterrupted
 from insitu.services.scan import scan_live, scan_replay
 from insitu.services.station import connect

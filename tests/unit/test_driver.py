@@ -4,20 +4,34 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
-from golden import GOLDEN, HEAD, mark_small_job, small_job
 
-from insitu.devices.galvo import (Controller, RecordingController, focus_points,
-                                  joint_from_targets, nominal_commands)
-from insitu.sim.world import SimWorld
-from insitu.sim.devices import SimController
+from golden import GOLDEN, HEAD, mark_small_job, small_job
+from insitu.devices.galvo import (
+    Controller,
+    RecordingController,
+    focus_points,
+    joint_from_targets,
+    nominal_commands,
+)
 from insitu.errors import DeviceError, FormatError, SafetyError
 from insitu.geometry.beams import TwoMirrorHead
 from insitu.geometry.distortion import NoDistortion
-from insitu.marking import (GalvoDriver, Limits, estimate_time, make_job, progress_path_for,
-                            read_progress, run_job, run_preview, write_job)
+from insitu.marking import (
+    GalvoDriver,
+    Limits,
+    estimate_time,
+    make_job,
+    progress_path_for,
+    read_progress,
+    run_job,
+    run_preview,
+    write_job,
+)
+from insitu.sim.devices import SimController
 from insitu.sim.marks import find_marks, mark_darkness, render_inspection
 from insitu.sim.rig import default_rig
 from insitu.sim.workpieces import make_workpiece
+from insitu.sim.world import SimWorld
 
 
 def many_paths_job(n=6):

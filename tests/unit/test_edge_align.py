@@ -5,14 +5,13 @@ order of their pixels."""
 
 import numpy as np
 import pytest
+from test_locate import synthetic_scan
 
 from insitu.geometry.camera import CameraModel
-from insitu.locate.edge_align import align_edges, edge_distance, edge_samples
 from insitu.geometry.pose import apply, inverse, rot_z
+from insitu.locate.edge_align import align_edges, edge_distance, edge_samples
 from insitu.locate.reference import reference_from_mesh
 from insitu.sim.workpieces import make_workpiece
-
-from test_locate import synthetic_scan
 
 TRUTH = (12.0, -7.0, 33.0)
 
@@ -107,8 +106,8 @@ def test_a_lines_points_are_taken_in_the_order_of_their_pixels():
 def test_the_scan_camera_is_the_height_calibrations():
     """Method 2 scans are measured through the height calibration's camera, Method 1 scans
     through the rig's."""
-    from insitu.formats.camera_spec import CameraSpec
     from insitu.formats.calibration import HeightCalibration
+    from insitu.formats.camera_spec import CameraSpec
     from insitu.services.height import scan_camera
     from insitu.sim.rig import default_rig
 

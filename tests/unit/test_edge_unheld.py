@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from insitu.locate.edge_align import align_edges
-from insitu.locate.unheld import unheld
 from insitu.locate.reference import reference_from_mesh
+from insitu.locate.unheld import unheld
 from insitu.sim.workpieces import make_workpiece
 
 

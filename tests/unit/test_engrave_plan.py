@@ -6,8 +6,17 @@ import numpy as np
 import pytest
 import shapely
 
-from insitu.marking.engrave_depth import (HIDDEN, MEASURED, OUTSIDE, DepthMap, DepthSettings,
-                                          Outline, PocketCells, measure_depth, unreachable)
+from insitu.marking.engrave_depth import (
+    HIDDEN,
+    MEASURED,
+    OUTSIDE,
+    DepthMap,
+    DepthSettings,
+    Outline,
+    PocketCells,
+    measure_depth,
+    unreachable,
+)
 from insitu.marking.engrave_layers import layer_paths, passes_given
 from insitu.marking.engrave_plan import RATE_MARGIN, CellHistory, learn, plan_round
 

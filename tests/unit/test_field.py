@@ -9,12 +9,26 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from insitu.calibrate.field import (CorrectionTable, RBFNetwork, fit_rbf, fit_table, folds,
-                                    invert, ols_order, select_rbf, select_table, table_nodes)
+from insitu.calibrate.field import (
+    CorrectionTable,
+    RBFNetwork,
+    fit_rbf,
+    fit_table,
+    folds,
+    invert,
+    ols_order,
+    select_rbf,
+    select_table,
+    table_nodes,
+)
 from insitu.calibrate.field_areas import area_table
-from insitu.calibrate.field_file import (FieldCorrection, correction_from_file,
-                                         load_field_correction, model_spec,
-                                         save_field_correction)
+from insitu.calibrate.field_file import (
+    FieldCorrection,
+    correction_from_file,
+    load_field_correction,
+    model_spec,
+    save_field_correction,
+)
 from insitu.errors import CalibrationError, ConfigError, SafetyError
 from insitu.geometry.distortion import PolynomialFieldDistortion
 

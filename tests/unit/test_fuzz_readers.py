@@ -12,25 +12,25 @@ import os
 from pathlib import Path
 
 import numpy as np
-import fuzzing
 import pytest
 from hypothesis import HealthCheck, given, seed, settings
 from hypothesis import strategies as st
 
+import fuzzing
 from insitu.calibrate.field_file import FieldCorrection, load_field_correction
 from insitu.errors import InsituError
+from insitu.formats.calibration import CameraCalibration, HeightCalibration
+from insitu.formats.json_file import load_json_model, save_json_model
 from insitu.formats.pointcloud import PointCloud, read_ply, write_ply
+from insitu.formats.rig import RigConfig, ScanHeadConfig
 from insitu.formats.sequence import Sequence
 from insitu.geometry.beams import TwoMirrorHead
 from insitu.marking import GalvoDriver, make_job, read_job, run_job, write_job
 from insitu.marking.run import history
-from insitu.vision.extract import CentreSettings
-from insitu.formats.calibration import CameraCalibration, HeightCalibration
-from insitu.formats.json_file import load_json_model, save_json_model
-from insitu.formats.rig import RigConfig, ScanHeadConfig
 from insitu.services.common import camera_model
 from insitu.services.field import read_targets_csv
 from insitu.services.height import height_model
+from insitu.vision.extract import CentreSettings
 
 SEED = int(os.environ["INSITU_FUZZ_SEED"])         # the run's, set by tests/conftest.py
 EXAMPLES = int(os.environ.get("INSITU_FUZZ_EXAMPLES", 60))

@@ -3,8 +3,7 @@
 import numpy as np
 import pytest
 
-from insitu.geometry.beams import (PivotHead, ScanHeadOptics, TwoMirrorHead, light_plane,
-                                   line_sheet)
+from insitu.geometry.beams import PivotHead, ScanHeadOptics, TwoMirrorHead, light_plane, line_sheet
 from insitu.geometry.camera import CameraModel
 from insitu.geometry.distortion import PolynomialFieldDistortion, distortion_from_dict
 

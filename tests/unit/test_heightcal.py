@@ -7,13 +7,13 @@ import numpy as np
 import pytest
 from typer.testing import CliRunner
 
+from insitu.calibrate.height_fit import LineObservation, fit_paper, fit_sheet
 from insitu.cli.main import app
 from insitu.errors import CalibrationError, MeasurementError
-from insitu.formats.pointcloud import read_ply
-from insitu.calibrate.height_fit import LineObservation, fit_paper, fit_sheet
-from insitu.reconstruct.plate_models import SheetHeightModel
 from insitu.formats.calibration import HeightCalibration
 from insitu.formats.json_file import load_json_model
+from insitu.formats.pointcloud import read_ply
+from insitu.reconstruct.plate_models import SheetHeightModel
 from insitu.services import load_height_calibration, scan_replay
 from insitu.sim.workpieces import make_workpiece
 

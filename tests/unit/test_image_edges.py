@@ -6,6 +6,7 @@ refuses the part;
 
 import numpy as np
 import pytest
+from test_locate import synthetic_scan
 from typer.testing import CliRunner
 
 from insitu.cli.main import app
@@ -19,7 +20,6 @@ from insitu.services.station import simulated
 from insitu.sim.rig import default_rig
 from insitu.sim.workpieces import make_workpiece
 from insitu.sim.world import SimWorld, sim_world
-from test_locate import synthetic_scan
 
 POSE = (6.0, -4.0, 37.0)
 LOOSE = LocateSettings(tolerance_mm=0.1, turn_bound_deg=0.5)

@@ -7,8 +7,16 @@ import pytest
 from pydantic import ValidationError
 
 from insitu.errors import FormatError
-from insitu.marking import (LaserOverride, LaserParams, MarkJob, Timing, estimate_time, make_job,
-                            read_job, write_job)
+from insitu.marking import (
+    LaserOverride,
+    LaserParams,
+    MarkJob,
+    Timing,
+    estimate_time,
+    make_job,
+    read_job,
+    write_job,
+)
 from insitu.marking.job import corner_delays_us
 
 

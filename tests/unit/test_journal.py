@@ -10,8 +10,16 @@ import pytest
 from insitu.devices.galvo import ListPosition, RecordingController, list_digest
 from insitu.errors import DeviceError, FormatError, SafetyError
 from insitu.geometry.beams import TwoMirrorHead
-from insitu.marking import (GalvoDriver, history, make_job, progress_path_for, read_journal,
-                            read_progress, run_job, write_job)
+from insitu.marking import (
+    GalvoDriver,
+    history,
+    make_job,
+    progress_path_for,
+    read_journal,
+    read_progress,
+    run_job,
+    write_job,
+)
 from insitu.marking.run import resume_list
 
 HEAD = TwoMirrorHead(350.0, 12.0)

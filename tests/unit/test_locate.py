@@ -12,9 +12,9 @@ from typer.testing import CliRunner
 from insitu.cli.main import app
 from insitu.errors import ConfigError
 from insitu.formats.pointcloud import PointCloud, write_ply
+from insitu.formats.pose import load_pose
 from insitu.locate.part import LocateRefused, locate_part
 from insitu.locate.reference import reference_from_cloud, reference_from_mesh
-from insitu.formats.pose import load_pose
 from insitu.sim.scene import Scene
 from insitu.sim.workpieces import make_workpiece
 
@@ -247,8 +247,8 @@ def test_pose_of_a_small_simulated_scan(refs):
 def test_edges_that_are_not_the_references_are_refused(refs):
     """When a good share of the scan's edges finds no edge of the reference where the pose
     puts them, the edge step gives up (the pose would be doubtful)."""
-    from insitu.locate.edge_align import align_edges, edge_samples
     from insitu.geometry.pose import apply, inverse, rot_z
+    from insitu.locate.edge_align import align_edges, edge_samples
 
     truth = (12.0, -7.0, 33.0)
     pts, lines = synthetic_scan("step-block", truth)

@@ -10,9 +10,15 @@ import pytest
 from insitu.devices.galvo import RecordingController
 from insitu.formats.pointcloud import PointCloud
 from insitu.geometry.beams import TwoMirrorHead
-from insitu.marking import GalvoDriver, make_job, progress_path_for, read_progress, write_job
+from insitu.marking import (
+    GalvoDriver,
+    Placement,
+    make_job,
+    progress_path_for,
+    read_progress,
+    write_job,
+)
 from insitu.services import Cancelled
-from insitu.marking import Placement
 from insitu.services.mark import mark, mark_on_station
 from insitu.services.plan import plan_placements
 from insitu.services.station import connect

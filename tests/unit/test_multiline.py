@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 
 from insitu.errors import FormatError
+from insitu.formats.sequence import Sequence, SequenceWriter
 from insitu.reconstruct.bands import Band, Packing, exclusive
 from insitu.reconstruct.scan import ScanReconstructor
-from insitu.formats.sequence import Sequence, SequenceWriter
 from insitu.vision.band_centres import centres_in_bands
 
 W, H = 200, 100

@@ -11,15 +11,15 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+
 from fakes.canary import build, project_naming
 from fakes.station import allow
-
 from insitu.devices.native import allowed_library, read_station, station_path
 from insitu.devices.rtc import RtcLibrary
 from insitu.errors import ConfigError, DeviceError
 from insitu.marking import make_job
-from insitu.services.serials import save_job
 from insitu.services.project import open_project
+from insitu.services.serials import save_job
 
 SRC = Path(__file__).parents[2] / "src"
 

@@ -17,9 +17,20 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from insitu.errors import FormatError
-from insitu.patterns import (Pattern, fiducial_centres, fiducial_grid, hatch, jump_length,
-                             load_image, load_pattern, order_paths, qr_pattern, simplify,
-                             text_pattern, to_svg)
+from insitu.patterns import (
+    Pattern,
+    fiducial_centres,
+    fiducial_grid,
+    hatch,
+    jump_length,
+    load_image,
+    load_pattern,
+    order_paths,
+    qr_pattern,
+    simplify,
+    text_pattern,
+    to_svg,
+)
 from insitu.patterns.fill import offset
 from insitu.patterns.model import normalised, region
 from insitu.patterns.order import order_units

@@ -12,8 +12,17 @@ from insitu.devices.lmc import L_MARK, L_ON_DELAY, LmcListBuilder, LmcSettings
 from insitu.errors import DeviceError, FormatError
 from insitu.formats.pens import DEFAULT_PENS, Delays, Pen, PenTable, Wobble, read_pens, write_pens
 from insitu.geometry.beams import TwoMirrorHead
-from insitu.marking import (GalvoDriver, LaserOverride, estimate_time, make_job,
-                            progress_path_for, read_job, run_job, with_pen, write_job)
+from insitu.marking import (
+    GalvoDriver,
+    LaserOverride,
+    estimate_time,
+    make_job,
+    progress_path_for,
+    read_job,
+    run_job,
+    with_pen,
+    write_job,
+)
 from insitu.marking.run import resume_list
 
 HEAD = TwoMirrorHead(350.0, 12.0)

@@ -243,6 +243,7 @@ def test_drawings_over_the_size_limit_are_refused(tmp_path, monkeypatch):
 
 def test_photos_that_lead_out_of_their_folder_are_refused(tmp_path):
     import cv2
+
     from insitu.calibrate.photos import image_files
     from insitu.errors import CalibrationError
     (tmp_path / "photos").mkdir()

@@ -16,8 +16,13 @@ from typer.testing import CliRunner
 
 from insitu.cli.main import app
 from insitu.errors import InsituError
-from insitu.vision.centres import ImageInputError, as_gray, gray_centroid, line_centres, \
-    line_direction
+from insitu.vision.centres import (
+    ImageInputError,
+    as_gray,
+    gray_centroid,
+    line_centres,
+    line_direction,
+)
 
 H, W = 480, 640
 

@@ -14,9 +14,9 @@ from insitu.cli.main import app
 from insitu.errors import FormatError
 from insitu.formats.pointcloud import PointCloud, write_ply
 from insitu.formats.recipe import Recipe, RecipeScan, read_recipe, reference_kind, write_recipe
+from insitu.geometry.pose import pose_matrix
 from insitu.marking import Placement
 from insitu.marking.modes import PROJECTIONS
-from insitu.geometry.pose import pose_matrix
 from insitu.sim.feeder import part_pose
 
 runner = CliRunner()

@@ -7,10 +7,10 @@ import numpy as np
 import pytest
 
 from insitu.devices.replay import ReplayCamera
-from insitu.services.station import simulated
 from insitu.errors import DeviceError
 from insitu.formats.sequence import Sequence
 from insitu.services import scan_replay
+from insitu.services.station import simulated
 from insitu.sim.workpieces import make_workpiece
 
 DATA = Path(__file__).parents[1] / "data"

@@ -3,15 +3,14 @@
 import numpy as np
 import pytest
 
-from insitu.sim.world import SimWorld
-
-from insitu.sim.devices import SimCamera, SimScanHead, SimStage
 from insitu.errors import SafetyError
 from insitu.geometry.beams import line_commands
+from insitu.sim.devices import SimCamera, SimScanHead, SimStage
 from insitu.sim.render import Renderer
 from insitu.sim.rig import default_rig
 from insitu.sim.scene import Scene
 from insitu.sim.workpieces import make_workpiece
+from insitu.sim.world import SimWorld
 from insitu.vision.centres import gray_centroid
 
 

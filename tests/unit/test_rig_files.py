@@ -9,10 +9,10 @@ import numpy as np
 import pytest
 
 from insitu.errors import ConfigError, FormatError
-from insitu.formats.sequence import ScanHeadSpec
 from insitu.formats.calibration import CameraCalibration
 from insitu.formats.json_file import CalibrationEnvelope, load_json_model, save_json_model
 from insitu.formats.rig import RigConfig, ScanHeadConfig, ScanHeadGeometry
+from insitu.formats.sequence import ScanHeadSpec
 
 CAMERA = {"width": 64, "height": 48, "K": [[60.0, 0, 32.0], [0, 60.0, 24.0], [0, 0, 1]],
           "dist": [0.01, -0.02, 0.0, 0.0, 0.0], "R": np.eye(3), "t": [0.0, 0.0, 300.0]}

@@ -2,8 +2,8 @@
 refused naming both, nothing fired; files without the record are marked with a warning."""
 
 import inspect
-import threading
 import json
+import threading
 
 import numpy as np
 import pytest

@@ -9,10 +9,16 @@ from datetime import datetime, timedelta, timezone
 import pytest
 
 from insitu.errors import FormatError
-from insitu.formats.counter import KEEP, locked, lock_path, read_counter
+from insitu.formats.counter import KEEP, lock_path, locked, read_counter
 from insitu.patterns import load_pattern
-from insitu.patterns.fields import (Variables, parse_fields, render_spec, render_text,
-                                    template_fields, uses_serial)
+from insitu.patterns.fields import (
+    Variables,
+    parse_fields,
+    render_spec,
+    render_text,
+    template_fields,
+    uses_serial,
+)
 from insitu.patterns.gs1 import check_gtin, gtin_check_digit
 
 NOW = datetime(2026, 3, 9, 7, 5, tzinfo=timezone(timedelta(hours=1)))

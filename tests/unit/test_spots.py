@@ -89,9 +89,9 @@ def test_spot_cut_by_the_image_border():
 
 
 def test_simulated_frame_spot_is_where_the_true_camera_sees_the_beam():
-    from insitu.sim.world import SimWorld
     from insitu.sim.devices import SimCamera, SimScanHead, SimStage
     from insitu.sim.rig import default_rig
+    from insitu.sim.world import SimWorld
 
     rig = default_rig(5, binning=4)
     world = SimWorld(rig, seed=5)

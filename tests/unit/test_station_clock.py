@@ -6,6 +6,7 @@ import json
 
 import numpy as np
 import pytest
+
 from insitu.devices.clock import StationClock, StationTime, StepTimer
 from insitu.marking import GalvoDriver, estimate_time, make_job, run_job
 from insitu.services.scan import scan_live
@@ -93,9 +94,9 @@ def test_a_scan_reports_station_seconds_beside_its_cpu():
 
 def test_produce_logs_station_and_cpu_seconds_per_step(tmp_path):
     from insitu.cli.produce import part_line
+    from insitu.formats.pointcloud import write_ply
     from insitu.formats.production_log import read_log
     from insitu.formats.recipe import Recipe, RecipeScan
-    from insitu.formats.pointcloud import write_ply
     from insitu.marking import Placement
     from insitu.services import production
 

@@ -9,21 +9,32 @@ import pytest
 from typer.testing import CliRunner
 
 from insitu.calibrate.field import RBFNetwork
-from insitu.calibrate.field_file import (FIELD_METHODS, FieldCorrection, load_field_correction,
-                                         model_spec)
+from insitu.calibrate.field_file import (
+    FIELD_METHODS,
+    FieldCorrection,
+    load_field_correction,
+    model_spec,
+)
 from insitu.cli.main import app
 from insitu.devices.protocols import check_in_field as head_check
 from insitu.errors import ConfigError, FormatError, SafetyError
+from insitu.formats.project import Project, read_project, write_project
 from insitu.formats.validation import one_of
 from insitu.geometry.beams import TwoMirrorHead
 from insitu.geometry.field import check_in_field
-from insitu.marking import (PROJECTIONS, GalvoDriver, Limits, check_projection, check_targets,
-                            make_job, project)
-from insitu.reconstruct.height_models import HEIGHT_MODELS, HeightModel
+from insitu.marking import (
+    PROJECTIONS,
+    GalvoDriver,
+    Limits,
+    Placement,
+    check_projection,
+    check_targets,
+    make_job,
+    project,
+)
 from insitu.patterns import FILE_SUFFIXES, SOURCES, SPEC_PREFIXES, is_spec, load_pattern
+from insitu.reconstruct.height_models import HEIGHT_MODELS, HeightModel
 from insitu.services import height_model, load_height_calibration
-from insitu.marking import Placement
-from insitu.formats.project import Project, read_project, write_project
 from insitu.vision.centres import CENTRE_METHODS, line_centres
 from insitu.vision.extract import CentreSettings, extract_centres
 

@@ -4,9 +4,15 @@ counts them as such is too small, the one of segments and per-edge biases holds.
 
 import numpy as np
 
-from insitu.locate.uncertainty import (FitTerms, covariance, edges_of, rim_moved, rim_sigma,
-                                       segments_of)
 from insitu.geometry.pose import pose_matrix
+from insitu.locate.uncertainty import (
+    FitTerms,
+    covariance,
+    edges_of,
+    rim_moved,
+    rim_sigma,
+    segments_of,
+)
 
 HALF = 10.0                      # a 20 × 20 mm square part, its four edges
 RIM = np.array([[-HALF, -HALF], [HALF, -HALF], [HALF, HALF], [-HALF, HALF]])

@@ -169,8 +169,8 @@ def test_svg_area_and_box_match_cairosvg(path):
 def _ezdxf_reference(path: Path) -> float:
     """Filled area mm² as ezdxf's drawing add-on draws the file (hatches solid, lines not
     stroked), rasterised by cairosvg."""
-    from ezdxf.addons.drawing import Frontend, RenderContext, config, layout, svg
     from ezdxf import recover, units
+    from ezdxf.addons.drawing import Frontend, RenderContext, config, layout, svg
 
     try:
         doc = ezdxf.readfile(str(path))

@@ -18,15 +18,24 @@ from typing import Annotated, Any, Literal
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
 
-from insitu.calibrate.field import (DEFAULT_GOALS, DEFAULT_SMOOTHING, CorrectionTable, Model,
-                                    RBFNetwork, Selection, invert, select_rbf, select_table)
+from insitu.calibrate.field import (
+    DEFAULT_GOALS,
+    DEFAULT_SMOOTHING,
+    CorrectionTable,
+    Model,
+    RBFNetwork,
+    Selection,
+    invert,
+    select_rbf,
+    select_table,
+)
 from insitu.calibrate.field_areas import AreaStats
 from insitu.errors import ConfigError
-from insitu.formats.sequence import CameraSpec
 from insitu.formats.bounds import each_within, within
+from insitu.formats.json_file import CalibrationEnvelope, load_json_model, save_json_model
+from insitu.formats.sequence import CameraSpec
 from insitu.formats.validation import Finite, PositivePair, Vec2, bad, numbers
 from insitu.geometry.field import check_in_field
-from insitu.formats.json_file import CalibrationEnvelope, load_json_model, save_json_model
 
 CONVENTION = ("landing(C) = C + delta(C) on z = 0 (delta = measured P - commanded Q); the "
               "command for target Q is the K with K + delta(K) = Q")

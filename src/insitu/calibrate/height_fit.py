@@ -12,8 +12,12 @@ from numpy.polynomial import polynomial as P
 
 from insitu.errors import CalibrationError
 from insitu.geometry.camera import CameraModel
-from insitu.reconstruct.plate_models import (SCALE_MM, PaperHeightModel, SheetHeightModel,
-                                             ray_at_height)
+from insitu.reconstruct.plate_models import (
+    SCALE_MM,
+    PaperHeightModel,
+    SheetHeightModel,
+    ray_at_height,
+)
 from insitu.reconstruct.turned_sheet import TurnedSheetModel, turned_camera
 
 

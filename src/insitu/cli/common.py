@@ -16,10 +16,10 @@ from pathlib import Path
 
 import typer
 import typer.core
-from typer._click import exceptions as usage  # typer vendors click: its errors, not click's
 from rich.console import Console
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
 from rich.text import Text
+from typer._click import exceptions as usage  # typer vendors click: its errors, not click's
 
 from insitu.errors import InsituError
 from insitu.formats.bounds import BOUNDS

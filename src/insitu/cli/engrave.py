@@ -9,8 +9,18 @@ import typer
 from rich.table import Table
 
 from insitu.cli.common import bounded, console, missing, one_line_errors, progress_bar
-from insitu.cli.options import (At, Field, PartPose, PatternSpec, Resume, Rig, Rotate, Seed,
-                                Width, Workpiece)
+from insitu.cli.options import (
+    At,
+    Field,
+    PartPose,
+    PatternSpec,
+    Resume,
+    Rig,
+    Rotate,
+    Seed,
+    Width,
+    Workpiece,
+)
 
 Depth = Annotated[float | None, typer.Option(
     "--depth", callback=bounded("depth_mm"), help="Depth to engrave to, mm (required).")]
@@ -58,7 +68,8 @@ def engrave(
     from insitu.formats.materials import DEFAULT_MATERIALS, read_materials
     from insitu.formats.pointcloud import read_ply
     from insitu.marking import Placement
-    from insitu.services.engrave import EngraveRequest, engrave as run
+    from insitu.services.engrave import EngraveRequest
+    from insitu.services.engrave import engrave as run
     from insitu.services.height import load_height_calibration
     from insitu.services.station import connect
 

@@ -12,8 +12,15 @@ import typer
 from rich.table import Table
 
 from insitu.calibrate.field_file import FIELD_METHODS
-from insitu.cli.common import (bounded, check_output, console, fail, one_line_errors,
-                               progress_bar, warn)
+from insitu.cli.common import (
+    bounded,
+    check_output,
+    console,
+    fail,
+    one_line_errors,
+    progress_bar,
+    warn,
+)
 from insitu.formats.validation import one_of
 
 

@@ -16,7 +16,6 @@ from insitu.marking.modes import projection_mode
 from insitu.patterns.load import sources_help
 from insitu.patterns.vector import BEAM_MM
 
-
 Image = Annotated[Path, typer.Argument(
     metavar="IMAGE.png", help="The side camera's frame of the marked part (the laser off), or "
     "without --cloud, --pattern and --at any photograph (PNG, JPEG, WebP, …).")]

@@ -12,10 +12,19 @@ import typer
 from rich.table import Table
 from rich.text import Text
 
-from insitu.cli.common import (check_output, console, one_line_errors,
-                               progress_bar, warn)
-from insitu.cli.options import (CutPath, Field, Inspect, PartPose, Preview, Restart, Resume,
-                                Rig, Seed, Workpiece)
+from insitu.cli.common import check_output, console, one_line_errors, progress_bar, warn
+from insitu.cli.options import (
+    CutPath,
+    Field,
+    Inspect,
+    PartPose,
+    Preview,
+    Restart,
+    Resume,
+    Rig,
+    Seed,
+    Workpiece,
+)
 from insitu.errors import InsituError
 
 app = typer.Typer(help="Mark jobs: show one, or mark it on the rig.", no_args_is_help=True,

@@ -9,8 +9,14 @@ import cv2
 import typer
 from rich.table import Table
 
-from insitu.cli.common import (bounded, bounded_each, check_output, console, one_line_errors,
-                               progress_bar)
+from insitu.cli.common import (
+    bounded,
+    bounded_each,
+    check_output,
+    console,
+    one_line_errors,
+    progress_bar,
+)
 from insitu.errors import ConfigError
 from insitu.formats.images import read_image
 from insitu.locate.part import LocateSettings

@@ -72,7 +72,7 @@ def gui(
     if project is not None and not project.is_file():
         fail(f"{project}: project file not found")
     try:
-        from insitu.ui.qt.app import run    # Qt is imported only for this command
+        from insitu.ui.qt.app import run  # Qt is imported only for this command
     except ImportError as e:
         missing = (e.name or "").split(".")[0]
         if isinstance(e, ModuleNotFoundError) and missing in GUI_MODULES:

@@ -9,14 +9,49 @@ import typer
 from rich.table import Table
 from rich.text import Text
 
-from insitu.cli.common import (check_output, console, fail, missing, one_line_errors,
-                               progress_bar, warn)
+from insitu.cli.common import (
+    check_output,
+    console,
+    fail,
+    missing,
+    one_line_errors,
+    progress_bar,
+    warn,
+)
 from insitu.cli.job import check_run_options, pen_text, run_on_station
-from insitu.cli.options import (At, Beam, CounterPath, Cross, CutPath, Field, Fill, Force,
-                                Frequency, Hatch, HatchAngle, JumpSpeed, Mode, Paint, PartPose,
-                                PatternSpec, PenName, PensFile, PosePath, Power, Preview,
-                                Restart, Resume, Rig, Rotate, Seed, SerialStart, Speed, Vars,
-                                Width, Workpiece)
+from insitu.cli.options import (
+    At,
+    Beam,
+    CounterPath,
+    Cross,
+    CutPath,
+    Field,
+    Fill,
+    Force,
+    Frequency,
+    Hatch,
+    HatchAngle,
+    JumpSpeed,
+    Mode,
+    Paint,
+    PartPose,
+    PatternSpec,
+    PenName,
+    PensFile,
+    PosePath,
+    Power,
+    Preview,
+    Restart,
+    Resume,
+    Rig,
+    Rotate,
+    Seed,
+    SerialStart,
+    Speed,
+    Vars,
+    Width,
+    Workpiece,
+)
 from insitu.patterns.vector import BEAM_MM
 
 Recipe = Annotated[Path | None, typer.Option(

@@ -9,8 +9,15 @@ from typing import Annotated
 
 import typer
 
-from insitu.cli.common import (bounded, check_output, console, fail, one_line_errors,
-                               parse_heights, progress_bar)
+from insitu.cli.common import (
+    bounded,
+    check_output,
+    console,
+    fail,
+    one_line_errors,
+    parse_heights,
+    progress_bar,
+)
 from insitu.cli.job import stop_on_signals
 from insitu.cli.options import RecordCross
 from insitu.services import record as svc

@@ -10,13 +10,19 @@ import typer
 from rich.table import Table
 
 from insitu.cli.common import bounded, check_output, console, fail, one_line_errors, progress_bar
-from insitu.cli.options import (CrossScan, CrossSpacing, PartPose, Rig, Seed, Workpiece,
-                                 rig_height_calibration)
+from insitu.cli.options import (
+    CrossScan,
+    CrossSpacing,
+    PartPose,
+    Rig,
+    Seed,
+    Workpiece,
+    rig_height_calibration,
+)
 from insitu.formats.atomic import atomic_write_bytes
 from insitu.formats.project import SIM_BINNING
 from insitu.formats.validation import one_of
 from insitu.reconstruct.height_models import HEIGHT_MODELS
-
 
 Output = Annotated[Path, typer.Option("-o", "--output", help="Point cloud to write (.ply).")]
 Replay = Annotated[Path | None, typer.Option(help="Recorded scan folder to reconstruct.")]

@@ -7,8 +7,15 @@ from typing import Annotated
 
 import typer
 
-from insitu.cli.common import (bounded, check_output, console, fail, one_line_errors,
-                               parse_heights, progress_bar)
+from insitu.cli.common import (
+    bounded,
+    check_output,
+    console,
+    fail,
+    one_line_errors,
+    parse_heights,
+    progress_bar,
+)
 from insitu.cli.options import PartPose, RecordCross
 from insitu.formats.project import SIM_BINNING
 from insitu.services import record

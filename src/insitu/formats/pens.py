@@ -26,8 +26,7 @@ from pydantic import AfterValidator, BaseModel, ConfigDict, Field, ValidationErr
 from insitu.errors import FormatError
 from insitu.formats.atomic import atomic_write_text
 from insitu.formats.bounds import within
-from insitu.formats.validation import (bad, dump_json, one_of, read_json, show,
-                                       validation_message)
+from insitu.formats.validation import bad, dump_json, one_of, read_json, show, validation_message
 
 PENS_FORMAT = "insitu-pens/1"
 _COLOUR = re.compile(r"^#[0-9a-fA-F]{6}$")

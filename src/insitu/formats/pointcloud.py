@@ -53,7 +53,7 @@ def write_ply(path: str | Path, cloud: PointCloud) -> None:
         raise FormatError(f"{path}: folder {path.parent} does not exist")
     if path.suffix.lower() != ".ply":
         raise FormatError(f"{path}: a point cloud is written as .ply")
-    import open3d as o3d                # 0.5 s to import: only when a cloud is written
+    import open3d as o3d  # 0.5 s to import: only when a cloud is written
 
     pcd = o3d.t.geometry.PointCloud(o3d.core.Tensor(np.asarray(cloud.points, np.float64)))
     for name, values in cloud.attributes.items():

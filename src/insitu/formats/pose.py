@@ -13,8 +13,8 @@ from pydantic import BaseModel, ConfigDict, field_validator
 
 from insitu.errors import ConfigError
 from insitu.formats.bounds import within
-from insitu.formats.validation import bad
 from insitu.formats.json_file import CalibrationEnvelope, load_json_model, save_json_model
+from insitu.formats.validation import bad
 
 Mm, Deg, Share = within("position_mm"), within("angle_deg"), within("fraction")
 Rmse = within("residual_mm")

@@ -36,8 +36,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError
 from insitu.errors import FormatError
 from insitu.formats.atomic import atomic_write_text
 from insitu.formats.bounds import each_within, within
-from insitu.formats.pens import (DEFAULT_PENS, PenName, PenTable, pen_table, pens_dict,
-                                 read_pens)
+from insitu.formats.pens import DEFAULT_PENS, PenName, PenTable, pen_table, pens_dict, read_pens
 from insitu.formats.validation import dump_json, one_of, read_json, validation_message
 
 PROJECT_FORMAT = "insitu-project/1"

@@ -46,9 +46,19 @@ from insitu.formats.atomic import atomic_write_text
 from insitu.formats.bounds import each_within, within
 from insitu.formats.counter import Serial
 from insitu.formats.mesh import MESH_SUFFIXES, is_mesh_file
-from insitu.formats.project import (_SPEC, Exposure, Length, Region, Spacing, Speed,
-                                    check_header,
-                                    _abs, _Placement, _rel, _Strict)
+from insitu.formats.project import (
+    _SPEC,
+    Exposure,
+    Length,
+    Region,
+    Spacing,
+    Speed,
+    _abs,
+    _Placement,
+    _rel,
+    _Strict,
+    check_header,
+)
 from insitu.formats.validation import dump_json, one_of, read_json, validation_message
 
 RECIPE_FORMAT = "insitu-recipe/1"

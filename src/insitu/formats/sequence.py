@@ -16,8 +16,15 @@ from typing import Annotated, Any, Literal
 
 import cv2
 import numpy as np
-from pydantic import (AfterValidator, BaseModel, ConfigDict, Field, ValidationError,
-                      field_validator, model_validator)
+from pydantic import (
+    AfterValidator,
+    BaseModel,
+    ConfigDict,
+    Field,
+    ValidationError,
+    field_validator,
+    model_validator,
+)
 
 from insitu.errors import FormatError
 from insitu.formats.atomic import atomic_folder, atomic_write_text
@@ -25,8 +32,17 @@ from insitu.formats.bounds import each_within, within
 from insitu.formats.camera_spec import CameraSpec
 from insitu.formats.images import check_bits, grey_image, read_image
 from insitu.formats.limits import MAX_IMAGE_BYTES, check_file, check_inside
-from insitu.formats.validation import (PositivePair, Range, Vec2, bad, dump_json, plain,
-                                       read_json, show, validation_message)
+from insitu.formats.validation import (
+    PositivePair,
+    Range,
+    Vec2,
+    bad,
+    dump_json,
+    plain,
+    read_json,
+    show,
+    validation_message,
+)
 
 FORMAT = "insitu-sequence/1"
 Kind = Literal["scan", "height-calibration", "field-calibration", "camera-calibration"]

@@ -12,6 +12,7 @@ from scipy.spatial import cKDTree
 
 from insitu.geometry.pose import Pose4, apply, rot_z
 
+
 @dataclass(frozen=True)
 class Fit:
     """How well source points fit the target after ICP: ``pose``; ``fitness``, the fraction of

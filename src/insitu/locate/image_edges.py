@@ -24,8 +24,8 @@ import cv2
 import numpy as np
 
 from insitu.geometry.camera import CameraModel
-from insitu.locate.edge_align import edge_distance
 from insitu.geometry.pose import rot_z
+from insitu.locate.edge_align import edge_distance
 from insitu.locate.height_image import HeightImage, sample
 from insitu.locate.uncertainty import FRAME_BIAS_PX, FitTerms, covariance
 

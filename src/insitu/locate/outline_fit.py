@@ -33,8 +33,18 @@ from scipy.spatial import cKDTree
 from insitu.geometry.camera import CameraModel
 from insitu.locate.edge_align import MIN_COS, EdgeSamples
 from insitu.locate.height_image import HeightImage
-from insitu.locate.image_edges import (SMOOTH_PX, SPACING_MM, STEP_PX, WALL_PX, Outline,
-                                       edge_heights, edge_points, outline, visible, wall_px)
+from insitu.locate.image_edges import (
+    SMOOTH_PX,
+    SPACING_MM,
+    STEP_PX,
+    WALL_PX,
+    Outline,
+    edge_heights,
+    edge_points,
+    outline,
+    visible,
+    wall_px,
+)
 
 SEARCH_PX = 6.0
 """How far from the splat's rough edge the frame's is looked for (its edges lie up to a few

@@ -37,10 +37,17 @@ from insitu.locate.edge_align import align_edges, crossed, edge_samples
 from insitu.locate.flat_icp import score
 from insitu.locate.image_edges import SEARCH_PX, align_image
 from insitu.locate.reference import PartReference, above_table, find_table, thin
-from insitu.locate.unheld import direction_name, unheld_reason
+from insitu.locate.search import (
+    Solution,
+    distinct,
+    global_fits,
+    pose_of,
+    refine,
+    solution_of,
+    subsample,
+)
 from insitu.locate.uncertainty import rim_moved, rim_sigma
-from insitu.locate.search import (Solution, distinct, global_fits, pose_of, refine,
-                                  solution_of, subsample)
+from insitu.locate.unheld import direction_name, unheld_reason
 
 MIN_POINTS = 200
 SIGMAS = 2.0

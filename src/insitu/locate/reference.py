@@ -16,9 +16,9 @@ import numpy as np
 from scipy.spatial import ConvexHull, cKDTree
 
 from insitu.errors import MeasurementError
-from insitu.locate.height_image import HeightImage, mesh_height_image, splat_image
 from insitu.geometry.camera import CameraModel
 from insitu.locate.edge_align import edge_samples
+from insitu.locate.height_image import HeightImage, mesh_height_image, splat_image
 from insitu.locate.image_edges import Outline, outline
 from insitu.locate.outline_fit import OutlineFit, fit_outline, stamp
 from insitu.locate.uncertainty import SCAN_REFERENCE_MM

@@ -8,7 +8,7 @@ from __future__ import annotations
 import numpy as np
 
 from insitu.geometry.pose import rot_z
-from insitu.locate.edge_align import MIN_COS, MIN_FOUND, MIN_SAMPLES, near_edges, edge_distance
+from insitu.locate.edge_align import MIN_COS, MIN_FOUND, MIN_SAMPLES, edge_distance, near_edges
 from insitu.locate.height_image import HeightImage
 
 

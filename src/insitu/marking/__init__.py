@@ -8,17 +8,34 @@
 
 from insitu.marking.checks import Limits, check_projection, check_targets
 from insitu.marking.driver import GalvoDriver, preview_outlines
-from insitu.marking.job import (LaserOverride, LaserParams, MarkJob, MarkPath, TimeEstimate,
-                                Timing, estimate_time, make_job, path_seconds, read_job,
+from insitu.marking.job import (
+                                LaserOverride,
+                                LaserParams,
+                                MarkJob,
+                                MarkPath,
+                                TimeEstimate,
+                                Timing,
+                                estimate_time,
+                                make_job,
+                                path_seconds,
+                                read_job,
                                 with_pen,
-                                write_job)
-from insitu.marking.plan import plan_job
+                                write_job,
+)
+from insitu.marking.journal import JournalSummary, journal_path_for, read_journal
 from insitu.marking.modes import PROJECTIONS, ProjectionMode, project, projection_mode
 from insitu.marking.placement import Placement
+from insitu.marking.plan import plan_job
 from insitu.marking.project import Projection, densify, project_planar, project_wrap
-from insitu.marking.journal import JournalSummary, journal_path_for, read_journal
-from insitu.marking.run import (CUT_CHOICES, RunResult, history, progress_path_for,
-                                read_progress, run_job, run_preview)
+from insitu.marking.run import (
+                                CUT_CHOICES,
+                                RunResult,
+                                history,
+                                progress_path_for,
+                                read_progress,
+                                run_job,
+                                run_preview,
+)
 from insitu.marking.surface import Surface, SurfaceSample
 
 __all__ = [

@@ -22,10 +22,10 @@ import numpy as np
 from scipy.spatial import ConvexHull, QhullError
 
 from insitu.devices.galvo import Command, FieldCorrection, joint_from_targets
+from insitu.formats.pens import Wobble
 from insitu.geometry.beams import TwoMirrorHead
 from insitu.geometry.field import check_in_field
 from insitu.marking.checks import Limits, check_targets, point_name
-from insitu.formats.pens import Wobble
 from insitu.marking.job import LaserParams, MarkJob, Timing, corner_delays_us
 
 

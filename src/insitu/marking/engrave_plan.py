@@ -27,8 +27,15 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.ndimage import distance_transform_edt
 
-from insitu.marking.engrave_depth import (HIDDEN, MEASURED, OUTSIDE, UNMEASURED, WALL,
-                                          DepthMap, PocketCells)
+from insitu.marking.engrave_depth import (
+    HIDDEN,
+    MEASURED,
+    OUTSIDE,
+    UNMEASURED,
+    WALL,
+    DepthMap,
+    PocketCells,
+)
 
 APPROACH = 0.9          # while far: this fraction of the passes the model says are missing
 RATE_MARGIN = 1.15      # a cell not seen is planned as if it ablated this much faster

@@ -6,7 +6,7 @@ import numpy as np
 
 from insitu.formats.pointcloud import PointCloud
 from insitu.marking.checks import Limits, check_projection
-from insitu.marking.job import LaserParams, LaserOverride, MarkJob, Timing, make_job
+from insitu.marking.job import LaserOverride, LaserParams, MarkJob, Timing, make_job
 from insitu.marking.modes import project
 from insitu.marking.project import Projection
 

@@ -18,8 +18,7 @@ import numpy as np
 
 from insitu.geometry.camera import CameraModel
 from insitu.marking.project import Projection
-from insitu.marking.rectify import (MarkFrame, camera_px_per_mm, mark_frame, rectify,
-                                    surface_points)
+from insitu.marking.rectify import MarkFrame, camera_px_per_mm, mark_frame, rectify, surface_points
 from insitu.marking.surface import Surface
 from insitu.marking.verify import render, unrolled
 from insitu.patterns.codes import SYMBOLOGIES

@@ -25,8 +25,15 @@ from insitu.devices.galvo import SETTINGS, WOBBLE, Command, list_digest, positio
 from insitu.errors import ConfigError, DeviceError, FormatError, SafetyError
 from insitu.marking.driver import GalvoDriver
 from insitu.marking.job import MarkJob
-from insitu.marking.journal import (Journal, JournalSummary, journal_beside, progress_path_for,
-                                    read_journal, read_progress, write_progress)
+from insitu.marking.journal import (
+    Journal,
+    JournalSummary,
+    journal_beside,
+    progress_path_for,
+    read_journal,
+    read_progress,
+    write_progress,
+)
 
 CUT_CHOICES = ("remark", "skip", "continue")
 PROGRESS_EVERY_S = 0.5          # the progress record is rewritten at most this often mid-run

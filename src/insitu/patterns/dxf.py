@@ -31,11 +31,26 @@ import shapely
 
 from insitu.errors import FormatError
 from insitu.patterns import dxf_geometry as geo
-from insitu.patterns.dxf_walk import (MESHES, header_has, hidden_layers, kind_of, line_pattern,
-                                      name_of, visible_entities)
+from insitu.patterns.dxf_walk import (
+    MESHES,
+    header_has,
+    hidden_layers,
+    kind_of,
+    line_pattern,
+    name_of,
+    visible_entities,
+)
 from insitu.patterns.model import Pattern, region
-from insitu.patterns.vector import (TOL_MM, Budget, _check_file, _fail, _non_empty,
-                                    check_extent, check_finite, dashed)
+from insitu.patterns.vector import (
+    TOL_MM,
+    Budget,
+    _check_file,
+    _fail,
+    _non_empty,
+    check_extent,
+    check_finite,
+    dashed,
+)
 
 FILL_MODES = ("auto", "all", "none")
 _FILLS = ("HATCH", "MPOLYGON", "SOLID", "TRACE")

@@ -23,10 +23,16 @@ import shapely
 from insitu.errors import FormatError
 from insitu.formats.limits import MAX_DRAWING_BYTES
 from insitu.patterns.model import Pattern, contours_of
-from insitu.patterns.svg_doc import (computed, length, matrix, read_root, viewbox_matrix,
-                                     viewbox_of)
-from insitu.patterns.vector import (BEAM_MM, MM_PER_PX, PAINT_MODES, TOL_MM, _check_file, _fail,
-                                    _non_empty)
+from insitu.patterns.svg_doc import computed, length, matrix, read_root, viewbox_matrix, viewbox_of
+from insitu.patterns.vector import (
+    BEAM_MM,
+    MM_PER_PX,
+    PAINT_MODES,
+    TOL_MM,
+    _check_file,
+    _fail,
+    _non_empty,
+)
 
 # svgelements turns mm and cm into px with 0.0393701 in/mm; this ppi makes those exact
 _SVG_PPI = 96.0 / (25.4 * 0.0393701)

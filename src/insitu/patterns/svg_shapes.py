@@ -14,13 +14,27 @@ import shapely
 import shapely.affinity
 
 from insitu.patterns.model import region, stroke_region
-from insitu.patterns.svg_doc import (compose, length, local, numbers, translate, url_id,
-                                     viewbox_matrix, viewbox_of)
+from insitu.patterns.svg_doc import (
+    compose,
+    length,
+    local,
+    numbers,
+    translate,
+    url_id,
+    viewbox_matrix,
+    viewbox_of,
+)
 from insitu.patterns.svg_paint import Item, resolve
 from insitu.patterns.svg_walk import Ctx, apply, children, clipped, inverse, rect_region
-from insitu.patterns.vector import (MM_PER_PX, _arc_steps, bezier_points, bezier_steps,
-                                    check_extent, check_finite, dashed)
-
+from insitu.patterns.vector import (
+    MM_PER_PX,
+    _arc_steps,
+    bezier_points,
+    bezier_steps,
+    check_extent,
+    check_finite,
+    dashed,
+)
 
 _NUMERIC = ("x", "y", "width", "height", "r", "rx", "ry", "cx", "cy", "x1", "y1", "x2", "y2")
 

@@ -222,8 +222,8 @@ def _layout(doc, run: _Run, c, path_len) -> list[tuple[list[np.ndarray], dict]]:
 def _path_length_fn(doc, c):
     """f(path element, distance) → ((x, y), angle) along the path in the text's user space,
     None beyond its ends."""
-    from insitu.patterns.svg_shapes import geometry, subpaths
     from insitu.patterns.svg_doc import matrix
+    from insitu.patterns.svg_shapes import geometry, subpaths
 
     cache = {}
 

@@ -18,8 +18,21 @@ import numpy as np
 import shapely
 import shapely.affinity
 
-from insitu.patterns.svg_doc import (XLINK_HREF, cascade, compose, computed, href, length, local,
-                                     matrix, opacity, translate, url_id, viewbox_matrix, viewbox_of)
+from insitu.patterns.svg_doc import (
+    XLINK_HREF,
+    cascade,
+    compose,
+    computed,
+    href,
+    length,
+    local,
+    matrix,
+    opacity,
+    translate,
+    url_id,
+    viewbox_matrix,
+    viewbox_of,
+)
 from insitu.patterns.svg_paint import Item
 from insitu.patterns.vector import Budget
 

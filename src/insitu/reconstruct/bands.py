@@ -23,8 +23,12 @@ from insitu.geometry.beams import light_plane
 from insitu.geometry.camera import CameraModel
 from insitu.reconstruct.plane import line_runs_along_rows
 from insitu.reconstruct.plate_models import SheetHeightModel
-from insitu.reconstruct.turned_sheet import (TurnedSheetModel, turn_to_y, same_direction,
-                                             turned_offset)
+from insitu.reconstruct.turned_sheet import (
+    TurnedSheetModel,
+    same_direction,
+    turn_to_y,
+    turned_offset,
+)
 
 _SAMPLES = 96
 _HEIGHTS = 5

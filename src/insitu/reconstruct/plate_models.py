@@ -23,8 +23,8 @@ import numpy as np
 from numpy.polynomial import polynomial as P
 
 from insitu.errors import MeasurementError
-from insitu.geometry.camera import CameraModel
 from insitu.geometry.beams import light_plane
+from insitu.geometry.camera import CameraModel
 
 SCALE_MM = np.array([100.0, 100.0, 25.0])   # x, Y, Z normalisation, mm
 

@@ -12,10 +12,14 @@ from insitu.geometry.camera import CameraModel
 from insitu.reconstruct.bands import Packing, Sheets, exclusive
 from insitu.reconstruct.consistency import cross_line_inliers
 from insitu.reconstruct.height_models import HeightModel
-from insitu.reconstruct.plate_models import check_bracket
 from insitu.reconstruct.plane import band_and_side, line_runs_along_rows, reconstruct_line
-from insitu.reconstruct.turned_sheet import (TurnedSheetModel, line_angle, same_direction,
-                                             turned_offset)
+from insitu.reconstruct.plate_models import check_bracket
+from insitu.reconstruct.turned_sheet import (
+    TurnedSheetModel,
+    line_angle,
+    same_direction,
+    turned_offset,
+)
 from insitu.vision.band_centres import centres_in_bands
 from insitu.vision.detect import LineCentres
 from insitu.vision.extract import CentreSettings, extract_centres

@@ -8,10 +8,10 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from insitu.errors import ConfigError
-from insitu.geometry.camera import CameraModel
 from insitu.formats.calibration import CameraCalibration
 from insitu.formats.json_file import load_json_model
 from insitu.formats.rig import RigConfig, ScanHeadConfig, ScanHeadGeometry
+from insitu.geometry.camera import CameraModel
 
 SIMULATED = ("sim",)
 """Backends of the simulated rig (``replay`` and ``none`` open no device)."""

@@ -17,17 +17,24 @@ from pathlib import Path
 import numpy as np
 
 from insitu.calibrate.alignment import Alignment, LineFrame, align_to_head
-from insitu.calibrate.camera import (INTRINSIC_NAMES, BoardSpec, Detection, Intrinsics,
-                                     board_pose, calibrate_intrinsics, detect_board)
+from insitu.calibrate.camera import (
+    INTRINSIC_NAMES,
+    BoardSpec,
+    Detection,
+    Intrinsics,
+    board_pose,
+    calibrate_intrinsics,
+    detect_board,
+)
 from insitu.calibrate.photos import image_files, read_grey
 from insitu.calibrate.pose_from_spots import PoseFromSpots, SpotObservations, pose_from_spots
 from insitu.errors import CalibrationError, InsituError
-from insitu.formats.sequence import Sequence
-from insitu.geometry.beams import BeamModel, PivotHead, ScanHeadOptics, TwoMirrorHead
-from insitu.geometry.camera import CameraModel
 from insitu.formats.calibration import CameraCalibration
 from insitu.formats.json_file import load_json_model
 from insitu.formats.rig import ScanHeadConfig
+from insitu.formats.sequence import Sequence
+from insitu.geometry.beams import BeamModel, PivotHead, ScanHeadOptics, TwoMirrorHead
+from insitu.geometry.camera import CameraModel
 from insitu.services.common import Progress, camera_model, save_with_picture
 
 

@@ -33,14 +33,35 @@ from insitu.formats.calibration import HeightCalibration
 from insitu.formats.materials import DEFAULT_MATERIALS, MaterialTable
 from insitu.formats.pens import PenTable
 from insitu.formats.pointcloud import PointCloud
-from insitu.marking import (Limits, Placement, check_targets, estimate_time, make_job,
-                            progress_path_for, read_job, read_journal, with_pen, write_job)
-from insitu.marking.engrave_depth import (STATES, DepthMap, DepthSettings, Outline,
-                                          PocketCells, measure_depth)
+from insitu.marking import (
+    Limits,
+    Placement,
+    check_targets,
+    estimate_time,
+    make_job,
+    progress_path_for,
+    read_job,
+    read_journal,
+    with_pen,
+    write_job,
+)
+from insitu.marking.engrave_depth import (
+    STATES,
+    DepthMap,
+    DepthSettings,
+    Outline,
+    PocketCells,
+    measure_depth,
+)
 from insitu.marking.engrave_layers import layer_paths, passes_given
 from insitu.marking.engrave_plan import CellHistory, Learnt, learn, plan_round
-from insitu.marking.engrave_record import (EngraveAsk, EngraveRecord, RoundRecord,
-                                           read_record, write_record)
+from insitu.marking.engrave_record import (
+    EngraveAsk,
+    EngraveRecord,
+    RoundRecord,
+    read_record,
+    write_record,
+)
 from insitu.marking.journal import journal_path_for
 from insitu.marking.surface import Surface
 from insitu.services.common import Progress

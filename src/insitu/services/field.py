@@ -18,9 +18,9 @@ from pathlib import Path
 
 import numpy as np
 
+from insitu.calibrate.fiducials import CircleSettings, find_circles
 from insitu.calibrate.field import DEFAULT_GOALS, DEFAULT_SMOOTHING, MIN_POINTS, Selection
 from insitu.calibrate.field_areas import area_table, stats
-from insitu.calibrate.fiducials import CircleSettings, find_circles
 from insitu.calibrate.field_file import FIELD_METHODS, AreaRow, CVRow, FieldCorrection
 from insitu.calibrate.report import report_image, write_report_png
 from insitu.errors import CalibrationError, FormatError

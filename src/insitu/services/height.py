@@ -6,19 +6,30 @@ from pathlib import Path
 
 import numpy as np
 
+from insitu.calibrate.height_fit import (
+    LineObservation,
+    cross_validate_sheet,
+    fit_paper,
+    fit_sheet,
+    fit_turned_sheet,
+    height_residuals,
+    residual_grid,
+)
 from insitu.errors import CalibrationError, ConfigError, MeasurementError
+from insitu.formats.calibration import HeightCalibration, ResidualGridSpec
+from insitu.formats.json_file import load_json_model
 from insitu.formats.sequence import Sequence
 from insitu.formats.validation import one_of, show
 from insitu.geometry.camera import CameraModel
 from insitu.reconstruct.height_models import HEIGHT_MODELS, HeightModel
-from insitu.calibrate.height_fit import (LineObservation, cross_validate_sheet, fit_paper,
-                                         fit_sheet, fit_turned_sheet, height_residuals,
-                                         residual_grid)
 from insitu.reconstruct.plane import expected_band, line_runs_along_rows
-from insitu.reconstruct.turned_sheet import (TurnedSheetModel, line_angle, same_direction,
-                                         turned_camera, turned_offset)
-from insitu.formats.calibration import HeightCalibration, ResidualGridSpec
-from insitu.formats.json_file import load_json_model
+from insitu.reconstruct.turned_sheet import (
+    TurnedSheetModel,
+    line_angle,
+    same_direction,
+    turned_camera,
+    turned_offset,
+)
 from insitu.services.common import Progress, camera_model, save_with_picture
 from insitu.vision.centres import CENTRE_METHODS
 from insitu.vision.extract import CentreSettings, extract_centres

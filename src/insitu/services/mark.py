@@ -18,11 +18,21 @@ from insitu.devices.clock import StepTime, StepTimer
 from insitu.devices.galvo import ListPosition, list_digest
 from insitu.errors import FormatError
 from insitu.formats.atomic import atomic_write_bytes
-from insitu.marking import (GalvoDriver, JournalSummary, MarkJob, RunResult, estimate_time,
-                            history, path_seconds, progress_path_for, run_job, run_preview)
+from insitu.marking import (
+    GalvoDriver,
+    JournalSummary,
+    MarkJob,
+    RunResult,
+    estimate_time,
+    history,
+    path_seconds,
+    progress_path_for,
+    run_job,
+    run_preview,
+)
 from insitu.services.common import Progress
-from insitu.services.scan import Cancelled
 from insitu.services.room_light import station_room_light
+from insitu.services.scan import Cancelled
 
 if TYPE_CHECKING:
     from insitu.services.station import Station

@@ -15,8 +15,17 @@ from typing import TYPE_CHECKING, Literal
 from insitu.errors import FormatError, InsituError, SafetyError
 from insitu.formats.pens import DEFAULT_PENS, PenTable
 from insitu.formats.pointcloud import PointCloud
-from insitu.marking import (GalvoDriver, LaserParams, MarkJob, Placement, Projection,
-                            TimeEstimate, estimate_time, plan_job, with_pen)
+from insitu.marking import (
+    GalvoDriver,
+    LaserParams,
+    MarkJob,
+    Placement,
+    Projection,
+    TimeEstimate,
+    estimate_time,
+    plan_job,
+    with_pen,
+)
 from insitu.marking.modes import PROJECTIONS
 from insitu.marking.verify import CodeCheck, check_code, unrolled
 from insitu.patterns import Pattern

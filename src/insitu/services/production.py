@@ -29,14 +29,14 @@ from insitu.formats.pointcloud import PointCloud, read_ply, write_ply
 from insitu.formats.production_log import PartRecord, append_record, read_log
 from insitu.formats.recipe import Recipe
 from insitu.geometry.pose import pose_matrix
-from insitu.marking import LaserParams, MarkJob, history, progress_path_for, read_job
 from insitu.locate.part import LocateRefused
+from insitu.marking import LaserParams, MarkJob, history, progress_path_for, read_job
 from insitu.services import mark as mark_svc
 from insitu.services import serials
-from insitu.services.mark_job import JobRequest, WrittenJob, write_mark_job
 from insitu.services.height import crossed_model
 from insitu.services.locate import Located, Locator
 from insitu.services.locate import recipe_locator as recipe_locator  # the commands' entry
+from insitu.services.mark_job import JobRequest, WrittenJob, write_mark_job
 from insitu.services.scan import Cancelled, ScanResult, scan_live
 from insitu.services.station import Station
 

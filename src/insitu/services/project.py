@@ -6,10 +6,10 @@ from __future__ import annotations
 from dataclasses import dataclass, replace
 from pathlib import Path
 
+from insitu.formats.calibration import HeightCalibration
 from insitu.formats.pointcloud import PointCloud, read_ply, write_ply
 from insitu.formats.project import Project, beside, read_project, write_project
 from insitu.marking import PROJECTIONS, MarkJob, Placement
-from insitu.formats.calibration import HeightCalibration
 from insitu.services.common import Progress
 from insitu.services.height import load_height_calibration
 from insitu.services.serials import save_job

@@ -5,7 +5,8 @@ true rig and workpiece beside it (for scoring)."""
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence as Seq
+from collections.abc import Callable
+from collections.abc import Sequence as Seq
 from pathlib import Path
 
 import numpy as np
@@ -14,11 +15,11 @@ from insitu.devices.protocols import ExposureCamera, pixel_bits_of
 from insitu.errors import ConfigError, DeviceError
 from insitu.formats.sequence import SequenceWriter
 from insitu.geometry.beams import axis_lines
+from insitu.reconstruct.packing import Frame, FramePlan
 from insitu.reconstruct.plan import check_region
 from insitu.reconstruct.turned_sheet import CROSS_ANGLE_DEG, turned_lines, turned_offset
 from insitu.services.common import Progress
 from insitu.services.room_light import station_room_light
-from insitu.reconstruct.packing import Frame, FramePlan
 from insitu.services.scan import plan_lines, reconstructor
 from insitu.services.scan_frames import Shots, survey_heights
 from insitu.services.station import Station

@@ -14,6 +14,7 @@ from insitu.devices.clock import StepTimer
 from insitu.devices.protocols import Camera, ScanHead, pixel_bits_of
 from insitu.devices.replay import ReplayCamera
 from insitu.errors import DeviceError, InsituError, MeasurementError
+from insitu.formats.calibration import HeightCalibration
 from insitu.formats.pointcloud import PointCloud, write_ply
 from insitu.formats.rig_record import RigRecord
 from insitu.formats.sequence import Sequence
@@ -23,15 +24,19 @@ from insitu.reconstruct.packing import FramePlan, RecordedPlan
 from insitu.reconstruct.plan import check_region, scan_lines
 from insitu.reconstruct.scan import ScanReconstructor
 from insitu.reconstruct.turned_sheet import CROSS_ANGLE_DEG
-from insitu.vision.extract import CentreSettings
-from insitu.formats.calibration import HeightCalibration
 from insitu.services.common import Progress, camera_model
-from insitu.services.height import (centre_settings, check_same_camera, crossed_model,
-                                    height_model)
+from insitu.services.height import centre_settings, check_same_camera, crossed_model, height_model
 from insitu.services.room_light import station_room_light
-from insitu.services.scan_frames import (ScanInterrupted, Shots, Stream, describe_packing,
-                                         region_of_interest, survey_heights)
+from insitu.services.scan_frames import (
+    ScanInterrupted,
+    Shots,
+    Stream,
+    describe_packing,
+    region_of_interest,
+    survey_heights,
+)
 from insitu.services.station import Station
+from insitu.vision.extract import CentreSettings
 
 
 @dataclass(frozen=True)

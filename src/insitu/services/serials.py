@@ -28,8 +28,7 @@ from insitu.errors import FormatError
 from insitu.formats.counter import locked, read_counter
 from insitu.formats.validation import validation_message
 from insitu.marking import MarkJob, Placement, progress_path_for, write_job
-from insitu.patterns.fields import (Variables, is_template, render_spec, template_fields,
-                                    uses_serial)
+from insitu.patterns.fields import Variables, is_template, render_spec, template_fields, uses_serial
 from insitu.patterns.load import spec_parts
 
 COUNTER_NAME = "serial.counter.json"

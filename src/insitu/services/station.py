@@ -12,11 +12,11 @@ from typing import TYPE_CHECKING
 from insitu.devices.backends import Devices, open_devices
 from insitu.devices.clock import StationClock
 from insitu.errors import ConfigError, SafetyError
+from insitu.formats.json_file import load_json_model
 from insitu.formats.project import SIM_BINNING
+from insitu.formats.rig import RigConfig
 from insitu.formats.rig_record import RigRecord, describe, same_rig
 from insitu.marking import GalvoDriver
-from insitu.formats.json_file import load_json_model
-from insitu.formats.rig import RigConfig
 from insitu.rig.model import RigModel, rig_model, simulated_devices
 
 if TYPE_CHECKING:
@@ -149,7 +149,7 @@ def connect(rig_file: Path | None = None, workpiece: str = "step-block", seed: i
     file with simulated devices simulates ``workpiece`` with its ``sim_seed``, the operator
     knowing what its calibration files say. ``field``: the field correction file to apply
     (default: the rig file's, if it names one)."""
-    from insitu.sim.world import sim_world      # the simulator (Open3D) only when simulated
+    from insitu.sim.world import sim_world  # the simulator (Open3D) only when simulated
 
     if rig_file is None:
         return simulated(sim_world(workpiece, seed=seed, binning=binning, pose=pose), field,

@@ -32,6 +32,7 @@ from insitu.sim.checkerboard import random_board_poses, render_checkerboard
 from insitu.sim.rig import SimRig
 from insitu.sim.world import LaserState, SimWorld
 
+
 def board_on_plate(cols: int, rows: int, square_mm: float, rng: np.random.Generator,
                    plate_z: float = 0.0, max_offset_mm: float = 5.0
                    ) -> tuple[np.ndarray, np.ndarray]:

@@ -38,8 +38,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from insitu.devices.backends import Devices
-from insitu.devices.galvo import (Command, ListPosition, focus_points, list_digest,
-                                  nominal_commands)
+from insitu.devices.galvo import Command, ListPosition, focus_points, list_digest, nominal_commands
 from insitu.devices.protocols import check_in_field
 from insitu.errors import DeviceError, SafetyError
 from insitu.geometry.beams import TwoMirrorHead

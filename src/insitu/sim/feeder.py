@@ -9,8 +9,7 @@ from pathlib import Path
 import numpy as np
 
 from insitu.geometry.pose import pose_matrix
-from insitu.sim.workpieces import (Workpiece, load_mesh_workpiece, make_workpiece,
-                                   random_pose)
+from insitu.sim.workpieces import Workpiece, load_mesh_workpiece, make_workpiece, random_pose
 from insitu.sim.world import SimWorld
 
 POSE_RANGE_MM = 25.0       # a part lies within ±25 mm of where the recipe's reference lay

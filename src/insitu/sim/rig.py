@@ -11,10 +11,10 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from insitu.formats.rig import ScanHeadGeometry
 from insitu.geometry.beams import ScanHeadOptics, TwoMirrorHead
 from insitu.geometry.camera import CameraModel, rotation_about
 from insitu.geometry.distortion import FieldDistortion, NoDistortion, PolynomialFieldDistortion
-from insitu.formats.rig import ScanHeadGeometry
 from insitu.rig.model import RigModel
 
 PIXEL_PITCH_MM = 0.00345

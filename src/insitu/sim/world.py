@@ -26,8 +26,15 @@ from insitu.sim.clock import SimTiming
 from insitu.sim.render import Renderer
 from insitu.sim.rig import SimRig, default_rig
 from insitu.sim.scene import Scene
-from insitu.sim.workpieces import (Pose, Workpiece, load_mesh_workpiece, make_workpiece,
-                                   part_matrix, to_part, workpiece_at)
+from insitu.sim.workpieces import (
+    Pose,
+    Workpiece,
+    load_mesh_workpiece,
+    make_workpiece,
+    part_matrix,
+    to_part,
+    workpiece_at,
+)
 
 ENGRAVING_ENV = "INSITU_SIM_ENGRAVING"
 

@@ -18,10 +18,25 @@ import cv2
 import numpy as np
 
 from insitu.vision.chains import longest_ridge
-from insitu.vision.detect import (LineCentres, as_image, band_background, detect, fwhm, gather,
-                                  raw_saturated, saturation_level)
-from insitu.vision.laser_image import (CHANNELS, ImageInputError, LaserImage, colour_margin,
-                                      laser_image, ridges, shrink)
+from insitu.vision.detect import (
+    LineCentres,
+    as_image,
+    band_background,
+    detect,
+    fwhm,
+    gather,
+    raw_saturated,
+    saturation_level,
+)
+from insitu.vision.laser_image import (
+    CHANNELS,
+    ImageInputError,
+    LaserImage,
+    colour_margin,
+    laser_image,
+    ridges,
+    shrink,
+)
 from insitu.vision.steger import gaussian_peak, steger
 
 __all__ = ["CENTRE_METHODS", "CHANNELS", "CentreMethod", "ImageInputError", "LineCentres",

@@ -60,8 +60,8 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from insitu.vision.chains import carry_ends, continuity as chain_support, junction, median3, \
-    short_ridges
+from insitu.vision.chains import carry_ends, junction, median3, short_ridges
+from insitu.vision.chains import continuity as chain_support
 from insitu.vision.laser_image import full_scale, noise_sigma
 from insitu.vision.tracks import candidates, on_longest_track
 

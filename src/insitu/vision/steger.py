@@ -23,8 +23,16 @@ import numpy as np
 from numpy.lib.stride_tricks import sliding_window_view
 from scipy.special import ndtr
 
-from insitu.vision.detect import (FWHM_PER_SIGMA, LineCentres, as_image, band_background, detect,
-                                  fwhm, gather, saturation_level)
+from insitu.vision.detect import (
+    FWHM_PER_SIGMA,
+    LineCentres,
+    as_image,
+    band_background,
+    detect,
+    fwhm,
+    gather,
+    saturation_level,
+)
 
 _M = 3          # candidate rows: the detected peak ± _M
 _T_MAX = 0.6    # |t·n| ≤ 0.5 px, plus room for the Taylor step's overshoot near pixel borders

@@ -11,9 +11,9 @@ from functools import lru_cache
 import numpy as np
 
 from insitu.errors import InsituError
+from insitu.marking import Placement
 from insitu.patterns import Pattern, load_pattern
 from insitu.patterns.fields import Variables, render_spec
-from insitu.marking import Placement
 
 # height colour map stops (t in 0…1 → RGB): blue, cyan, green, yellow, red
 COLORMAP_STOPS = np.array([[0.0, 0.15, 0.25, 0.85], [0.25, 0.0, 0.75, 0.9],

@@ -12,8 +12,7 @@ from psygnal import Signal
 from insitu.formats.pens import DEFAULT_PENS, PenTable
 from insitu.formats.pointcloud import PointCloud
 from insitu.formats.project import RigChoice
-from insitu.marking import MarkJob
-from insitu.marking import Placement
+from insitu.marking import MarkJob, Placement
 from insitu.services.plan import PlanOutcome
 from insitu.ui.model.scene_data import follow_code_hatch
 

@@ -10,13 +10,20 @@ from pathlib import Path
 
 from PySide6.QtCore import Qt
 from PySide6.QtGui import QColor, QPixmap
-from PySide6.QtWidgets import (QFileDialog, QHBoxLayout, QPushButton, QTableWidgetItem,
-                               QTabWidget, QVBoxLayout, QWidget)
+from PySide6.QtWidgets import (
+    QFileDialog,
+    QHBoxLayout,
+    QPushButton,
+    QTableWidgetItem,
+    QTabWidget,
+    QVBoxLayout,
+    QWidget,
+)
 
 from insitu.ui.model import operations as ops
 from insitu.ui.model.calibration_verdict import verdict
-from insitu.ui.qt.image_view import to_qimage
 from insitu.ui.qt.forms import load_form
+from insitu.ui.qt.image_view import to_qimage
 from insitu.ui.qt.image_window import Clicks, ImageWindow
 
 LEVEL_COLOURS = {"pass": QColor(90, 200, 110), "check": QColor(240, 190, 60),

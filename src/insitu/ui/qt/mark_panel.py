@@ -13,7 +13,6 @@ from PySide6.QtGui import QAction, QKeySequence
 from PySide6.QtWidgets import QHBoxLayout, QMessageBox, QPushButton, QVBoxLayout, QWidget
 
 from insitu.errors import InsituError
-
 from insitu.marking import JournalSummary, LaserParams, MarkJob, path_seconds
 from insitu.services.mark import StationRun, board_seconds
 from insitu.services.serials import is_templated

@@ -80,8 +80,7 @@ def show_job_file(window) -> None:
 def export_job(window, path: Path) -> bool:
     """Write the current plan as a mark job at ``path`` (atomically); False and one line
     when there is none."""
-    from insitu.services.serials import save_job
-    from insitu.services.serials import is_templated
+    from insitu.services.serials import is_templated, save_job
 
     job = window.mark_panel.job()
     if window.session.job_file is None and is_templated(window.session.placements.items):

@@ -13,9 +13,8 @@ from PySide6.QtGui import QBrush, QColor
 from PySide6.QtWidgets import QFileDialog, QInputDialog, QSizePolicy, QVBoxLayout, QWidget
 
 from insitu.errors import InsituError
-from insitu.marking import PROJECTIONS
+from insitu.marking import PROJECTIONS, Placement
 from insitu.patterns import FILE_SUFFIXES, is_spec
-from insitu.marking import Placement
 from insitu.ui.model.free_spot import free_spot
 from insitu.ui.model.scene_data import base_pattern, code_hatch, handles
 from insitu.ui.qt.forms import load_form

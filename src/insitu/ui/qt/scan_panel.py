@@ -9,14 +9,21 @@ from __future__ import annotations
 from pathlib import Path
 
 from PySide6.QtCore import Signal
-from PySide6.QtWidgets import (QAbstractSpinBox, QCheckBox, QComboBox, QFileDialog, QLineEdit,
-                               QPushButton, QVBoxLayout, QWidget)
+from PySide6.QtWidgets import (
+    QAbstractSpinBox,
+    QCheckBox,
+    QComboBox,
+    QFileDialog,
+    QLineEdit,
+    QPushButton,
+    QVBoxLayout,
+    QWidget,
+)
 
 from insitu.formats.project import ScanSettings
 from insitu.ui.model import operations as ops
 from insitu.ui.model.operations import NO_RIG
 from insitu.ui.qt.forms import load_form
-
 
 BUSY = ("scan", "mark", "preview", "produce")
 """Tasks that use the station: a scan waits for them."""

@@ -8,7 +8,6 @@ from __future__ import annotations
 from PySide6.QtGui import QAction, QKeySequence
 from PySide6.QtWidgets import QMenu, QToolBar
 
-
 NO_AMBIENT = ("this cloud has no camera picture: it was measured without an ambient "
               "(laser-off) frame")
 NO_CLOUD = "no point cloud: scan or open one"
