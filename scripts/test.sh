@@ -25,6 +25,6 @@ if (($#)); then
 fi
 # the long tests first: the short ones fill the workers' ends; a module marked xdist_group runs
 # on one worker (its module fixture made once)
-XDIST=(-n auto --dist loadgroup --basetemp="$BASETEMP")
+XDIST=(-n auto --dist loadgroup --basetemp="$BASETEMP" --durations=15)
 INSITU_TEST_NO_QT=1 python -m pytest -p no:pytest-qt "${XDIST[@]}" tests/integration tests/unit
 "${XVFB[@]}" python -m pytest "${XDIST[@]}" tests/gui

@@ -180,8 +180,10 @@ def matrix(transform: str | None) -> np.ndarray:
 
 
 def compose(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """a ∘ b: apply b, then a."""
-    return np.column_stack([a[:, :2] @ b[:, :2], a[:, :2] @ b[:, 2] + a[:, 2]])
+    """a ∘ b: apply b, then a. A product beyond float range is inf (no warning): the shapes'
+    coordinates are then refused as not finite, naming the element."""
+    with np.errstate(over="ignore", invalid="ignore"):
+        return np.column_stack([a[:, :2] @ b[:, :2], a[:, :2] @ b[:, 2] + a[:, 2]])
 
 
 def translate(x: float, y: float) -> np.ndarray:

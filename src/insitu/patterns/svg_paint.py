@@ -57,7 +57,8 @@ class Item:
     def mapped(self, m: np.ndarray) -> Item:
         """This item under the (2, 3) affine ``m``."""
         r = shapely.affinity.affine_transform(self.region, [*m[0, :2], *m[1, :2], *m[:, 2]])
-        lines = [q @ m[:, :2].T + m[:, 2] for q in self.lines]
+        with np.errstate(over="ignore", invalid="ignore"):
+            lines = [q @ m[:, :2].T + m[:, 2] for q in self.lines]
         return Item(r, self.lum, self.what, self.why, lines)
 
 

@@ -108,7 +108,10 @@ def inverse(m: np.ndarray) -> np.ndarray | None:
 
 
 def apply(m: np.ndarray, pts: np.ndarray) -> np.ndarray:
-    return pts @ m[:, :2].T + m[:, 2]
+    """(N, 2) points under the (2, 3) affine ``m``; beyond float range inf or nan, without a
+    warning (refused later as not finite, naming the element)."""
+    with np.errstate(over="ignore", invalid="ignore"):
+        return pts @ m[:, :2].T + m[:, 2]
 
 
 def rect_region(m: np.ndarray, x: float, y: float, w: float, h: float):
