@@ -28,7 +28,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_valida
 from insitu.errors import FormatError
 from insitu.formats.bounds import within
 from insitu.formats.pens import Pen, PenName
-from insitu.formats.validation import bad, one_of, read_json, validation_message
+from insitu.formats.validation import one_of, read_json, unique_names, validation_message
 
 MATERIALS_FORMAT = "insitu-materials/1"
 Power, Spot = within("laser_power_w"), within("spot_um")
@@ -83,11 +83,7 @@ class MaterialTable(_Strict):
 
     @model_validator(mode="after")
     def _names(self) -> "MaterialTable":
-        seen = set()
-        for i, m in enumerate(self.materials):
-            if m.name in seen:
-                raise bad(f"material {m.name!r} is defined twice", at=f"materials[{i}].name")
-            seen.add(m.name)
+        unique_names(self.materials, "material", "materials")
         return self
 
     @property

@@ -26,7 +26,15 @@ from pydantic import AfterValidator, BaseModel, ConfigDict, Field, ValidationErr
 from insitu.errors import FormatError
 from insitu.formats.atomic import atomic_write_text
 from insitu.formats.bounds import within
-from insitu.formats.validation import bad, dump_json, one_of, read_json, show, validation_message
+from insitu.formats.validation import (
+    bad,
+    dump_json,
+    one_of,
+    read_json,
+    show,
+    unique_names,
+    validation_message,
+)
 
 PENS_FORMAT = "insitu-pens/1"
 _COLOUR = re.compile(r"^#[0-9a-fA-F]{6}$")
@@ -126,11 +134,7 @@ class PenTable(_Strict):
 
     @model_validator(mode="after")
     def _names(self) -> "PenTable":
-        seen = set()
-        for i, p in enumerate(self.pens):
-            if p.name in seen:
-                raise bad(f"pen {p.name!r} is defined twice", at=f"pens[{i}].name")
-            seen.add(p.name)
+        seen = unique_names(self.pens, "pen", "pens")
         if self.default not in seen:
             raise bad(f"expected one of the pens, {one_of(seen)}", self.default, at="default")
         return self

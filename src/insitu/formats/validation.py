@@ -44,6 +44,17 @@ def bad(expected: str, got: Any = ..., *, at: str = "", more: int = 0) -> Pydant
     return PydanticCustomError("insitu", "{message}", {"message": msg, "at": at, "more": more})
 
 
+def unique_names(items, kind: str, field: str) -> set[str]:
+    """The ``name`` of every item of ``items`` (from the list ``field``); a validation error
+    at the first name given twice ("pen 'fine' is defined twice" at ``pens[2].name``)."""
+    seen: set[str] = set()
+    for i, item in enumerate(items):
+        if item.name in seen:
+            raise bad(f"{kind} {item.name!r} is defined twice", at=f"{field}[{i}].name")
+        seen.add(item.name)
+    return seen
+
+
 def loc_text(loc: tuple | list) -> str:
     """('frames', 3, 'line', 'start') → 'frames[3].line.start'."""
     out = ""
