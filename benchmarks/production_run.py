@@ -45,6 +45,7 @@ from insitu.patterns.fields import Variables
 from insitu.services import calibrate_height, production
 from insitu.services.field import calibrate_field
 from insitu.services.height import scan_camera
+from insitu.services.locate import recipe_locator
 from insitu.services.record import record_height_calibration, record_marked_field_calibration
 from insitu.services.serials import render_placement
 from insitu.services.station import connect, simulated
@@ -99,7 +100,7 @@ def run(args, folder: Path, field: Path, height) -> tuple[list, dict, dict]:
     recipe = read(recipe_path)
     log = folder / "run.jsonl"
     truths, offsets = {}, {}
-    locate = production.recipe_locator(recipe, scan_camera(None, height))
+    locate = recipe_locator(recipe, scan_camera(None, height))
     for attempt in ("first", "resumed"):
         with connect(None, PART, args.seed, args.binning, field=field) as station:
             present = station.part_feeder(PART, args.seed)

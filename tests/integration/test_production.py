@@ -20,6 +20,7 @@ from insitu.formats.recipe import Recipe, RecipeScan, write_recipe
 from insitu.marking import Placement, read_job
 from insitu.patterns.fields import Variables
 from insitu.services import production
+from insitu.services.locate import Located, recipe_locator
 from insitu.services.scan import Cancelled, scan_live
 from insitu.services.serials import job_variables, render_placement
 from insitu.services.station import connect
@@ -57,7 +58,7 @@ def _run(recipe_path, log, count, station, seed=3, **kw):
         truths["now"] = truths[k]
 
     def truth(cloud, room_light=None):
-        return production.Located(truths["now"], 1.0, 0.0)
+        return Located(truths["now"], 1.0, 0.0)
     return production.Production(r, station, log, count, truth, present=put, **kw), truths
 
 
@@ -156,7 +157,7 @@ def test_a_part_not_found_is_set_aside_without_a_serial(recipe, tmp_path):
     with connect(None, "step-block", 0, BINNING) as station:
         r = read(recipe)
         production.produce(production.Production(
-            r, station, log, 1, production.recipe_locator(r),
+            r, station, log, 1, recipe_locator(r),
             present=lambda k: station.world.clear_table()))
     (rec,) = read_log(log)
     assert rec.outcome == "refused" and rec.serial is None and "no part" in rec.error
@@ -203,7 +204,7 @@ def test_a_pose_the_lines_leave_unheld_gets_a_second_look_crossed(recipe, tmp_pa
                 x, y, a = flat_pose(truths["now"])
                 raise LocateRefused("poor-fit", "x, y and the turn are not pinned down",
                                     Solution(x, y, 0.0, a, 1.0, 1.0, 0.02))
-            return production.Located(truths["now"], 1.0, 0.0)
+            return Located(truths["now"], 1.0, 0.0)
         locate.reference = reference_from_mesh(mesh.vertices, mesh.triangles, "step-block")
         run.locate = locate
         (rec,) = production.produce(run)
@@ -239,7 +240,7 @@ def test_a_recipe_job_marks_every_placement_where_the_part_lies(recipe, tmp_path
         r = read(recipe)
         r = replace(r, placements=r.placements + (Placement('qr:"{serial:05d}"', (0.0, 30.0),
                                                             7.35),))
-        located = production.Located(pose_matrix(x, y, a), 1.0, 0.0)
+        located = Located(pose_matrix(x, y, a), 1.0, 0.0)
         done = production.plan_recipe(station, r, cloud, located, tmp_path / "j.json")
     job = read_job(tmp_path / "j.json")
     assert job_variables(job).serial == 1 and [t.text for t in job_variables(job).texts] == [

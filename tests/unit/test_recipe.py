@@ -160,7 +160,7 @@ def test_recipe_new_refuses_a_pattern_that_does_not_load(tmp_path, reference):
 def test_a_mesh_reference_is_sampled_in_the_part_frame(tmp_path):
     import open3d as o3d
 
-    from insitu.services.production import recipe_locator
+    from insitu.services.locate import recipe_locator
     from insitu.sim.workpieces import make_workpiece
 
     part = make_workpiece("step-block")

@@ -99,13 +99,14 @@ def test_produce_logs_station_and_cpu_seconds_per_step(tmp_path):
     from insitu.formats.recipe import Recipe, RecipeScan
     from insitu.marking import Placement
     from insitu.services import production
+    from insitu.services.locate import Located
 
     with connect(None, "step-block", 0, 4) as station:
         write_ply(tmp_path / "ref.ply", scan_live(station, 1.0).cloud)
         recipe = Recipe(tmp_path / "ref.ply", "cloud", (
             Placement('text:"A";size=2', (0.0, -30.0), 4.0, 10.0),), scan=RecipeScan(
                 margin_mm=4.0, spacing_mm=1.0), workpiece="step-block")
-        where = lambda cloud, room_light=None: production.Located(np.eye(4), 1.0, 0.0)  # noqa: E731
+        where = lambda cloud, room_light=None: Located(np.eye(4), 1.0, 0.0)  # noqa: E731
         run = production.Production(recipe, station, tmp_path / "run.jsonl", 1, where,
                                     production.read_part)
         production.produce(run)

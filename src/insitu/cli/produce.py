@@ -101,6 +101,7 @@ def produce(recipe: RecipeFile, rig: Rig = None, field: Field = None, count: Cou
     from insitu.formats.production_log import read_log
     from insitu.services import production
     from insitu.services.height import scan_camera
+    from insitu.services.locate import recipe_locator
     from insitu.services.station import connect
 
     r = read(recipe)
@@ -122,7 +123,7 @@ def produce(recipe: RecipeFile, rig: Rig = None, field: Field = None, count: Cou
                 console.print(part_line(rec), highlight=False, soft_wrap=True)
                 progress(rec.part, count)
 
-            locate = production.recipe_locator(r, scan_camera(station.rig.camera, cal))
+            locate = recipe_locator(r, scan_camera(station.rig.camera, cal))
             run = production.Production(r, station, log, count, locate,
                                         production.read_part, present, start, cancel,
                                         cal, on_record)

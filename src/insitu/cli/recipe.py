@@ -262,6 +262,7 @@ def mark_recipe(recipe_path: Path, cloud: Path, out: Path, run: bool, preview: b
     from insitu.cli.mark import record_rows
     from insitu.formats.pointcloud import read_ply
     from insitu.services import production
+    from insitu.services.locate import recipe_locator
     from insitu.services.station import connect
 
     if inspect is not None:
@@ -273,7 +274,7 @@ def mark_recipe(recipe_path: Path, cloud: Path, out: Path, run: bool, preview: b
     with connect(rig, r.workpiece or workpiece, seed, field=field) as station:
         with progress_bar("locating") as progress:
             progress(0, 1)
-            located = production.recipe_locator(r)(measured)
+            located = recipe_locator(r)(measured)
         with progress_bar("projecting") as progress:
             progress(0, 1)
             planned = production.plan_recipe(station, r, measured, located, out, cloud,

@@ -35,7 +35,6 @@ from insitu.services import mark as mark_svc
 from insitu.services import serials
 from insitu.services.height import crossed_model
 from insitu.services.locate import Located, Locator
-from insitu.services.locate import recipe_locator as recipe_locator  # the commands' entry
 from insitu.services.mark_job import JobRequest, WrittenJob, write_mark_job
 from insitu.services.scan import Cancelled, ScanResult, scan_live
 from insitu.services.station import Station

@@ -144,6 +144,7 @@ class ProductionPanel(QWidget):
         """Run the recipe on the connected station, off the GUI thread."""
         from insitu.services import production
         from insitu.services.height import scan_camera
+        from insitu.services.locate import recipe_locator
 
         station, r = self.window_.station, self.recipe
         if r is None or station is None:
@@ -161,7 +162,7 @@ class ProductionPanel(QWidget):
 
         def work(progress, cancel, on_frame):
             cal = self.window_.session.height_cal
-            locate = production.recipe_locator(r, scan_camera(station.rig.camera, cal))
+            locate = recipe_locator(r, scan_camera(station.rig.camera, cal))
             self._reference = locate.reference
             run = production.Production(
                 r, station, log, count, locate, production.read_part, present,
