@@ -93,35 +93,41 @@ def carry_ends(img: np.ndarray, ok: np.ndarray, row: np.ndarray, gmax: np.ndarra
     gap = (np.diff(cols) > 1) | (np.abs(np.diff(row[cols]) - slope) > 2)  # or a step
     first, last = cols[np.r_[True, gap]], cols[np.r_[gap, True]]
     line = last - first + 1 >= RUN                     # a stray column or two is no line
-    fronts = [(c, -1) for c in first[line]] + [(c, 1) for c in last[line]]
-    for end, d in fronts:
-        for k in range(1, steps + 1):
-            c = end + d * k
-            if not 0 <= c < W or not searched[c]:
-                break
-            at = float(row[end]) + slope * d * k
-            if ok[c] and not (k <= SHARED and upper * (row[c] - at) < -2.0
-                              and (locked is None or not locked[c])):
-                break
-            r, v = _peak_near(img, int(round(at)), c)
-            if v < min_peak or v - bg[end] < thr:
-                break
-            ok[c], row[c], gmax[c], bg[c] = True, r, v, bg[end]
+    locked = np.zeros(W, bool) if locked is None else locked
+    for ends, d in ((first[line], -1), (last[line], 1)):
+        close = len(ends) > 1 and np.diff(ends).min() <= steps    # within reach of another
+        for part in ([ends[i:i + 1] for i in range(len(ends))] if close else [ends]):
+            _carry(img, ok, row, gmax, bg, part, d, slope, min_peak, thr, searched, steps,
+                   upper, locked)
     return ok, row, gmax, bg
 
 
-def _peak_near(img: np.ndarray, at: int, c: int) -> tuple[int, float]:
-    """Of rows at − 1, at, at + 1 of column c (clipped to ``img``), the first with the
-    greatest median of its 3 px along the row, and that median (scalars: a few pixels)."""
+def _carry(img, ok, row, gmax, bg, ends, d, slope, min_peak, thr, searched, steps, upper,
+           locked) -> None:
+    """:func:`carry_ends` of the line ends ``ends`` (m,) in direction ``d`` (−1, +1), each at
+    least ``steps`` + 1 columns from the next, so that none reaches what another carries: the
+    columns each end goes on to, step by step, until the first that fails, at once; ok, row,
+    gmax and bg (W,) are updated in place."""
     H, W = img.shape
-    best_r, best = 0, -np.inf
-    for r in (at - 1, at, at + 1):
-        r = min(max(r, 0), H - 1)
-        a, b, e = (float(img[r, min(max(x, 0), W - 1)]) for x in (c - 1, c, c + 1))
-        m = max(min(a, b), min(max(a, b), e))
-        if m > best:
-            best_r, best = r, m
-    return best_r, best
+    k = np.arange(1, steps + 1)
+    c = ends[:, None] + d * k                                      # (m, steps)
+    at = row[ends].astype(np.float64)[:, None] + slope * d * k
+    inside = (c >= 0) & (c < W)
+    cc = np.clip(c, 0, W - 1)
+    shared = ((k <= SHARED) & (upper * (row[cc] - at) < -2.0) & ~locked[cc])
+    rows = np.clip(np.rint(at).astype(np.int64)[..., None] + np.arange(-1, 2), 0, H - 1)
+    px = img[rows[..., None], np.clip(cc[..., None, None] + np.arange(-1, 2), 0, W - 1)]
+    px = px.astype(np.float64)
+    med = median3(px[..., 0], px[..., 1], px[..., 2])               # (m, steps, 3 rows)
+    best = np.argmax(med, axis=-1)
+    v = np.take_along_axis(med, best[..., None], -1)[..., 0]
+    base = bg[ends][:, None]
+    go = (inside & searched[cc] & (~ok[cc] | shared) & (v >= min_peak) & (v - base >= thr))
+    go = np.logical_and.accumulate(go, axis=1)
+    i, j = np.nonzero(go)
+    col = cc[i, j]
+    ok[col], row[col] = True, np.take_along_axis(rows, best[..., None], -1)[i, j, 0]
+    gmax[col], bg[col] = v[i, j], base[i, 0]
 
 
 def ridges_of(cols: np.ndarray, row: np.ndarray, bridge: int, max_jump: float) -> np.ndarray:

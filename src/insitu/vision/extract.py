@@ -95,13 +95,14 @@ def extract_centres(image: np.ndarray, settings: CentreSettings = CentreSettings
                      pixel_bits=pixel_bits, **options)
     if r0 or c0:
         c = replace(c, u=c.u + c0, v=c.v + r0)
-    if settings.smooth_half_window:
+    if settings.smooth_half_window and len(c):
         half = settings.smooth_half_window
+        order, pieces = _pieces(c, settings.jump_px)
         if settings.smooth_grains:
-            grain = wander_correlation_px(c, settings.jump_px)
+            grain = _wander(c.v[order], pieces)
             half = int(np.clip(np.ceil(settings.smooth_grains * grain / 2), half,
                                max(half, MAX_HALF_WINDOW)))
-        c = smooth_centres(c, half, settings.jump_px, settings.end_fraction)
+        c = _smooth(c, order, pieces, half, settings.jump_px, settings.end_fraction)
     return c if along_rows else replace(c, u=c.v, v=c.u)
 
 
@@ -163,15 +164,30 @@ def wander_correlation_px(c: LineCentres, jump_px: float = 1.0, min_run: int = 8
     ``min_run`` columns, about a 61-column quadratic trend; 0 when no run is long enough."""
     if len(c) < min_run:
         return 0.0
+    order, edges = _pieces(c, jump_px)
+    return _wander(c.v[order], edges, min_run, max_lag)
+
+
+def _pieces(c: LineCentres, jump_px: float) -> tuple[np.ndarray, np.ndarray]:
+    """The order that sorts ``c`` by u, and the :func:`_run_edges` of the sorted centres."""
     order = np.argsort(c.u, kind="stable")
-    u, v = c.u[order], c.v[order]
-    acf = np.zeros(max_lag + 1)
-    for r in runs(u, v, jump_px):
-        if r.stop - r.start >= min_run:
-            res = v[r] - quadratic_trend(v[r], 61 if r.stop - r.start > 61 else min_run - 1)
-            res -= res.mean()
-            f = np.fft.rfft(res, 2 * len(res))
-            acf += np.fft.irfft(f * np.conj(f))[:max_lag + 1]
+    return order, _run_edges(c.u[order], c.v[order], jump_px)
+
+
+def _wander(v: np.ndarray, edges: np.ndarray, min_run: int = 80, max_lag: int = 24) -> float:
+    """:func:`wander_correlation_px` of the centres' v (n,) sorted by u, cut into runs at
+    ``edges``: the residuals of every long run laid end to end with ``max_lag`` zeros
+    between them, so that one product of lagged windows sums each run's autocorrelation."""
+    start, stop = edges[:-1], edges[1:]
+    long = stop - start >= min_run
+    if not long.any():
+        return 0.0
+    res = [np.zeros(max_lag)]
+    for a, b in zip(start[long], stop[long]):
+        r = v[a:b] - quadratic_trend(v[a:b], 61 if b - a > 61 else min_run - 1)
+        res += [r - r.mean(), np.zeros(max_lag)]
+    flat = np.concatenate(res)
+    acf = sliding_window_view(flat, max_lag + 1).T @ flat[:len(flat) - max_lag]
     if acf[0] <= 0:
         return 0.0
     rho = acf / acf[0]
@@ -224,10 +240,16 @@ def smooth_centres(c: LineCentres, half_window: int = 7, jump_px: float = 1.0,
     """
     if len(c) == 0 or half_window < 1:
         return c
-    order = np.argsort(c.u, kind="stable")
+    order, edges = _pieces(c, jump_px)
+    return _smooth(c, order, edges, half_window, jump_px, end_fraction, drop_short)
+
+
+def _smooth(c: LineCentres, order: np.ndarray, edges: np.ndarray, half_window: int,
+            jump_px: float, end_fraction: float, drop_short: int = 3) -> LineCentres:
+    """:func:`smooth_centres` of ``c`` (n ≥ 1), given the order sorting it by u and the
+    :func:`_run_edges` of the sorted centres."""
     u, v = c.u[order], c.v[order]
     peak = c.peak[order]
-    edges = _run_edges(u, v, jump_px)
     level = 0.0
     if end_fraction > 0:
         level = np.repeat([end_fraction * np.median(peak[a:b]) for a, b in

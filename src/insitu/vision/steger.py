@@ -43,20 +43,20 @@ def _flank_fit(g, inside, x, sat_mask, floor, unit=1.0):
     saturated plateau: those at or above ``floor`` that fall away from it without a break (the
     first pixel that rises again is the background's, not the line's). g: (k, n) values minus
     background, x: (k, 1) offsets. NaN if degenerate."""
-    use = inside & ~sat_mask & (g >= floor)
+    above = inside & (g >= floor)
+    use = above & ~sat_mask
     k = len(x) // 2
-    above = inside & (g >= floor)                                  # contiguous with the peak
-    falls = np.ones_like(above)
+    falls = np.ones_like(above)                                    # contiguous with the peak
     falls[:k] = g[:k] <= g[1:k + 1]
     falls[k + 1:] = g[k + 1:] <= g[k:-1]
     above &= falls | sat_mask
-    near = np.r_[np.cumprod(above[k::-1], axis=0)[::-1][:-1], np.cumprod(above[k:], axis=0)]
-    use &= near.astype(bool)
+    use[:k] &= np.logical_and.accumulate(above[k::-1], axis=0)[:0:-1]
+    use[k:] &= np.logical_and.accumulate(above[k:], axis=0)
     wgt = np.where(use, g, 0.0).astype(np.float64)
-    ly = np.log(np.maximum(g, unit)).astype(np.float64)
-    xs = x.astype(np.float64)
-    m = np.stack([(wgt * xs**p).sum(axis=0) for p in range(5)])   # moments (5, n)
-    det, coef = moment_solve(m, [(wgt * ly * xs**p).sum(axis=0) for p in range(3)])
+    ly = np.log(np.maximum(g, unit), where=use, out=np.zeros(g.shape)).astype(np.float64)
+    powers = x.astype(np.float64) ** np.arange(5)                  # (k, 5)
+    m = powers.T @ wgt                                             # moments (5, n)
+    det, coef = moment_solve(m, powers[:, :3].T @ (wgt * ly))
     ok = (use[: k].any(axis=0) & use[k + 1:].any(axis=0) & (use.sum(axis=0) >= 3)
           & (np.abs(det) > 1e-9 * np.maximum(m[0], 1) ** 3))
     with np.errstate(divide="ignore", invalid="ignore"):
