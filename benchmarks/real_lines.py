@@ -25,7 +25,13 @@ Baseline, the naive centre of mass: per scan line of the laser's own channel (th
 which), the pixels within ±8 px of the line's maximum that reach 0.8 of it, weighted by their
 value. Nothing else: no validity test, no filter.
 
+Hold-out: ``--half first`` scores the first half of each set's photographs with a board pose
+(in the order ``files`` gives them, :func:`half`), ``--half second`` the rest; the truth's
+plane, where it is fitted, is fitted on all of them. real_sets.TUNED says which half of which
+set the defaults were tuned on.
+
 Run: .venv/bin/python benchmarks/real_lines.py DATA [--sets desktop,…] [--background]
+[--half first|second|all]
 """
 
 from __future__ import annotations
@@ -40,7 +46,7 @@ from rich.console import Console
 from rich.table import Table
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from real_sets import SETS, TUNING, PhotoSet  # noqa: E402
+from real_sets import SETS, TUNED, PhotoSet  # noqa: E402
 
 from insitu.vision.centres import CENTRE_METHODS, UncertainLine, photo_centres  # noqa: E402
 
@@ -146,6 +152,12 @@ def centres_or_none(bgr, method, laser_off) -> np.ndarray:
         return np.zeros((0, 2))
 
 
+def half(items: list, which: str) -> list:
+    """The first half of ``items`` (the first ⌈n/2⌉), the second (the rest) or all."""
+    n = (len(items) + 1) // 2
+    return {"first": items[:n], "second": items[n:], "all": items}[which]
+
+
 def measure(s: PhotoSet, root: str, background: bool):
     """Centres of every photograph with a board pose: [(file, pose, shape, {name: uv})], the
     naive baseline under "naive" (its uv for both directions: "naive rows", "naive cols")."""
@@ -216,16 +228,18 @@ def score(s: PhotoSet, shots, plane):
     return rows, pairs
 
 
-def report(s: PhotoSet, root: str, background: bool, console: Console) -> None:
-    shots = measure(s, root, background)
-    if not shots:
+def report(s: PhotoSet, root: str, background: bool, console: Console,
+           which: str = "all") -> None:
+    every = measure(s, root, background)
+    if not every:
         console.print(f"{s.name}: no photographs with a board under {root} (see real_sets.py)")
         return
-    plane = reference_plane(s, shots)
+    plane = reference_plane(s, every)
+    shots = half(every, which)
     rows, pairs = score(s, shots, plane)
-    role = "tuning set" if s.name == TUNING else "looked at, not held out"
-    table = Table(title=f"{s.name} ({s.repo}, {role}): {len(shots)} photographs with the "
-                        f"board{', laser-off frame subtracted' if background else ''}")
+    role = TUNED.get(s.name, "looked at, not held out")
+    table = Table(title=f"{s.name} ({s.repo}; {which} half: {len(shots)} photographs with the "
+                        f"board{', laser-off frame subtracted' if background else ''}; {role})")
     for col in ("method", "board scan lines", "found %", "wrong %", "photos without",
                 "pairs", "RMS mm", "naive RMS mm", "ratio"):
         table.add_column(col, justify="left" if col == "method" else "right")
@@ -236,16 +250,18 @@ def report(s: PhotoSet, root: str, background: bool, console: Console) -> None:
         if m == "naive":
             table.add_row(*cells, "", "", "", "")
             continue
-        X = np.concatenate([rays_to_board(uv, s.K, s.dist, R, t) for R, t, uv, _ in pairs[m]])
-        Xb = np.concatenate([rays_to_board(b, s.K, s.dist, R, t) for R, t, _, b in pairs[m]])
+        X = np.concatenate([np.zeros((0, 3))] + [rays_to_board(uv, s.K, s.dist, R, t)
+                                                 for R, t, uv, _ in pairs[m]])
+        Xb = np.concatenate([np.zeros((0, 3))] + [rays_to_board(b, s.K, s.dist, R, t)
+                                                  for R, t, _, b in pairs[m]])
         if len(X) <= 3:
             table.add_row(*cells, str(len(X)), "—", "—", "—")
             continue
         r, rb = rms_to_own_plane(X), rms_to_own_plane(Xb)
         table.add_row(*cells, str(len(X)), f"{r:.3f}", f"{rb:.3f}", f"{r / rb:.2f}")
     console.print(table)
-    if s.plane() is not None and sum(len(found[m]) for *_, found in shots for m in METHODS) > 3:
-        own = reference_plane(PhotoSet(**{**s.__dict__, "plane": lambda: None}), shots)
+    if s.plane() is not None and sum(len(found[m]) for *_, found in every for m in METHODS) > 3:
+        own = reference_plane(PhotoSet(**{**s.__dict__, "plane": lambda: None}), every)
         angle = np.degrees(np.arccos(min(1.0, abs(float(own[0] @ s.plane()[0])))))
         console.print(f"the published plane and one fitted to the points: {angle:.2f}° apart")
 
@@ -257,12 +273,14 @@ def main() -> None:
                     + ", ".join(SETS))
     ap.add_argument("--background", action="store_true",
                     help="subtract the set's laser-off photograph (sets that have one)")
+    ap.add_argument("--half", choices=("first", "second", "all"), default="all",
+                    help="score the first half of each set's photographs, the second, or all")
     a = ap.parse_args()
     console = Console(width=130)
     for name in a.sets.split(","):
         if name not in SETS:
             raise SystemExit(f"--sets: {name!r}: expected one of {', '.join(SETS)}")
-        report(SETS[name], a.data, a.background, console)
+        report(SETS[name], a.data, a.background, console, a.half)
     console.print(f"found: a centre within {RIGHT_PX:g} px of the true course on a scan line "
                   f"where it crosses the board; wrong: farther. RMS: on the pairs both the "
                   f"method and the naive centre of mass ({NAIVE_FRACTION:g} of the line's "

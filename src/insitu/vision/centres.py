@@ -176,6 +176,17 @@ CENTRE_METHODS: dict[str, CentreMethod] = {
 }
 
 
+CLIPPED_SHARE = 0.1
+"""Pixels of laser-coloured light at full scale in the laser's channel, as a share of the
+frame's longer side, from which a photograph's stripe counts as clipping the channel
+(:func:`_clips`): its excess over the others is 0 where it is white, no gap is filled from
+it."""
+GAPS = 0.95
+"""A photograph's stripe with centres on fewer of the scan lines between its ends has its
+gaps filled from the laser's colour (:func:`_fill_gaps`)."""
+FILL_PX = 4.0
+"""How far (px) a centre filling a gap may lie from the course of the stripe's centres on
+either side (:func:`_fill_gaps`)."""
 PHOTO_RUN = 20
 """Least columns (or rows) of a stripe in anyone's photograph (:func:`photo_centres`)."""
 FRINGE_MARGIN = 1.0
@@ -220,8 +231,10 @@ def _check(method: str, direction: str | None) -> None:
         raise ImageInputError(f"direction {direction!r}: expected rows, cols or auto")
 
 
-def _centres_in(li: LaserImage, method, direction, band, clipped, kw) -> LineCentres:
-    """:func:`line_centres` in the laser's light ``li``."""
+def _centres_in(li: LaserImage, method, direction, band, clipped, kw,
+                colour: bool = False) -> LineCentres:
+    """:func:`line_centres` in the laser's light ``li``; colour: the gaps of the stripe
+    filled from the laser channel's excess over the others (:func:`_fill_gaps`)."""
     fn = CENTRE_METHODS[method].find
     img, allow = li.gray, li.allow
     if direction is None:
@@ -234,8 +247,41 @@ def _centres_in(li: LaserImage, method, direction, band, clipped, kw) -> LineCen
         t = _along(fn, li.total, direction, band, allow, scaled(3 * li.full_scale))
         if (np.mean(c.saturated) > 0.5 if len(c) else False) or \
                 _stripe_length(t, direction) > _stripe_length(c, direction):
-            return replace(t, peak=t.peak / 3, contrast=t.contrast / 3, full_scale=c.full_scale)
+            c = replace(t, peak=t.peak / 3, contrast=t.contrast / 3, full_scale=c.full_scale)
+    if colour and li.excess is not None and len(c) > 1 and not _clips(li):
+        scan = c.u if direction == "rows" else c.v
+        if len(c) < GAPS * (np.ptp(scan) + 1):
+            e = _along(fn, li.excess, direction, band, allow, scaled(li.full_scale))
+            c = _fill_gaps(c, e, direction == "rows")
     return c
+
+
+def _clips(li: LaserImage) -> bool:
+    """Whether the laser's channel is clipped on laser-coloured light (``li.allow``) in at
+    least :data:`CLIPPED_SHARE` of the frame's longer side's count of pixels."""
+    H, W = li.gray.shape
+    hit = cv2.compare(li.gray, li.full_scale, cv2.CMP_GE) & li.allow.view(np.uint8)
+    return cv2.countNonZero(hit) >= CLIPPED_SHARE * max(H, W)
+
+
+def _fill_gaps(c: LineCentres, e: LineCentres, along_rows: bool) -> LineCentres:
+    """``c`` with the centres of ``e`` added on the scan lines ``c`` has none, between its
+    ends, where they lie within :data:`FILL_PX` of ``c``'s course there (interpolated
+    between its neighbours). ``e``: the centres in the laser channel's excess over the
+    others, where a neutral board's pattern cancels and a stripe running along a dark
+    square's edge (a step in the channel, no peak) is a ridge."""
+    key = (lambda x: x.u) if along_rows else (lambda x: x.v)
+    cross = (lambda x: x.v) if along_rows else (lambda x: x.u)
+    sc, se = np.round(key(c)).astype(np.int64), np.round(key(e)).astype(np.int64)
+    order = np.argsort(sc)
+    course = np.interp(se, sc[order], cross(c)[order])
+    add = ((se > sc.min()) & (se < sc.max()) & ~np.isin(se, sc)
+           & (np.abs(cross(e) - course) <= FILL_PX))
+    if not add.any():
+        return c
+    keep = np.argsort(np.r_[sc, se[add]], kind="stable")
+    fields = ("u", "v", "peak", "width", "contrast", "saturated", "ambiguous")
+    return replace(c, **{f: np.r_[getattr(c, f), getattr(e, f)[add]][keep] for f in fields})
 
 
 def _stripe_length(c: LineCentres, direction: str) -> int:
@@ -265,7 +311,8 @@ def photo_centres(image: np.ndarray, method: str = "steger", direction: str | No
     _check(method, direction)
     kw = dict(CENTRE_METHODS[method].defaults)
     li = laser_image(image, channel, laser_off, pixel_bits)
-    c = _centres_in(li, method, direction, None, 1.0, dict(kw, min_run=PHOTO_RUN, ridge=True))
+    c = _centres_in(li, method, direction, None, 1.0, dict(kw, min_run=PHOTO_RUN, ridge=True),
+                    colour=True)
     margin = colour_margin(li, c.u, c.v) if laser_off is None else np.inf
     if margin < FRINGE_MARGIN:
         raise UncertainLine(f"the line's laser colour is {margin:.2f} × the colour fringes at "
