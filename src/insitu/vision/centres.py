@@ -33,6 +33,7 @@ from insitu.vision.laser_image import (
     ImageInputError,
     LaserImage,
     colour_margin,
+    excess,
     laser_image,
     ridges,
     shrink,
@@ -248,11 +249,11 @@ def _centres_in(li: LaserImage, method, direction, band, clipped, kw,
         if (np.mean(c.saturated) > 0.5 if len(c) else False) or \
                 _stripe_length(t, direction) > _stripe_length(c, direction):
             c = replace(t, peak=t.peak / 3, contrast=t.contrast / 3, full_scale=c.full_scale)
-    if colour and li.excess is not None and len(c) > 1 and not _clips(li):
-        scan = c.u if direction == "rows" else c.v
-        if len(c) < GAPS * (np.ptp(scan) + 1):
-            e = _along(fn, li.excess, direction, band, allow, scaled(li.full_scale))
-            c = _fill_gaps(c, e, direction == "rows")
+    scan = c.u if direction == "rows" else c.v
+    if colour and li.bgr is not None and 1 < len(c) < GAPS * (np.ptp(scan) + 1) \
+            and not _clips(li):
+        e = _along(fn, excess(li), direction, band, allow, scaled(li.full_scale))
+        c = _fill_gaps(c, e, direction == "rows")
     return c
 
 

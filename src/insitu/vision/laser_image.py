@@ -55,10 +55,8 @@ class LaserImage:
     over the other channels, at a smaller scale for a large frame (None: gray input).
     total: (H, W) the sum of the three channels (full scale 3 · full_scale), where a core
     clipped white stands out over a halo that clips the laser's channel (None: gray input,
-    or a channel given). excess: (H, W) float32 ≥ 0, the laser channel's excess over the
-    mean of the two others, where a neutral board's pattern (black on white) cancels and the
-    laser's light stays, also where the stripe runs along a square's edge (None: gray input,
-    a channel given, or a laser-off frame taken away)."""
+    or a channel given). bgr: the colour frame (H, W, 3) its :func:`excess` is made of (None:
+    gray input, a channel given, or a laser-off frame taken away)."""
 
     gray: np.ndarray
     allow: np.ndarray | None
@@ -66,7 +64,7 @@ class LaserImage:
     channel: str | None
     ridge: np.ndarray | None = None
     total: np.ndarray | None = None
-    excess: np.ndarray | None = None
+    bgr: np.ndarray | None = None
 
 
 def full_scale(dtype: np.dtype, pixel_bits: int | None = None) -> float:
@@ -246,10 +244,16 @@ def laser_image(image, channel: str = "auto", laser_off=None,
     else:
         c = _auto_channel(img)
     thin, allow = _laser_coloured(img, c, fs)
-    total = excess = None
+    total = None
     if channel == "auto":
         ch, depth = cv2.split(img), cv2.CV_16U if img.dtype == np.uint8 else cv2.CV_32F
         total = cv2.add(cv2.add(ch[0], ch[1], dtype=depth), ch[2], dtype=depth)
-        if off is None:
-            excess = cv2.max(_excess(img, c), 0.0)
-    return LaserImage(cv2.extractChannel(img, c), allow, fs, "bgr"[c], thin, total, excess)
+    return LaserImage(cv2.extractChannel(img, c), allow, fs, "bgr"[c], thin, total,
+                      img if channel == "auto" and off is None else None)
+
+
+def excess(li: LaserImage) -> np.ndarray:
+    """(H, W) float32 ≥ 0: the laser channel's excess over the mean of the two others in
+    ``li.bgr``, where a neutral board's pattern (black on white) cancels and the laser's
+    light stays, also where the stripe runs along a square's edge."""
+    return cv2.max(_excess(li.bgr, CHANNELS[li.channel]), 0.0)
