@@ -95,19 +95,18 @@ def carry_ends(img: np.ndarray, ok: np.ndarray, row: np.ndarray, gmax: np.ndarra
     line = last - first + 1 >= RUN                     # a stray column or two is no line
     locked = np.zeros(W, bool) if locked is None else locked
     for ends, d in ((first[line], -1), (last[line], 1)):
-        close = len(ends) > 1 and np.diff(ends).min() <= steps    # within reach of another
-        for part in ([ends[i:i + 1] for i in range(len(ends))] if close else [ends]):
-            _carry(img, ok, row, gmax, bg, part, d, slope, min_peak, thr, searched, steps,
-                   upper, locked)
+        _carry(img, ok, row, gmax, bg, ends, d, slope, min_peak, thr, searched, steps, upper,
+               locked)
     return ok, row, gmax, bg
 
 
 def _carry(img, ok, row, gmax, bg, ends, d, slope, min_peak, thr, searched, steps, upper,
            locked) -> None:
-    """:func:`carry_ends` of the line ends ``ends`` (m,) in direction ``d`` (−1, +1), each at
-    least ``steps`` + 1 columns from the next, so that none reaches what another carries: the
-    columns each end goes on to, step by step, until the first that fails, at once; ok, row,
-    gmax and bg (W,) are updated in place."""
+    """:func:`carry_ends` of the line ends ``ends`` (m,) in direction ``d`` (−1, +1), all at
+    once: the columns each end goes on to, step by step, until the first that fails; ok,
+    row, gmax and bg (W,) are updated in place. Ends of one direction cannot reach what
+    another carries, nor its end: between two of them lies a line of at least :data:`RUN`
+    valid columns, and an end goes on into at most :data:`SHARED` < RUN of those."""
     H, W = img.shape
     k = np.arange(1, steps + 1)
     c = ends[:, None] + d * k                                      # (m, steps)

@@ -189,8 +189,8 @@ def _half_width(pre, row, gmax, w, cols) -> np.ndarray:
     the least of its ±w band to its peak, on the wider side, px."""
     g, inside = gather(pre, row[None, :] + np.arange(-w, w + 1)[:, None], cols)
     above = (g > (gmax + np.where(inside, g, np.inf).min(axis=0)) / 2) & inside
-    up = np.cumprod(above[w::-1], axis=0).sum(axis=0)
-    down = np.cumprod(above[w:], axis=0).sum(axis=0)
+    up = np.logical_and.accumulate(above[w::-1], axis=0).sum(axis=0)
+    down = np.logical_and.accumulate(above[w:], axis=0).sum(axis=0)
     return np.minimum(np.maximum(up, down), w)
 
 
@@ -375,6 +375,6 @@ def fwhm(g, inside, base, gmax) -> np.ndarray:
     FWHM in px. A bright area on one side of the line is not counted in its width."""
     above = (g > (base + gmax) / 2) & inside
     k = len(g) // 2
-    up = np.cumprod(above[k::-1], axis=0).sum(axis=0)
-    down = np.cumprod(above[k:], axis=0).sum(axis=0)
+    up = np.logical_and.accumulate(above[k::-1], axis=0).sum(axis=0)
+    down = np.logical_and.accumulate(above[k:], axis=0).sum(axis=0)
     return np.maximum(up + down - 1, 0).astype(np.float64)

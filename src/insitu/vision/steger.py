@@ -181,11 +181,11 @@ def _hermite_root(y0, d0, y1, d1):
     """Root s in [0, 1] of the cubic Hermite interpolant of (y0, d0) at 0 and (y1, d1) at 1:
     Newton from the linear estimate, 4 steps."""
     s = np.clip(y0 / np.where(y0 != y1, y0 - y1, 1.0), 0.0, 1.0)
+    a2 = 3 * (y1 - y0) - 2 * d0 - d1                   # the cubic y0 + d0 s + a2 s² + a3 s³
+    a3 = 2 * (y0 - y1) + d0 + d1
     for _ in range(4):
-        s2, s3 = s * s, s * s * s
-        p = ((2 * s3 - 3 * s2 + 1) * y0 + (s3 - 2 * s2 + s) * d0 + (3 * s2 - 2 * s3) * y1
-             + (s3 - s2) * d1)
-        dp = (6 * s2 - 6 * s) * (y0 - y1) + (3 * s2 - 4 * s + 1) * d0 + (3 * s2 - 2 * s) * d1
+        p = y0 + s * (d0 + s * (a2 + s * a3))
+        dp = d0 + s * (2 * a2 + s * (3 * a3))
         s = np.clip(s - p / np.where(np.abs(dp) > 1e-12, dp, 1e-12), 0.0, 1.0)
     return s
 
@@ -291,8 +291,10 @@ def steger(image: np.ndarray, sigma: float | None = None, min_peak: float = 40.0
     (y0, d0), (yn, dn), (yp, dp) = ((at(gcol, k + i), at(dcol, k + i)) for i in (0, 1, -1))
     down = np.sign(y0) != np.sign(yn)
     refined = down | (np.sign(yp) != np.sign(y0))
-    s = _hermite_root(np.where(down, y0, yp), np.where(down, d0, dp), np.where(down, yn, y0),
-                      np.where(down, dn, d0)) - np.where(down, 0.0, 1.0)
+    s = np.zeros(n)
+    s[refined] = _hermite_root(*(np.where(down, a, b)[refined] for a, b in
+                                 ((y0, yp), (d0, dp), (yn, y0), (dn, d0))))
+    s -= np.where(down, 0.0, 1.0)
     u = np.where(refined, c, c + bt * bu)
     v = r + (k - _M - 1) + np.where(refined, s, bt * bv)
     level = saturation_level(img, saturation, scale)
