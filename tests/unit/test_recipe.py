@@ -47,7 +47,7 @@ def _recipe(reference, **kw):
 def test_a_recipe_reads_back_as_written(tmp_path, reference):
     sub = tmp_path / "recipes"
     sub.mkdir()
-    r = _recipe(reference, scan=RecipeScan((-40, 40, -60, 60), 4.0, 0.4),
+    r = _recipe(reference, scan=RecipeScan((-40, 40, -60, 60), 4.0, 0.4, lines_per_frame="auto"),
                 prefer_angle_deg=(-90.0, 90.0), serial_start=100, fields={"lot": "A7"},
                 workpiece="step-block")
     path = sub / "r.json"
@@ -60,6 +60,7 @@ def test_a_recipe_reads_back_as_written(tmp_path, reference):
     assert back.reference == reference and back.reference_kind == "cloud"
     assert back.placements == r.placements
     assert back.scan == r.scan and back.prefer_angle_deg == (-90.0, 90.0)
+    assert raw["scan"]["lines_per_frame"] == "auto" and back.scan.lines_per_frame == "auto"
     assert back.counter == sub / "serial.counter.json" and back.serial_start == 100
     assert back.fields == {"lot": "A7"} and back.workpiece == "step-block"
     assert back.laser == r.laser
@@ -70,6 +71,8 @@ def test_a_recipe_reads_back_as_written(tmp_path, reference):
      r"placements\[0\]\.width_mm: -1 is outside 0\.001 … 2000 mm"),
     (lambda d: d["laser"].update(power_pct=120), r"laser\.power_pct: 120 is outside 0 … 100 %"),
     (lambda d: d["scan"].update(margin_mm=0), r"scan\.margin_mm: 0 is outside"),
+    (lambda d: d["scan"].update(lines_per_frame=0), r"scan\.lines_per_frame"),
+    (lambda d: d["scan"].update(lines_per_frame="many"), r"scan\.lines_per_frame"),
     (lambda d: d.update(reference={"mesh": "a.stl", "cloud": "b.ply"}),
      r"reference: expected exactly one of mesh, cloud"),
     (lambda d: d.update(reference={"cloud": "gone.ply"}), r"reference\.cloud: gone\.ply not found"),

@@ -11,7 +11,8 @@
      "scan": {"region": null, "margin_mm": 5, "spacing_mm": 0.25, "exposure_ms": 10,
               "speed_mm_s": 2000,                   # region: world (x0, x1, y0, y1) mm
               "cross": true, "cross_spacing_mm": 0.5,   # a crossed pass (absent: none)
-              "second_look": true},                # along y only: crossed when unheld
+              "second_look": true,                 # along y only: crossed when unheld
+              "lines_per_frame": "auto"},          # K or "auto" a frame (absent: one)
      "locate": {"prefer_angle_deg": null,          # which of a symmetric part's turns
                 "tolerance_mm": 0.05, "turn_bound_deg": 0.1},  # 2σ at its rim, 3σ of its turn
      "serial": {"counter": "serial.counter.json", "start": 1, "fields": {}}}
@@ -94,6 +95,7 @@ class _Scan(_Strict):
     cross: bool = False
     cross_spacing_mm: Spacing | None = None
     second_look: bool = True
+    lines_per_frame: Annotated[int, Field(ge=1)] | Literal["auto"] | None = None
 
 
 class _Locate(_Strict):
@@ -128,7 +130,9 @@ class RecipeScan:
     ``exposure_ms``, line sweep ``speed_mm_s``; ``cross``: a second, crossed pass
     ``cross_spacing_mm`` apart (None: ``spacing_mm``); off unless asked, as in files without
     it (``insitu recipe new`` asks for it by default); ``second_look``: without ``cross``,
-    scan crossed over the part when the lines along y leave its pose unheld."""
+    scan crossed over the part when the lines along y leave its pose unheld;
+    ``lines_per_frame``: K or "auto", several lines per exposure
+    (:mod:`insitu.reconstruct.packing`; None: one)."""
 
     region: tuple[float, float, float, float] | None = None
     margin_mm: float = 5.0
@@ -138,6 +142,7 @@ class RecipeScan:
     cross: bool = False
     cross_spacing_mm: float | None = None
     second_look: bool = True
+    lines_per_frame: int | str | None = None
 
 
 @dataclass(frozen=True)
@@ -196,7 +201,8 @@ def recipe_json(recipe: Recipe, path: Path) -> str:
         workpiece=recipe.workpiece, placements=placements, laser=_Laser(**recipe.laser),
         scan=_Scan(region=s.region, margin_mm=s.margin_mm, spacing_mm=s.spacing_mm,
                    exposure_ms=s.exposure_ms, speed_mm_s=s.speed_mm_s, cross=s.cross,
-                   cross_spacing_mm=s.cross_spacing_mm, second_look=s.second_look),
+                   cross_spacing_mm=s.cross_spacing_mm, second_look=s.second_look,
+                   lines_per_frame=s.lines_per_frame),
         locate=_Locate(prefer_angle_deg=recipe.prefer_angle_deg,
                        tolerance_mm=recipe.tolerance[0], turn_bound_deg=recipe.tolerance[1]),
         serial=_Serial(counter=_rel(counter, folder), start=recipe.serial_start,
@@ -241,7 +247,7 @@ def read_recipe(path: str | Path, placement: Callable[..., Any],
         reference=_abs(getattr(d.reference, kind), folder, f"reference.{kind}", path),
         reference_kind=kind, placements=tuple(placements), laser=d.laser.model_dump(),
         scan=RecipeScan(s.region, s.margin_mm, s.spacing_mm, s.exposure_ms, s.speed_mm_s,
-                        s.cross, s.cross_spacing_mm, s.second_look),
+                        s.cross, s.cross_spacing_mm, s.second_look, s.lines_per_frame),
         prefer_angle_deg=d.locate.prefer_angle_deg,
         counter=_abs(d.serial.counter, folder, "serial.counter", path, must_exist=False),
         serial_start=d.serial.start, fields=dict(d.serial.fields), workpiece=d.workpiece,

@@ -93,14 +93,17 @@ class ScanReconstructor:
         return self._store(index, start, end, centres)
 
     def add_lines(self, image: np.ndarray, lines, ids, z_range: tuple[float, float],
-                  packing: Packing = Packing()) -> int:
+                  packing: Packing = Packing(), excess_light: np.ndarray | None = None) -> int:
         """Process a frame of several ``lines`` ((start, end) mm each) drawn in one exposure,
         line ``ids[k]`` of the scan each (its place across its pass: the cloud's ``line``):
         each line's centres only inside its band for surfaces within ``z_range`` mm
         (:mod:`insitu.reconstruct.bands`, widened by ``packing``), none where two bands hold
-        the same pixel. Returns the points the frame gave; ``last_centres``, ``last_points``
-        hold all its lines'."""
+        the same pixel. ``excess_light`` (:func:`excess_room_light`, the frame's shape and
+        dtype): subtracted first. Returns the points the frame gave; ``last_centres``,
+        ``last_points`` hold all its lines'."""
         self._check(ids[0], image)
+        if excess_light is not None:
+            image = image - np.minimum(image, excess_light)
         self.frames += len(lines)
         bands = exclusive([self.sheets.band(a, b, z_range, packing.margin_px) for a, b in lines],
                           packing.guard_px)
@@ -219,6 +222,19 @@ class ScanReconstructor:
             sel = angle == a
             keep[sel] = cross_line_inliers(pts[sel], line[sel])
         return keep
+
+
+def excess_room_light(laser_off: np.ndarray, k: int) -> np.ndarray:
+    """(K − 1)/K of ``laser_off`` (H, W), a frame with the laser off exposed as long as a
+    frame of ``k`` lines (rounded, its dtype): the room light such a frame holds beyond one
+    line's exposure. Subtracted from the frame, it leaves on average the room light of a
+    one-line frame (its texture, its level: the detector's absolute floor means what it
+    means there) without the texture and shading of the other K − 1 exposures, which bias
+    the centres (on the simulator's tilted plane and freeform 1.16–1.2 × the RMS of one
+    line a frame at K = 4; the lines' own stray light, the bands and the sheets' lookup
+    cost nothing: benchmarks/multiline_why.py)."""
+    wide = laser_off.astype(np.uint32) * (k - 1)
+    return ((wide + k // 2) // k).astype(laser_off.dtype)
 
 
 def density_inliers(points: np.ndarray, radius_mm: float, neighbours: int) -> np.ndarray:

@@ -255,7 +255,7 @@ def _scan_part(run: Production, part: _Part, stage: str, region, cross: bool) ->
     scanned = _stage(run, part, stage, lambda: scan_live(
         run.station, s.spacing_mm, region, run.height_cal, exposure_ms=s.exposure_ms,
         speed_mm_s=s.speed_mm_s, cancel=run.cancel, cross=cross,
-        cross_spacing=s.cross_spacing_mm))
+        cross_spacing=s.cross_spacing_mm, lines_per_frame=s.lines_per_frame))
     write_ply(run.cloud_path(part.number), scanned.cloud)
     return scanned
 

@@ -32,6 +32,7 @@ from insitu.services.scan_frames import (
     Shots,
     Stream,
     describe_packing,
+    excess_light,
     region_of_interest,
     survey_heights,
 )
@@ -240,21 +241,24 @@ def scan_live(station: Station, spacing: float = 0.5, region=None,
     return _scan(camera, head, plan, rec, t0, "lines", progress, cancel, on_frame,
                  station.record,
                  (lambda: station_room_light(station).image) if room_light else None,
-                 roi=region_of_interest(rec, lines))
+                 roi=region_of_interest(rec, lines), laser_off=True)
 
 
 def _scan(camera: Camera, head: ScanHead, plan, rec: ScanReconstructor, t0: StepTimer,
           what: str, progress: Progress | None, cancel: threading.Event | None,
           on_frame: FrameCallback | None, rig: RigRecord | None = None,
           room_light: Callable[[], np.ndarray | None] | None = None,
-          roi: tuple[int, int, int, int] | None = None) -> ScanResult:
+          roi: tuple[int, int, int, int] | None = None, laser_off: bool = False
+          ) -> ScanResult:
     """The scan loop: ``room_light()`` (the laser-off frame, or None) first — a camera that
     gives none (a trigger only the head sends) leaves the points without grey values, said in
     the summary's ``ambient`` — then the ``plan``'s survey frames (their heights bound the
     packed frames), then its frames: drawn and taken on a thread of their own
     (:class:`~insitu.services.scan_frames.Stream`) while the last ones are reconstructed
-    here, so a scan takes the slower of the two; the laser off at the end, on a cancel
-    (:class:`Cancelled`) or a device fault (:class:`ScanInterrupted`), each keeping what was
+    here, so a scan takes the slower of the two (with ``laser_off``, before them a frame
+    with the laser off for each exposure of several lines, subtracted in part from those
+    frames: :func:`~insitu.services.scan_frames.excess_light`); the laser off at the end,
+    on a cancel (:class:`Cancelled`) or a device fault (:class:`ScanInterrupted`), each keeping what was
     measured. The camera reads ``roi`` only during the lines."""
     ambient, room, taken, packing = "none", None, 0, "one line a frame"
     shot = Shots(camera, head, roi)
@@ -269,6 +273,8 @@ def _scan(camera: Camera, head: ScanHead, plan, rec: ScanReconstructor, t0: Step
         measured, taken = survey_heights(shot, rec, plan)
         frames = plan.frames(measured)
         packing = describe_packing(plan, frames, measured)
+        excess = excess_light(shot, frames) if laser_off else {}
+        taken += len(excess)
         stream = Stream(shot, frames)
         try:
             for i, f, image in stream:
@@ -280,7 +286,8 @@ def _scan(camera: Camera, head: ScanHead, plan, rec: ScanReconstructor, t0: Step
                 if len(f.lines) == 1:
                     rec.add(f.ids[0], image, *f.lines[0])
                 else:
-                    rec.add_lines(image, f.lines, f.ids, plan.z_range, plan.packing)
+                    rec.add_lines(image, f.lines, f.ids, plan.z_range, plan.packing,
+                                  excess.get(len(f.lines)))
                 if on_frame:
                     on_frame(ScanFrame(i, len(frames), image, rec.last_centres,
                                        rec.last_points))

@@ -13,7 +13,7 @@ from insitu.devices.protocols import Camera, ExposureCamera, RoiCamera, ScanHead
 from insitu.errors import DeviceError
 from insitu.reconstruct.packing import Frame
 from insitu.reconstruct.plane import band_and_side, line_runs_along_rows
-from insitu.reconstruct.scan import ScanReconstructor
+from insitu.reconstruct.scan import ScanReconstructor, excess_room_light
 
 
 class ScanInterrupted(DeviceError):
@@ -54,15 +54,33 @@ class Shots:
         self.roi = roi if isinstance(camera, RoiCamera) else None
         self._roi_set = False
 
+    def _expose(self, k: int) -> None:
+        """The region of interest set, the exposure of a frame of ``k`` lines."""
+        if self.roi is not None and not self._roi_set:
+            self.camera.set_region_of_interest(self.roi)
+            self._roi_set = True
+        if self.base is not None:
+            want = self.base * k
+            if self.camera.exposure_ms != want:
+                self.camera.set_exposure(want)
+
+    def laser_off(self, k: int) -> np.ndarray | None:
+        """A frame with the laser off, exposed as a frame of ``k`` lines (None: the camera
+        does not say its exposure, so frames of several lines are not exposed longer)."""
+        if self.base is None:
+            return None
+        try:
+            self.head.off()
+            self._expose(k)
+            return self.camera.grab()
+        except DeviceError as e:
+            self.head.off()
+            raise ScanInterrupted(f"scan stopped at the laser-off frame of {k} lines' "
+                                  f"exposure, laser off: {e}", None) from e
+
     def take(self, frame: Frame, i: int, n: int, partial) -> np.ndarray:
         try:
-            if self.roi is not None and not self._roi_set:
-                self.camera.set_region_of_interest(self.roi)
-                self._roi_set = True
-            if self.base is not None:
-                want = self.base * len(frame.lines)
-                if self.camera.exposure_ms != want:
-                    self.camera.set_exposure(want)
+            self._expose(len(frame.lines))
             if len(frame.lines) == 1:
                 self.head.show_line(*frame.lines[0])
             else:
@@ -132,6 +150,19 @@ def back_and_forth(lines) -> list:
     """``lines`` ((start, end) each) with every second one drawn end → start: the head's
     jump between two lines is then across them, not back along them (the same lines)."""
     return [(a, b) if k % 2 == 0 else (b, a) for k, (a, b) in enumerate(lines)]
+
+
+def excess_light(shot: Shots, frames: list[Frame]) -> dict[int, np.ndarray]:
+    """For each count K > 1 of lines in the packed ``frames``: one frame with the laser off
+    at their exposure, taken now, as :func:`~insitu.reconstruct.scan.excess_room_light`
+    (K → its (K − 1)/K); empty when the camera does not say its exposure."""
+    out: dict[int, np.ndarray] = {}
+    for k in sorted({len(f.lines) for f in frames if not f.survey and len(f.lines) > 1}):
+        image = shot.laser_off(k)
+        if image is None:
+            return {}
+        out[k] = excess_room_light(image, k)
+    return out
 
 
 def describe_packing(plan, frames: list[Frame], measured) -> str:
