@@ -138,7 +138,7 @@ def test_recipe_new_add_and_show(tmp_path, reference):
     res = runner.invoke(app, ["recipe", "new", str(reference), "--pattern", 'qr:"{serial}"',
                               "--at", "1", "2", "--width", "6", "--rotate", "30", "-o", str(out),
                               "--serial-start", "7", "--prefer-angle", "0", "180",
-                              "--workpiece", "step-block"])
+                              "--workpiece", "step-block", "--lines-per-frame", "4"])
     assert res.exit_code == 0, res.output
     res = runner.invoke(app, ["recipe", "add", str(out), "--pattern", "text:LOT;size=2",
                               "--at", "0", "-20"])
@@ -146,6 +146,7 @@ def test_recipe_new_add_and_show(tmp_path, reference):
     r = read_recipe(out, Placement, PROJECTIONS)
     assert [p.at_mm for p in r.placements] == [(1.0, 2.0), (0.0, -20.0)]
     assert r.serial_start == 7 and r.prefer_angle_deg == (0.0, 180.0)
+    assert r.scan.lines_per_frame == 4
     res = runner.invoke(app, ["recipe", "show", str(out)])
     assert res.exit_code == 0, res.output
     flat = _flat(res.output)
@@ -158,6 +159,11 @@ def test_recipe_new_refuses_a_pattern_that_does_not_load(tmp_path, reference):
                               "--at", "0", "0", "-o", str(tmp_path / "r.json")])
     assert res.exit_code == 1 and isinstance(res.exception, SystemExit)
     assert "nope" in res.output and not (tmp_path / "r.json").exists()
+    res = runner.invoke(app, ["recipe", "new", str(reference), "--pattern", "qr:A", "--at",
+                              "0", "0", "-o", str(tmp_path / "r.json"), "--lines-per-frame", "0"])
+    assert res.exit_code == 1 and "--lines-per-frame '0'" in res.output
+    assert "reference" not in res.output
+    assert not (tmp_path / "r.json").exists()
 
 
 def test_a_mesh_reference_is_sampled_in_the_part_frame(tmp_path):

@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from insitu.devices.clock import StationClock, StationTime, StepTimer
+from insitu.errors import ConfigError
 from insitu.marking import GalvoDriver, estimate_time, make_job, run_job
 from insitu.services.scan import scan_live
 from insitu.services.station import connect
@@ -131,3 +132,22 @@ def test_mark_run_prints_station_seconds(tmp_path, capsys):
         run_on_station(station, job, tmp_path / "job.json", False, False, None)
     out = capsys.readouterr().out
     assert "marking: station 0." in out and "CPU" in out
+
+
+def test_the_rig_file_states_the_simulated_stations_timing(tmp_path):
+    """``options.sim_timing`` sets the simulated devices' timing (a slower sensor row: a
+    longer readout); an unknown key or a value ≤ 0 is refused naming it."""
+    rig = {"kind": "rig", "camera": "sim", "scan_head": "sim", "stage": "sim",
+           "options": {"sim_timing": {"row_us": 30.0, "blank_rows": 4}}}
+    path = tmp_path / "rig.json"
+    path.write_text(json.dumps(rig))
+    with connect(path, "step-block", binning=8) as station:
+        t = station.world.timing
+        assert (t.row_us, t.blank_rows, t.link_gbit_s) == (30.0, 4, SimTiming().link_gbit_s)
+        assert t.readout_s(100, 16) == pytest.approx(104 * 30e-6)
+    for bad, said in (({"row_ms": 1.0}, "options.sim_timing.row_ms: unknown"),
+                      ({"trigger_us": 0}, "options.sim_timing.trigger_us: 0: expected a number"),
+                      ({"blank_rows": 2.5}, "options.sim_timing.blank_rows: 2.5")):
+        path.write_text(json.dumps({**rig, "options": {"sim_timing": bad}}))
+        with pytest.raises(ConfigError, match=said):
+            connect(path, "step-block", binning=8)

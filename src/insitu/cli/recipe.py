@@ -121,6 +121,11 @@ TurnBound = Annotated[float, typer.Option(
     "--turn-bound", metavar="DEG", callback=bounded("turn_bound_deg"),
     help="And its turn to 3σ within this, degrees.")]
 
+LinesPerFrame = Annotated[str | None, typer.Option(
+    "--lines-per-frame", metavar="auto|K",
+    help="Scan each part with several lines in one exposure: K, or auto (as insitu scan "
+         "--lines-per-frame). Default: one line a frame.")]
+
 
 @app.command("new")
 @one_line_errors
@@ -133,7 +138,8 @@ def new(reference: Reference, pattern: Pattern, at: At, out: Output, width: Widt
         prefer_angle: PreferAngle = None, counter: Counter = None,
         serial_start: SerialStart = None, fields: Fields = None,
         reference_room_light: ReferenceRoomLight = None, height_cal: HeightCal = None,
-        tolerance: Tolerance = 0.05, turn_bound_deg: TurnBound = 0.1) -> None:
+        tolerance: Tolerance = 0.05, turn_bound_deg: TurnBound = 0.1,
+        lines_per_frame: LinesPerFrame = None) -> None:
     """Write a recipe: the part's REFERENCE and one pattern placed on it (add more with
     'insitu recipe add'). Positions and turns are in the reference's frame; each part of a
     run is located and the placements moved where it lies. A scan REFERENCE is checked
@@ -141,8 +147,10 @@ def new(reference: Reference, pattern: Pattern, at: At, out: Output, width: Widt
     and circles fit it."""
     from insitu.formats.recipe import Recipe, RecipeScan, reference_kind, write_recipe
     from insitu.patterns.fields import parse_fields
+    from insitu.reconstruct.packing import lines_per_frame as per_frame
 
     check_output(out, ".json")
+    per_line = per_frame(lines_per_frame)
     kind = reference_kind(reference)
     check_reference(reference, kind, reference_room_light, height_cal)
     recipe = Recipe(
@@ -151,7 +159,7 @@ def new(reference: Reference, pattern: Pattern, at: At, out: Output, width: Widt
         laser={"power_pct": power, "frequency_khz": frequency, "mark_speed_mm_s": speed,
                "jump_speed_mm_s": 3000.0},
         scan=RecipeScan(region, margin, spacing, cross=cross, cross_spacing_mm=cross_spacing,
-                        second_look=second_look),
+                        second_look=second_look, lines_per_frame=per_line),
         prefer_angle_deg=prefer_angle,
         counter=None if counter is None else counter.absolute(), serial_start=serial_start,
         fields=parse_fields(fields or []), workpiece=workpiece,

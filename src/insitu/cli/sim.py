@@ -146,10 +146,14 @@ def calib_cmd(
         callback=bounded("seed"), help="Seed of the simulated rig.")] = 0,
 ) -> None:
     """Write the simulated rig's files as its operator knows them: camera.json (calibrated
-    camera, with realistic errors), scan-head.json (nominal geometry) and rig.json."""
+    camera, with realistic errors), scan-head.json (nominal geometry) and rig.json (with the
+    simulated devices' timing, options.sim_timing)."""
+    from dataclasses import asdict
+
     from insitu.formats.calibration import CameraCalibration
     from insitu.formats.json_file import save_json_model
     from insitu.formats.rig import RigConfig, ScanHeadConfig
+    from insitu.sim.clock import SimTiming
     from insitu.sim.rig import default_rig
 
     out.mkdir(parents=True, exist_ok=True)
@@ -160,6 +164,7 @@ def calib_cmd(
         notes="the simulated operator's calibration: the true camera plus realistic errors"))
     save_json_model(out / "scan-head.json", ScanHeadConfig(**rig.operator.head.model_dump(),
                                                            inputs=source))
-    save_json_model(out / "rig.json", RigConfig(camera_calibration="camera.json",
-                                                scan_head_config="scan-head.json", sim_seed=seed))
+    save_json_model(out / "rig.json", RigConfig(
+        camera_calibration="camera.json", scan_head_config="scan-head.json", sim_seed=seed,
+        options={"sim_timing": asdict(SimTiming())}))
     console.print(f"wrote {out}/camera.json, scan-head.json, rig.json")

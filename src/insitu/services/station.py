@@ -159,6 +159,10 @@ def connect(rig_file: Path | None = None, workpiece: str = "step-block", seed: i
     world = None
     if simulated_devices(cfg):
         world = sim_world(workpiece, seed=cfg.sim_seed, binning=binning, pose=pose)
+        if "sim_timing" in cfg.options:
+            from insitu.sim.clock import timing_from
+
+            world.timing = timing_from(cfg.options["sim_timing"], str(rig_file))
     rig = rig_model(cfg, world.rig.operator if world is not None else None)
     if world is not None and cfg.camera in ("sim", "replay"):
         size, sim = (rig.camera.width, rig.camera.height), world.rig.camera

@@ -19,9 +19,11 @@ the job's speeds, its delays); the stage: ``stage_mm_s`` and ``stage_settle_ms``
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 
 import numpy as np
+
+from insitu.errors import ConfigError
 
 
 @dataclass(frozen=True)
@@ -86,3 +88,25 @@ def roi_size(roi: tuple[int, int, int, int] | None, width: int, height: int
         return height, width
     u0, v0, u1, v1 = roi
     return v1 - v0, u1 - u0
+
+
+def timing_from(options, where: str) -> SimTiming:
+    """The rig file's ``options.sim_timing`` block (``where``: the file, for messages):
+    :class:`SimTiming` with the fields it names (the rest the default's); ConfigError naming
+    ``options.sim_timing.<key>`` for an unknown key or a value that is not a number > 0
+    (``blank_rows``: a whole number ≥ 0)."""
+    if not isinstance(options, dict):
+        raise ConfigError(f"{where}: options.sim_timing: expected an object")
+    names = {f.name for f in fields(SimTiming)}
+    for key, value in options.items():
+        at = f"{where}: options.sim_timing.{key}"
+        if key not in names:
+            raise ConfigError(f"{at}: unknown; expected one of {', '.join(sorted(names))}")
+        whole = key == "blank_rows"
+        if (isinstance(value, bool) or not isinstance(value, (int, float))
+                or not np.isfinite(value) or (value < 0 if whole else value <= 0)
+                or (whole and value != int(value))):
+            raise ConfigError(f"{at}: {value!r}: expected "
+                              + ("a whole number ≥ 0" if whole else "a number > 0"))
+    return SimTiming(**{k: (int(v) if k == "blank_rows" else float(v))
+                        for k, v in options.items()})
