@@ -260,6 +260,12 @@ def _nearest_depth(depth: np.ndarray, ok: np.ndarray) -> np.ndarray:
     return np.where(ok, depth, depth[ri, ci])
 
 
+def viewpoints(rig) -> np.ndarray:
+    """(2, 3) world mm: where a rig (``rig.camera``, ``rig.head``) sees a pocket from: the
+    camera's centre and the head's pivot, for :func:`unreachable`."""
+    return np.array([rig.camera.centre_world, [0.0, 0.0, rig.head.pivot_height_mm]])
+
+
 def unreachable(cells: PocketCells, depth: np.ndarray, outline: Outline,
                 viewpoints: np.ndarray) -> np.ndarray:
     """(ny, nx) bool: cells of the pocket that a ray to one of ``viewpoints`` (K, 3) world mm

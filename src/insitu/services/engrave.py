@@ -52,6 +52,7 @@ from insitu.marking.engrave_depth import (
     Outline,
     PocketCells,
     measure_depth,
+    viewpoints,
 )
 from insitu.marking.engrave_layers import layer_paths, passes_given
 from insitu.marking.engrave_plan import CellHistory, Learnt, learn, plan_round
@@ -122,14 +123,17 @@ class EngraveOutcome:
 
 
 Notify = Callable[[str], None]
+Measured = Callable[[DepthMap, dict], None]     # each measurement: its map, its summary
 
 
 class _Engraving:
     """One engraving's state between its steps (see the module docstring)."""
 
-    def __init__(self, station: Station, req: EngraveRequest, notify: Notify | None):
+    def __init__(self, station: Station, req: EngraveRequest, notify: Notify | None,
+                 measured: Measured | None = None):
         self.station, self.req = station, req
         self.notify = notify or (lambda text: None)
+        self.measured = measured or (lambda dm, summary: None)
         self.material = req.materials.material(req.material)
         self.nominal = self.material.depth_per_pass_mm(req.materials.laser)
         if self.nominal <= 0:
@@ -269,10 +273,8 @@ class _Engraving:
             record.state = "cancelled"
             self.save(record, history)
             raise
-        rig = self.station.rig
-        views = np.array([rig.camera.centre_world, [0.0, 0.0, rig.head.pivot_height_mm]])
         dm = measure_depth(scan.cloud.points, scan.cloud.attributes["line"], self.region, s,
-                           self.outline, self.cells, views)
+                           self.outline, self.cells, viewpoints(self.station.rig))
         learnt = learn(history, dm, self.nominal)
         k = len(record.measures) + 1
         record.measures.append(_summary(len(record.rounds), dm, learnt, history, req.depth_mm,
@@ -286,16 +288,18 @@ class _Engraving:
         self.notify(f"measured after round {len(record.rounds)}: mean depth "
                     f"{m['mean_mm']:.4f} mm ± {m['sem_mm']:.4f}, rate {learnt.rate_mm * 1e3:.2f}"
                     f" µm/pass, {m['at_depth']} cells at depth, {m['short']} short")
+        self.measured(dm, m)
         return dm, learnt
 
 
 def engrave(station: Station, req: EngraveRequest, cancel: threading.Event | None = None,
-            progress: Progress | None = None, notify: Notify | None = None) -> EngraveOutcome:
+            progress: Progress | None = None, notify: Notify | None = None,
+            measured: Measured | None = None) -> EngraveOutcome:
     """Engrave ``req`` on ``station`` (see the module docstring). The laser is off when this
     returns or raises; the record says how far it got. Refused (SafetyError, nothing marked)
     like any mark; ConfigError for a report folder holding another engraving, or a finished
     or interrupted one without ``resume``."""
-    e = _Engraving(station, req, notify)
+    e = _Engraving(station, req, notify, measured)
     req.report_dir.mkdir(exist_ok=True)
     record = read_record(req.report_dir)
     if record is None:
