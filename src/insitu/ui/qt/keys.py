@@ -115,4 +115,4 @@ def add_laser_menu(window, menu, toolbar) -> None:
     toolbar.addActions([panel.preview_action, panel.mark_action, panel.abort_action])
     window.nudge_actions = add_nudge_actions(window)
     route_keys(window, [window.place_panel, window.scan_panel, window.mark_panel,
-                        window.calibrate_panel, window.production_panel])
+                        window.engrave_panel, window.calibrate_panel, window.production_panel])

@@ -1,5 +1,5 @@
 """The main window of ``insitu gui``: the 3-D view in the middle, docks for Scan, Place, Mark,
-Calibrate, Production and the camera; menus, toolbar, status bar (messages, camera, scan
+Engrave, Calibrate, Production and the camera; menus, toolbar, status bar (messages, camera, scan
 head, calibration age, where the journal is kept); the rig (:mod:`.rig_connection`) and
 the project files (:mod:`.project_files`); undo/redo, the keys of a laser station
 (:mod:`.keys`), drag-and-drop of patterns, projects, clouds, jobs."""
@@ -20,6 +20,7 @@ from insitu.ui.qt import keys, open_files
 from insitu.ui.qt.calibrate_panel import CalibratePanel
 from insitu.ui.qt.camera_window import CameraDock
 from insitu.ui.qt.dialogs import ask_abort
+from insitu.ui.qt.engrave_panel import EngravePanel
 from insitu.ui.qt.fit_label import FitLabel
 from insitu.ui.qt.forms import icon
 from insitu.ui.qt.help import add_help_menu
@@ -59,6 +60,7 @@ class MainWindow(ProjectFiles, RigConnection, QMainWindow):
         self.scan_panel = ScanPanel(self)
         self.place_panel = PlacePanel(self)
         self.mark_panel = MarkPanel(self)
+        self.engrave_panel = EngravePanel(self)
         self.calibrate_panel = CalibratePanel(self)
         self.production_panel = ProductionPanel(self)
         self._docks()
@@ -100,10 +102,11 @@ class MainWindow(ProjectFiles, RigConnection, QMainWindow):
         self.docks = {"scan": dock("Scan", self.scan_panel, right),
                       "place": dock("Place", self.place_panel, right),
                       "mark": dock("Mark", self.mark_panel, right),
+                      "engrave": dock("Engrave", self.engrave_panel, right),
                       "calibrate": dock("Calibrate", self.calibrate_panel, right),
                       "production": dock("Production", self.production_panel, right),
                       "camera": dock("Camera", self.camera_dock, Qt.LeftDockWidgetArea)}
-        for name in ("place", "mark", "calibrate", "production"):
+        for name in ("place", "mark", "engrave", "calibrate", "production"):
             self.tabifyDockWidget(self.docks["scan"], self.docks[name])
         self.docks["scan"].raise_()
 
@@ -291,7 +294,7 @@ class MainWindow(ProjectFiles, RigConnection, QMainWindow):
     def closeEvent(self, e) -> None:
         """Quit only when no marking runs (or the operator aborts it) and nothing unsaved is
         lost (Save / Discard / Cancel)."""
-        if self.runner.running("mark"):
+        if self.runner.running("mark") or self.runner.running("engrave"):
             if not ask_abort(self):
                 e.ignore()
                 return

@@ -26,7 +26,7 @@ from insitu.ui.qt.forms import icon, load_form
 from insitu.ui.qt.pens_panel import PensRow
 from insitu.ui.qt.place_panel import short_name
 
-BUSY = ("mark", "preview", "scan", "produce")
+BUSY = ("mark", "preview", "scan", "produce", "engrave")
 """Tasks that use the station: none of them starts while another runs."""
 
 
@@ -315,10 +315,12 @@ class MarkPanel(QWidget):
         return buttons.get(box.clickedButton())
 
     def abort(self) -> None:
-        """ABORT: the board stops at once, laser off (the journal records the cut path)."""
+        """ABORT: the board stops at once, laser off (the journal records the cut path); an
+        engraving under way (the Engrave dock) stops as well."""
         if self.window_.runner.running("mark"):
             self.window_.runner.cancel("mark")
             self.ui.resultLabel.setText("aborting: laser off")
+        self.window_.engrave_panel.abort()
 
     def _progress(self, done: int, total: int) -> None:
         self.ui.progressBar.setMaximum(total)
@@ -350,7 +352,7 @@ class MarkPanel(QWidget):
         if name in BUSY:
             marking = self.window_.runner.running("mark")
             self.ui.abortButton.setEnabled(marking)
-            self.abort_action.setEnabled(marking)
+            self.abort_action.setEnabled(marking or self.window_.runner.running("engrave"))
             self.pens_row.set_locked(marking)
             self.window_.place_panel.pen_chooser.set_locked(marking)
             self.refresh()

@@ -25,7 +25,7 @@ from insitu.ui.model import operations as ops
 from insitu.ui.model.operations import NO_RIG
 from insitu.ui.qt.forms import load_form
 
-BUSY = ("scan", "mark", "preview", "produce")
+BUSY = ("scan", "mark", "preview", "produce", "engrave")
 """Tasks that use the station: a scan waits for them."""
 CONNECTING = "the rig is connecting…"
 
