@@ -50,8 +50,14 @@ class _Armed:
     """What the operator is asked to confirm: the request and what it was made of."""
 
     request: object                 # insitu.services.engrave.EngraveRequest
-    key: tuple                      # (placement, cloud, station) it was armed with
+    station: object                 # the station it was armed on
     region: object
+
+    def holds(self, sel, cloud, station) -> bool:
+        """Whether the selection ``sel`` (placement, plan), ``cloud`` and ``station`` are
+        still the ones armed."""
+        return (sel is not None and sel[0] == self.request.placement
+                and cloud is self.request.cloud and station is self.station)
 
 
 class EngravePanel(QWidget):
@@ -100,7 +106,7 @@ class EngravePanel(QWidget):
         lay.addLayout(form)
         lay.addLayout(buttons)
         for w in (self.progressBar, self.resultLabel, self.picture, self.mapLabel):
-            lay.addWidget(w)
+            lay.addWidget(w, 1 if w is self.picture else 0)
         self.arm_dialog: ArmDialog | None = None
         self._armed: _Armed | None = None
         self._running: _Armed | None = None
@@ -137,7 +143,7 @@ class EngravePanel(QWidget):
         else:
             self.patternLabel.setText("no cloud: scan the part first" if s.cloud is None else
                                       "select a pattern placed and checked on the cloud")
-        if self._armed is not None and (sel is None or self._key(sel) != self._armed.key):
+        if self._armed is not None and not self._armed.holds(sel, s.cloud, station):
             self.disarm("disarmed: the pattern, the cloud or the station changed")
         busy = self._busy()
         engraving = self.window_.runner.running("engrave")
@@ -145,9 +151,6 @@ class EngravePanel(QWidget):
         self.engraveButton.setEnabled(sel is not None and station is not None and not busy
                                       and self._armed is None)
         self.abortButton.setEnabled(engraving)
-
-    def _key(self, sel) -> tuple:
-        return (sel[0], id(self.session.cloud), id(self.window_.station))
 
     # -- the depth map -------------------------------------------------------------------
     def depth_map(self) -> None:
@@ -213,7 +216,7 @@ class EngravePanel(QWidget):
         spacing, out = self.spacingSpin.value(), self.report_dir(name)
         req = EngraveRequest(out, placement, self.session.cloud, depth, every, material.name,
                              self.materials, self.session.height_cal, spacing)
-        self._armed = _Armed(req, self._key(sel), region)
+        self._armed = _Armed(req, station, region)
         rows = engrave_rows(name, depth, material, self.materials.laser, every, spacing,
                             " · ".join(station.describe()), self.session.cloud.rig, out)
         self.arm_dialog = dlg = ArmDialog(rows, self)
@@ -242,8 +245,8 @@ class EngravePanel(QWidget):
         if self.arm_dialog is not None:
             self.arm_dialog.deleteLater()
         self.arm_dialog, self._armed = None, None
-        sel = self.selected()
-        if armed is None or sel is None or self._key(sel) != armed.key or self._busy():
+        if armed is None or self._busy() or not armed.holds(self.selected(),
+                                                             self.session.cloud, station):
             self.resultLabel.setText("disarmed: the pattern, the cloud or the station "
                                      "changed; nothing was engraved")
             self.refresh()
