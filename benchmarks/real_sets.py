@@ -189,7 +189,7 @@ CIRCLES = PhotoSet(
 SETS = {s.name: s for s in (DESKTOP, STRIPE, OUC, CIRCLES)}
 TUNED = {"desktop": "defaults chosen on all of it",
          "circles": "the tracks shaped on all of it",
-         "ouc": "clipped boards tuned on the first half (bc1–bc7), second half held out",
+         "ouc": "first half (bc1–bc7) looked at, nothing tuned on it; second half held out",
          "stripe": "tuned on the first half (2_, 3_right), second half held out"}
 """How each set has been used: the halves are real_lines.half's of the set's photographs with
 a board pose (``files``' order)."""
