@@ -2,7 +2,8 @@
 pattern's pocket in the scanned cloud — its numbers those of the depth measurement, the
 cells hidden by the walls and those not measured counted and drawn apart; Engrave… armed in
 the same dialog as Mark (nothing fired before Fire laser, Cancel disarms), each re-measure's
-map shown as it comes, ABORT stopping it with the laser off, the end said in words."""
+map shown as it comes, ABORT stopping it with the laser off, the end said in words, Resume
+going on with it."""
 
 from pathlib import Path
 
@@ -155,3 +156,21 @@ def test_engrave_is_armed_first_shows_each_remeasure_and_abort_stops_it(qtbot, w
     assert panel.resultLabel.text().startswith("stopped (ABORT) after")
     assert str(out) in panel.resultLabel.text()
     assert not abort.isEnabled() and panel.engraveButton.isEnabled()
+    # Resume arms the stopped engraving again (measured first); ABORT stops it once more
+    rounds = len(record.rounds)
+    assert panel.resumeButton.isEnabled()
+    qtbot.mouseClick(panel.resumeButton, Qt.LeftButton)
+    qtbot.waitUntil(lambda: panel.arm_dialog is not None and panel.arm_dialog.isVisible(),
+                    timeout=WAIT_MS)
+    rows = dict(panel.arm_dialog.rows)
+    assert rows["report"] == str(out) and rows["run"].startswith("resume: the pocket is "
+                                                                 "measured first")
+    qtbot.mouseClick(panel.arm_dialog.fire_button, Qt.LeftButton)
+    qtbot.waitUntil(abort.isEnabled, timeout=WAIT_MS)
+    assert not panel.resumeButton.isEnabled()
+    abort.trigger()
+    qtbot.waitUntil(lambda: not window.runner.running("engrave"), timeout=WAIT_MS)
+    record = read_record(out)
+    assert record.state == "cancelled" and len(record.rounds) == rounds
+    assert panel.resultLabel.text().startswith("stopped (ABORT) after")
+    assert world.laser.kind == "off" and panel.resumeButton.isEnabled()

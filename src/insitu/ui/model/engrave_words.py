@@ -57,5 +57,5 @@ def verdict(record: EngraveRecord | None, report_dir: Path, error: str | None = 
         return (f"stopped at the walls: {held} cells short of {target:g} mm are hidden by the "
                 f"walls from the camera, left as they are, never over-burnt ({done})")
     why = error or ("ABORT" if record.state == "cancelled" else record.state)
-    return (f"stopped ({why}) after {done}; the laser is off. insitu engrave --resume -o "
-            f"{report_dir} goes on (it measures first)")
+    return (f"stopped ({why}) after {done}; the laser is off. Resume (insitu engrave --resume "
+            f"-o {report_dir}) goes on, measuring the pocket first")

@@ -10,7 +10,7 @@ ones not measured grey, their counts and the mean depth and 95 % band in words."
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 from PySide6.QtCore import QObject, Signal
@@ -55,7 +55,9 @@ class _Armed:
 
     def holds(self, sel, cloud, station) -> bool:
         """Whether the selection ``sel`` (placement, plan), ``cloud`` and ``station`` are
-        still the ones armed."""
+        still the ones armed (a resume: the station alone, its request is the record's)."""
+        if self.request.resume:
+            return station is self.station
         return (sel is not None and sel[0] == self.request.placement
                 and cloud is self.request.cloud and station is self.station)
 
@@ -85,6 +87,9 @@ class EngravePanel(QWidget):
         self.engraveButton = QPushButton("Engrave…", clicked=self.arm)
         self.engraveButton.setIcon(icon("engrave"))
         self.engraveButton.setToolTip("arm: what will be engraved, then Fire laser")
+        self.resumeButton = QPushButton("Resume…", clicked=self.resume, enabled=False)
+        self.resumeButton.setToolTip("go on with the engraving stopped last: the pocket "
+                                     "measured first, then only the depth still missing")
         self.abortButton = QPushButton("ABORT", clicked=self.abort, enabled=False)
         self.abortButton.setIcon(icon("abort"))
         self.abortButton.setToolTip("stop at once, laser off (Esc or Space)")
@@ -100,7 +105,7 @@ class EngravePanel(QWidget):
         form.addRow("Measure every", self.rescanSpin)
         form.addRow("Scan lines apart", self.spacingSpin)
         buttons = QHBoxLayout()
-        for b in (self.mapButton, self.engraveButton, self.abortButton):
+        for b in (self.mapButton, self.engraveButton, self.resumeButton, self.abortButton):
             buttons.addWidget(b)
         lay = QVBoxLayout(self)
         lay.addLayout(form)
@@ -110,6 +115,7 @@ class EngravePanel(QWidget):
         self.arm_dialog: ArmDialog | None = None
         self._armed: _Armed | None = None
         self._running: _Armed | None = None
+        self._stopped: _Armed | None = None    # the last run, stopped before its end
         self.last_map = None                # (DepthMap, DepthSummary) shown
         self.last_outcome = None
         self._bridge = _Bridge(self)
@@ -150,6 +156,9 @@ class EngravePanel(QWidget):
         self.mapButton.setEnabled(sel is not None and not busy)
         self.engraveButton.setEnabled(sel is not None and station is not None and not busy
                                       and self._armed is None)
+        self.resumeButton.setEnabled(self._stopped is not None and not busy
+                                     and self._armed is None
+                                     and self._stopped.station is station)
         self.abortButton.setEnabled(engraving)
 
     # -- the depth map -------------------------------------------------------------------
@@ -216,9 +225,27 @@ class EngravePanel(QWidget):
         spacing, out = self.spacingSpin.value(), self.report_dir(name)
         req = EngraveRequest(out, placement, self.session.cloud, depth, every, material.name,
                              self.materials, self.session.height_cal, spacing)
-        self._armed = _Armed(req, station, region)
-        rows = engrave_rows(name, depth, material, self.materials.laser, every, spacing,
-                            " · ".join(station.describe()), self.session.cloud.rig, out)
+        self._open(_Armed(req, station, region))
+
+    def resume(self) -> None:
+        """Arm the engraving stopped last, to go on with it (measured first)."""
+        run = self._stopped
+        if run is None or self._armed is not None or self._busy():
+            return
+        self._open(replace(run, request=replace(run.request, resume=True)))
+
+    def _open(self, armed: _Armed) -> None:
+        """Show the arming dialog of ``armed``."""
+        req = armed.request
+        self._armed = armed
+        rows = engrave_rows(short_name(req.placement.pattern), req.depth_mm,
+                            self.materials.material(req.material), self.materials.laser,
+                            req.rescan_every, req.spacing_mm,
+                            " · ".join(armed.station.describe()), req.cloud.rig,
+                            req.report_dir)
+        if req.resume:
+            rows.append(("run", "resume: the pocket is measured first, then only the depth "
+                                "still missing is engraved"))
         self.arm_dialog = dlg = ArmDialog(rows, self)
         dlg.setWindowTitle("Armed: confirm to engrave")
         dlg.accepted.connect(self._fire)
@@ -259,7 +286,7 @@ class EngravePanel(QWidget):
                            bridge.measured.emit)
         task = self.window_.runner.start("engrave", work, self._ended, self._failed)
         if task is not None:
-            self._running = armed
+            self._running, self._stopped = armed, None
             self.last_outcome = None
             self.progressBar.setValue(0)
             self.resultLabel.setText("engraving: the first round…")
@@ -286,17 +313,24 @@ class EngravePanel(QWidget):
     def _ended(self, outcome) -> None:
         run, self._running = self._running, None
         self.last_outcome = outcome
-        self._tell(verdict(outcome.record, run.request.report_dir))
+        self._tell(run, outcome.record)
 
     def _failed(self, message: str, cancelled: bool) -> None:
         run, self._running = self._running, None
-        out = run.request.report_dir
         try:
-            record = read_record(out)
+            record = read_record(run.request.report_dir)
         except InsituError:
             record = None
-        self._tell(verdict(record, out, None if cancelled else message))
+        self._tell(run, record, None if cancelled else message)
 
-    def _tell(self, text: str) -> None:
+    def _tell(self, run: _Armed, record, error: str | None = None) -> None:
+        """How ``run`` ended, from its ``record`` (None: none written); Resume offered for
+        one stopped before its end."""
+        unfinished = record is not None and record.state not in ("done", "held")
+        self._stopped = replace(run, request=replace(run.request, resume=False)) \
+            if unfinished else None
+        text = verdict(record, run.request.report_dir, error)
         self.resultLabel.setText(text)
-        self.window_.show_message(f"engraving: {text}", "engrave")
+        (self.window_.show_error if error else self.window_.show_message)(
+            f"engraving: {text}", "engrave")
+        self.refresh()
