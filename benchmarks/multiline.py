@@ -196,7 +196,8 @@ def station_table(heights: tuple[float, float]) -> None:
     surveys = plan.surveys()
     packed = plan.frames((heights[0] + 0.5, heights[1] - 0.5))
     t = Table(title="station seconds, step block, lines 0.5 mm apart, binning 1 (2448 × 2048), "
-                    "10 ms of light a line (the room-light frame left out)")
+                    "10 ms of light a line (the room-light frame left out; packed: its "
+                    "survey frames and one laser-off frame per packed exposure counted)")
     for col in ("frames", "camera reads", "lines/frame", "station s", "× one line a frame"):
         t.add_column(col)
     base = None
@@ -212,9 +213,19 @@ def station_table(heights: tuple[float, float]) -> None:
             at = np.asarray(drawn[0][0], float)
             total += timing.frame_s(10.0 * len(f), setup, timing.readout_s(rows, cols),
                                     timing.cycle_s(drawn, None))
+        if what.startswith("packed"):
+            ks = {len(f.lines) for f in packed if len(f.lines) > 1}
+            total += sum(timing.frame_s(10.0 * k, 0.0, timing.readout_s(rows, cols))
+                         for k in ks)
+            frames = frames + [[]] * len(ks)
         base = base or total
         t.add_row(str(len(frames)), "whole frame" if window is None else f"{cols} × {rows} px",
                   what, f"{total:.3f}", f"{total / base:.3f}")
+    light = 10e-3 * len(lines)
+    sweep = sum(float(np.linalg.norm(np.subtract(b, a))) for a, b in lines) / timing.line_speed_mm_s
+    t.add_row("-", "-", "the light alone: lines × 10 ms", f"{light:.3f}", f"{light / base:.3f}")
+    t.add_row("-", "-", f"the sweeps alone: Σ length / {timing.line_speed_mm_s:g} mm/s",
+              f"{sweep:.3f}", f"{sweep / base:.3f}")
     console.print(t)
 
 

@@ -37,6 +37,7 @@ from insitu.formats.recipe import Recipe, RecipeScan, write_recipe  # noqa: E402
 from insitu.marking import Placement  # noqa: E402
 from insitu.services import production  # noqa: E402
 from insitu.services.height import scan_camera  # noqa: E402
+from insitu.services.locate import recipe_locator  # noqa: E402
 from insitu.services.station import connect  # noqa: E402
 from insitu.sim.workpieces import make_workpiece  # noqa: E402
 
@@ -58,7 +59,7 @@ def run(folder: Path, per_frame, parts: int, seed: int, binning: int) -> list:
     from insitu.cli.recipe import read
 
     recipe = read(recipe_path)
-    locate = production.recipe_locator(recipe, scan_camera(None, height))
+    locate = recipe_locator(recipe, scan_camera(None, height))
     with connect(None, PART, seed, binning) as station:
         present = station.part_feeder(PART, seed)
         job = production.Production(recipe, station, folder / "run.jsonl", parts, locate,

@@ -9,7 +9,7 @@ import numpy as np
 from insitu.reconstruct.bands import Band
 from insitu.reconstruct.packing import Frame
 from insitu.reconstruct.scan import excess_room_light
-from insitu.services.scan_frames import Shots, excess_light
+from insitu.services.scan_frames import Shots, laser_off_frames
 from insitu.vision.band_centres import centres_in_bands
 
 W, H, K = 160, 80, 4
@@ -93,7 +93,6 @@ def test_one_laser_off_frame_for_each_exposure_of_several_lines():
               Frame((line,) * 3, (8, 9, 10)), Frame((line,), (11,)),
               Frame((line,) * 2, (12, 13), survey=True)]
     head.on = True
-    got = excess_light(Shots(camera, head, None), frames)
-    assert sorted(got) == [3, 4]
+    got = laser_off_frames(Shots(camera, head, None), frames)
+    assert sorted(got) == [3, 4] and int(got[4][0, 0]) == 40
     assert camera.grabs == [(30.0, False), (40.0, False)]
-    assert int(got[4][0, 0]) == 30 and int(got[3][0, 0]) == 27

@@ -159,6 +159,7 @@ class SequenceSpec(BaseModel):
     frames: list[FrameSpec]
     checkerboard: CheckerboardSpec | None = None
     ambient: AmbientSpec | None = None
+    laser_off: list[AmbientSpec] | None = None
     pixel_bits: Literal[8, 10, 12, 14, 16] | None = None
 
     @field_validator("frames", mode="before")
@@ -228,11 +229,11 @@ class Sequence:
         for f in spec.frames:
             check_inside(folder / f.file, folder, "frame file")
             check_file(folder / f.file, MAX_IMAGE_BYTES, "frame image")
-        if spec.ambient is not None:
-            ambient = folder / spec.ambient.file
+        for extra in [spec.ambient] * (spec.ambient is not None) + (spec.laser_off or []):
+            ambient = folder / extra.file
             check_inside(ambient, folder, "ambient frame file")
             check_file(ambient, MAX_IMAGE_BYTES, "ambient frame image",
-                       missing="missing (sequence.json names it as the ambient frame)")
+                       missing="missing (sequence.json names it as a laser-off frame)")
         return cls(folder, spec)
 
     kind = property(lambda self: self.spec.kind)
@@ -250,6 +251,12 @@ class Sequence:
 
     ambient = property(lambda self: self.spec.ambient,
                        doc="The laser-off frame's spec (our extension), None without one.")
+    laser_off = property(lambda self: self.spec.laser_off or [],
+                         doc="The laser-off frames of packed exposures (ours): their specs.")
+
+    def read_laser_off(self, i: int) -> np.ndarray:
+        """Laser-off frame ``i`` of :attr:`laser_off`, (H, W) as the frames."""
+        return self._read_grey(self.folder / self.laser_off[i].file, "ambient frame file")
 
     def read_frame(self, i: int) -> np.ndarray:
         """Frame ``i`` as (H, W) uint8 or uint16; FormatError naming the file if it is not one."""
@@ -321,6 +328,7 @@ class SequenceWriter:
         self._bits = pixel_bits
         self._frames: list[dict] = []
         self._ambient: dict | None = None
+        self._laser_off: list[dict] = []
         self._size: tuple[int, ...] | None = None
         self._cm, self._tmp = None, None
 
@@ -353,17 +361,24 @@ class SequenceWriter:
         self._frames.append(frame)
         return i
 
-    def add_ambient(self, image: np.ndarray, exposure_ms: float | None = None) -> None:
+    def add_ambient(self, image: np.ndarray, exposure_ms: float | None = None,
+                    packed: bool = False) -> None:
         """Write the laser-off frame under the room light ((H, W) uint8/uint16, the frames'
-        size) as ``ambient.png``, taken with ``exposure_ms``."""
+        size) as ``ambient.png``, taken with ``exposure_ms``; ``packed``: one of the
+        ``laser_off`` frames of the packed frames' exposures instead (``laser-off-N.png``)."""
         if self._tmp is None:
             raise RuntimeError("SequenceWriter.add_ambient() outside its 'with' block")
         where = f"{self._source}: ambient"
         self._check_image(image, where)
-        spec = _validate(AmbientSpec, plain({"file": AMBIENT_NAME, "exposure_ms": exposure_ms}),
-                         self._source, "ambient")
-        self._write_png(AMBIENT_NAME, image, where)
-        self._ambient = spec.model_dump(mode="json", exclude_none=True)
+        name = f"laser-off-{len(self._laser_off)}.png" if packed else AMBIENT_NAME
+        spec = _validate(AmbientSpec, plain({"file": name, "exposure_ms": exposure_ms}),
+                         self._source, "laser_off" if packed else "ambient")
+        self._write_png(name, image, where)
+        spec = spec.model_dump(mode="json", exclude_none=True)
+        if packed:
+            self._laser_off.append(spec)
+        else:
+            self._ambient = spec
 
     def _check_image(self, image: np.ndarray, where: str) -> None:
         if (not isinstance(image, np.ndarray) or image.ndim != 2
@@ -387,7 +402,8 @@ class SequenceWriter:
     def _finish(self) -> None:
         data = {"format": FORMAT, "kind": self.kind, "camera": self._camera,
                 "scan_head": self._head, "frames": self._frames, "checkerboard": self._board,
-                "ambient": self._ambient, "pixel_bits": self._bits}
+                "ambient": self._ambient, "laser_off": self._laser_off or None,
+                "pixel_bits": self._bits}
         spec = _validate(SequenceSpec, data, self._source)
         atomic_write_text(self._tmp / "sequence.json",
                           dump_json(spec.model_dump(mode="json", exclude_none=True)))

@@ -21,7 +21,7 @@ from insitu.reconstruct.turned_sheet import CROSS_ANGLE_DEG, turned_lines, turne
 from insitu.services.common import Progress
 from insitu.services.room_light import station_room_light
 from insitu.services.scan import plan_lines, reconstructor
-from insitu.services.scan_frames import Shots, survey_heights
+from insitu.services.scan_frames import Shots, laser_off_frames, survey_heights
 from insitu.services.station import Station
 
 KINDS = ("scan", "height-calibration", "field-calibration", "camera-calibration")
@@ -68,7 +68,8 @@ def record_scan(station: Station, out: Path, spacing: float = 0.5, region=None,
     light (auto-exposed, ``ambient.png``; left out when the camera gives none).
     ``lines_per_frame`` K or "auto": the frames as a live scan packs them
     (:mod:`insitu.reconstruct.packing`; its survey frames first, ``"survey": true``), each
-    with its ``lines`` and the exposure it was taken with."""
+    with its ``lines`` and the exposure it was taken with, and the laser-off frames of their
+    exposures (``laser_off``, taken before them as a live scan takes them)."""
     region = tuple(region) if region is not None else station.default_region()
     check_region(region, station.rig.head.field_size_mm)
     lines = plan_lines(region, spacing, cross)
@@ -93,10 +94,13 @@ def record_scan(station: Station, out: Path, spacing: float = 0.5, region=None,
                 pass            # a camera only the head triggers: a recording without one
             measured, _ = survey_heights(shot, rec, plan, keep)
             frames = plan.frames(measured)
+            off = laser_off_frames(shot, frames) if exposure is not None else {}
             for i, f in enumerate(frames):
                 keep(f, shot.take(f, i, len(frames), lambda: None))
                 if progress:
                     progress(i + 1, len(frames))
+            for k, image in off.items():
+                w.add_ambient(image, exposure * k, packed=True)
         finally:
             shot.done()
     return out

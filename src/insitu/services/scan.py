@@ -22,7 +22,7 @@ from insitu.geometry.camera import CameraModel
 from insitu.reconstruct.bands import Packing
 from insitu.reconstruct.packing import FramePlan, RecordedPlan
 from insitu.reconstruct.plan import check_region, scan_lines
-from insitu.reconstruct.scan import ScanReconstructor
+from insitu.reconstruct.scan import ScanReconstructor, excess_room_light
 from insitu.reconstruct.turned_sheet import CROSS_ANGLE_DEG
 from insitu.services.common import Progress, camera_model
 from insitu.services.height import centre_settings, check_same_camera, crossed_model, height_model
@@ -32,7 +32,8 @@ from insitu.services.scan_frames import (
     Shots,
     Stream,
     describe_packing,
-    excess_light,
+    laser_off_frames,
+    recorded_excess,
     region_of_interest,
     survey_heights,
 )
@@ -182,7 +183,8 @@ def scan_replay(folder: str | Path, height_cal: HeightCalibration | None = None,
     one ``line`` and of several ``lines`` alike (:class:`~insitu.reconstruct.packing.
     RecordedPlan`: the lines of a frame told apart by their bands, for the ``heights`` given,
     else those its survey frame measured). Its ambient frame, when it has one, gives each
-    point its ``ambient`` grey value."""
+    point its ``ambient`` grey value; its laser-off frames of packed exposures are
+    subtracted in part from those frames, as a live scan's."""
     t0 = StepTimer(None)
     seq = Sequence.open(folder)
     if seq.kind != "scan":
@@ -197,7 +199,7 @@ def scan_replay(folder: str | Path, height_cal: HeightCalibration | None = None,
                                                    for f in drawn for a, b in f),
                         pixel_bits=seq.pixel_bits)
     return _scan(ReplayCamera(seq), RecordedHead(), plan, rec, t0, "frames", progress, cancel,
-                 on_frame, room_light=seq.read_ambient)
+                 on_frame, room_light=seq.read_ambient, excess=recorded_excess(seq))
 
 
 def scan_live(station: Station, spacing: float = 0.5, region=None,
@@ -241,23 +243,24 @@ def scan_live(station: Station, spacing: float = 0.5, region=None,
     return _scan(camera, head, plan, rec, t0, "lines", progress, cancel, on_frame,
                  station.record,
                  (lambda: station_room_light(station).image) if room_light else None,
-                 roi=region_of_interest(rec, lines), laser_off=True)
+                 roi=region_of_interest(rec, lines))
 
 
 def _scan(camera: Camera, head: ScanHead, plan, rec: ScanReconstructor, t0: StepTimer,
           what: str, progress: Progress | None, cancel: threading.Event | None,
           on_frame: FrameCallback | None, rig: RigRecord | None = None,
           room_light: Callable[[], np.ndarray | None] | None = None,
-          roi: tuple[int, int, int, int] | None = None, laser_off: bool = False
-          ) -> ScanResult:
+          roi: tuple[int, int, int, int] | None = None,
+          excess: dict[int, np.ndarray] | None = None) -> ScanResult:
     """The scan loop: ``room_light()`` (the laser-off frame, or None) first — a camera that
     gives none (a trigger only the head sends) leaves the points without grey values, said in
     the summary's ``ambient`` — then the ``plan``'s survey frames (their heights bound the
     packed frames), then its frames: drawn and taken on a thread of their own
     (:class:`~insitu.services.scan_frames.Stream`) while the last ones are reconstructed
-    here, so a scan takes the slower of the two (with ``laser_off``, before them a frame
-    with the laser off for each exposure of several lines, subtracted in part from those
-    frames: :func:`~insitu.services.scan_frames.excess_light`); the laser off at the end,
+    here, so a scan takes the slower of the two (before them a frame with the laser off for
+    each exposure of several lines, :func:`~insitu.services.scan_frames.laser_off_frames`,
+    (K − 1)/K of it subtracted from those frames; ``excess``: those given, K → the excess,
+    a recording's); the laser off at the end,
     on a cancel (:class:`Cancelled`) or a device fault (:class:`ScanInterrupted`), each keeping what was
     measured. The camera reads ``roi`` only during the lines."""
     ambient, room, taken, packing = "none", None, 0, "one line a frame"
@@ -273,8 +276,10 @@ def _scan(camera: Camera, head: ScanHead, plan, rec: ScanReconstructor, t0: Step
         measured, taken = survey_heights(shot, rec, plan)
         frames = plan.frames(measured)
         packing = describe_packing(plan, frames, measured)
-        excess = excess_light(shot, frames) if laser_off else {}
-        taken += len(excess)
+        if excess is None:
+            off = laser_off_frames(shot, frames)
+            excess = {k: excess_room_light(image, k) for k, image in off.items()}
+            taken += len(off)
         stream = Stream(shot, frames)
         try:
             for i, f, image in stream:

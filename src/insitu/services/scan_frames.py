@@ -152,16 +152,29 @@ def back_and_forth(lines) -> list:
     return [(a, b) if k % 2 == 0 else (b, a) for k, (a, b) in enumerate(lines)]
 
 
-def excess_light(shot: Shots, frames: list[Frame]) -> dict[int, np.ndarray]:
+def laser_off_frames(shot: Shots, frames: list[Frame]) -> dict[int, np.ndarray]:
     """For each count K > 1 of lines in the packed ``frames``: one frame with the laser off
-    at their exposure, taken now, as :func:`~insitu.reconstruct.scan.excess_room_light`
-    (K → its (K − 1)/K); empty when the camera does not say its exposure."""
+    at their exposure, taken now (K → the frame); empty when the camera does not say its
+    exposure (a recording's: its own laser-off frames, :func:`recorded_excess`)."""
     out: dict[int, np.ndarray] = {}
     for k in sorted({len(f.lines) for f in frames if not f.survey and len(f.lines) > 1}):
         image = shot.laser_off(k)
         if image is None:
             return {}
-        out[k] = excess_room_light(image, k)
+        out[k] = image
+    return out
+
+
+def recorded_excess(seq) -> dict[int, np.ndarray]:
+    """A recording's (:class:`~insitu.formats.sequence.Sequence`) laser-off frames as the
+    :func:`~insitu.reconstruct.scan.excess_room_light` of the packed frames of the same
+    exposure (K lines → its (K − 1)/K); none for frames without an exposure."""
+    out: dict[int, np.ndarray] = {}
+    for i, off in enumerate(seq.laser_off):
+        ks = {len(f.drawn()) for f in seq.frames if not f.survey and len(f.drawn()) > 1
+              and f.exposure_ms is not None and off.exposure_ms is not None
+              and abs(f.exposure_ms - off.exposure_ms) <= 1e-6 * off.exposure_ms}
+        out |= {k: excess_room_light(seq.read_laser_off(i), k) for k in ks}
     return out
 
 
