@@ -16,15 +16,21 @@ export QT_QPA_PLATFORM="${QT_QPA_PLATFORM:-offscreen}"
 if [ -z "${TMPDIR:-}" ] && [ -d /dev/shm ] && [ -w /dev/shm ]; then export TMPDIR=/dev/shm; fi
 BASETEMP="$(mktemp -d "${TMPDIR:-/tmp}/t.XXXX")"
 trap 'rm -rf "$BASETEMP"' EXIT
+# the recordings and fitted calibrations of the session fixtures made once for both tiers
+export INSITU_TEST_SHARED="$BASETEMP/shared"
+# bytecode written: each module (and each test file's assertion rewrite) compiled once, not in
+# every worker, tier and command the tests start
+unset PYTHONDONTWRITEBYTECODE
 ruff check src tests benchmarks patterns
 lint-imports pyproject.toml
 XVFB=(xvfb-run -a -s "-screen 0 1280x1024x24")
 if (($#)); then
-    "${XVFB[@]}" python -m pytest --basetemp="$BASETEMP" "$@"
+    "${XVFB[@]}" python -m pytest --basetemp="$BASETEMP/run" "$@"
     exit
 fi
 # the long tests first: the short ones fill the workers' ends; a module marked xdist_group runs
 # on one worker (its module fixture made once)
-XDIST=(-n auto --dist loadgroup --basetemp="$BASETEMP" --durations=15)
-INSITU_TEST_NO_QT=1 python -m pytest -p no:pytest-qt "${XDIST[@]}" tests/integration tests/unit
-"${XVFB[@]}" python -m pytest "${XDIST[@]}" tests/gui
+XDIST=(-n auto --dist loadgroup --durations=15)
+INSITU_TEST_NO_QT=1 python -m pytest -p no:pytest-qt "${XDIST[@]}" --basetemp="$BASETEMP/core" \
+    tests/integration tests/unit
+"${XVFB[@]}" python -m pytest "${XDIST[@]}" --basetemp="$BASETEMP/gui" tests/gui
