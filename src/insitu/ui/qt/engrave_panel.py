@@ -13,7 +13,7 @@ import time
 from dataclasses import dataclass, replace
 from pathlib import Path
 
-from PySide6.QtCore import QObject, Signal
+from PySide6.QtCore import QObject, Qt, Signal
 from PySide6.QtWidgets import (
     QComboBox,
     QDoubleSpinBox,
@@ -72,7 +72,7 @@ class EngravePanel(QWidget):
         for m in self.materials.materials:
             self.materialCombo.addItem(m.name)
             self.materialCombo.setItemData(self.materialCombo.count() - 1, m.description,
-                                           3)   # Qt.ToolTipRole
+                                           Qt.ItemDataRole.ToolTipRole)
         self.depthSpin = QDoubleSpinBox(decimals=3, minimum=0.005, maximum=2.0,
                                         singleStep=0.01, value=0.1, suffix=" mm")
         self.rescanSpin = QSpinBox(minimum=1, maximum=200, value=10, suffix=" passes")
