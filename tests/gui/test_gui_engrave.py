@@ -174,3 +174,22 @@ def test_engrave_is_armed_first_shows_each_remeasure_and_abort_stops_it(qtbot, w
     assert record.state == "cancelled" and len(record.rounds) == rounds
     assert panel.resultLabel.text().startswith("stopped (ABORT) after")
     assert world.laser.kind == "off" and panel.resumeButton.isEnabled()
+
+
+def test_measure_pocket_scans_it_on_the_rig_and_maps_its_depth(qtbot, window, tmp_path):
+    flat = scanned_pocket(window.station.rig.camera.centre_world, depth=0.0)
+    place_on(qtbot, window, flat, square_svg(tmp_path, 2.0), 2.0)
+    panel, world = window.engrave_panel, window.station.world
+    assert panel.measureButton.isEnabled()
+    qtbot.mouseClick(panel.measureButton, Qt.LeftButton)
+    assert panel.abortButton.isEnabled() and not panel.engraveButton.isEnabled()
+    qtbot.waitUntil(lambda: panel.last_map is not None, timeout=WAIT_MS)
+    dm, summary = panel.last_map
+    # the pocket's cells from a scan of its own, the top around it (2 mm) measured too
+    assert not world.engravings and summary == DepthSummary.of(dm)
+    assert summary.counts["measured"] > 20 and np.isfinite(summary.mean)
+    assert dm.cells.inside.sum() == sum(summary.counts.values())
+    assert f"mean depth {summary.mean:.4f} mm" in panel.mapLabel.text()
+    assert "measured on the rig" in panel.picture.caption
+    qtbot.waitUntil(lambda: not panel.abortButton.isEnabled(), timeout=WAIT_MS)
+    assert panel.engraveButton.isEnabled() and world.laser.kind == "off"

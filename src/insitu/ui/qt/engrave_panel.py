@@ -1,5 +1,6 @@
 """The Engrave dock: the selected pattern's pocket — its depth map from the scanned cloud
-against the top around it (Depth map), and Engrave… to a target depth in a material, armed
+against the top around it (Depth map) or from a scan of its own on the rig, as an engraving
+measures between rounds (Measure pocket, :mod:`insitu.services.pocket`), and Engrave… to a target depth in a material, armed
 as Mark is (what will be engraved, confirmed in the same dialog; the laser never fires
 without it), run on the station off the GUI thread (:func:`insitu.services.engrave.engrave`:
 rounds of passes, each followed by a scan of the pocket), each re-measure's depth map shown
@@ -84,6 +85,9 @@ class EngravePanel(QWidget):
         self.mapButton = QPushButton("Depth map", clicked=self.depth_map)
         self.mapButton.setToolTip("the selected pattern's pocket measured in the scanned cloud "
                                   "against the top around it")
+        self.measureButton = QPushButton("Measure pocket", clicked=self.measure)
+        self.measureButton.setToolTip("scan the selected pattern's pocket on the rig as an "
+                                      "engraving does between rounds, and map its depth")
         self.engraveButton = QPushButton("Engrave…", clicked=self.arm)
         self.engraveButton.setIcon(icon("engrave"))
         self.engraveButton.setToolTip("arm: what will be engraved, then Fire laser")
@@ -105,7 +109,8 @@ class EngravePanel(QWidget):
         form.addRow("Measure every", self.rescanSpin)
         form.addRow("Scan lines apart", self.spacingSpin)
         buttons = QHBoxLayout()
-        for b in (self.mapButton, self.engraveButton, self.resumeButton, self.abortButton):
+        for b in (self.mapButton, self.measureButton, self.engraveButton, self.resumeButton,
+                  self.abortButton):
             buttons.addWidget(b)
         lay = QVBoxLayout(self)
         lay.addLayout(form)
@@ -116,6 +121,7 @@ class EngravePanel(QWidget):
         self._armed: _Armed | None = None
         self._running: _Armed | None = None
         self._stopped: _Armed | None = None    # the last run, stopped before its end
+        self._scanning = False                  # the "scan" task running is this dock's
         self.last_map = None                # (DepthMap, DepthSummary) shown
         self.last_outcome = None
         self._bridge = _Bridge(self)
@@ -153,13 +159,15 @@ class EngravePanel(QWidget):
             self.disarm("disarmed: the pattern, the cloud or the station changed")
         busy = self._busy()
         engraving = self.window_.runner.running("engrave")
+        self._scanning &= self.window_.runner.running("scan")
         self.mapButton.setEnabled(sel is not None and not busy)
+        self.measureButton.setEnabled(sel is not None and station is not None and not busy)
         self.engraveButton.setEnabled(sel is not None and station is not None and not busy
                                       and self._armed is None)
         self.resumeButton.setEnabled(self._stopped is not None and not busy
                                      and self._armed is None
                                      and self._stopped.station is station)
-        self.abortButton.setEnabled(engraving)
+        self.abortButton.setEnabled(engraving or self._scanning)
 
     # -- the depth map -------------------------------------------------------------------
     def depth_map(self) -> None:
@@ -180,6 +188,37 @@ class EngravePanel(QWidget):
             "depth", work, lambda r: self.show_map(r[1], r[0], f"{name}: depth map",
                                                    None, rig is not None),
             lambda m, _c: self._said(m))
+
+    def measure(self) -> None:
+        """Scan the selected pattern's pocket on the rig and map its depth (as an engraving
+        measures between rounds), off the GUI thread; ABORT (or the Scan dock's Cancel)
+        stops the scan."""
+        from insitu.services.pocket import scan_pocket
+
+        sel, station = self.selected(), self.window_.station
+        if sel is None or station is None or self._busy():
+            return
+        name = short_name(sel[0].pattern)
+        try:
+            region = pocket_region(sel[1], name)
+        except InsituError as e:
+            self._said(str(e))
+            return
+        spacing, cal = self.spacingSpin.value(), self.session.height_cal
+
+        def work(progress, cancel, _f):
+            return scan_pocket(station, region, spacing_mm=spacing, height_cal=cal,
+                               cancel=cancel, progress=progress)
+        task = self.window_.runner.start(
+            "scan", work, lambda dm: self.show_map(dm, region, f"{name}: measured on the rig",
+                                                   None),
+            lambda m, cancelled: self._said("measuring stopped: the scan was cancelled"
+                                            if cancelled else m))
+        if task is not None:
+            self._scanning = True
+            self.resultLabel.setText("scanning the pocket…")
+            task.progress.connect(self._progress)
+        self.refresh()
 
     def show_map(self, dm, region, title: str, target_mm: float | None,
                  rig_known: bool = True, extra: str = "") -> None:
@@ -309,6 +348,8 @@ class EngravePanel(QWidget):
         if self.window_.runner.running("engrave"):
             self.window_.runner.cancel("engrave")
             self.resultLabel.setText("aborting: laser off")
+        if self._scanning:
+            self.window_.runner.cancel("scan")
 
     def _ended(self, outcome) -> None:
         run, self._running = self._running, None

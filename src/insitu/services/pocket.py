@@ -1,0 +1,43 @@
+"""A pocket measured on the station, as an engraving measures it between rounds: a local scan
+of lines across the pocket and the top around it, their centres found across the line only
+(:data:`insitu.services.engrave.DEPTH_CENTRES`: nothing smoothed along it, so a wall's step
+is not carried onto the floor), the depth mapped per cell against the top of the same lines
+(:func:`insitu.marking.engrave_depth.measure_depth`), the cells the camera or the beam
+cannot reach past a wall told apart."""
+
+from __future__ import annotations
+
+import threading
+
+from insitu.formats.calibration import HeightCalibration
+from insitu.marking.engrave_depth import DepthMap, DepthSettings, measure_depth, viewpoints
+from insitu.services.common import Progress
+from insitu.services.engrave import DEPTH_CENTRES
+from insitu.services.height import centre_settings
+from insitu.services.scan import scan_live
+from insitu.services.station import Station
+from insitu.vision.extract import CentreSettings
+
+
+def pocket_scan_region(region, settings: DepthSettings) -> tuple[float, float, float, float]:
+    """(x0, x1, y0, y1) mm a depth scan of the pocket ``region`` (shapely, world mm) covers:
+    the lines (along y) past the wall band on each side in x, the top ring in y."""
+    x0, y0, x1, y1 = region.bounds
+    band = settings.wall_band_mm + 0.3
+    return (x0 - band, x1 + band, y0 - settings.ring_mm, y1 + settings.ring_mm)
+
+
+def scan_pocket(station: Station, region, settings: DepthSettings | None = None,
+                spacing_mm: float = 0.1, height_cal: HeightCalibration | None = None,
+                cancel: threading.Event | None = None,
+                progress: Progress | None = None) -> DepthMap:
+    """Scan the pocket ``region`` on ``station`` (lines ``spacing_mm`` apart; heights by
+    ``height_cal``, None: the light plane alone) and map its depth. Cancelled when
+    ``cancel`` is set; MeasurementError when too few points land on the top or the floor."""
+    s = settings or DepthSettings()
+    centres = CentreSettings(**{**(centre_settings(height_cal).to_dict()
+                                   if height_cal is not None else {}), **DEPTH_CENTRES})
+    scan = scan_live(station, spacing_mm, pocket_scan_region(region, s), height_cal,
+                     centres=centres, cancel=cancel, progress=progress, room_light=False)
+    return measure_depth(scan.cloud.points, scan.cloud.attributes["line"], region, s,
+                         viewpoints=viewpoints(station.rig))
