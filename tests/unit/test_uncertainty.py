@@ -2,13 +2,18 @@
 an error — a bias along a whole edge, a drift along it — are not independent; the σ that
 counts them as such is too small, the one of segments and per-edge biases holds."""
 
+from dataclasses import replace
+
 import numpy as np
 
 from insitu.geometry.pose import pose_matrix
 from insitu.locate.uncertainty import (
+    FRAME_TILT_PX,
+    LOCK_PX,
     FitTerms,
     covariance,
     edges_of,
+    frame_tilt,
     rim_moved,
     rim_sigma,
     segments_of,
@@ -119,3 +124,23 @@ def test_an_edge_turned_by_its_bias_is_counted():
         honest.append(abs(x[0]) / np.sqrt(covariance(terms, 0.03)[0, 0]))
     assert np.mean(np.array(naive) > 3) > 0.3
     assert np.mean(np.array(honest) > 3) <= 0.05
+
+
+def test_a_frame_edge_along_a_pixel_row_may_turn_one_across_rows_hardly():
+    """The pull of an edge's grey step toward the pixel grid turns an edge that stays within
+    a pixel of one row end to end (LOCK_PX at its ends); one crossing 40 rows averages it out
+    to the light's FRAME_TILT_PX; the turn's σ follows."""
+    xy, n, edge = square()
+    z = np.full(len(xy), 5.0)
+    px = 0.16                                           # mm a pixel
+    level = xy / px
+    tilted = level @ np.array([[np.cos(0.3), -np.sin(0.3)], [np.sin(0.3), np.cos(0.3)]]).T
+    along_rows = frame_tilt(xy, n, z, level)
+    across = frame_tilt(xy, n, z, tilted)
+    assert np.allclose(along_rows, np.hypot(FRAME_TILT_PX, LOCK_PX))
+    assert np.all(across < 1.1 * FRAME_TILT_PX)
+    rng = np.random.default_rng(1)
+    _, terms = fit(rng.normal(0, 0.01, len(xy)), xy, n)
+    sigma = [np.sqrt(covariance(replace(terms, along=np.full(len(xy), px), tilt=t), 0.1)[0, 0])
+             for t in (along_rows, across)]
+    assert sigma[0] > 3 * sigma[1]

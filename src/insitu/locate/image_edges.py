@@ -22,12 +22,13 @@ from dataclasses import dataclass
 
 import cv2
 import numpy as np
+from scipy import ndimage
 
 from insitu.geometry.camera import CameraModel
 from insitu.geometry.pose import rot_z
 from insitu.locate.edge_align import edge_distance
 from insitu.locate.height_image import HeightImage, sample
-from insitu.locate.uncertainty import FRAME_BIAS_PX, FitTerms, covariance
+from insitu.locate.uncertainty import FRAME_BIAS_PX, FitTerms, covariance, frame_tilt
 
 STEEP = 1.0
 """Slope (of the height image blurred as for its normals) above which a pixel lies on an
@@ -42,6 +43,30 @@ SEARCH_PX = 4.0
 STEP_PX = 0.25
 SMOOTH_PX = 0.7
 """The frame is blurred this much (Gaussian σ) before the grey values are read: the noise."""
+ALONG_PX = np.arange(-2.0, 2.5)
+"""Each edge's profile is the mean of profiles this far beside it along the edge, px: the
+noise of a frame (a few DN a pixel: another renderer's frame scatters the steps found 0.1 mm
+about the edge read from one profile, 0.07 from five)."""
+
+
+@dataclass(frozen=True)
+class Frame:
+    """A room-light frame ready to be read between pixels: ``coef`` (H, W) the cubic spline
+    coefficients of the frame blurred by ``SMOOTH_PX`` (read along an edge's normal, a
+    bilinear frame's slope is constant between pixel centres and pins an edge's step to the
+    pixel grid: up to half a pixel along an edge a tenth of a degree off a row), ``clipped``
+    (H, W), 1 where the frame is at full scale."""
+
+    coef: np.ndarray
+    clipped: np.ndarray
+
+
+def frame_of(image: np.ndarray) -> Frame:
+    """:class:`Frame` of ``image`` (H, W) grey, integer or float."""
+    grey = cv2.GaussianBlur(np.asarray(image, np.float32), (0, 0), SMOOTH_PX)
+    full = np.iinfo(image.dtype).max if np.issubdtype(image.dtype, np.integer) else np.inf
+    return Frame(ndimage.spline_filter(grey.astype(np.float64), 3, mode="nearest"),
+                 (np.asarray(image) >= full).astype(np.float32))
 CONTRAST = 2.5
 """An edge's step: its slope of grey this many times the median slope along the outline's
 profiles (what noise and the surfaces' texture give off the edges)."""
@@ -140,9 +165,7 @@ def align_image(image: np.ndarray, camera: CameraModel, heights: HeightImage,
     if image.shape[:2] != (camera.height, camera.width):
         return (f"the frame is {image.shape[1]}×{image.shape[0]} px, the camera "
                 f"{camera.width}×{camera.height}")
-    grey = cv2.GaussianBlur(np.asarray(image, np.float32), (0, 0), SMOOTH_PX)
-    full = np.iinfo(image.dtype).max if np.issubdtype(image.dtype, np.integer) else np.inf
-    clipped = (np.asarray(image) >= full).astype(np.float32)
+    frame = frame_of(image)
     angle = float(np.arctan2(T_world_part[1, 0], T_world_part[0, 0]))
     t = np.asarray(T_world_part[:3, 3], np.float64)
     width = wall_px(edges, camera, angle, t)
@@ -156,7 +179,7 @@ def align_image(image: np.ndarray, camera: CameraModel, heights: HeightImage,
         R = rot_z(angle)[:2, :2]
         pw = np.column_stack([p[:, :2] @ R.T + t[:2], p[:, 2] + t[2]])
         nw = n @ R.T
-        found, e, px_mm = edge_points(grey, clipped, camera, pw, nw, offs, reach)
+        found, e, px_mm = edge_points(frame, camera, pw, nw, offs, reach)
         if found.sum() < max(MIN_POINTS, MIN_FOUND * len(p)):
             return (f"{found.sum()} of the {len(p)} outline points in view show an edge in "
                     f"the frame (at least {max(MIN_POINTS, int(MIN_FOUND * len(p)))} needed)")
@@ -179,7 +202,9 @@ def align_image(image: np.ndarray, camera: CameraModel, heights: HeightImage,
     if mad > max_spread_mm:
         return (f"the frame's edges scatter {mad:.3f} mm about the outline (at most "
                 f"{max_spread_mm:g}): not the part's edges")
-    terms = FitTerms(J, w, r, p[found, :2], n[found], p[found, 2], px_mm[found], mad)
+    uv = camera.project(np.column_stack([e[found], p[found, 2] + t[2]]))
+    terms = FitTerms(J, w, r, p[found, :2], n[found], p[found, 2], px_mm[found], mad,
+                     frame_tilt(p[found, :2], n[found], p[found, 2], uv))
     cov = covariance(terms, bias_px, reference_mm=reference_mm)
     if (abs(x[0]) > max(np.sqrt(cov[0, 0]), SETTLE_RAD)
             or np.linalg.norm(x[1:]) > max(np.sqrt(np.trace(cov[1:, 1:])), SETTLE_MM)):
@@ -190,24 +215,28 @@ def align_image(image: np.ndarray, camera: CameraModel, heights: HeightImage,
                     float(np.degrees(np.sqrt(cov[0, 0]))), mad, cov, terms)
 
 
-def edge_points(grey: np.ndarray, clipped: np.ndarray, camera: CameraModel, pw: np.ndarray,
-                nw: np.ndarray, offs: np.ndarray, reach: np.ndarray | None = None
+def edge_points(frame: Frame, camera: CameraModel, pw: np.ndarray, nw: np.ndarray, offs: np.ndarray, reach: np.ndarray | None = None
                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(found (K,) bool, the edge in x, y (K, 2) world, mm, mm a pixel across the edge
     (K,)) for outline points ``pw`` (K, 3) world with normals ``nw`` (K, 2): along the
     normal's image, within the offsets ``offs`` px (outward at most ``reach`` (K,) px: short
     of the foot of a wall the camera sees, whose step beyond the top's may be the steeper),
-    the steepest grey step (its slope above ``CONTRAST`` times the median), cut at the
-    point's height; none where a pixel on the way is at full scale (``clipped`` (H, W) 1: a
-    step cut off there has its steepest slope moved toward the dark side)."""
+    the steepest grey step of ``frame`` (its slope above ``CONTRAST`` times the median), cut
+    at the point's height; none where a pixel on the way is at full scale (a step cut off
+    there has its steepest slope moved toward the dark side)."""
     uv = camera.project(pw)
     step = camera.project(np.column_stack([pw[:, :2] + 0.05 * nw, pw[:, 2]])) - uv
     d = step / np.maximum(np.linalg.norm(step, axis=1, keepdims=True), 1e-12)
     q = uv[:, None, :] + offs[None, :, None] * d[:, None, :]
     inside = (camera.in_image(q.reshape(-1, 2), 1.0).reshape(len(pw), -1).all(1)
               & np.isfinite(uv).all(1))
-    prof, cut = (s.reshape(len(pw), -1)
-                 for s in sample([grey, clipped], q[..., 0].ravel(), q[..., 1].ravel()))
+    tw = camera.project(np.column_stack([pw[:, :2] + 0.05 * nw[:, ::-1] * [-1, 1], pw[:, 2]]))
+    tw = (tw - uv) / np.maximum(np.linalg.norm(tw - uv, axis=1, keepdims=True), 1e-12)
+    beside = q[:, None] + ALONG_PX[None, :, None, None] * tw[:, None, None, :]
+    prof = ndimage.map_coordinates(frame.coef, [beside[..., 1].ravel(), beside[..., 0].ravel()],
+                                   order=3, mode="nearest", prefilter=False
+                                   ).reshape(len(pw), len(ALONG_PX), -1).mean(axis=1)
+    cut = sample([frame.clipped], q[..., 0].ravel(), q[..., 1].ravel())[0].reshape(len(pw), -1)
     slope = np.abs(np.gradient(prof, STEP_PX, axis=1))
     noise = float(np.median(slope))           # the slope off the edges: noise, texture
     if reach is not None:

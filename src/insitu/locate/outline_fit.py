@@ -24,7 +24,6 @@ from __future__ import annotations
 
 from dataclasses import dataclass, replace
 
-import cv2
 import numpy as np
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
@@ -34,13 +33,13 @@ from insitu.geometry.camera import CameraModel
 from insitu.locate.edge_align import MIN_COS, EdgeSamples
 from insitu.locate.height_image import HeightImage
 from insitu.locate.image_edges import (
-    SMOOTH_PX,
     SPACING_MM,
     STEP_PX,
     WALL_PX,
     Outline,
     edge_heights,
     edge_points,
+    frame_of,
     outline,
     visible,
     wall_px,
@@ -153,12 +152,9 @@ def fit_outline(heights: HeightImage, image: np.ndarray, camera: CameraModel,
     seen = visible(heights, rough, camera, 0.0, np.zeros(3)) & ~((width > 0) & (width < WALL_PX))
     if seen.sum() < 50:
         return f"{seen.sum()} of the outline's {len(rough.points)} points in the camera's view"
-    grey = cv2.GaussianBlur(np.asarray(image, np.float32), (0, 0), SMOOTH_PX)
-    full = np.iinfo(image.dtype).max if np.issubdtype(image.dtype, np.integer) else np.inf
-    clipped = (np.asarray(image) >= full).astype(np.float32)
     p, n = rough.points[seen], rough.normals[seen]
     offs = np.arange(-SEARCH_PX, SEARCH_PX + 1e-9, STEP_PX)
-    found, e, _ = edge_points(grey, clipped, camera, p, n, offs,
+    found, e, _ = edge_points(frame_of(image), camera, p, n, offs,
                               np.where(width[seen] > 0, width[seen] / 2, np.inf))
     pieces = [q for q in _fitted(e[found], n[found], p[found, 2], SPACING_MM)
               if _near_rough(q, rough)]

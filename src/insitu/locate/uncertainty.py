@@ -17,6 +17,11 @@ wall, a shadow), a pixel grid an edge runs along. So:
   residual shows (an edge moved as a whole moves the fit with it): a random bias per edge of
   ``bias_mm``, and one growing linearly along it to ± ``bias_mm`` at its ends (an edge
   turned), are added (their covariance through the fit).
+* A room-light frame's edge is read to a fraction of a pixel, and that fraction is pulled
+  toward the pixel grid (the sensor's pixels integrate the step): along an edge that runs
+  within a pixel of one row or column end to end the pull changes smoothly and turns the edge
+  (:data:`LOCK_PX`), along one that crosses many rows it averages out; what remains is the
+  light's (:data:`FRAME_TILT_PX`) — :func:`frame_tilt`.
 * The σ that counts is at the part's rim: the largest 1σ displacement the turn and shift give
   any point of the part's outline (:func:`rim_sigma`).
 """
@@ -40,10 +45,17 @@ change along it end to end. Chosen on the simulated corpus' tuning half
 (benchmarks/locate_corpus.py; binning 2, 17 poses): every pose within 2.2σ at its rim and
 1.6σ in its turn (the independent points' σ: 4.5σ)."""
 FRAME_BIAS_PX = 0.1
-"""The same for one edge's grey step in the room-light frame, camera pixels. Chosen on the
-same half under four room lights (69 frames): every pose within 2.3σ at its rim (the arc at
-51° under a low lamp, 0.048 mm: a lit wall beside its top) and 2.1σ in its turn (the
-independent points' σ: 27σ)."""
+"""The same for one edge's grey step in the room-light frame, camera pixels (its change along
+the edge: :func:`frame_tilt`). Chosen on the same half under four room lights (69 frames):
+every pose within 2.3σ at its rim (the arc at 51° under a low lamp, 0.048 mm: a lit wall
+beside its top) and 2.1σ in its turn (the independent points' σ: 27σ)."""
+FRAME_TILT_PX = 0.03
+LOCK_PX = 0.15
+"""± at its ends, px, of a frame's edge turned by the light (a lamp's fall-off, a shadow) and
+by the pull toward the pixel grid when it runs within a pixel of a row or column (over a span
+of ``s`` rows or columns, ``LOCK_PX / s`` when s > 1). Chosen on the tuning half (72 frames,
+CAD): the insert's side 0.3° off a pixel row turned 0.5 px end to end read bilinearly, 0.28
+px through a cubic spline; sides that cross 10–60 rows, 0.03 px."""
 
 
 @dataclass(frozen=True)
@@ -53,7 +65,9 @@ class FitTerms:
     ``xy`` (K, 2) the points (a fixed frame, mm), ``normals`` (K, 2) their edges' outward
     normals, ``z`` (K,) their heights, mm; ``along`` (K,) how much of a bias along the
     point's own direction shows across its edge (1: biases act across the edge; the scan's
-    ν); ``spread_mm`` the residuals' robust 1σ."""
+    ν); ``spread_mm`` the residuals' robust 1σ; ``tilt`` (K,) the change of the point's
+    edge's bias end to end, ± in the bias' unit (None: the bias itself; a frame's:
+    :func:`frame_tilt`)."""
 
     J: np.ndarray
     w: np.ndarray
@@ -63,6 +77,7 @@ class FitTerms:
     z: np.ndarray
     along: np.ndarray
     spread_mm: float
+    tilt: np.ndarray | None = None
 
 
 SCAN_REFERENCE_MM = {"fitted": 0.1, "splat": 0.15}
@@ -84,6 +99,21 @@ def edges_of(xy: np.ndarray, normals: np.ndarray, z: np.ndarray) -> np.ndarray:
     graph = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])) if len(pairs)
                        else ([], ([], [])), shape=(len(xy), len(xy)))
     return connected_components(graph, directed=False)[1]
+
+
+def frame_tilt(xy: np.ndarray, normals: np.ndarray, z: np.ndarray, uv: np.ndarray
+               ) -> np.ndarray:
+    """(K,) px: the change end to end (±) of each frame edge's bias (:data:`LOCK_PX`,
+    :data:`FRAME_TILT_PX`) for points ``xy`` (K, 2), ``normals`` (K, 2), ``z`` (K,) mm on
+    the edges of :func:`edges_of`, seen at the pixels ``uv`` (K, 2): the rows or columns an
+    edge crosses are the fewer of its extent in u and in v."""
+    edges = edges_of(xy, normals, z)
+    out = np.zeros(len(xy))
+    for e in np.unique(edges):
+        sel = edges == e
+        span = float(min(np.ptp(uv[sel, 0]), np.ptp(uv[sel, 1])))
+        out[sel] = np.hypot(FRAME_TILT_PX, LOCK_PX / max(span, 1.0))
+    return out
 
 
 def along_edges(xy: np.ndarray, edges: np.ndarray) -> np.ndarray:
@@ -120,7 +150,7 @@ def covariance(t: FitTerms, bias_mm: float, segment_mm: float = SEGMENT_MM,
     trace) of the independent points' (spread² · A⁻¹) and the cluster-robust one over
     segments, plus a random bias per edge of 1σ ``bias_mm`` and one that changes linearly
     along it, ± ``bias_mm`` at its ends (an edge turned: its bias grows with the distance to
-    the camera, the light falls off along it); ``reference_mm``: the same, across the edge,
+    the camera, the light falls off along it; ± ``t.tilt`` where given); ``reference_mm``: the same, across the edge,
     for the reference's own outline (a scan's: :data:`SCAN_REFERENCE_MM`)."""
     J, w, r = t.J, t.w, t.r
     p = J.shape[1]
@@ -136,12 +166,14 @@ def covariance(t: FitTerms, bias_mm: float, segment_mm: float = SEGMENT_MM,
     cov = robust if np.trace(robust) > np.trace(iid) else iid
     E = int(edge.max()) + 1 if len(edge) else 0
     pos = along_edges(t.xy, edge)[:, None]
-    for scale, along in ((bias_mm, t.along), (reference_mm, np.ones(len(w)))):
+    ones = np.ones(len(w))
+    tilt = ones if t.tilt is None or bias_mm <= 0 else t.tilt / bias_mm
+    for scale, along, turned in ((bias_mm, t.along, tilt), (reference_mm, ones, ones)):
         if scale > 0:
             lever = np.zeros((2 * E, p))
             wj = J * (w * along)[:, None]
             np.add.at(lever, edge, wj)
-            np.add.at(lever, E + edge, wj * pos)
+            np.add.at(lever, E + edge, wj * (pos * turned[:, None]))
             cov = cov + scale ** 2 * Ai @ (lever.T @ lever) @ Ai
     return cov
 
