@@ -31,7 +31,7 @@ from scipy.spatial import cKDTree
 
 from insitu.geometry.camera import CameraModel
 from insitu.locate.edge_align import MIN_COS, EdgeSamples
-from insitu.locate.height_image import HeightImage
+from insitu.locate.height_image import HeightImage, sample
 from insitu.locate.image_edges import (
     SPACING_MM,
     STEP_PX,
@@ -54,6 +54,11 @@ FIT_MM = 0.1
 """A line or circle fits a chain of edge points when they scatter less than this about it
 (the frame's edges scatter 0.02–0.06 mm about a part's true outline at binning 2)."""
 MIN_CHECK = 3
+DEEP_MM = (0.3, 1.2)
+"""A splat's top is carried to its edges from this band inside them (:func:`top_heights`):
+its last few tenths of a mm lie low (the lines end short of an edge, the splat's kernel
+reaches over it; 1.1–1.6 mm low at 0.2 mm in), and an edge point cut at too low a height
+lies outward along the camera's ray (0.46 mm a mm of height at the rig's 25° view)."""
 ROUGH_MM = 0.5
 """A frame's piece must run this close to the splat's rough outline (whose edges lie up to
 0.3 mm out: the table beside a wall is in shadow)."""
@@ -148,6 +153,8 @@ def fit_outline(heights: HeightImage, image: np.ndarray, camera: CameraModel,
         return (f"the frame is {image.shape[1]}×{image.shape[0]} px, the camera "
                 f"{camera.width}×{camera.height}")
     rough = outline(heights)
+    rough = replace(rough, points=np.column_stack([rough.points[:, :2], top_heights(
+        heights, rough.points[:, :2], rough.normals)]))
     width = wall_px(rough, camera, 0.0, np.zeros(3))
     seen = visible(heights, rough, camera, 0.0, np.zeros(3)) & ~((width > 0) & (width < WALL_PX))
     if seen.sum() < 50:
@@ -174,10 +181,28 @@ def fit_outline(heights: HeightImage, image: np.ndarray, camera: CameraModel,
 
 
 def _sampled(heights: HeightImage, pieces: list[Piece]) -> Outline:
-    """The pieces sampled every ``SPACING_MM``, with the heights of ``heights`` each side."""
+    """The pieces sampled every ``SPACING_MM``, with the heights of ``heights`` each side (the
+    top's from ``DEEP_MM`` inside)."""
     pts, nrm = (np.concatenate(a) for a in zip(*(q.sample(SPACING_MM) for q in pieces)))
-    top, below = edge_heights(heights, pts, nrm)
-    return Outline(np.column_stack([pts, top]), nrm, below)
+    below = edge_heights(heights, pts, nrm)[1]
+    return Outline(np.column_stack([pts, top_heights(heights, pts, nrm)]), nrm, below)
+
+
+def top_heights(heights: HeightImage, edge: np.ndarray, n: np.ndarray) -> np.ndarray:
+    """(K,) mm: the top's height at each edge point ``edge`` (K, 2) of a splat ``heights``, a
+    line through its heights every 0.1 mm of ``DEEP_MM`` inside along the outward normal
+    ``n`` (K, 2) carried on to the edge — through the upper half of them (a sparse splat
+    falls between its lines)."""
+    depth = np.arange(DEEP_MM[0], DEEP_MM[1] + 1e-9, 0.1)
+    q = edge[:, None, :] - depth[None, :, None] * n[:, None, :]
+    z = sample([heights.z], *heights.pixel(q.reshape(-1, 2)))[0].reshape(len(edge), -1)
+    upper = z >= np.median(z, axis=1, keepdims=True)
+    m = upper.sum(axis=1)
+    d_mean = (upper * depth).sum(axis=1) / m
+    z_mean = (upper * z).sum(axis=1) / m
+    dd = np.where(upper, depth - d_mean[:, None], 0.0)
+    slope = (dd * (z - z_mean[:, None])).sum(axis=1) / np.maximum((dd ** 2).sum(axis=1), 1e-12)
+    return z_mean - slope * d_mean
 
 
 def _fitted(xy: np.ndarray, normals: np.ndarray, z: np.ndarray, spacing_mm: float,
