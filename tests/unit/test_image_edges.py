@@ -55,8 +55,9 @@ def test_the_frames_edges_turn_the_insert_within_four_hundredths_of_a_degree(rig
     assert not isinstance(fit, str), fit
     xy, turn = _errors(np.degrees(fit.angle_rad), fit.xy_mm, POSE)
     assert xy < 0.01 and turn < 0.04, (xy, turn)
-    # its σ counts a bias and a tilt per side (0.1 px): a 16 mm part's turn to 0.1°
-    assert fit.edges > 0.8 * fit.visible and turn < fit.sigma_deg < 0.15
+    # its σ counts a bias per side (0.1 px) and a tilt (0.03 px; its sides cross 11 pixel
+    # rows and more): the turn within 3σ, and 3σ within the 0.1° a pose is given at
+    assert fit.edges > 0.8 * fit.visible and turn < 3 * fit.sigma_deg < 0.1
 
 
 def test_a_frame_without_the_part_or_of_another_camera_is_not_used(rig, insert):
@@ -73,8 +74,8 @@ def test_locate_takes_the_frames_edges_only_where_they_agree_with_the_scan(rig, 
     near = (POSE[2] - 30.0, POSE[2] + 30.0)
     alone = locate_part(insert, points, LOOSE, lines=lines, prefer_angle=near).best
     here = _frame(sim_world("insert", rig=rig, pose=POSE))
-    got = locate_part(insert, points, LOOSE, lines=lines, prefer_angle=near,
-                      camera=rig.camera, image=here).best
+    got = locate_part(insert, points, lines=lines, prefer_angle=near, camera=rig.camera,
+                      image=here).best                 # given within the default tolerance
     assert got.image_edges > 0 and got.image_note == ""
     xy, turn = _errors(got.angle_deg, (got.x_mm, got.y_mm), POSE)
     assert xy < 0.01 and turn < 0.04, (xy, turn)
