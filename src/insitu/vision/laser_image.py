@@ -35,6 +35,9 @@ CHROMA = 12 / 255
 scale."""
 CHROMA_SNR = 6.0
 """… and least multiple of the excess's noise sigma."""
+WHITE = 0.85
+"""Least value of all three channels, of full scale, of a pixel counted white: a stripe's
+clipped core (a JPEG smears its chroma a few tens of gray values below full scale)."""
 EDGES = 0.02
 """The fraction of a frame's pixels, of the strongest gradient, whose colour fringes
 :func:`colour_margin` weighs the line's colour against."""
@@ -180,28 +183,53 @@ def colour_margin(li: LaserImage, u: np.ndarray, v: np.ndarray) -> float:
 def _laser_coloured(bgr: np.ndarray, c: int, fs: float) -> tuple[np.ndarray, np.ndarray]:
     """The thin ridges (white top-hat) of channel c's excess, and (H, W) bool: where they
     (≥ :data:`CHROMA` · fs and :data:`CHROMA_SNR` · their noise) are, or lie within reach
-    (1 % of the shorter side) on both sides — above and below, or left and right: the halo
-    round a core clipped white; a white thing beside a red one has them on one side only.
-    Made on the excess max-pooled by reach // 3 (a thin ridge keeps its peak), with
-    reach // 3 ≥ 3 px left: a full-HD frame in 3 × 3 blocks."""
+    (1 % of the shorter side) on both sides — above and below, or left and right — of the
+    pixel or of the white run it lies in (:func:`_flanked`): the halo round a core clipped
+    white; a white thing beside a red one has them on one side only. Made on the excess
+    max-pooled by reach // 3 (a thin ridge keeps its peak), with reach // 3 ≥ 3 px left: a
+    full-HD frame in 3 × 3 blocks."""
     H, W = bgr.shape[:2]
     reach, f = _reach(bgr.shape)
     excess = _excess(bgr, c)
+    white = cv2.compare(cv2.min(cv2.min(*cv2.split(bgr)[:2]), cv2.split(bgr)[2]),
+                        WHITE * fs, cv2.CMP_GE)
+    h, w = H // f, W // f
     if f > 1:
-        h, w = H // f, W // f
-        excess = cv2.dilate(excess, np.ones((f, f), np.uint8), anchor=(0, 0))[:h * f:f, :w * f:f]
+        pool = np.ones((f, f), np.uint8)
+        excess = cv2.dilate(excess, pool, anchor=(0, 0))[:h * f:f, :w * f:f]
+        white = cv2.dilate(white, pool, anchor=(0, 0))[:h * f:f, :w * f:f]
     square = np.ones((2 * (reach // f) + 1,) * 2, np.uint8)
     thin = cv2.morphologyEx(excess, cv2.MORPH_TOPHAT, square, borderType=cv2.BORDER_REPLICATE)
     least = max(CHROMA * fs, CHROMA_SNR * noise_sigma(excess))
-    laser, r = (thin >= least).astype(np.uint8), reach // f
-    near = cv2.dilate(laser, np.ones((3, 3), np.uint8))
-    for shape, ends in (((r + 1, 1), ((0, 0), (0, r))), ((1, r + 1), ((0, 0), (r, 0)))):
-        a, b = (cv2.dilate(laser, np.ones(shape, np.uint8), anchor=e) for e in ends)
-        near |= a & b
+    laser, r = thin >= least, reach // f
+    near = cv2.dilate(laser.view(np.uint8), np.ones((3, 3), np.uint8)) > 0
+    white = white > 0
+    near |= _flanked(laser, white, r) | _flanked(laser.T, white.T, r).T
+    near = near.view(np.uint8)
     if f > 1:
         near = cv2.resize(near, (w * f, h * f), interpolation=cv2.INTER_NEAREST)
         near = cv2.copyMakeBorder(near, 0, H - h * f, 0, W - w * f, cv2.BORDER_REPLICATE)
     return thin, near > 0
+
+
+def _flanked(laser: np.ndarray, white: np.ndarray, r: int) -> np.ndarray:
+    """(h, w) bool: ``laser`` (h, w) bool lies within ``r`` rows above and within ``r`` below
+    each pixel — of a pixel in a run of ``white`` along its column, above the run's top and
+    below its bottom, when the run is at most 4 r long (a stripe's core clipped white, its
+    halo beside it; a lamp or a window is wider)."""
+    h = laser.shape[0]
+    idx = np.arange(h)[:, None]
+
+    def last(mask):                         # index of the last True at or above, −1: none
+        return np.maximum.accumulate(np.where(mask, idx, -1), axis=0)
+
+    def first(mask):                        # index of the first True at or below, h: none
+        return h - 1 - last(mask[::-1])[::-1]
+
+    top, bottom = last(~white), first(~white)        # the run of white: top + 1 … bottom − 1
+    up, down = last(laser), first(laser)
+    return ((up >= 0) & (up >= top - r) & (down < h) & (down <= bottom + r)
+            & (bottom - top - 1 <= 4 * r))
 
 
 def laser_image(image, channel: str = "auto", laser_off=None,

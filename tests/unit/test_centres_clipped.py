@@ -1,0 +1,111 @@
+"""A red stripe whose core clips white in all three channels, with a red halo, across a bright
+dot board (its white face unclipped), in a room with a lamp that clips white, a red glint (the
+laser reflected by a shiny part) and the edge of a white cupboard; sensor noise, JPEG with
+chroma at half resolution. Drawn in numpy (fast), with the proportions of the full-HD set of
+benchmarks/real_sets.py (zhaocongyang/structured_LineLight_calib) at half size.
+"""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+import pytest
+
+from insitu.vision.centres import CENTRE_METHODS, UncertainLine, photo_centres
+
+H, W = 540, 960
+BOARD = (200, 760, 80, 500)                      # x0, x1, y0, y1 px: the board's white face
+ON = slice(210, 750)                             # the columns scored
+LAMP, GLINT = (120, 160), (600, 420)             # centres px
+CUPBOARD = 830                                   # its edge, px
+
+
+def clipped_photo(seed: int = 0):
+    """(H, W, 3) uint8 BGR JPEG-decoded photograph and the stripe's true row per column (W,)."""
+    rng = np.random.default_rng(seed)
+    yy, xx = np.mgrid[0:H, 0:W].astype(np.float32)
+    room = 120.0 + 0.05 * xx                                           # a wall, lit unevenly
+    x0, x1, y0, y1 = BOARD
+    room[(xx > x0) & (xx < x1) & (yy > y0) & (yy < y1)] = 215.0
+    for cx in range(260, 740, 80):
+        for cy in range(130, 480, 80):
+            room[(xx - cx) ** 2 + (yy - cy) ** 2 < 18 ** 2] = 35.0     # the dots
+    room[xx >= CUPBOARD] = 235.0
+    room = cv2.GaussianBlur(room, (0, 0), 1.0)
+    true = 300.0 + 0.1 * (np.arange(W) - 480)
+    d = yy - true[None, :]
+    light = (2400 * np.exp(-0.5 * (d / 1.6) ** 2) + 260 * np.exp(-0.5 * (d / 5.0) ** 2)) \
+        * np.clip(room / 215.0, 0.1, 1.1)                               # core, halo × albedo
+    light += 900 * np.exp(-((xx - GLINT[0]) ** 2 + (yy - GLINT[1]) ** 2) / (2 * 9.0 ** 2))
+    lamp = (xx - LAMP[0]) ** 2 + (yy - LAMP[1]) ** 2 < 40 ** 2
+    raw = []
+    for c in (0.86 * room + 0.05 * light, 0.93 * room + 0.08 * light, room + light):  # B, G, R
+        c = np.where(lamp, 400.0, c)
+        noisy = c + rng.normal(0, 1.0, c.shape) * np.sqrt(np.maximum(c, 0) / 6 + 2)
+        raw.append(np.clip(noisy + 0.5, 0, 255).astype(np.uint8))
+    ok, jpg = cv2.imencode(".jpg", cv2.merge(raw), [cv2.IMWRITE_JPEG_QUALITY, 90])
+    return cv2.imdecode(jpg, cv2.IMREAD_COLOR), true
+
+
+@pytest.fixture(scope="module")
+def photo():
+    return clipped_photo()
+
+
+def errors(c, true) -> np.ndarray:
+    """(W,) the centre's error per column, px (NaN: none)."""
+    err = np.full(W, np.nan)
+    u = np.round(c.u).astype(int)
+    err[u] = c.v - true[u]
+    return err
+
+
+def naive_com(channel: np.ndarray) -> np.ndarray:
+    """Per column the centre of mass of the pixels within ±8 rows of its maximum that reach
+    0.8 of it (benchmarks/real_lines.py's baseline)."""
+    g = channel.astype(np.float64)
+    rows = np.clip(np.argmax(g, axis=0) + np.arange(-8, 9)[:, None], 0, H - 1)
+    vals = g[rows, np.arange(W)]
+    vals[vals < 0.8 * vals.max(axis=0)] = 0
+    return (vals * rows).sum(axis=0) / vals.sum(axis=0)
+
+
+@pytest.mark.parametrize("method", list(CENTRE_METHODS))
+def test_a_clipped_white_core_with_a_halo_is_the_stripe(photo, method):
+    """Found on ≥ 90 % of the board's columns, ≤ 1 % wrong (> 5 px), at most 0.9 × the RMS
+    error of a naive centre of mass of the red channel on the columns both found."""
+    bgr, true = photo
+    err = errors(photo_centres(bgr, method), true)[ON]
+    right = np.abs(np.nan_to_num(err, nan=99)) <= 5
+    assert right.mean() >= 0.9 and (np.isfinite(err) & ~right).mean() <= 0.01
+    naive = (naive_com(bgr[:, :, 2]) - true)[ON]
+    both = right & (np.abs(naive) <= 5)
+    rms, rms_naive = (float(np.sqrt(np.mean(e[both] ** 2))) for e in (err, naive))
+    assert rms <= 0.9 * rms_naive, (rms, rms_naive)
+
+
+@pytest.mark.parametrize("method", list(CENTRE_METHODS))
+def test_the_lamp_the_glint_and_the_cupboards_edge_get_no_centre(photo, method):
+    """No centre on the lamp (clipped white, no laser colour), on the red glint (laser
+    colour, but a blob: no ridge along the scan lines) or on the cupboard's edge (an edge of
+    a bright object, no ridge); beyond the board, on the wall and the cupboard the stripe
+    still lights, every centre lies on the stripe."""
+    bgr, true = photo
+    c = photo_centres(bgr, method)
+    for x, y in (LAMP, GLINT):
+        assert not (np.hypot(c.u - x, c.v - y) < 30).any(), (x, y)
+    off_board = (c.u < BOARD[0]) | (c.u > BOARD[1])
+    assert (np.abs(errors(c, true)[np.round(c.u[off_board]).astype(int)]) <= 5).all()
+    assert off_board.sum() > 0.5 * (W - (BOARD[1] - BOARD[0]))
+
+
+def test_the_red_channel_alone_loses_it(photo):
+    """What the sum of the channels does: in the red channel (``--channel r``) the halo
+    clips as the core does; the stripe is found on far fewer columns, or the photograph is
+    refused (its centres carry no more laser colour than the edges' fringes)."""
+    bgr, true = photo
+    try:
+        err = errors(photo_centres(bgr, "gray", channel="r"), true)[ON]
+    except UncertainLine:
+        return
+    assert (np.abs(np.nan_to_num(err, nan=99)) <= 5).mean() < 0.6
