@@ -109,3 +109,19 @@ def test_the_red_channel_alone_loses_it(photo):
     except UncertainLine:
         return
     assert (np.abs(np.nan_to_num(err, nan=99)) <= 5).mean() < 0.6
+
+
+def test_a_white_run_counts_only_with_laser_colour_on_both_sides_and_when_short():
+    """laser_image._flanked on one row, reach 2: a 3 px white run with laser colour 2 px
+    before it and 3 px after it (within reach + 1) counts; one with it on one side only, or 9 px long (> 4
+    reach: a lamp), does not."""
+    from insitu.vision.laser_image import _flanked
+
+    laser = np.zeros((3, 30), bool)
+    white = np.zeros((3, 30), bool)
+    laser[0, [3, 10]], white[0, 5:8] = True, True                 # flanked
+    laser[1, 3], white[1, 5:8] = True, True                       # one side only
+    laser[2, [3, 16]], white[2, 5:14] = True, True                # too long
+    out = _flanked(laser, white, 2)
+    assert out[0, 5:8].all() and out[0].sum() == 3
+    assert not out[1].any() and not out[2].any()

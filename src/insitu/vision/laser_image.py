@@ -201,11 +201,13 @@ def _laser_coloured(bgr: np.ndarray, c: int, fs: float) -> tuple[np.ndarray, np.
     square = np.ones((2 * (reach // f) + 1,) * 2, np.uint8)
     thin = cv2.morphologyEx(excess, cv2.MORPH_TOPHAT, square, borderType=cv2.BORDER_REPLICATE)
     least = max(CHROMA * fs, CHROMA_SNR * noise_sigma(excess))
-    laser, r = thin >= least, reach // f
-    near = cv2.dilate(laser.view(np.uint8), np.ones((3, 3), np.uint8)) > 0
-    white = white > 0
-    near |= _flanked(laser, white, r) | _flanked(laser.T, white.T, r).T
-    near = near.view(np.uint8)
+    laser, r = (thin >= least).astype(np.uint8), reach // f
+    near = cv2.dilate(laser, np.ones((3, 3), np.uint8))
+    for shape, ends in (((r + 1, 1), ((0, 0), (0, r))), ((1, r + 1), ((0, 0), (r, 0)))):
+        a, b = (cv2.dilate(laser, np.ones(shape, np.uint8), anchor=e) for e in ends)
+        near |= a & b
+    lb, wb = laser > 0, white > 0
+    near |= (_flanked(lb, wb, r) | _flanked(lb.T.copy(), wb.T.copy(), r).T).view(np.uint8)
     if f > 1:
         near = cv2.resize(near, (w * f, h * f), interpolation=cv2.INTER_NEAREST)
         near = cv2.copyMakeBorder(near, 0, H - h * f, 0, W - w * f, cv2.BORDER_REPLICATE)
@@ -213,23 +215,31 @@ def _laser_coloured(bgr: np.ndarray, c: int, fs: float) -> tuple[np.ndarray, np.
 
 
 def _flanked(laser: np.ndarray, white: np.ndarray, r: int) -> np.ndarray:
-    """(h, w) bool: ``laser`` (h, w) bool lies within ``r`` rows above and within ``r`` below
-    each pixel — of a pixel in a run of ``white`` along its column, above the run's top and
-    below its bottom, when the run is at most 4 r long (a stripe's core clipped white, its
-    halo beside it; a lamp or a window is wider)."""
-    h = laser.shape[0]
-    idx = np.arange(h)[:, None]
-
-    def last(mask):                         # index of the last True at or above, −1: none
-        return np.maximum.accumulate(np.where(mask, idx, -1), axis=0)
-
-    def first(mask):                        # index of the first True at or below, h: none
-        return h - 1 - last(mask[::-1])[::-1]
-
-    top, bottom = last(~white), first(~white)        # the run of white: top + 1 … bottom − 1
-    up, down = last(laser), first(laser)
-    return ((up >= 0) & (up >= top - r) & (down < h) & (down <= bottom + r)
-            & (bottom - top - 1 <= 4 * r))
+    """(n, m) bool: the runs of ``white`` along the rows (n, m) bool at most 4 r long with
+    ``laser`` (n, m) bool from r + 1 px before their first pixel to their last, and from
+    their first to r + 1 px after their last (a stripe's core clipped white, its halo beside
+    it; a lamp or a window is wider). Worked out on the rows that hold white only."""
+    out = np.zeros(laser.shape, bool)
+    sel = np.flatnonzero(white.any(axis=1))
+    if not len(sel):
+        return out
+    laser, white = laser[sel], white[sel]
+    n, m = laser.shape
+    pad = np.zeros((n, r + 2), bool)
+    edge = np.diff(np.hstack([pad, white, pad]).view(np.int8), axis=1)
+    rows, first = np.nonzero(edge == 1)
+    first = first + 1                                          # in the padded frame's columns
+    last = np.nonzero(edge == -1)[1]
+    cum = np.zeros((n, m + 2 * r + 5), np.int32)
+    np.cumsum(np.hstack([pad, laser, pad]), axis=1, out=cum[:, 1:])   # cum[:, j]: laser < j
+    before = cum[rows, last + 1] - cum[rows, first - r - 1]      # r + 1 px before … its end
+    after = cum[rows, last + r + 2] - cum[rows, first]           # its start … r + 1 px after
+    ok = (before > 0) & (after > 0) & (last - first < 4 * r)
+    mark = np.zeros((n, m + 2 * r + 5), np.int8)
+    mark[rows[ok], first[ok]] = 1                  # runs are ≥ 1 px apart: no index twice
+    mark[rows[ok], last[ok] + 1] = -1
+    out[sel] = np.cumsum(mark, axis=1, dtype=np.int8)[:, r + 2:r + 2 + m] > 0
+    return out
 
 
 def laser_image(image, channel: str = "auto", laser_off=None,
