@@ -5,10 +5,11 @@ of the simulated devices, :mod:`insitu.sim.clock`; the CPU of this process less 
 simulator's drawing), the processing held to one core (BLAS and OpenCV one thread; run under
 ``taskset -c 0`` for the whole process).
 
-Data: insitu's simulator, the step block at random poses (seed 1), binning 2, Method 2 with
-``tests/data/height-cal-b2.json`` (no crossed sheet: no second look), no field correction
-(timing only: where the code lands is benchmarks/production_run.py's), lines 0.5 mm apart,
-the QR 0.35 mm modules on the 3 mm step.
+Data: insitu's simulator (rig seed 11), the step block at random poses (seed 1), binning 2,
+Method 2 with ``tests/data/height-cal-b2.json`` (no crossed sheet: no second look), no field
+correction (timing only: where the code lands is benchmarks/production_run.py's), lines
+0.5 mm apart swept at 10 m/s (the simulated head's own speed; the recipe's default is
+2 m/s), the QR 0.35 mm modules on the 3 mm step.
 
 Run: nice taskset -c 0 .venv/bin/python benchmarks/produce_clock.py [--parts 3]
 """
@@ -43,6 +44,7 @@ from insitu.sim.workpieces import make_workpiece  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 PART, STEPS = "step-block", ("scan", "locate", "plan", "mark", "read")
+RIG_SEED = 11               # the rig tests/data/height-cal-b2.json was recorded on
 
 
 def run(folder: Path, per_frame, parts: int, seed: int, binning: int) -> list:
@@ -54,13 +56,14 @@ def run(folder: Path, per_frame, parts: int, seed: int, binning: int) -> list:
     recipe_path = folder / "recipe.json"
     write_recipe(recipe_path, Recipe(folder / "part.stl", "mesh", (p,), serial_start=1,
                                      scan=RecipeScan(margin_mm=4.0, spacing_mm=0.5,
+                                                     speed_mm_s=10000.0,
                                                      lines_per_frame=per_frame),
                                      workpiece=PART))
     from insitu.cli.recipe import read
 
     recipe = read(recipe_path)
     locate = recipe_locator(recipe, scan_camera(None, height))
-    with connect(None, PART, seed, binning) as station:
+    with connect(None, PART, RIG_SEED, binning) as station:
         present = station.part_feeder(PART, seed)
         job = production.Production(recipe, station, folder / "run.jsonl", parts, locate,
                                     production.read_part, present, height_cal=height)
