@@ -144,3 +144,15 @@ def test_a_frame_edge_along_a_pixel_row_may_turn_one_across_rows_hardly():
     sigma = [np.sqrt(covariance(replace(terms, along=np.full(len(xy), px), tilt=t), 0.1)[0, 0])
              for t in (along_rows, across)]
     assert sigma[0] > 3 * sigma[1]
+
+
+def test_a_reference_piece_left_unchecked_counts_more_than_a_checked_one():
+    """Each point's own reference σ (a scan reference's pieces: those its crossed scan checks
+    0.03 mm, the others 0.1): all alike, the same covariance as one σ for all; one side
+    unchecked, a larger σ across it than the checked sides give."""
+    xy, n, edge = square()
+    _, terms = fit(np.random.default_rng(2).normal(0, 0.01, len(xy)), xy, n)
+    same = covariance(replace(terms, reference=np.full(len(xy), 0.03)), 0.0)
+    assert np.allclose(same, covariance(terms, 0.0, reference_mm=0.03))
+    one = covariance(replace(terms, reference=np.where(edge == 0, 0.1, 0.03)), 0.0)
+    assert one[1, 1] > 2 * same[1, 1] and np.isclose(one[2, 2], same[2, 2], rtol=0.2)

@@ -87,11 +87,15 @@ so the last step need only be within the fit's own 1σ or these."""
 class Outline:
     """The part's edges seen from above: ``points`` (K, 3) part frame, mm, on the upper side
     of each drop (z: the top's height there), ``normals`` (K, 2) outward unit, ``below``
-    (K,) the height of the surface beyond the drop, mm."""
+    (K,) the height of the surface beyond the drop, mm; ``sigma_mm`` (K,) 1σ of each
+    point's edge across it, mm (a fitted scan reference's pieces:
+    :data:`insitu.locate.uncertainty.SCAN_REFERENCE_MM`; None: one for all, the
+    reference's)."""
 
     points: np.ndarray
     normals: np.ndarray
     below: np.ndarray
+    sigma_mm: np.ndarray | None = None
 
 
 def outline(heights: HeightImage) -> Outline:
@@ -161,7 +165,8 @@ def align_image(image: np.ndarray, camera: CameraModel, heights: HeightImage,
     outline points are in view or show an edge, the edges found scatter about the fit, or
     the fit does not settle (``max_spread_mm``: at most this robust 1σ about the fit).
     ``search_px``: how far from the outline's image each edge is looked for;
-    ``reference_mm``: 1σ of the outline's own edges, for the covariance."""
+    ``reference_mm``: 1σ of the outline's own edges, for the covariance (``edges.sigma_mm``
+    where given)."""
     if image.shape[:2] != (camera.height, camera.width):
         return (f"the frame is {image.shape[1]}×{image.shape[0]} px, the camera "
                 f"{camera.width}×{camera.height}")
@@ -203,8 +208,9 @@ def align_image(image: np.ndarray, camera: CameraModel, heights: HeightImage,
         return (f"the frame's edges scatter {mad:.3f} mm about the outline (at most "
                 f"{max_spread_mm:g}): not the part's edges")
     uv = camera.project(np.column_stack([e[found], p[found, 2] + t[2]]))
+    own = None if edges.sigma_mm is None else edges.sigma_mm[seen][found]
     terms = FitTerms(J, w, r, p[found, :2], n[found], p[found, 2], px_mm[found], mad,
-                     frame_tilt(p[found, :2], n[found], p[found, 2], uv))
+                     frame_tilt(p[found, :2], n[found], p[found, 2], uv), own)
     cov = covariance(terms, bias_px, reference_mm=reference_mm)
     if (abs(x[0]) > max(np.sqrt(cov[0, 0]), SETTLE_RAD)
             or np.linalg.norm(x[1:]) > max(np.sqrt(np.trace(cov[1:, 1:])), SETTLE_MM)):

@@ -44,6 +44,7 @@ from insitu.locate.image_edges import (
     visible,
     wall_px,
 )
+from insitu.locate.uncertainty import SCAN_REFERENCE_MM
 
 SEARCH_PX = 6.0
 """How far from the splat's rough edge the frame's is looked for (its edges lie up to a few
@@ -182,10 +183,14 @@ def fit_outline(heights: HeightImage, image: np.ndarray, camera: CameraModel,
 
 def _sampled(heights: HeightImage, pieces: list[Piece]) -> Outline:
     """The pieces sampled every ``SPACING_MM``, with the heights of ``heights`` each side (the
-    top's from ``DEEP_MM`` inside)."""
+    top's from ``DEEP_MM`` inside) and each piece's 1σ (checked by the crossed scan's lines
+    or not: :data:`insitu.locate.uncertainty.SCAN_REFERENCE_MM`)."""
     pts, nrm = (np.concatenate(a) for a in zip(*(q.sample(SPACING_MM) for q in pieces)))
     below = edge_heights(heights, pts, nrm)[1]
-    return Outline(np.column_stack([pts, top_heights(heights, pts, nrm)]), nrm, below)
+    sigma = np.concatenate([np.full(len(q.sample(SPACING_MM)[0]), SCAN_REFERENCE_MM[
+        "checked" if q.scan >= MIN_CHECK and np.isfinite(q.offset_mm) else "fitted"])
+        for q in pieces])
+    return Outline(np.column_stack([pts, top_heights(heights, pts, nrm)]), nrm, below, sigma)
 
 
 def top_heights(heights: HeightImage, edge: np.ndarray, n: np.ndarray) -> np.ndarray:

@@ -58,6 +58,13 @@ CAD): the insert's side 0.3° off a pixel row turned 0.5 px end to end read bili
 px through a cubic spline; sides that cross 10–60 rows, 0.03 px."""
 
 
+CHECKED_MM = 0.03
+"""1σ across a scan reference's piece its crossed scan's lines cross (at least
+``outline_fit.MIN_CHECK`` of them, its offset from them measured): the pieces so checked lay
+0.003–0.046 mm (mean) from the CAD outline on the tuning half's references (step block, arc,
+insert), the unchecked ones up to 0.16 mm."""
+
+
 @dataclass(frozen=True)
 class FitTerms:
     """What a weighted least-squares edge fit ended on: ``J`` (K, p) its Jacobian (turn in
@@ -67,7 +74,8 @@ class FitTerms:
     point's own direction shows across its edge (1: biases act across the edge; the scan's
     ν); ``spread_mm`` the residuals' robust 1σ; ``tilt`` (K,) the change of the point's
     edge's bias end to end, ± in the bias' unit (None: the bias itself; a frame's:
-    :func:`frame_tilt`)."""
+    :func:`frame_tilt`); ``reference`` (K,) 1σ of the reference's outline at each point, mm
+    (None: ``reference_mm`` of :func:`covariance` for all)."""
 
     J: np.ndarray
     w: np.ndarray
@@ -78,13 +86,16 @@ class FitTerms:
     along: np.ndarray
     spread_mm: float
     tilt: np.ndarray | None = None
+    reference: np.ndarray | None = None
 
 
-SCAN_REFERENCE_MM = {"fitted": 0.1, "splat": 0.15}
-"""1σ of a scan reference's outline, per edge, across it (and its change end to end): fitted
-from its room-light frame, its edges lie where the frame's grey steps and the lines' ends put
-them — both 0.03–0.13 mm out on some edges and not others (a lit wall, a line's end spilling
-past a top); its height image alone (the splat of its lines), 0.15–0.3 mm out beside walls."""
+SCAN_REFERENCE_MM = {"checked": CHECKED_MM, "fitted": 0.1, "splat": 0.15}
+"""1σ of a scan reference's outline, per edge, across it (and its change end to end): a piece
+fitted from its room-light frame that the crossed scan's lines cross (``checked``:
+:data:`CHECKED_MM`); one they do not ("fitted"): the frame's grey steps alone, 0.03–0.16 mm
+out on some edges and not others (a lit wall, a splat's height low beside a wall the camera
+does not see); its height image alone (the splat of its lines), 0.15–0.3 mm out beside
+walls."""
 
 
 def edges_of(xy: np.ndarray, normals: np.ndarray, z: np.ndarray) -> np.ndarray:
@@ -168,7 +179,10 @@ def covariance(t: FitTerms, bias_mm: float, segment_mm: float = SEGMENT_MM,
     pos = along_edges(t.xy, edge)[:, None]
     ones = np.ones(len(w))
     tilt = ones if t.tilt is None or bias_mm <= 0 else t.tilt / bias_mm
-    for scale, along, turned in ((bias_mm, t.along, tilt), (reference_mm, ones, ones)):
+    own = reference_mm * ones if t.reference is None else t.reference
+    for scale, along, turned in ((bias_mm, t.along, tilt), (float(own.max(initial=0.0)),
+                                                             own / max(own.max(initial=0.0),
+                                                                       1e-12), ones)):
         if scale > 0:
             lever = np.zeros((2 * E, p))
             wj = J * (w * along)[:, None]
