@@ -184,15 +184,16 @@ def _laser_coloured(bgr: np.ndarray, c: int, fs: float) -> tuple[np.ndarray, np.
     """The thin ridges (white top-hat) of channel c's excess, and (H, W) bool: where they
     (≥ :data:`CHROMA` · fs and :data:`CHROMA_SNR` · their noise) are, or lie within reach
     (1 % of the shorter side) on both sides — above and below, or left and right — of the
-    pixel or of the white run it lies in (:func:`_flanked`): the halo round a core clipped
+    pixel or of the white run it lies in (:func:`_flanked`; a run's flanks judged on a
+    top-hat 3 × wider, as a halo can be wider than the reach): the halo round a core clipped
     white; a white thing beside a red one has them on one side only. Made on the excess
     max-pooled by reach // 3 (a thin ridge keeps its peak), with reach // 3 ≥ 3 px left: a
     full-HD frame in 3 × 3 blocks."""
     H, W = bgr.shape[:2]
     reach, f = _reach(bgr.shape)
     excess = _excess(bgr, c)
-    white = cv2.compare(cv2.min(cv2.min(*cv2.split(bgr)[:2]), cv2.split(bgr)[2]),
-                        WHITE * fs, cv2.CMP_GE)
+    b, g, r_ = cv2.split(bgr)
+    white = cv2.compare(cv2.min(cv2.min(b, g), r_), WHITE * fs, cv2.CMP_GE)
     h, w = H // f, W // f
     if f > 1:
         pool = np.ones((f, f), np.uint8)
@@ -206,8 +207,12 @@ def _laser_coloured(bgr: np.ndarray, c: int, fs: float) -> tuple[np.ndarray, np.
     for shape, ends in (((r + 1, 1), ((0, 0), (0, r))), ((1, r + 1), ((0, 0), (r, 0)))):
         a, b = (cv2.dilate(laser, np.ones(shape, np.uint8), anchor=e) for e in ends)
         near |= a & b
-    lb, wb = laser > 0, white > 0
-    near |= (_flanked(lb, wb, r) | _flanked(lb.T.copy(), wb.T.copy(), r).T).view(np.uint8)
+    wb = white > 0
+    if wb.any():
+        wide = np.ones((6 * r + 1,) * 2, np.uint8)
+        lb = cv2.morphologyEx(excess, cv2.MORPH_TOPHAT, wide,
+                              borderType=cv2.BORDER_REPLICATE) >= least
+        near |= (_flanked(lb, wb, r) | _flanked(lb.T.copy(), wb.T.copy(), r).T).view(np.uint8)
     if f > 1:
         near = cv2.resize(near, (w * f, h * f), interpolation=cv2.INTER_NEAREST)
         near = cv2.copyMakeBorder(near, 0, H - h * f, 0, W - w * f, cv2.BORDER_REPLICATE)
