@@ -1,10 +1,11 @@
 """Engraving to depth end to end on the simulated rig: a small pocket in stainless steel
 measured between rounds until it is at depth (scored by the simulator's truth), its report
 and journal: stopped as its first round starts, refused without --resume, resumed (measured
-first) to the end; a resume of the finished record is refused."""
+first) to the end; a resume of the finished record is refused. One engraving (a module
+fixture) serves every test."""
 
 import threading
-from dataclasses import replace
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -14,7 +15,7 @@ from insitu.errors import ConfigError, SafetyError
 from insitu.marking import Placement
 from insitu.marking.engrave_depth import DepthSettings
 from insitu.marking.journal import journal_path_for
-from insitu.services.engrave import EngraveRequest, engrave
+from insitu.services.engrave import EngraveOutcome, EngraveRequest, engrave
 from insitu.services.scan import scan_live
 from insitu.services.station import connect
 
@@ -23,32 +24,41 @@ SQUARE = ('<svg xmlns="http://www.w3.org/2000/svg" width="1.5mm" height="1.5mm" 
 TARGET = 0.03
 
 
-def test_a_small_pocket_is_engraved_to_depth_measured_between_rounds(tmp_path):
-    svg = tmp_path / "sq.svg"
-    svg.write_text(SQUARE)
-    out = tmp_path / "report"
-    with connect(None, "blank-stainless", 0) as station:
-        cloud = scan_live(station, 0.5, (-4, 4, -4, 4), room_light=False).cloud
-        req = EngraveRequest(out, Placement(str(svg), (0.0, 0.0), None, 0.0), cloud, TARGET,
-                             rescan_every=4, settings=DepthSettings(ring_mm=1.0))
-        notes: list[str] = []
-        stop = threading.Event()
+@dataclass
+class Run:
+    req: EngraveRequest
+    first: EngraveOutcome
+    refused: str
+    notes: list[str]
+    outcome: EngraveOutcome
+    truth: np.ndarray
 
-        def note(text: str) -> None:          # ABORT as the first round starts
-            notes.append(text)
-            stop.set()
-        first = engrave(station, req, cancel=stop, notify=note)
-        assert first.record.state == "cancelled" and first.record.rounds[0].state == "cut"
-        with pytest.raises(SafetyError, match="resume it"):
+
+@pytest.fixture(scope="module")
+def run(tmp_path_factory) -> Run:
+    """The engraving: ABORT as its first round starts, a try without --resume, the resume."""
+    folder = tmp_path_factory.mktemp("engrave")
+    svg = folder / "sq.svg"
+    svg.write_text(SQUARE)
+    with connect(None, "blank-stainless", 0) as station:
+        cloud = scan_live(station, 1.0, (-2.5, 2.5, -2.5, 2.5), room_light=False).cloud
+        req = EngraveRequest(folder / "report", Placement(str(svg), (0.0, 0.0), None, 0.0),
+                             cloud, TARGET, rescan_every=4,
+                             settings=DepthSettings(ring_mm=1.0))
+        stop = threading.Event()
+        first = engrave(station, req, cancel=stop, notify=lambda text: stop.set())
+        with pytest.raises(SafetyError, match="resume it") as refused:
             engrave(station, req)
-        notes.clear()
+        notes: list[str] = []
         outcome = engrave(station, replace(req, resume=True), notify=notes.append)
-        assert notes[0].startswith("measured after round 1")      # a resume measures first
-        world = station.world
         g = np.meshgrid(np.linspace(-0.5, 0.5, 41), np.linspace(-0.5, 0.5, 41))
-        truth = world.true_depth(*g)
-    rec = outcome.record
-    assert rec.state == "done", notes
+        truth = station.world.true_depth(*g)
+    return Run(req, first, str(refused.value), notes, outcome, truth)
+
+
+def test_the_closed_loop_reaches_the_depth_measured_between_rounds(run):
+    rec, truth = run.outcome.record, run.truth
+    assert rec.state == "done", run.notes
     # the floor's truth (beyond the walls' taper): the issue's tolerances
     assert abs(truth.mean() - TARGET) <= 0.010
     assert np.percentile(np.abs(truth - TARGET), 95) <= 0.025
@@ -60,6 +70,17 @@ def test_a_small_pocket_is_engraved_to_depth_measured_between_rounds(tmp_path):
     # the last measurement against the truth (a 1.5 mm floor holds few speckle grains: the
     # 5 µm of benchmarks/engrave.py measure are on larger pockets)
     assert abs(rec.measures[-1]["mean_mm"] - truth.mean()) <= 0.010
+
+
+def test_an_abort_is_resumed_measuring_first(run):
+    first = run.first.record
+    assert first.state == "cancelled" and first.rounds[0].state == "cut"
+    assert "resume it" in run.refused
+    assert run.notes[0].startswith("measured after round 1")      # a resume measures first
+
+
+def test_the_report_and_a_finished_record(run):
+    out, rec = run.req.report_dir, run.outcome.record
     for name in ("engrave.json", "depth-map.png", "histogram.png", "measure-01.png"):
         assert (out / name).stat().st_size > 0
     assert journal_path_for(out / rec.rounds[0].job).exists()
@@ -67,6 +88,4 @@ def test_a_small_pocket_is_engraved_to_depth_measured_between_rounds(tmp_path):
     assert seconds["marking"] > 0 and seconds["scanning"] > 0
     with pytest.raises(ConfigError, match="the engraving is finished"):
         with connect(None, "blank-stainless", 0) as station:
-            engrave(station, EngraveRequest(Path(out), req.placement, cloud, TARGET,
-                                            rescan_every=4, resume=True,
-                                            settings=DepthSettings(ring_mm=1.0)))
+            engrave(station, replace(run.req, report_dir=Path(out), resume=True))

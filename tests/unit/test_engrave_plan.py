@@ -10,6 +10,8 @@ from insitu.marking.engrave_depth import (
     HIDDEN,
     MEASURED,
     OUTSIDE,
+    UNMEASURED,
+    WALL,
     DepthMap,
     DepthSettings,
     Outline,
@@ -139,3 +141,64 @@ def test_a_round_cut_short_counts_the_passes_of_its_marked_paths():
     inner = given[1:-1, 1:-1]            # a cell holds 4 … 6 of a layer's lines 0.05 mm apart
     assert inner.mean() == pytest.approx(1.0, abs=0.05)
     assert inner == pytest.approx(np.ones_like(inner), abs=0.25)
+
+
+def _slot_scan(width: float, depth: float, short_mm: float, rng):
+    """Scan lines 0.1 mm apart across a slot ``width`` × 4 mm, ``depth`` deep, on a flat top
+    at 5 mm; the floor within 0.25 mm of the +x wall (the camera's far side) reads
+    ``short_mm`` short."""
+    pts, line = [], []
+    for k, x in enumerate(np.arange(-2.5, 2.51, 0.1)):
+        y = np.arange(-4.0, 4.0, 0.02)
+        inside = (np.abs(x) < width / 2) & (np.abs(y) < 2.0)
+        short = short_mm if x > width / 2 - 0.25 else 0.0
+        z = 5.0 - np.where(inside, depth - short, 0.0)
+        pts.append(np.column_stack([np.full(len(y), x), y,
+                                    z + 0.002 * rng.standard_normal(len(y))]))
+        line.append(np.full(len(y), k))
+    return np.vstack(pts), np.concatenate(line)
+
+
+def test_a_floor_narrow_for_its_depth_or_crossed_by_few_lines_is_not_measured():
+    """A 2 mm slot: shallow, its middle is measured; at 0.5 mm the floor lies within the
+    walls' bias zone (0.2 mm + 1 mm per mm of depth) but for 0.6 mm, fewer lines than
+    ``min_lines``: no cell counts as measured, the floor that reads short is not learnt
+    from, and the cells follow the model. A 0.8 mm slot is crossed by too few lines even
+    shallow."""
+    rng = np.random.default_rng(3)
+    s = DepthSettings(ring_mm=1.5)
+    wide = shapely.box(-1.0, -2.0, 1.0, 2.0)
+    shallow = measure_depth(*_slot_scan(2.0, 0.05, 0.0, rng), wide, s)
+    assert shallow.count(MEASURED) >= 20
+    deep = measure_depth(*_slot_scan(2.0, 0.5, 0.04, rng), wide, s)
+    assert deep.count(MEASURED) == 0
+    assert deep.count(UNMEASURED) == shallow.count(MEASURED) + shallow.count(UNMEASURED)
+    # the floor points that read short are left out
+    assert deep.mean_depth()[0] == pytest.approx(0.5, abs=0.002)
+    narrow = measure_depth(*_slot_scan(0.8, 0.05, 0.0, rng), shapely.box(-0.4, -2, 0.4, 2), s)
+    assert narrow.count(MEASURED) == 0
+    h = CellHistory.start(deep.cells.shape, 0.0045)
+    h.given(np.where(deep.cells.inside, 100.0, 0.0))
+    learn(h, deep, 0.0045)
+    assert not (h.sp2 > 0).any()                         # nothing learnt from it
+    plan = plan_round(h, deep.state, 0.5, rescan_every=25)
+    inside = deep.cells.inside
+    assert plan.passes[inside].max() <= round(0.5 / 0.0045) - 100    # the model's rest
+
+
+def test_before_a_trusted_measurement_a_round_stops_where_the_floor_stays_measurable():
+    cells = _cells(4)
+    h = CellHistory.start(cells.shape, 0.005)
+    state = np.full(cells.shape, MEASURED)
+    trusted = np.full(cells.shape, 0.075)
+    first = plan_round(h, state, TARGET, 25, trusted)
+    assert first.layers == int(0.075 / (RATE_MARGIN * 0.005)) == 13
+    assert plan_round(h, state, TARGET, 25, np.full(cells.shape, 1.0)).layers == 25
+    h.given(first.passes)
+    depth = np.full(cells.shape, 13 * 0.0045)
+    learn(h, _map(cells, depth, state), 0.005)           # measured: the limit is spent
+    assert plan_round(h, state, TARGET, 25, trusted).layers == 25
+    # a wall cell follows the model: never more passes than its rate says reach the depth
+    wall = np.where(np.arange(4) == 0, WALL, MEASURED)[None, :].repeat(4, 0)
+    rest = plan_round(h, wall, TARGET, 100)
+    assert np.all(rest.passes[wall == WALL] <= np.round(TARGET / h.rate[wall == WALL]) - 13)

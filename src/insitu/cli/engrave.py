@@ -100,12 +100,14 @@ def _summary(outcome, out: Path) -> None:
     rec = outcome.record
     t = Table(title=f"engraved: {rec.state}", show_header=True)
     for col in ("after round", "passes", "mean depth mm", "± mm", "µm/pass", "at depth",
-                "short", "over", "hidden"):
+                "short", "over", "hidden", "not measured"):
         t.add_column(col)
     for m in rec.measures:
-        t.add_row(str(m["round"]), f"{m['passes_mean']:.1f}", f"{m['mean_mm']:.4f}",
-                  f"{m['sem_mm']:.4f}", f"{m['rate_mm'] * 1e3:.2f}", str(m["at_depth"]),
-                  str(m["short"]), str(m["over"]), str(m["cells"]["hidden"]))
+        mean = ("–", "–") if m["mean_mm"] is None else (f"{m['mean_mm']:.4f}",
+                                                        f"{m['sem_mm']:.4f}")
+        t.add_row(str(m["round"]), f"{m['passes_mean']:.1f}", *mean,
+                  f"{m['rate_mm'] * 1e3:.2f}", str(m["at_depth"]), str(m["short"]),
+                  str(m["over"]), str(m["cells"]["hidden"]), str(m["cells"]["unmeasured"]))
     console.print(t)
     s = station_seconds(rec)
     console.print(f"station time {s['total']:.1f} s (marking {s['marking']:.1f} s, scanning "

@@ -9,15 +9,22 @@ depth is top(x, y) + offset(line) − z.
 
 The wall's neighbourhood: a point within ``wall_band_mm`` of the outline is neither floor nor
 top. There the line (as wide as the beam) straddles the edge, the centre detector's kernel
-carries the step along the line, and the camera loses the floor behind the wall on its side;
-``benchmarks/engrave.py walls`` measures the bias against the distance to the wall.
+carries the step along the line, and the camera loses the floor behind the wall on its side.
+Deeper, the floor beside the wall the camera faces reads short (its image merges with the lit
+wall's): a floor point counts only beyond ``wall_band_mm + bias_per_depth ×`` its depth from
+the outline (``benchmarks/engrave.py walls`` measures the bias against the distance to the
+wall). A floor point's error is shared along its line (the speckle of the floor it crosses,
+about 0.01 mm): a floor crossed by fewer than ``min_lines`` lines with trusted points is not
+measured at all, and in a pocket narrow for its depth no point may count.
 
 The map: a cell's depth is the Gaussian-weighted mean of the floor points around its centre
 (σ ``kernel_mm``), with its standard error; each cell of the pocket is
-  measured   — enough floor points around it (``min_points`` effective), centre beyond the band;
+  measured   — enough trusted floor points around it (``min_points`` effective), its centre
+               beyond the bias zone at its depth: the one state whose depth can be trusted;
   wall       — its centre within the band: the value the kernel brings from the floor inside;
   hidden     — the camera (or the beam) cannot reach it past the wall at the depth around it;
-  unmeasured — too few points for another reason.
+  unmeasured — too few trusted points or lines, or its centre within the bias zone at its
+               depth.
 """
 
 from __future__ import annotations
@@ -42,9 +49,13 @@ class DepthSettings:
     """``wall_band_mm``: points this close to the outline are left out (floor and top);
     ``ring_mm``: top points up to this far outside; ``cell_mm``: the map's cells;
     ``kernel_mm``: σ of the weights that average floor points into a cell; ``min_points``:
-    effective points for a cell to count as measured."""
+    effective points for a cell to count as measured; ``bias_per_depth``: the band grows by
+    this many mm per mm of depth for the floor's points and the measured cells' centres;
+    ``min_lines``: scan lines with trusted floor points for any cell to count as measured."""
 
     wall_band_mm: float = 0.2
+    bias_per_depth: float = 1.0
+    min_lines: int = 8
     ring_mm: float = 2.0
     cell_mm: float = 0.25
     kernel_mm: float = 0.2
@@ -152,11 +163,14 @@ class DepthMap:
 
 def measure_depth(points: np.ndarray, line: np.ndarray, region, settings: DepthSettings,
                   outline: Outline | None = None, cells: PocketCells | None = None,
-                  viewpoints: np.ndarray | None = None) -> DepthMap:
+                  viewpoints: np.ndarray | None = None,
+                  expected_mm: np.ndarray | None = None) -> DepthMap:
     """The pocket ``region`` (shapely, world mm) measured by a scan's ``points`` (N, 3) mm,
     ``line`` (N,) the scan line of each. ``viewpoints`` (K, 3): where the camera and the beam
-    come from (world mm), for the cells they cannot reach past a wall (None: not checked).
-    MeasurementError when the scan has too few top or floor points."""
+    come from (world mm), for the cells they cannot reach past a wall (None: not checked);
+    ``expected_mm`` (cells' grid): the depth a model expects where no cell is measured (None:
+    the nearest measured cell's). MeasurementError when the scan has too few top or floor
+    points."""
     s = settings
     outline = outline or Outline(region, s.ring_mm + s.cell_mm)
     cells = cells or outline.cells(s.cell_mm)
@@ -170,15 +184,19 @@ def measure_depth(points: np.ndarray, line: np.ndarray, region, settings: DepthS
         raise MeasurementError(f"the scan has {int(floor.sum())} points on the pocket's floor")
     top_at, top_rms = _top_model(points[top], line[top])
     d = top_at(points[floor], line[floor]) - points[floor, 2]
-    fx, fy = points[floor, 0], points[floor, 1]
+    trusted = dist[floor] >= s.wall_band_mm + s.bias_per_depth * np.maximum(d, 0.0)
+    fx, fy, d = points[floor, 0][trusted], points[floor, 1][trusted], d[trusted]
     depth, sem, neff, sigma, keep = _cell_means(cells, fx, fy, d, s.kernel_mm)
     state = np.full(cells.shape, OUTSIDE, np.int8)
     state[cells.inside] = UNMEASURED
-    ok = cells.inside & (neff >= s.min_points)
-    state[ok & (cells.edge_mm >= s.wall_band_mm)] = MEASURED
+    enough = np.unique(line[floor][trusted]).size >= s.min_lines
+    ok = cells.inside & (neff >= s.min_points) & enough
+    near = _nearest_depth(depth, ok) if expected_mm is None else np.where(ok, depth,
+                                                                          expected_mm)
+    zone = s.wall_band_mm + s.bias_per_depth * np.maximum(near, 0.0)
+    state[ok & (cells.edge_mm >= zone)] = MEASURED
     state[cells.inside & (cells.edge_mm < s.wall_band_mm)] = WALL
     if viewpoints is not None:
-        near = _nearest_depth(depth, ok)
         blocked = unreachable(cells, near, outline, viewpoints)
         state[(state == UNMEASURED) & blocked] = HIDDEN
         state[(state == WALL) & blocked & ~ok] = HIDDEN
@@ -227,6 +245,9 @@ def _cell_means(cells: PocketCells, x, y, d, kernel_mm: float):
     and effective points; the robust point scatter; which points were kept (beyond 4σ of
     their cell's mean: left out, a ghost or a dropped centre)."""
     shape = cells.shape
+    if len(d) == 0:
+        zero = np.zeros(shape)
+        return zero, np.full(shape, np.inf), zero, float("nan"), np.zeros(0, bool)
     gx, gy = cells.centres()
     tree = cKDTree(np.column_stack([x, y]))
     keep = np.ones(len(d), bool)

@@ -10,14 +10,22 @@ measurements' noise explains (a random effect: τ², the rates' true spread, is 
 spread has beyond the noise). So a noisy
 measurement moves a cell's estimate only by what it is worth, and passes never chase noise.
 
+Only a measured cell's depth (:data:`~insitu.marking.engrave_depth.MEASURED`: enough floor
+points beyond the walls' bias zone at its depth) is learnt from: a cell the measurement cannot
+vouch for (the wall band, too few trusted points, the bias zone of a wall close for the depth)
+follows the model: never more passes than reach the depth at its rate or the pocket's
+(the higher) plus :data:`UNTRUSTED_SIGMAS` σ of the rate (the pocket rate's σ holds at least
+the scan's shared error over the passes of the deepest measurement). Until the
+first such measurement, a round stops where the deepest-trusted cell would leave its zone (at
+:data:`RATE_MARGIN` × the rate), so that a narrow pocket is measured while its floor can be.
+
 Each round's passes: the depth still missing over the cell's rate, at most ``rescan_every``;
 while the floor is far, :data:`APPROACH` of it (the next measurement corrects the rate), once
-no cell it sees is more than a pass or so short, the rounded rest. A cell at its depth gets no
-more energy. A cell the last measurement could not see (a wall hides it, or no points) gets
-passes only while its passes at its highest likely rate (:data:`RATE_MARGIN` × its rate, or
-its rate plus three times the σ of the cells' spread and of the rate's estimate, whichever is
-higher) stay short of the target: it is never over-burnt, and is reported when that leaves it
-short.
+no measured cell is more than a pass or so short, the rounded rest. A cell at its depth gets
+no more energy. A cell the camera cannot see (a wall hides it) gets passes only while its
+passes at its highest likely rate (:data:`RATE_MARGIN` × its rate, or its rate plus three
+times the σ of the cells' spread and of the rate's estimate, whichever is higher) stay short
+of the target: it is never over-burnt, and is reported when that leaves it short.
 """
 
 from __future__ import annotations
@@ -31,14 +39,13 @@ from insitu.marking.engrave_depth import (
     HIDDEN,
     MEASURED,
     OUTSIDE,
-    UNMEASURED,
-    WALL,
     DepthMap,
     PocketCells,
 )
 
 APPROACH = 0.9          # while far: this fraction of the passes the model says are missing
 RATE_MARGIN = 1.15      # a cell not seen is planned as if it ablated this much faster
+UNTRUSTED_SIGMAS = 2.0  # a cell not measured is planned at its rate + this many σ of its rate
 SCAN_ERROR_MM = 0.004   # a depth scan's error shared by the pocket's cells (the floor's speckle
                         # changes pass to pass; benchmarks/engrave.py measure: 1 … 7 µm)
 _FIELDS = ("passes", "spp", "sp2", "rate", "rate_var", "estimate")
@@ -99,7 +106,7 @@ def owners(cells: PocketCells) -> tuple[np.ndarray, np.ndarray]:
 def learn(history: CellHistory, dm: DepthMap, nominal_rate_mm: float) -> Learnt:
     """Add the measurement ``dm`` to ``history`` and fit the rates again (see the module
     docstring); the nominal rate stands until a measured cell has passes."""
-    seen = (np.isin(dm.state, (MEASURED, WALL)) & np.isfinite(dm.depth)
+    seen = ((dm.state == MEASURED) & np.isfinite(dm.depth)
             & np.isfinite(dm.sem) & (history.passes > 0))
     s2 = np.where(seen, np.maximum(dm.sem, 1e-4) ** 2 + SCAN_ERROR_MM ** 2, np.inf)
     history.spp = history.spp + np.where(seen, history.passes * np.nan_to_num(dm.depth) / s2, 0)
@@ -111,7 +118,10 @@ def learn(history: CellHistory, dm: DepthMap, nominal_rate_mm: float) -> Learnt:
     noise = 1.0 / history.sp2[fit]
     rate = float(np.average(raw, weights=1 / noise))
     tau2 = max(float(np.var(raw) - np.mean(noise)), 0.0)
-    rate_sem2 = float(np.var(raw) / fit.sum())
+    # the scan's shared error does not average over the cells: at least its share of the
+    # deepest measurement bounds the pocket rate's error
+    shared = SCAN_ERROR_MM / max(float(history.passes[fit].max()), 1.0)
+    rate_sem2 = float(np.var(raw) / fit.sum()) + shared ** 2
     has = history.sp2 > 0
     prior = 1.0 / max(tau2, 1e-12)
     post = np.where(has, (history.spp + rate * prior) / (history.sp2 + prior), rate)
@@ -137,20 +147,33 @@ class RoundPlan:
 
 
 def plan_round(history: CellHistory, state: np.ndarray, target_mm: float,
-               rescan_every: int) -> RoundPlan:
+               rescan_every: int, trusted_to_mm: np.ndarray | None = None) -> RoundPlan:
     """The next round's passes per cell (``state``: the last depth map's cell states; all
-    measured before the first measurement)."""
+    measured before the first measurement). ``trusted_to_mm`` (ny, nx): the depth down to
+    which each cell's measurement is trusted (None: any)."""
     inside = state != OUTSIDE
     rate = np.maximum(history.rate, 1e-6)
     need = np.where(inside, (target_mm - history.estimate) / rate, 0.0)
-    blind = inside & np.isin(state, (HIDDEN, UNMEASURED))
+    blind = inside & (state == HIDDEN)
     rate_hi = np.maximum(RATE_MARGIN * rate, rate + 3.0 * np.sqrt(history.rate_var))
     allowed = np.floor(target_mm / rate_hi - history.passes + 1e-9)
-    seen = inside & ~blind
+    measured = inside & (state == MEASURED)
+    untrusted = inside & ~measured & ~blind
     far = np.floor(APPROACH * need)
-    finishing = not (far[seen] >= 1).any() if seen.any() else True
+    finishing = not (far[measured] >= 1).any() if measured.any() else True
     n = np.round(need) if finishing else far
     n = np.where(blind, np.minimum(n, allowed), n)
-    n = np.clip(np.where(inside, n, 0), 0, rescan_every).astype(int)
+    pocket = float(np.median(rate[inside])) if inside.any() else 0.0
+    rate_up = np.maximum(rate, pocket) + UNTRUSTED_SIGMAS * np.sqrt(history.rate_var)
+    n = np.where(untrusted, np.minimum(n, np.floor(target_mm / rate_up - history.passes
+                                                    + 1e-9)), n)
+    most = rescan_every
+    if trusted_to_mm is not None and not (history.sp2 > 0).any() and inside.any():
+        reach = float(trusted_to_mm[inside].max())
+        fastest = RATE_MARGIN * float(rate[inside].max())
+        if reach < target_mm and reach >= fastest:
+            most = min(most, int(reach / fastest))
+            finishing = False
+    n = np.clip(np.where(inside, n, 0), 0, most).astype(int)
     held = blind & (need >= 0.5) & (n == 0)
     return RoundPlan(n, finishing, held)

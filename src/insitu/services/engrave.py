@@ -46,7 +46,7 @@ from insitu.marking import (
     write_job,
 )
 from insitu.marking.engrave_depth import (
-    STATES,
+    UNMEASURED,
     DepthMap,
     DepthSettings,
     Outline,
@@ -66,7 +66,9 @@ from insitu.marking.engrave_record import (
 from insitu.marking.journal import journal_path_for
 from insitu.marking.surface import Surface
 from insitu.services.common import Progress
+from insitu.services.engrave_report import centres as _centres
 from insitu.services.engrave_report import depth_picture, histogram_picture
+from insitu.services.engrave_report import measure_summary as _summary
 from insitu.services.height import centre_settings
 from insitu.services.mark import mark
 from insitu.services.plan import plan_mark
@@ -155,6 +157,8 @@ class _Engraving:
         self.cells: PocketCells = self.outline.cells(s.cell_mm)
         x0, y0, x1, y1 = region.bounds
         self.top = Surface(req.cloud, region=(x0 - 2, x1 + 2, y0 - 2, y1 + 2))
+        self.trusted_to = np.where(self.cells.inside, np.maximum(
+            self.cells.edge_mm - s.wall_band_mm, 0.0) / s.bias_per_depth, 0.0)
         self.last: DepthMap | None = None
 
     def _check_reach(self, req: EngraveRequest, targets: np.ndarray) -> None:
@@ -245,6 +249,23 @@ class _Engraving:
         self.notify(f"round {len(record.rounds)} {state} after {int(done.sum())} of "
                     f"{len(done)} paths")
 
+    def finish(self, record: EngraveRecord, history: CellHistory, held: np.ndarray,
+               state: np.ndarray) -> None:
+        """The outcome: done, or held (cells hidden by a wall left short); the floor's cells
+        the last measurement could not vouch for (beyond the wall band, not measured: their
+        depth is the model's) named in a warning; the report's pictures."""
+        record.state = "held" if held.any() else "done"
+        model = self.cells.inside & (state == UNMEASURED)
+        record.outcome = {"held_cells": int(held.sum()), "held_at_mm": _centres(self.cells, held),
+                          "model_cells": int(model.sum()),
+                          "model_at_mm": _centres(self.cells, model),
+                          "station_s": station_seconds(record)}
+        if model.any():
+            self.notify(f"warning: {int(model.sum())} cells of {self.req.placement.pattern} "
+                        "not measured: their depth follows the model, not the measurement")
+        self.final_pictures(history)
+        self.save(record, history)
+
     def final_pictures(self, history: CellHistory) -> None:
         """The report's depth map and histogram of the last measurement (the histogram's
         band: ± half a pass, the stop's tolerance)."""
@@ -274,7 +295,8 @@ class _Engraving:
             self.save(record, history)
             raise
         dm = measure_depth(scan.cloud.points, scan.cloud.attributes["line"], self.region, s,
-                           self.outline, self.cells, viewpoints(self.station.rig))
+                           self.outline, self.cells, viewpoints(self.station.rig),
+                           history.estimate)
         learnt = learn(history, dm, self.nominal)
         k = len(record.measures) + 1
         record.measures.append(_summary(len(record.rounds), dm, learnt, history, req.depth_mm,
@@ -285,9 +307,11 @@ class _Engraving:
                       f"measure {k}, after round {len(record.rounds)}")
         self.save(record, history)
         m = record.measures[-1]
-        self.notify(f"measured after round {len(record.rounds)}: mean depth "
-                    f"{m['mean_mm']:.4f} mm ± {m['sem_mm']:.4f}, rate {learnt.rate_mm * 1e3:.2f}"
-                    f" µm/pass, {m['at_depth']} cells at depth, {m['short']} short")
+        mean = (f"mean depth {m['mean_mm']:.4f} mm ± {m['sem_mm']:.4f}"
+                if m["mean_mm"] is not None else "no floor point beyond the walls' bias zone")
+        self.notify(f"measured after round {len(record.rounds)}: {mean}, rate "
+                    f"{learnt.rate_mm * 1e3:.2f} µm/pass, {m['at_depth']} cells at depth, "
+                    f"{m['short']} short, {m['cells']['unmeasured']} not measured")
         self.measured(dm, m)
         return dm, learnt
 
@@ -321,14 +345,9 @@ def engrave(station: Station, req: EngraveRequest, cancel: threading.Event | Non
             e.save(record, history)
         return EngraveOutcome(record, None)
     while len(record.rounds) < MAX_ROUNDS:
-        plan = plan_round(history, state, req.depth_mm, req.rescan_every)
+        plan = plan_round(history, state, req.depth_mm, req.rescan_every, e.trusted_to)
         if plan.layers == 0:
-            record.state = "held" if plan.held.any() else "done"
-            record.outcome = {"held_cells": int(plan.held.sum()),
-                              "held_at_mm": _centres(e.cells, plan.held),
-                              "station_s": station_seconds(record)}
-            e.final_pictures(history)
-            e.save(record, history)
+            e.finish(record, history, plan.held, state)
             return EngraveOutcome(record, e.last)
         if not e.mark_round(record, history, plan.passes, plan.finishing, cancel, progress):
             return EngraveOutcome(record, e.last)
@@ -366,37 +385,9 @@ def _resumed(e: _Engraving, record: EngraveRecord, req: EngraveRequest) -> CellH
     return history
 
 
-def _summary(round_no: int, dm: DepthMap, learnt: Learnt, history: CellHistory,
-             target: float, frames: int, seconds: float) -> dict:
-    """A measurement as the record keeps it (mm; NaN as None)."""
-    mean, sem = dm.mean_depth()
-    seen = np.isin(dm.state, (0, 1))
-    err = (dm.depth - target)[dm.state == 0]
-    half = 0.5 * float(np.median(history.rate[seen])) if seen.any() else 0.0
-
-    def num(v):
-        return None if v is None or not np.isfinite(v) else round(float(v), 6)
-    return {"round": round_no, "passes_mean": num(history.passes[dm.state >= 0].mean()),
-            "mean_mm": num(mean), "sem_mm": num(sem), "point_sigma_mm": num(dm.point_sigma),
-            "top_rms_mm": num(dm.top_rms), "rate_mm": num(learnt.rate_mm),
-            "rate_sem_mm": num(learnt.rate_sem_mm), "rate_spread_mm": num(learnt.spread_mm),
-            "rate_cells": learnt.cells,
-            "cells": {name: dm.count(i) for i, name in enumerate(STATES)},
-            "at_depth": int((np.abs(err) <= half).sum()), "short": int((err < -half).sum()),
-            "over": int((err > half).sum()),
-            "cell_p95_mm": num(np.percentile(np.abs(err), 95)) if len(err) else None,
-            "frames": frames, "scan_s": round(seconds, 3),
-            "hidden_at_mm": _centres(dm.cells, dm.state == 2)}
-
-
 def _seconds(t: StepTime) -> float:
     """A step's station seconds (a real rig's: the wall clock's)."""
     return float(t.station if t.station is not None else t.wall)
-
-
-def _centres(cells: PocketCells, mask: np.ndarray) -> list[list[float]]:
-    gx, gy = cells.centres()
-    return np.round(np.column_stack([gx[mask], gy[mask]]), 3).tolist()
 
 
 def station_seconds(record: EngraveRecord) -> dict[str, float]:

@@ -1,6 +1,7 @@
-"""The pictures of an engraving's report (matplotlib, no display): the depth map over the
-pocket's cells (cells the camera cannot see crossed, wall cells dotted) and the histogram of
-the floor's depths against the target, each written atomically."""
+"""An engraving's report: each measurement as the record keeps it, and the pictures
+(matplotlib, no display): the depth map over the pocket's cells (cells the camera cannot see
+crossed, wall cells dotted) and the histogram of the floor's depths against the target, each
+written atomically."""
 
 from __future__ import annotations
 
@@ -10,7 +11,16 @@ from pathlib import Path
 import numpy as np
 
 from insitu.formats.atomic import atomic_write_bytes
-from insitu.marking.engrave_depth import HIDDEN, OUTSIDE, UNMEASURED, WALL, DepthMap
+from insitu.marking.engrave_depth import (
+    HIDDEN,
+    OUTSIDE,
+    STATES,
+    UNMEASURED,
+    WALL,
+    DepthMap,
+    PocketCells,
+)
+from insitu.marking.engrave_plan import CellHistory, Learnt
 
 
 def _save(fig, path: Path) -> None:
@@ -73,3 +83,32 @@ def histogram_picture(path: Path, dm: DepthMap, target_mm: float, tolerance_mm: 
     ax.set_xlabel("depth, µm")
     ax.set_ylabel("points")
     _save(fig, path)
+
+
+def measure_summary(round_no: int, dm: DepthMap, learnt: Learnt, history: CellHistory,
+             target: float, frames: int, seconds: float) -> dict:
+    """A measurement as the record keeps it (mm; NaN as None)."""
+    mean, sem = dm.mean_depth()
+    seen = np.isin(dm.state, (0, 1))
+    err = (dm.depth - target)[dm.state == 0]
+    half = 0.5 * float(np.median(history.rate[seen])) if seen.any() else 0.0
+
+    def num(v):
+        return None if v is None or not np.isfinite(v) else round(float(v), 6)
+    return {"round": round_no, "passes_mean": num(history.passes[dm.state >= 0].mean()),
+            "mean_mm": num(mean), "sem_mm": num(sem), "point_sigma_mm": num(dm.point_sigma),
+            "top_rms_mm": num(dm.top_rms), "rate_mm": num(learnt.rate_mm),
+            "rate_sem_mm": num(learnt.rate_sem_mm), "rate_spread_mm": num(learnt.spread_mm),
+            "rate_cells": learnt.cells,
+            "cells": {name: dm.count(i) for i, name in enumerate(STATES)},
+            "at_depth": int((np.abs(err) <= half).sum()), "short": int((err < -half).sum()),
+            "over": int((err > half).sum()),
+            "cell_p95_mm": num(np.percentile(np.abs(err), 95)) if len(err) else None,
+            "frames": frames, "scan_s": round(seconds, 3),
+            "hidden_at_mm": centres(dm.cells, dm.state == 2)}
+
+
+def centres(cells: PocketCells, mask: np.ndarray) -> list[list[float]]:
+    """The world x, y (mm) of the cells where ``mask``."""
+    gx, gy = cells.centres()
+    return np.round(np.column_stack([gx[mask], gy[mask]]), 3).tolist()
