@@ -159,31 +159,28 @@ def _slot_scan(width: float, depth: float, short_mm: float, rng):
     return np.vstack(pts), np.concatenate(line)
 
 
-def test_a_floor_narrow_for_its_depth_or_crossed_by_few_lines_is_not_measured():
-    """A 2 mm slot: shallow, its middle is measured; at 0.5 mm the floor lies within the
-    walls' bias zone (0.2 mm + 1 mm per mm of depth) but for 0.6 mm, fewer lines than
-    ``min_lines``: no cell counts as measured, the floor that reads short is not learnt
-    from, and the cells follow the model. A 0.8 mm slot is crossed by too few lines even
-    shallow."""
+def test_a_floor_beside_a_wall_or_crossed_by_few_lines_is_not_measured():
+    """A 2 mm slot 0.5 mm deep whose floor within 0.25 mm of a wall reads short: those points
+    are left out and no cell within the walls' bias zone (0.2 mm + 0.25 mm per mm of depth)
+    counts as measured. A 0.8 mm slot is crossed by fewer lines than ``min_lines`` beyond
+    the zone: no cell is measured, nothing is learnt, and the cells follow the model."""
     rng = np.random.default_rng(3)
     s = DepthSettings(ring_mm=1.5)
-    wide = shapely.box(-1.0, -2.0, 1.0, 2.0)
-    shallow = measure_depth(*_slot_scan(2.0, 0.05, 0.0, rng), wide, s)
-    assert shallow.count(MEASURED) >= 20
-    deep = measure_depth(*_slot_scan(2.0, 0.5, 0.04, rng), wide, s)
-    assert deep.count(MEASURED) == 0
-    assert deep.count(UNMEASURED) == shallow.count(MEASURED) + shallow.count(UNMEASURED)
-    # the floor points that read short are left out
-    assert deep.mean_depth()[0] == pytest.approx(0.5, abs=0.002)
-    narrow = measure_depth(*_slot_scan(0.8, 0.05, 0.0, rng), shapely.box(-0.4, -2, 0.4, 2), s)
-    assert narrow.count(MEASURED) == 0
-    h = CellHistory.start(deep.cells.shape, 0.0045)
-    h.given(np.where(deep.cells.inside, 100.0, 0.0))
-    learn(h, deep, 0.0045)
+    deep = measure_depth(*_slot_scan(2.0, 0.5, 0.04, rng), shapely.box(-1, -2, 1, 2), s)
+    zone = s.wall_band_mm + s.bias_per_depth * 0.5
+    assert deep.count(MEASURED) >= 20
+    assert np.all(deep.cells.edge_mm[deep.state == MEASURED] >= zone - 0.01)
+    assert deep.mean_depth()[0] == pytest.approx(0.5, abs=0.002)     # the short ones out
+    assert np.nanmax(np.abs(deep.depth[deep.state == MEASURED] - 0.5)) < 0.005
+    narrow = measure_depth(*_slot_scan(0.8, 0.2, 0.04, rng), shapely.box(-0.4, -2, 0.4, 2), s)
+    assert narrow.count(MEASURED) == 0 and narrow.count(UNMEASURED) > 0
+    h = CellHistory.start(narrow.cells.shape, 0.0045)
+    h.given(np.where(narrow.cells.inside, 40.0, 0.0))
+    learn(h, narrow, 0.0045)
     assert not (h.sp2 > 0).any()                         # nothing learnt from it
-    plan = plan_round(h, deep.state, 0.5, rescan_every=25)
-    inside = deep.cells.inside
-    assert plan.passes[inside].max() <= round(0.5 / 0.0045) - 100    # the model's rest
+    plan = plan_round(h, narrow.state, TARGET, rescan_every=25)
+    inside = narrow.cells.inside
+    assert plan.passes[inside].max() <= round(TARGET / 0.0045) - 40    # the model's rest
 
 
 def test_before_a_trusted_measurement_a_round_stops_where_the_floor_stays_measurable():
