@@ -83,20 +83,18 @@ def scan_recording(tmp_path_factory) -> Path:
 
 @pytest.fixture(scope="session")
 def camera_recording(tmp_path_factory) -> Path:
-    """A camera calibration recorded on the simulated rig of seed 2 at binning 2: the board
-    in 4 views, the scan head's axis lines, the board's truth."""
-    from insitu.geometry.beams import axis_lines
-    from insitu.services.record import record_camera_calibration
-    from insitu.services.station import simulated
-    from insitu.sim.board import BoardViews
-    from insitu.sim.rig import default_rig
-    from insitu.sim.world import SimWorld
+    """A camera calibration recorded by ``insitu sim record camera-calibration`` on the
+    simulated rig of seed 2 at binning 2: the board in 4 views, the scan head's axis lines
+    (recorded by default), the board's truth."""
+    from typer.testing import CliRunner
+
+    from insitu.cli.main import app
 
     def record(folder):
-        world = SimWorld(default_rig(seed=2, binning=2), seed=2)
-        board = BoardViews(world, 4, lines=axis_lines())
-        record_camera_calibration(simulated(world), folder / "camcal", board, 4,
-                                  axis_lines=axis_lines(), truth=board.truth)
+        res = CliRunner().invoke(app, ["sim", "record", "camera-calibration", "-o",
+                                       str(folder / "camcal"), "--views", "4", "--binning", "2",
+                                       "--seed", "2"])
+        assert res.exit_code == 0, res.output
     return shared(tmp_path_factory, "camera-calibration", record) / "camcal"
 
 

@@ -343,18 +343,17 @@ def test_plain_folder_bad_input_one_line_error_and_no_file(rec, tmp_path, case, 
     assert not (tmp_path / "camera.json").exists()
 
 
-def test_sim_record_then_calibrate_gives_the_pose_in_the_scan_head_frame(tmp_path):
-    """The README's two commands: `insitu sim record camera-calibration` records the head's
-    axis lines on the board by default, so `insitu calibrate camera` gives the camera's pose
-    in the scan-head frame (not R = I, t = 0)."""
+def test_sim_record_then_calibrate_gives_the_pose_in_the_scan_head_frame(camera_recording,
+                                                                         tmp_path):
+    """The README's two commands: `insitu sim record camera-calibration` (the recording of
+    tests/integration/conftest.py) records the head's axis lines on the board by default, so
+    `insitu calibrate camera` gives the camera's pose in the scan-head frame (not R = I,
+    t = 0)."""
     from insitu.cli.main import app
 
-    rec, out = tmp_path / "ccal", tmp_path / "camera.json"
-    res = runner.invoke(app, ["sim", "record", "camera-calibration", "-o", str(rec),
-                              "--views", "4", "--binning", "2", "--seed", "2"])
-    assert res.exit_code == 0, res.output
-    assert sum(f.line is not None for f in Sequence.open(rec).frames) == 3
-    res = runner.invoke(app, ["calibrate", "camera", str(rec), "-o", str(out)])
+    out = tmp_path / "camera.json"
+    assert sum(f.line is not None for f in Sequence.open(camera_recording).frames) == 3
+    res = runner.invoke(app, ["calibrate", "camera", str(camera_recording), "-o", str(out)])
     assert res.exit_code == 0, res.output
     cal, true = load_json_model(out, CameraCalibration), default_rig(seed=2, binning=2).camera
     R = np.array(cal.camera.R)
