@@ -42,8 +42,9 @@ def crossed_cal(crossed_height_cal):
     return load_height_calibration(crossed_height_cal / "height.json")
 
 
-def _pass(cloud, angle):
-    """The points of the lines at ``angle`` degrees to x, by each line's points' direction."""
+def _in_pass(cloud, angle):
+    """(N,) bool: the points of the lines at ``angle`` degrees to x, by each line's points'
+    direction."""
     line = cloud.attributes["line"]
     keep = np.zeros(len(line), bool)
     for i in np.unique(line):
@@ -51,7 +52,12 @@ def _pass(cloud, angle):
         xy = cloud.points[sel, :2]
         d = np.linalg.svd(xy - xy.mean(0), full_matrices=False)[2][0]
         keep[sel] = abs(abs(np.degrees(np.arctan2(d[1], d[0])) % 180 - angle)) < 5
-    return cloud.points[keep]
+    return keep
+
+
+def _pass(cloud, angle):
+    """The points of the lines at ``angle`` degrees to x."""
+    return cloud.points[_in_pass(cloud, angle)]
 
 
 def test_the_turned_sheet_model_is_exact_on_ideal_sheets():
@@ -175,6 +181,7 @@ def test_a_part_square_to_the_lines_is_located_with_a_crossed_scan(crossed_cal):
     along y alone does not pin it down; with the crossed pass it is found where it lies
     (binning 4: within the coarse frame's precision and the rig's calibration offset), from
     edge samples of both passes."""
+    from insitu.formats.pointcloud import PointCloud
     from insitu.locate.part import LocateRefused, LocateSettings
     from insitu.locate.reference import reference_from_mesh
     from insitu.services.locate import locate_cloud
@@ -182,13 +189,15 @@ def test_a_part_square_to_the_lines_is_located_with_a_crossed_scan(crossed_cal):
     wp = make_workpiece("step-block")
     ref = reference_from_mesh(wp.vertices, wp.triangles, "step-block")
     truth, coarse = (8.0, -6.0, 90.0), LocateSettings(tolerance_mm=0.2, turn_bound_deg=0.5)
-    clouds = {}
-    for cross in (False, True):
-        with simulated(sim_world("step-block", binning=4, pose=truth)) as station:
-            clouds[cross] = scan_live(station, 0.5, height_cal=crossed_cal, cross=cross).cloud
+    with simulated(sim_world("step-block", binning=4, pose=truth)) as station:
+        cloud = scan_live(station, 0.5, height_cal=crossed_cal, cross=True).cloud
+    # the lines along y alone: the scan without its crossed pass (which leaves them as they
+    # are: test_the_crossed_pass_leaves_the_first_pass_as_it_was)
+    along = _in_pass(cloud, 90.0)
     with pytest.raises(LocateRefused, match="not pinned down"):
-        locate_cloud(ref, clouds[False], coarse)
-    cloud = clouds[True]
+        locate_cloud(ref, PointCloud(cloud.points[along], {k: v[along] for k, v in
+                                                           cloud.attributes.items()},
+                                     cloud.rig), coarse)
     table = cloud.points[:, 2] < 0.5
     u = edge_samples(cloud.points, cloud.attributes["line"], table).dirs
     angles = np.degrees(np.arctan2(u[:, 1], u[:, 0])) % 180
