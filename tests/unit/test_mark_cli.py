@@ -1,7 +1,6 @@
-"""``insitu mark`` end to end: placement as asked, refusals that write nothing, marking on the
-simulated rig with a progress record, resume and inspection."""
+"""``insitu mark`` end to end: placement as asked, refusals that write nothing, ``job show``
+and ``job run``; marking on the simulated rig with --run is tests/integration/test_mark_run.py."""
 
-import json
 import re
 
 import numpy as np
@@ -115,23 +114,6 @@ def test_bad_inputs(files, tmp_path):
                    "-o", out)
         assert res.exit_code == 1 and message in res.output, res.output
         assert isinstance(res.exception, SystemExit) and not out.exists(), res.exception
-
-
-def test_run_marks_the_part_records_progress_resumes_and_inspects(files, tmp_path):
-    out, img = tmp_path / "job.json", tmp_path / "inspect.png"
-    args = ("mark", "--cloud", files / "step3.ply", "--pattern", files / "rect.svg", "--at",
-            0.0, -30.0, "--width", 6, "-o", out, "--run")
-    res = _run(*args, "--preview", "--inspect", img)
-    assert res.exit_code == 0, res.output
-    progress = json.loads((tmp_path / "job.progress.json").read_text())
-    assert progress["state"] == "done" and progress["completed"] == len(read_job(out).paths)
-    assert img.stat().st_size > 10_000 and (tmp_path / "inspect.raw.png").stat().st_size > 10_000
-    assert "read back by the camera" in res.output and "wrote " in res.output
-    res = _run(*args, "--resume")
-    assert res.exit_code == 0 and "nothing left to mark: " in res.output, res.output
-    # a job that no longer matches the file cannot be resumed
-    res = _run(*args[:-5], "--width", 5, "-o", out, "--run", "--resume")
-    assert res.exit_code == 1 and "does not hold this job" in res.output
 
 
 def test_job_show_and_run(files, tmp_path):
