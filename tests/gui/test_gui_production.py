@@ -62,16 +62,17 @@ def test_save_as_recipe_keeps_the_cloud_and_placements(qtbot, tmp_path):
 
 
 def test_a_short_production_run_from_the_dock(qtbot, tmp_path):
-    """Two parts at random poses, located against the part's mesh. Whether a part is found
-    is the registration's to say (its own tests and benchmark): each row is marked — its
-    serial next, read back — or refused without a serial."""
+    """Two parts at random poses, scanned with lines 1 mm apart and located against the part's
+    mesh. Whether a part is found is the registration's to say (its own tests and benchmark):
+    each row is marked — its serial next, read back — or refused without a serial."""
     w = _window(qtbot, tmp_path, 2)
     try:
         part = make_workpiece("step-block")
         write_mesh(tmp_path / "part.stl", np.array(part.vertices), np.array(part.triangles))
         write_recipe(tmp_path / "r.json", Recipe(
             tmp_path / "part.stl", "mesh", (Placement('qr:"{serial:03d}"', (0.0, -30.0), 7.35),),
-            scan=RecipeScan(margin_mm=4.0), serial_start=1, workpiece="step-block"))
+            scan=RecipeScan(margin_mm=4.0, spacing_mm=1.0), serial_start=1,
+            workpiece="step-block"))
         panel = w.production_panel
         assert panel.open_recipe(tmp_path / "r.json")
         panel.countSpin.setValue(2)

@@ -1,8 +1,7 @@
 """The operator's station as a professional expects it (pytest-qt, offscreen, real widgets):
 Mark arms and waits for a confirmation, Resume after an abort, quitting asks to save, clouds
 and jobs made by the commands open, File ▸ Export job, the Help menu, refusals shown where
-they happen and cleared when they no longer hold, Ctrl+Z in a field, the calibration
-picture at full size."""
+they happen and cleared when they no longer hold, Ctrl+Z in a field."""
 
 import numpy as np
 import pytest
@@ -370,30 +369,3 @@ def test_ctrl_z_in_a_field_undoes_the_placement(qtbot, window):
     QTest.keySequence(spin, QKeySequence.StandardKey.Undo)
     assert window.session.current().width_mm == 12.0
     assert spin.value() == 12.0 and spin.text().startswith("12")
-
-
-# -- 9. the calibration picture at full size ----------------------------------------------
-def test_a_click_on_the_calibration_picture_opens_it_full_size(qtbot, window, tmp_path):
-    page = window.calibrate_panel.pages["height"]
-    page.ui.recordingEdit.setText(str(DATA / "height-cal-b4"))
-    page.ui.outputEdit.setText(str(tmp_path / "h.json"))
-    qtbot.mouseClick(page.ui.runButton, Qt.LeftButton)
-    qtbot.waitUntil(lambda: page.picture is not None, timeout=2 * WAIT_MS)   # a fit
-    shown = page.ui.pictureLabel.pixmap()
-    qtbot.mouseClick(page.ui.pictureLabel, Qt.LeftButton)
-    win = page.picture_window
-    assert win is not None and win.isVisible()
-    full = win.view.image
-    png = (tmp_path / "h.png")
-    import cv2
-    h, w = cv2.imread(str(png)).shape[:2]
-    assert (full.width(), full.height()) == (w, h) and full.width() > shown.width()
-    win.view.to_widget(np.zeros((1, 2)))              # the fitted scale, at the window's size
-    z0 = win.view.scale
-    assert win.view.fitted and z0 < 1.0
-    QTest.keyClick(win.view, Qt.Key_Plus)
-    assert win.view.scale == pytest.approx(z0 * 1.25) and not win.view.fitted
-    QTest.keyClick(win.view, Qt.Key_1)
-    assert win.view.scale == pytest.approx(1.0)
-    QTest.keyClick(win.view, Qt.Key_0)
-    assert win.view.fitted

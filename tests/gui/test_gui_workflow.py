@@ -5,6 +5,7 @@ the project, and the one-line messages for bad input."""
 import json
 from pathlib import Path
 
+import cv2
 import numpy as np
 import pytest
 from PySide6.QtCore import QMimeData, QPoint, QPointF, QSettings, Qt, QUrl
@@ -233,6 +234,7 @@ def test_drop_a_pattern_file_and_a_bad_pattern(qtbot, window):
 
 
 def test_the_height_calibration_page_shows_residuals_and_a_picture(qtbot, window, tmp_path):
+    """The fit's residuals in words and its picture, which a click opens full size."""
     page = window.calibrate_panel.pages["height"]
     page.ui.recordingEdit.setText(str(DATA / "height-cal-b4"))
     page.ui.outputEdit.setText(str(tmp_path / "h.json"))
@@ -253,6 +255,23 @@ def test_the_height_calibration_page_shows_residuals_and_a_picture(qtbot, window
     assert (tmp_path / "h.json").exists()
     qtbot.waitUntil(lambda: window.session.height_cal_path == tmp_path / "h.json",
                     timeout=WAIT_MS)
+    # a click on the picture opens it full size, zoomed by the keys
+    shown = page.ui.pictureLabel.pixmap()
+    qtbot.mouseClick(page.ui.pictureLabel, Qt.LeftButton)
+    win = page.picture_window
+    assert win is not None and win.isVisible()
+    full = win.view.image
+    h, w = cv2.imread(str(tmp_path / "h.png")).shape[:2]
+    assert (full.width(), full.height()) == (w, h) and full.width() > shown.width()
+    win.view.to_widget(np.zeros((1, 2)))              # the fitted scale, at the window's size
+    z0 = win.view.scale
+    assert win.view.fitted and z0 < 1.0
+    QTest.keyClick(win.view, Qt.Key_Plus)
+    assert win.view.scale == pytest.approx(z0 * 1.25) and not win.view.fitted
+    QTest.keyClick(win.view, Qt.Key_1)
+    assert win.view.scale == pytest.approx(1.0)
+    QTest.keyClick(win.view, Qt.Key_0)
+    assert win.view.fitted
 
 
 def test_a_device_fault_mid_scan_keeps_what_was_measured(qtbot, window, monkeypatch):
