@@ -117,9 +117,10 @@ def line_contrast(hat: np.ndarray) -> float:
     return float(max(hat.max(axis=0).mean(), hat.max(axis=1).mean()))
 
 
-def _excess(bgr: np.ndarray, c: int) -> np.ndarray:
-    """(H, W) float32: channel c minus the mean of the two others."""
-    ch = cv2.split(bgr)
+def _excess(bgr: np.ndarray, c: int, ch=None) -> np.ndarray:
+    """(H, W) float32: channel c minus the mean of the two others (ch: bgr's channels, when
+    split already)."""
+    ch = cv2.split(bgr) if ch is None else ch
     a, b = (ch[k] for k in range(3) if k != c)
     return cv2.addWeighted(ch[c], 1.0, cv2.add(a, b, dtype=cv2.CV_32F), -0.5, 0.0,
                            dtype=cv2.CV_32F)
@@ -191,9 +192,9 @@ def _laser_coloured(bgr: np.ndarray, c: int, fs: float) -> tuple[np.ndarray, np.
     full-HD frame in 3 × 3 blocks."""
     H, W = bgr.shape[:2]
     reach, f = _reach(bgr.shape)
-    excess = _excess(bgr, c)
-    b, g, r_ = cv2.split(bgr)
-    white = cv2.compare(cv2.min(cv2.min(b, g), r_), WHITE * fs, cv2.CMP_GE)
+    ch = cv2.split(bgr)
+    excess = _excess(bgr, c, ch)
+    white = cv2.compare(cv2.min(cv2.min(ch[0], ch[1]), ch[2]), WHITE * fs, cv2.CMP_GE)
     h, w = H // f, W // f
     if f > 1:
         pool = np.ones((f, f), np.uint8)
