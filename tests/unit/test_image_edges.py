@@ -123,3 +123,13 @@ def test_the_scan_command_writes_its_room_light_frame(tmp_path):
     frame = read_image(tmp_path / "room.png")
     camera = default_rig(seed=0, binning=4).camera
     assert frame.shape == (camera.height, camera.width) and frame.max() > 100
+
+
+def test_a_side_along_the_pixel_rows_is_named_as_what_holds_the_turn_back():
+    from insitu.locate.image_edges import grid_note
+    from insitu.locate.uncertainty import FRAME_TILT_PX, LOCK_PX
+
+    assert grid_note(np.full(10, np.hypot(FRAME_TILT_PX, LOCK_PX / 20))) == ""
+    note = grid_note(np.r_[np.full(5, FRAME_TILT_PX), np.hypot(FRAME_TILT_PX, LOCK_PX / 2)])
+    assert "within 2.0 pixel rows" in note and "turned a few degrees" in note
+    assert "within one pixel row" in grid_note(np.full(3, np.hypot(FRAME_TILT_PX, LOCK_PX)))

@@ -28,7 +28,14 @@ from insitu.geometry.camera import CameraModel
 from insitu.geometry.pose import rot_z
 from insitu.locate.edge_align import edge_distance
 from insitu.locate.height_image import HeightImage, sample
-from insitu.locate.uncertainty import FRAME_BIAS_PX, FitTerms, covariance, frame_tilt
+from insitu.locate.uncertainty import (
+    FRAME_BIAS_PX,
+    FRAME_TILT_PX,
+    LOCK_PX,
+    FitTerms,
+    covariance,
+    frame_tilt,
+)
 
 STEEP = 1.0
 """Slope (of the height image blurred as for its normals) above which a pixel lies on an
@@ -140,7 +147,8 @@ class ImageFit:
     shift (mm, world) (:func:`insitu.locate.uncertainty.covariance`: segments of an edge
     vary together, each edge's grey step may be off by ``bias_px``); ``sigma_mm``,
     ``sigma_deg``: 1σ of the shift (its worst direction) and of the turn; ``rms_mm`` the
-    distances' robust spread about the fit."""
+    distances' robust spread about the fit; ``note``: what held its turn back (a side along
+    the pixel rows, :func:`grid_note`; "": nothing)."""
 
     angle_rad: float
     xy_mm: np.ndarray
@@ -151,6 +159,7 @@ class ImageFit:
     rms_mm: float
     cov: np.ndarray | None = None
     terms: FitTerms | None = None
+    note: str = ""
 
 
 def align_image(image: np.ndarray, camera: CameraModel, heights: HeightImage,
@@ -218,7 +227,22 @@ def align_image(image: np.ndarray, camera: CameraModel, heights: HeightImage,
                 f"{np.degrees(x[0]):+.4f}°, {np.linalg.norm(x[1:]):.4f} mm)")
     return ImageFit(angle, t[:2].copy(), int(found.sum()), len(p),
                     float(np.sqrt(np.linalg.eigvalsh(cov[1:, 1:]).max())),
-                    float(np.degrees(np.sqrt(cov[0, 0]))), mad, cov, terms)
+                    float(np.degrees(np.sqrt(cov[0, 0]))), mad, cov, terms,
+                    grid_note(terms.tilt))
+
+
+def grid_note(tilt: np.ndarray) -> str:
+    """What holds a frame's turn back when a side of the part runs along the pixel rows or
+    columns (its tilt ``tilt`` (K,) px of :func:`insitu.locate.uncertainty.frame_tilt` more
+    than twice the light's), as a sentence; "" otherwise."""
+    worst = float(tilt.max(initial=0.0))
+    if worst <= 2 * FRAME_TILT_PX:
+        return ""
+    rows = LOCK_PX / np.sqrt(worst ** 2 - FRAME_TILT_PX ** 2)
+    within = "one pixel row" if rows < 1.05 else f"{rows:.1f} pixel rows"
+    return (f"a side of the part runs within {within} of the camera end to end, "
+            "its grey step pulled toward the pixel grid (its turn held to "
+            f"± {worst:.2f} px): the part turned a few degrees is held better")
 
 
 def edge_points(frame: Frame, camera: CameraModel, pw: np.ndarray, nw: np.ndarray, offs: np.ndarray, reach: np.ndarray | None = None

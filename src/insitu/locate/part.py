@@ -217,7 +217,7 @@ def _imaged(ref: PartReference, best: Solution, image: np.ndarray, camera: Camer
     framed = replace(best, x_mm=float(fit.xy_mm[0]), y_mm=float(fit.xy_mm[1]),
                      angle_deg=float(angle), image_edges=fit.edges,
                      image_sigma_mm=fit.sigma_mm, image_sigma_deg=fit.sigma_deg,
-                     image_sigma_rim_mm=sigma)
+                     image_sigma_rim_mm=sigma, image_note=fit.note)
     held = best.T_world_part
     if not np.isfinite(scan) and best.free_xy is not None:   # may slide along the free way
         free = np.asarray(best.free_xy)
