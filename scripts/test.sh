@@ -28,9 +28,10 @@ if (($#)); then
     "${XVFB[@]}" python -m pytest --basetemp="$BASETEMP/run" "$@"
     exit
 fi
-# the long tests first: the short ones fill the workers' ends; a module marked xdist_group runs
-# on one worker (its module fixture made once)
-XDIST=(-n auto --dist loadgroup --durations=15)
+# the long tests first: the short ones fill the workers' ends; each test file runs on one
+# worker, its tests one after the other (its module fixtures made once: xdist 3.8's loadgroup
+# does not group under pytest 9.2, whose node ids it cannot suffix)
+XDIST=(-n auto --dist loadfile --durations=15)
 INSITU_TEST_NO_QT=1 python -m pytest -p no:pytest-qt "${XDIST[@]}" --basetemp="$BASETEMP/core" \
     tests/integration tests/unit
 "${XVFB[@]}" python -m pytest "${XDIST[@]}" --basetemp="$BASETEMP/gui" tests/gui

@@ -18,9 +18,6 @@ from insitu.services.station import simulated
 from insitu.sim.rig import default_rig
 from insitu.sim.world import SimWorld
 
-# its module fixture made once: the module's tests on one pytest-xdist worker
-pytestmark = pytest.mark.xdist_group("drift-cli")
-
 runner = CliRunner()
 SEED = 3
 

@@ -27,9 +27,6 @@ from insitu.geometry.camera import CameraModel, rotation_about
 from insitu.services.camera import pose_change
 from insitu.sim.rig import default_rig
 
-# its module fixture made once: the module's tests on one pytest-xdist worker
-pytestmark = pytest.mark.xdist_group("pose-recalibration")
-
 PROGRESS = re.compile(r"[\w ]+: \d+ of \d+( \w+)?")   # a plain progress line (no terminal)
 
 runner = CliRunner()

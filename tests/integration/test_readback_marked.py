@@ -18,9 +18,6 @@ from insitu.sim.devices import SimController
 from insitu.sim.marks import RoomLightView, render_inspection
 from insitu.sim.world import sim_world
 
-# its module fixture made once: the module's tests on one pytest-xdist worker
-pytestmark = pytest.mark.xdist_group("readback-marked")
-
 
 @pytest.fixture(scope="module")
 def marked():
