@@ -219,7 +219,7 @@ class SimController:
         self.speed = {"mark": 500.0, "jump": 3000.0}
         self.wobble_mm = 0.0
         self.elapsed_s = 0.0
-        self._open: list[tuple[np.ndarray, np.ndarray]] = []
+        self._open: list[tuple[np.ndarray, ...]] = []     # the burst's samples, not yet burnt
         self._stopped = False
         self._position: ListPosition | None = None
         self._index = 0
@@ -328,16 +328,18 @@ class SimController:
             pulses = np.full(len(cmd), self.frequency_khz * 1e3 * length / n / self.speed["mark"])
             if not self._open:
                 pulses[0] = 0.0                     # the path's first sample: the spot arrives
-            self._open.append((*self.burn_at(cmd, focus), pulses))
+            # burnt when the laser goes off: one ray cast for the whole burst
+            self._open.append((cmd, focus, np.full(len(cmd), self.wobble_mm), pulses))
         elif self.pilot_is_on:
             self.pilot_trace.append(np.vstack([a, b]))
         self.joint = target
 
-    def burn_at(self, cmd: np.ndarray, focus_mm: np.ndarray) -> tuple[np.ndarray, ...]:
-        """(N, 2) commands on z = 0 and (N,) focus shifts → where the true beam meets the
-        true surface (N, 3) and the 1/e² spot diameter there (N,), mm (NaN where it meets
-        nothing), the z of the focus on each beam (N,) mm and the scene part it met (N,)
-        (−1: none)."""
+    def burn_at(self, cmd: np.ndarray, focus_mm: np.ndarray,
+                wobble_mm: np.ndarray) -> tuple[np.ndarray, ...]:
+        """(N, 2) commands on z = 0, (N,) focus shifts and (N,) wobble amplitudes → where the
+        true beam meets the true surface (N, 3) and the 1/e² spot diameter there, widened by
+        the wobble (N,), mm (NaN where it meets nothing), the z of the focus on each beam (N,)
+        mm and the scene part it met (N,) (−1: none)."""
         rig, head = self.world.rig, self.world.rig.head
         origins, dirs = rig.beams.rays(cmd)
         hits = self.scene.cast(origins, dirs)
@@ -350,13 +352,13 @@ class SimController:
         width = 2.0 * rig.optics.beam_radius_mm(s_hit - s_focus)
         pts = np.where(hits.hit[:, None], hits.points, np.nan)
         focus_z = origins[:, 2] + s_focus * dirs[:, 2]
-        return (pts, np.where(hits.hit, width + 2.0 * self.wobble_mm, np.nan), focus_z,
-                hits.part)
+        return (pts, np.where(hits.hit, width + 2.0 * wobble_mm, np.nan), focus_z, hits.part)
 
     def _close_burn(self) -> None:
         if self._open:
-            pts, w, focus_z, part, pulses = (np.concatenate(a) for a in zip(*self._open))
+            cmd, focus, wobble, pulses = (np.concatenate(a) for a in zip(*self._open))
             self._open = []
+            pts, w, focus_z, part = self.burn_at(cmd, focus, wobble)
             burn = Burn(pts, w, self.power_pct)
             if self.world.ablate(pts, part, focus_z, pulses, self.power_pct,
                                  self.frequency_khz):
