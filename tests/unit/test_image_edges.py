@@ -133,3 +133,19 @@ def test_a_side_along_the_pixel_rows_is_named_as_what_holds_the_turn_back():
     note = grid_note(np.r_[np.full(5, FRAME_TILT_PX), np.hypot(FRAME_TILT_PX, LOCK_PX / 2)])
     assert "within 2.0 pixel rows" in note and "turned a few degrees" in note
     assert "within one pixel row" in grid_note(np.full(3, np.hypot(FRAME_TILT_PX, LOCK_PX)))
+
+
+def test_a_crown_meeting_its_wall_at_a_shallow_angle_is_counted_less_sure():
+    """The 8.5 mm crowned arc's sides: its top falls 46° into them, the grey step sits up to
+    0.65 px outward (two renderers) — their bias counts SHOULDER times more; the 5 mm crown's
+    (28°) and the arc's ends do not."""
+    from insitu.locate.image_edges import SHOULDER, shoulder
+
+    for sagitta, sides in ((8.5, SHOULDER), (5.0, 1.0)):
+        w = make_workpiece("arc", sagitta=sagitta)
+        ref = reference_from_mesh(w.vertices, w.triangles, "arc")
+        o = ref.outline
+        got = shoulder(ref.heights, o.points, o.normals)
+        side = (np.abs(o.normals[:, 0]) > 0.99) & (np.abs(o.points[:, 1]) < 15)
+        end = (np.abs(o.normals[:, 1]) > 0.99) & (np.abs(o.points[:, 0]) < 15)
+        assert np.median(got[side]) == sides and np.all(got[end] == 1.0)
