@@ -8,10 +8,21 @@ import pytest
 import shapely
 
 from insitu.marking import Placement
-from insitu.marking.engrave_depth import DepthSettings
-from insitu.services.engrave import EngraveRequest, engrave
+from insitu.marking.engrave_depth import (
+    HIDDEN,
+    MEASURED,
+    DepthSettings,
+    Outline,
+    measure_depth,
+    viewpoints,
+)
+from insitu.marking.engrave_plan import CellHistory, learn, plan_round
+from insitu.services.engrave import DEPTH_CENTRES, EngraveRequest, engrave
+from insitu.services.engrave_report import depth_picture
 from insitu.services.scan import scan_live
 from insitu.services.station import connect
+from insitu.sim.ablation import ABLATION, Engraving
+from insitu.vision.extract import CentreSettings
 
 TOLERANCE = 0.010        # the issue's mean tolerance; the deepest point within 0.025
 
@@ -61,3 +72,59 @@ def test_a_narrow_slot_is_not_over_burnt_and_its_unmeasured_cells_are_named(tmp_
     assert warning == [f"warning: {rec.outcome['model_cells']} cells of {req.placement.pattern}"
                        " not measured: their depth follows the model, not the measurement"]
     print(f"slot: mean {truth.mean():.4f} deepest {truth.max():.4f}", notes)
+
+
+def _cut(world, w: float, h: float, depth: float, taper_mm: float = 0.03) -> None:
+    """A w × h mm pocket ``depth`` deep straight into the blank (walls tapered): what many
+    passes leave, without marking them."""
+    part = world.parts[0]
+    eng = Engraving(ABLATION[part.name], seed=1)
+    eng.cover(part, np.array([-w / 2, -h / 2]), np.array([w / 2, h / 2]))
+    xs, ys = eng.nodes()
+    d = np.minimum(np.clip(w / 2 - np.abs(xs)[None, :], 0, None),
+                   np.clip(h / 2 - np.abs(ys)[:, None], 0, None))
+    eng.removed = (np.minimum(d / taper_mm, 1.0) * depth).astype(np.float32)
+    eng.version += 1
+    world.engravings[0] = eng
+    world.invalidate()
+
+
+def test_a_pocket_whose_wall_hides_its_floor_reports_the_hidden_cells_never_over_burnt(
+        tmp_path):
+    """A 2 × 3 mm pocket 0.45 mm deep (100 passes at 4.5 µm) on its way to 0.5 mm: the camera,
+    ~150 mm off to −x at 330 mm, cannot see 0.2 mm of the floor along the −x wall. Those cells
+    are reported hidden (and drawn so), the planner gives them no pass beyond what their
+    highest likely rate allows, and the cells it sees go on to the depth."""
+    target, region = 0.5, shapely.box(-1.0, -1.5, 1.0, 1.5)
+    s = DepthSettings(ring_mm=1.0)
+    with connect(None, "blank-stainless", 0) as station:
+        _cut(station.world, 2.0, 3.0, 0.45)
+        scan = scan_live(station, 0.1, (-1.5, 1.5, -2.5, 2.5), room_light=False,
+                         centres=CentreSettings(**DEPTH_CENTRES))
+        outline = Outline(region, s.ring_mm + s.cell_mm)
+        cells = outline.cells(s.cell_mm)
+        h = CellHistory.start(cells.shape, 0.0045)
+        h.given(np.where(cells.inside, 100.0, 0.0))
+        dm = measure_depth(scan.cloud.points, scan.cloud.attributes["line"], region, s,
+                           outline, cells, viewpoints(station.rig), h.estimate)
+    gx, _ = cells.centres()
+    hidden = dm.state == HIDDEN
+    assert hidden.sum() >= 8 and np.all(gx[hidden] < -0.5)          # along the −x wall
+    assert dm.count(MEASURED) >= 20
+    assert abs(dm.mean_depth()[0] - 0.45) <= 0.015      # seen: −10 µm, 2 mm wide, 0.45 deep
+    learn(h, dm, 0.0045)
+    for _ in range(10):                                 # rounds on the same belief
+        plan = plan_round(h, dm.state, target, rescan_every=25)
+        if plan.layers == 0:
+            break
+        h.given(plan.passes)
+    # never over-burnt: no pass to a hidden cell beyond what its highest likely rate (15 %
+    # faster) allows; the seen ones were planned to the depth; the short hidden ones held
+    rate_hi = 1.15 * h.rate[hidden]
+    assert np.all(h.passes[hidden] <= np.maximum(100.0, np.floor(target / rate_hi)))
+    seen = dm.state == MEASURED
+    assert np.all(np.abs(h.passes[seen] * h.rate[seen] - target) <= 0.6 * h.rate[seen])
+    assert np.array_equal(plan.held, hidden & (h.passes * h.rate < target - 0.5 * h.rate))
+    assert plan.held.any()
+    depth_picture(tmp_path / "map.png", dm, target, "hidden")
+    assert (tmp_path / "map.png").stat().st_size > 0

@@ -22,7 +22,8 @@ The map: a cell's depth is the Gaussian-weighted mean of the floor points around
   measured   — enough trusted floor points around it (``min_points`` effective), its centre
                beyond the bias zone at its depth: the one state whose depth can be trusted;
   wall       — its centre within the band: the value the kernel brings from the floor inside;
-  hidden     — the camera (or the beam) cannot reach it past the wall at the depth around it;
+  hidden     — the camera (or the beam) cannot reach it past the wall at the depth around it
+               (a wall cell too: whatever the kernel brings it comes from the floor beside);
   unmeasured — too few trusted points or lines, or its centre within the bias zone at its
                depth.
 """
@@ -199,7 +200,7 @@ def measure_depth(points: np.ndarray, line: np.ndarray, region, settings: DepthS
     if viewpoints is not None:
         blocked = unreachable(cells, near, outline, viewpoints)
         state[(state == UNMEASURED) & blocked] = HIDDEN
-        state[(state == WALL) & blocked & ~ok] = HIDDEN
+        state[(state == WALL) & blocked] = HIDDEN
     depth = np.where(state == OUTSIDE, np.nan, np.where(neff > 0, depth, np.nan))
     floor_pts = np.column_stack([fx, fy, d])[keep]
     return DepthMap(cells, depth, sem, neff, state, floor_pts, top_rms, sigma)
