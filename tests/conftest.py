@@ -54,13 +54,14 @@ def _commands_let_no_exception_escape(monkeypatch):
 
 @pytest.fixture(scope="session")
 def height_cal_file(tmp_path_factory) -> Path:
-    """tests/data/height-cal-b4 (91 frames, binning 4) fitted by ``calibrate_height``, saved
-    as the JSON file ``insitu calibrate height`` writes."""
-    from insitu.formats.json_file import save_json_model
-    from insitu.services import calibrate_height
+    """tests/data/height-cal-b4 (91 frames, binning 4) fitted by ``insitu calibrate height``:
+    the JSON file it writes, its residual grid's picture beside it (.png)."""
+    from insitu.cli.main import app
 
     def fit(folder):
-        save_json_model(folder / "height.json", calibrate_height(DATA / "height-cal-b4"))
+        res = CliRunner().invoke(app, ["calibrate", "height", str(DATA / "height-cal-b4"),
+                                       "-o", str(folder / "height.json")])
+        assert res.exit_code == 0, res.output
     return shared(tmp_path_factory, "height-cal-b4", fit) / "height.json"
 
 

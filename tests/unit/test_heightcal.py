@@ -121,10 +121,10 @@ def test_method2_accuracy_fitted_at_binning_4(cal):
         assert rms <= 1.5 * rms0 and worst <= 1.5 * max0, (which, rms, worst)
 
 
-def test_cli_calibrate_then_scan_with_the_file(tmp_path):
-    hjson = tmp_path / "height.json"
-    res = runner.invoke(app, ["calibrate", "height", str(DATA / "height-cal-b4"), "-o", str(hjson)])
-    assert res.exit_code == 0, res.output
+def test_cli_calibrate_then_scan_with_the_file(height_cal_file, tmp_path):
+    """``insitu calibrate height``'s file (tests/conftest.py fits it with the command): its
+    residuals, their grid and picture; scans measure with it."""
+    hjson = height_cal_file
     cal = load_json_model(hjson, HeightCalibration)
     assert cal.residuals["sheet_rms_mm"] > 0 and cal.centres.method == "steger"
     # the residual grid: one cell per plate height × line offset, its RMS consistent with the
