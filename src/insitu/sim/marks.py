@@ -52,17 +52,14 @@ def _burn_samples(burns: list[Burn]) -> tuple[np.ndarray, np.ndarray, np.ndarray
         for run in np.split(np.arange(len(p)), np.flatnonzero(np.diff(ok.astype(int)) != 0) + 1):
             if not ok[run[0]]:
                 continue
-            q, r, k0 = p[run], w[run] / 2, len(rad)
-            pts.append(q[:1])
-            rad.append(r[:1])
-            if len(q) > 1:
-                seg = np.linalg.norm(np.diff(q, axis=0), axis=1)
-                n = np.maximum(np.ceil(seg / (0.25 * np.minimum(r[:-1], r[1:]))), 1).astype(int)
-                for i in range(len(seg)):
-                    t = (np.arange(1, n[i] + 1) / n[i])[:, None]
-                    pts.append(q[i] + t * (q[i + 1] - q[i]))
-                    rad.append(r[i] + t[:, 0] * (r[i + 1] - r[i]))
-            passes.append(np.full(sum(map(len, rad[k0:])), b.passes))
+            q, r = p[run], w[run] / 2
+            seg = np.linalg.norm(np.diff(q, axis=0), axis=1)
+            n = np.maximum(np.ceil(seg / (0.25 * np.minimum(r[:-1], r[1:]))), 1).astype(int)
+            i = np.repeat(np.arange(len(seg)), n)             # each new sample's segment
+            t = (np.arange(len(i)) - np.repeat(np.cumsum(n) - n, n) + 1) / n[i]
+            pts += [q[:1], q[i] + t[:, None] * (q[i + 1] - q[i])]
+            rad += [r[:1], r[i] + t * (r[i + 1] - r[i])]
+            passes.append(np.full(1 + len(i), b.passes))
     if not pts:
         return np.zeros((0, 3)), np.zeros(0), np.zeros(0)
     return np.vstack(pts), np.concatenate(rad), np.concatenate(passes)
