@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 
 from insitu.vision.centres import CENTRE_METHODS, UncertainLine, photo_centres
+from naive_centre import naive_com
 
 H, W = 540, 960
 BOARD = (200, 760, 80, 500)                      # x0, x1, y0, y1 px: the board's white face
@@ -59,16 +60,6 @@ def errors(c, true) -> np.ndarray:
     u = np.round(c.u).astype(int)
     err[u] = c.v - true[u]
     return err
-
-
-def naive_com(channel: np.ndarray) -> np.ndarray:
-    """Per column the centre of mass of the pixels within ±8 rows of its maximum that reach
-    0.8 of it (benchmarks/real_lines.py's baseline)."""
-    g = channel.astype(np.float64)
-    rows = np.clip(np.argmax(g, axis=0) + np.arange(-8, 9)[:, None], 0, H - 1)
-    vals = g[rows, np.arange(W)]
-    vals[vals < 0.8 * vals.max(axis=0)] = 0
-    return (vals * rows).sum(axis=0) / vals.sum(axis=0)
 
 
 @pytest.mark.parametrize("method", list(CENTRE_METHODS))

@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 
 from insitu.vision.centres import CENTRE_METHODS, photo_centres
+from naive_centre import naive_com
 
 H, W, SQUARE = 480, 640, 80
 ON = slice(80, 560)                                    # columns scored (the stripe: 60 … 579)
@@ -48,16 +49,6 @@ def score(c, true):
     right = np.abs(np.nan_to_num(err, nan=99)) <= 5
     n = ON.stop - ON.start
     return right.sum() / n, (np.isfinite(err) & ~right).sum() / n, np.where(right, err, np.nan)
-
-
-def naive_com(channel: np.ndarray) -> np.ndarray:
-    """Per column the centre of mass of the pixels within ±8 rows of its maximum that reach
-    0.8 of it (benchmarks/real_lines.py's baseline)."""
-    g = channel.astype(np.float64)
-    rows = np.clip(np.argmax(g, axis=0) + np.arange(-8, 9)[:, None], 0, H - 1)
-    vals = g[rows, np.arange(W)]
-    vals[vals < 0.8 * vals.max(axis=0)] = 0
-    return (vals * rows).sum(axis=0) / vals.sum(axis=0)
 
 
 @pytest.mark.parametrize("method", list(CENTRE_METHODS))

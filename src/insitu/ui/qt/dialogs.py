@@ -52,6 +52,12 @@ class ArmDialog(QDialog):
         buttons.rejected.connect(self.reject)
         lay.addWidget(buttons)
 
+    def dismiss(self) -> None:
+        """Close without a signal: the owner has already forgotten the armed job."""
+        self.blockSignals(True)
+        self.reject()
+        self.deleteLater()
+
 
 def ask_save(parent: QWidget, changes: list[str], what: str) -> str:
     """Ask whether to save unsaved ``changes`` before ``what`` ("quitting", "opening …");

@@ -296,9 +296,7 @@ class EngravePanel(QWidget):
     def disarm(self, why: str) -> None:
         dlg, self.arm_dialog, self._armed = self.arm_dialog, None, None
         if dlg is not None:
-            dlg.blockSignals(True)
-            dlg.reject()
-            dlg.deleteLater()
+            dlg.dismiss()
         self.resultLabel.setText(why)
         self.refresh()
 

@@ -238,9 +238,7 @@ class MarkPanel(QWidget):
         """Forget the armed job (its dialog closed); ``why`` shown."""
         dlg, self.arm_dialog, self._armed = self.arm_dialog, None, None
         if dlg is not None:
-            dlg.blockSignals(True)
-            dlg.reject()
-            dlg.deleteLater()
+            dlg.dismiss()
             job = self.job()
             self._result_of = None if job is None else job.digest()
             self.ui.resultLabel.setText(why)
