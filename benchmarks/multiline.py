@@ -4,7 +4,8 @@ For each part and setting of insitu's simulator, the same scan (lines 0.5 mm apa
 one line per frame and once packed (``--lines-per-frame auto``: a survey frame bounds the
 heights, then as many lines per exposure as their bands allow, about 8 mm apart on the step
 block): height RMS and max error over the part's top against the simulator's truth, the top's
-coverage, the points on a wrongly identified line, the frames and the station seconds.
+coverage, the points on a wrongly identified line, the frames and the station seconds (the
+scan's station seconds on the full-size rig: benchmarks/multiline_clock.py).
 
 Wrong line: each point's centre (the point seen by the true camera) must lie nearer its own
 line's true stripe (the true beam's hits on the true scene that the true camera sees) than
@@ -173,62 +174,6 @@ def simulator_table(parts, settings, cache: Path) -> None:
     console.print(t)
 
 
-def station_table(heights: tuple[float, float]) -> None:
-    """Station seconds of the step block's 0.5 mm scan on the full-size (binning 1) rig: the
-    simulator's timing (:class:`insitu.sim.clock.SimTiming`, as its devices advance the
-    station clock) of each frame the scan takes — the head's jump to its list, one cycle
-    over its lines, the exposure (10 ms a line), the readout of the frame or of the region
-    of interest — the frames themselves not drawn; ``heights``: what the survey measured
-    (its frames counted too). The room-light frame before the lines is left out."""
-    from insitu.reconstruct.packing import FramePlan
-    from insitu.services.scan import reconstructor
-    from insitu.services.scan_frames import back_and_forth, region_of_interest
-    from insitu.sim.clock import SimTiming, roi_size
-
-    world = sim_world("step-block", seed=11, binning=1)
-    station = simulated(world)
-    rig, timing = station.rig, SimTiming()
-    lines = plan_lines(station.default_region(), 0.5)
-    rec = reconstructor(rig.camera, rig.head.pivot_height_mm, False, rig.head.z_range_mm,
-                        None, None, "timing")
-    roi = region_of_interest(rec, lines)
-    plan = FramePlan(lines, rec.sheets, rig.head.z_range_mm, "auto")
-    surveys = plan.surveys()
-    packed = plan.frames((heights[0] + 0.5, heights[1] - 0.5))
-    t = Table(title="station seconds, step block, lines 0.5 mm apart, binning 1 (2448 × 2048), "
-                    "10 ms of light a line (the room-light frame left out; packed: its "
-                    "survey frames and one laser-off frame per packed exposure counted)")
-    for col in ("frames", "camera reads", "lines/frame", "station s", "× one line a frame"):
-        t.add_column(col)
-    base = None
-    for what, frames, window in (
-            ("one line a frame", [[line] for line in lines], None),
-            ("one line a frame", [[line] for line in lines], roi),
-            ("packed (auto)", [f.lines for f in surveys + packed], roi)):
-        rows, cols = roi_size(window, rig.camera.width, rig.camera.height)
-        at, total = np.zeros(2), 0.0
-        for f in frames:
-            drawn = back_and_forth(f) if len(f) > 1 else f
-            setup = timing.jump_s(float(np.linalg.norm(np.asarray(drawn[0][0]) - at)))
-            at = np.asarray(drawn[0][0], float)
-            total += timing.frame_s(10.0 * len(f), setup, timing.readout_s(rows, cols),
-                                    timing.cycle_s(drawn, None))
-        if what.startswith("packed"):
-            ks = {len(f.lines) for f in packed if len(f.lines) > 1}
-            total += sum(timing.frame_s(10.0 * k, 0.0, timing.readout_s(rows, cols))
-                         for k in ks)
-            frames = frames + [[]] * len(ks)
-        base = base or total
-        t.add_row(str(len(frames)), "whole frame" if window is None else f"{cols} × {rows} px",
-                  what, f"{total:.3f}", f"{total / base:.3f}")
-    light = 10e-3 * len(lines)
-    sweep = sum(float(np.linalg.norm(np.subtract(b, a))) for a, b in lines) / timing.line_speed_mm_s
-    t.add_row("-", "-", "the light alone: lines × 10 ms", f"{light:.3f}", f"{light / base:.3f}")
-    t.add_row("-", "-", f"the sweeps alone: Σ length / {timing.line_speed_mm_s:g} mm/s",
-              f"{sweep:.3f}", f"{sweep / base:.3f}")
-    console.print(t)
-
-
 def independent_table(folder: Path, cache: Path) -> None:
     """Which independent recordings hold `lines` frames (printed); then their scans'
     single-line frames summed into frames of lines ≥ 8 mm apart, replayed against the
@@ -344,7 +289,6 @@ def main() -> None:
     args = ap.parse_args()
     cache = Path(tempfile.gettempdir()) / "insitu-multiline-bench"
     cache.mkdir(exist_ok=True)
-    station_table((-0.6, 15.6))
     if not args.no_independent:
         independent_table(args.recordings, cache)
     if args.settings:

@@ -121,35 +121,43 @@ class SimCamera:
 
     def _tick(self) -> None:
         """The frame's station seconds (:meth:`SimTiming.frame_s`) onto the world's clock;
-        the head's jump to its list counts once, in the first frame after it."""
+        the head's jump to its list counts once, in the first frame after it. A frame of
+        lines is exposed for the light they need at the scan's power (the camera's exposure
+        says how much light), in whole passes over them (:meth:`SimTiming.exposure_s`)."""
         w, t = self.world, self.world.timing
         rows, cols = roi_size(self.roi, self.width, self.height)
-        seconds = t.frame_s(self._exposure_now_ms(), w.laser.setup_s, t.readout_s(rows, cols),
-                            w.laser.cycle_s)
+        exposure_ms = self._exposure_now_ms()
+        if w.laser.kind in ("line", "lines") and w.board is None:
+            exposure_ms = t.exposure_s(w.laser.lines, exposure_ms, w.laser.speed_mm_s) * 1e3
+        seconds = t.frame_s(exposure_ms, w.laser.setup_s, t.readout_s(rows, cols))
         w.laser.setup_s = 0.0
         w.clock.advance("frames", seconds)
 
 
 class SimScanHead:
     """Projects scan lines (one, or several in one exposure) and the pilot spot on the
-    world; its moves set the next frame's timing (the jump to the list's start, one cycle
-    over its lines: :class:`~insitu.sim.clock.SimTiming`)."""
+    world; its moves set the next frame's timing (the jump to the list's start, the speed
+    its lines are swept at: :class:`~insitu.sim.clock.SimTiming`)."""
 
     def __init__(self, world: SimWorld):
         self.world = world
         nominal = world.rig.operator.head
         self.field_size_mm = tuple(nominal.field_size_mm)
         self.z_range_mm = tuple(nominal.z_range_mm)
-        self.speed_mm_s = world.timing.line_speed_mm_s
+        self.speed_mm_s = world.timing.max_sweep_mm_s()
 
     def _check(self, *points) -> None:
         check_in_field(self.field_size_mm, *points)
 
     def set_line_speed(self, speed_mm_s: float) -> None:
-        """How fast each line is swept (the frames' timing); the simulated picture of a
+        """How fast each line is swept (the frames' timing), at most the head's
+        (:meth:`~insitu.sim.clock.SimTiming.max_sweep_mm_s`); the simulated picture of a
         line is the same at any speed (its light follows the exposure)."""
-        if not speed_mm_s > 0:
-            raise SafetyError(f"scan head: line speed {speed_mm_s:g} mm/s: expected > 0")
+        top = self.world.timing.max_sweep_mm_s()
+        if not 0 < speed_mm_s <= top:
+            raise SafetyError(f"scan head: line speed {speed_mm_s:g} mm/s: expected > 0 and "
+                              f"at most the head's {top:g} mm/s (rig file: "
+                              "options.sim_timing.line_speed_mm_s)")
         self.speed_mm_s = float(speed_mm_s)
 
     def show_line(self, start, end, focus_z: float = 0.0) -> None:
@@ -164,7 +172,7 @@ class SimScanHead:
         self._check(*(p for line in lines for p in line))
         kind = "line" if len(lines) == 1 else "lines"
         self._set(LaserState(kind, lines[0][0], lines[0][1], float(focus_z), tuple(lines),
-                             cycle_s=self.world.timing.cycle_s(lines, self.speed_mm_s)))
+                             speed_mm_s=self.speed_mm_s))
 
     def show_spot(self, xy, focus_z: float = 0.0) -> None:
         self._check(xy)
@@ -172,10 +180,10 @@ class SimScanHead:
 
     def _set(self, laser: LaserState) -> None:
         """Show ``laser``, its list starting with a jump from where the last one left the
-        head."""
+        head (several lines: the last one's end)."""
         w = self.world
         laser.setup_s = w.timing.jump_s(float(np.linalg.norm(laser.start - w.head_xy)))
-        w.head_xy = laser.start.copy()
+        w.head_xy = (laser.lines[-1][1] if laser.kind == "lines" else laser.start).copy()
         w.laser = laser
 
     def off(self) -> None:

@@ -44,8 +44,8 @@ class LaserState:
     """What the head shows: nothing ("off"), a ``"line"`` start → end, several lines in one
     exposure (``"lines"``: ``lines``, (start, end) each; ``start``, ``end`` the first's) or
     a ``"spot"`` at ``start``; mm on z = 0, focused at ``focus_z``. Its timing: the head's
-    jump to it (``setup_s``, counted by the next frame) and one cycle over its lines
-    (``cycle_s``)."""
+    jump to it (``setup_s``, counted by the next frame) and the speed its lines are swept at
+    (``speed_mm_s``; None: the head's fastest)."""
 
     kind: str = "off"                       # "off" | "line" | "lines" | "spot"
     start: np.ndarray | None = None
@@ -53,7 +53,7 @@ class LaserState:
     focus_z: float = 0.0
     lines: tuple = ()
     setup_s: float = 0.0
-    cycle_s: float = 0.0
+    speed_mm_s: float | None = None
 
 
 @dataclass
