@@ -99,14 +99,15 @@ class Outline:
     """The part's edges seen from above: ``points`` (K, 3) part frame, mm, on the upper side
     of each drop (z: the top's height there), ``normals`` (K, 2) outward unit, ``below``
     (K,) the height of the surface beyond the drop, mm; ``sigma_mm`` (K,) 1σ of each
-    point's edge across it, mm (a fitted scan reference's pieces:
-    :data:`insitu.locate.uncertainty.SCAN_REFERENCE_MM`; None: one for all, the
-    reference's)."""
+    point's edge across it, mm, and ``tilt_mm`` (K,) of its edge's turn, ± at its ends (a
+    fitted scan reference's pieces: :mod:`insitu.locate.outline_fit`; None: one for all,
+    the reference's)."""
 
     points: np.ndarray
     normals: np.ndarray
     below: np.ndarray
     sigma_mm: np.ndarray | None = None
+    tilt_mm: np.ndarray | None = None
 
 
 def outline(heights: HeightImage) -> Outline:
@@ -193,6 +194,7 @@ def align_image(image: np.ndarray, camera: CameraModel, heights: HeightImage,
     p, n = edges.points[seen], edges.normals[seen]
     reach = np.where(width[seen] > 0, width[seen] / 2, np.inf)
     offs = np.arange(-search_px, search_px + 1e-9, STEP_PX)
+    own = None if edges.sigma_mm is None else edges.sigma_mm[seen]
     for _ in range(ITERATIONS):
         R = rot_z(angle)[:2, :2]
         pw = np.column_stack([p[:, :2] @ R.T + t[:2], p[:, 2] + t[2]])
@@ -208,6 +210,8 @@ def align_image(image: np.ndarray, camera: CameraModel, heights: HeightImage,
         dev = np.abs(r - np.median(r))
         mad = 1.4826 * float(np.median(dev))
         w = np.minimum(1.0, 1.5 * max(mad, 1e-4) / np.maximum(dev, 1e-12))
+        if own is not None:                 # the reference's less sure pieces count less
+            w = w / (1.0 + (own[found] / max(mad, 0.01)) ** 2)
         A = J.T @ (J * w[:, None])
         try:
             x = np.linalg.solve(A, J.T @ (w * r))
@@ -221,10 +225,11 @@ def align_image(image: np.ndarray, camera: CameraModel, heights: HeightImage,
         return (f"the frame's edges scatter {mad:.3f} mm about the outline (at most "
                 f"{max_spread_mm:g}): not the part's edges")
     uv = camera.project(np.column_stack([e[found], p[found, 2] + t[2]]))
-    own = None if edges.sigma_mm is None else edges.sigma_mm[seen][found]
     steep = shoulder(heights, p[found], n[found]) * px_mm[found]
     terms = FitTerms(J, w, r, p[found, :2], n[found], p[found, 2], steep, mad,
-                     frame_tilt(p[found, :2], n[found], p[found, 2], uv), own)
+                     frame_tilt(p[found, :2], n[found], p[found, 2], uv),
+                     None if own is None else own[found],
+                     None if edges.tilt_mm is None else edges.tilt_mm[seen][found])
     cov = covariance(terms, bias_px, reference_mm=reference_mm)
     if (abs(x[0]) > max(np.sqrt(cov[0, 0]), SETTLE_RAD)
             or np.linalg.norm(x[1:]) > max(np.sqrt(np.trace(cov[1:, 1:])), SETTLE_MM)):

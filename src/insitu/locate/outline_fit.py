@@ -25,8 +25,6 @@ from __future__ import annotations
 from dataclasses import dataclass, replace
 
 import numpy as np
-from scipy.sparse import coo_matrix
-from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
 from insitu.geometry.camera import CameraModel
@@ -44,85 +42,28 @@ from insitu.locate.image_edges import (
     visible,
     wall_px,
 )
-from insitu.locate.uncertainty import SCAN_REFERENCE_MM
+from insitu.locate.pieces import Piece, fitted
+from insitu.locate.uncertainty import reference_floor
 
 SEARCH_PX = 6.0
 """How far from the splat's rough edge the frame's is looked for (its edges lie up to a few
 tenths of a mm off)."""
-LINK_MM = 1.0
-TURN_DEG = 30.0
-FIT_MM = 0.1
-"""A line or circle fits a chain of edge points when they scatter less than this about it
-(the frame's edges scatter 0.02–0.06 mm about a part's true outline at binning 2)."""
 MIN_CHECK = 3
 DEEP_MM = (0.3, 1.2)
-"""A splat's top is carried to its edges from this band inside them (:func:`top_heights`):
-its last few tenths of a mm lie low (the lines end short of an edge, the splat's kernel
-reaches over it; 1.1–1.6 mm low at 0.2 mm in), and an edge point cut at too low a height
-lies outward along the camera's ray (0.46 mm a mm of height at the rig's 25° view)."""
+"""A top is carried to its edges from this band inside them (:func:`top_heights`,
+:func:`scan_heights`): a splat's last few tenths of a mm lie low (the lines end short of an
+edge, the splat's kernel reaches over it; 1.1–1.6 mm low at 0.2 mm in), and an edge point cut
+at too low a height lies outward along the camera's ray (0.46 mm a mm of height at the rig's
+25° view)."""
+NEAREST_MM = 0.15
+"""A scan point within this of a place inside an edge gives the top's height there."""
 ROUGH_MM = 0.5
 """A frame's piece must run this close to the splat's rough outline (whose edges lie up to
 0.3 mm out: the table beside a wall is in shadow)."""
-MIN_PIECE_MM = 3.0
-DENSE = 0.25
-"""A piece needs edge points along this share of its length (the outline's points are
-``SPACING_MM`` apart): a few points found here and there are no edge."""
-MERGE_DEG = 2.0
 NEAR_MM = 0.5
+"""Scan edge samples this close to a piece (across it) check it."""
 SCAN_SPACING_MM = 0.5
 """About how far apart along an edge a crossed scan's lines end on it."""
-"""Scan edge samples this close to a piece (across it) check it."""
-
-
-@dataclass(frozen=True)
-class Piece:
-    """One fitted edge: ``kind`` "line" (``centre`` a point on it, ``axis`` its unit
-    direction) or "circle" (``centre``, ``radius_mm``); ``outward`` ±1: the side the part's
-    surface drops to (+: the line's left normal, the circle's outside); ``length_mm``;
-    ``rms_mm`` of the edge points about it (``points`` of them) at height ``z_mm`` (their
-    median), from the ``source`` "frame" or, where it showed none, the "scan"; ``scan``: the
-    scan's
-    edge samples crossing it, from ``directions`` line directions (2: crossed), ending
-    ``inset_mm`` (median) inside it along their lines (nan: none)."""
-
-    kind: str
-    centre: np.ndarray
-    axis: np.ndarray | None
-    radius_mm: float
-    outward: float
-    extent: tuple[float, float]
-    length_mm: float
-    rms_mm: float
-    points: int
-    z_mm: float
-    source: str = "frame"
-    scan: int = 0
-    directions: int = 0
-    offset_mm: float = float("nan")
-
-    def sample(self, spacing_mm: float) -> tuple[np.ndarray, np.ndarray]:
-        """(points (K, 2), outward normals (K, 2)) every ``spacing_mm`` along it."""
-        n = max(2, int(np.ceil(self.length_mm / spacing_mm)) + 1)
-        s = np.linspace(*self.extent, n)
-        if self.kind == "line":
-            left = np.array([-self.axis[1], self.axis[0]])
-            return self.centre + s[:, None] * self.axis, np.tile(self.outward * left, (n, 1))
-        radial = np.column_stack([np.cos(s), np.sin(s)])
-        return self.centre + self.radius_mm * radial, self.outward * radial
-
-    def moved(self, outward_mm: float) -> Piece:
-        """The piece moved ``outward_mm`` along its outward normal."""
-        if self.kind == "line":
-            left = np.array([-self.axis[1], self.axis[0]])
-            return replace(self, centre=self.centre + outward_mm * self.outward * left)
-        return replace(self, radius_mm=self.radius_mm + outward_mm * self.outward)
-
-    def distance(self, xy: np.ndarray) -> np.ndarray:
-        """(K,) signed distance, mm, of points (K, 2) from it, outward positive."""
-        if self.kind == "line":
-            left = np.array([-self.axis[1], self.axis[0]])
-            return self.outward * ((xy - self.centre) @ left)
-        return self.outward * (np.linalg.norm(xy - self.centre, axis=1) - self.radius_mm)
 
 
 @dataclass(frozen=True)
@@ -145,52 +86,111 @@ class OutlineFit:
 
 
 def fit_outline(heights: HeightImage, image: np.ndarray, camera: CameraModel,
-                scan: EdgeSamples | None = None) -> OutlineFit | str:
+                scan: EdgeSamples | None = None, part: np.ndarray | None = None
+                ) -> OutlineFit | str:
     """The outline of the part a scan ``heights`` (its splat, part frame = world) shows, from
     ``image`` (H, W), ``camera``'s room-light frame of it as scanned, checked by the scan's
-    edge samples ``scan`` (world frame; None: not checked). Why not, as a sentence, when the
-    frame is not the camera's or shows too little of the outline."""
+    edge samples ``scan`` (world frame; None: not checked); ``part`` (N, 3): the scan's
+    points on the part, whose heights by each piece cut its edges a second time (None: the
+    splat's heights only). Why not, as a sentence, when the frame is not the camera's or
+    shows too little of the outline."""
     if image.shape[:2] != (camera.height, camera.width):
         return (f"the frame is {image.shape[1]}×{image.shape[0]} px, the camera "
                 f"{camera.width}×{camera.height}")
     rough = outline(heights)
+    tops = _tops(heights, part)
     rough = replace(rough, points=np.column_stack([rough.points[:, :2], top_heights(
         heights, rough.points[:, :2], rough.normals)]))
-    width = wall_px(rough, camera, 0.0, np.zeros(3))
-    seen = visible(heights, rough, camera, 0.0, np.zeros(3)) & ~((width > 0) & (width < WALL_PX))
-    if seen.sum() < 50:
-        return f"{seen.sum()} of the outline's {len(rough.points)} points in the camera's view"
-    p, n = rough.points[seen], rough.normals[seen]
-    offs = np.arange(-SEARCH_PX, SEARCH_PX + 1e-9, STEP_PX)
-    found, e, _ = edge_points(frame_of(image), camera, p, n, offs,
-                              np.where(width[seen] > 0, width[seen] / 2, np.inf))
-    pieces = [q for q in _fitted(e[found], n[found], p[found, 2], SPACING_MM)
-              if _near_rough(q, rough)]
+    pieces, found, seen = _frame_pieces(heights, frame_of(image), camera, rough,
+                                        None if part is None else tops)
+    if seen < 50:
+        return f"{seen} of the outline's {len(rough.points)} points in the camera's view"
+    covered = found / len(rough.points)
     inset = float("nan")
     if scan is not None and len(scan):
         pieces, inset = _anchored(pieces, scan)
         pieces += _from_scan(pieces, rough, scan, inset)
     if not pieces:
-        return (f"no straight or round edge fitted to the {found.sum()} edge points the frame "
+        return (f"no straight or round edge fitted to the {found} edge points the frame "
                 f"shows of the outline's {len(rough.points)}")
     known = [q.offset_mm for q in pieces if np.isfinite(q.offset_mm)]
     shift = float(np.median(known)) if known else 0.0
-    return OutlineFit(_sampled(heights, pieces), tuple(pieces),
-                      float(found.sum() / len(rough.points)), inset,
+    return OutlineFit(_sampled(heights, pieces, tops), tuple(pieces), float(covered), inset,
                       _sampled(heights, [q.moved(-q.offset_mm if np.isfinite(q.offset_mm)
-                                                 else -shift) for q in pieces]))
+                                                 else -shift) for q in pieces], tops))
 
 
-def _sampled(heights: HeightImage, pieces: list[Piece]) -> Outline:
-    """The pieces sampled every ``SPACING_MM``, with the heights of ``heights`` each side (the
-    top's from ``DEEP_MM`` inside) and each piece's 1σ (checked by the crossed scan's lines
-    or not: :data:`insitu.locate.uncertainty.SCAN_REFERENCE_MM`)."""
+def _frame_pieces(heights: HeightImage, frame, camera: CameraModel, rough: Outline,
+                  tops=None) -> tuple[list[Piece], int, int]:
+    """(the pieces fitted to the frame's edges found within ``SEARCH_PX`` of the ``rough``
+    outline's points (those in view, not on a wall seen edge-on) that run along it, how many
+    edge points were found, of how many in view). ``tops``: the top's heights at edge points
+    (:func:`_tops`), at which each edge point's ray is cut again (twice: its height where
+    it was found); None: cut at the rough outline's heights."""
+    width = wall_px(rough, camera, 0.0, np.zeros(3))
+    seen = visible(heights, rough, camera, 0.0, np.zeros(3)) & ~((width > 0) & (width < WALL_PX))
+    if seen.sum() < 50:
+        return [], 0, int(seen.sum())
+    p, n = rough.points[seen], rough.normals[seen]
+    offs = np.arange(-SEARCH_PX, SEARCH_PX + 1e-9, STEP_PX)
+    found, e, _ = edge_points(frame, camera, p, n, offs,
+                              np.where(width[seen] > 0, width[seen] / 2, np.inf))
+    e, n, z = e[found], n[found], p[found, 2]
+    if tops is not None and len(e):
+        o, dirs = camera.rays(camera.project(np.column_stack([e, z])))
+        for _ in range(2):
+            z = tops(e, n)
+            e = o[:2] + dirs[:, :2] * ((z - o[2]) / dirs[:, 2])[:, None]
+    pieces = [q for q in fitted(e, n, z, SPACING_MM) if _near_rough(q, rough)]
+    return pieces, int(found.sum()), int(seen.sum())
+
+
+def _sampled(heights: HeightImage, pieces: list[Piece], tops) -> Outline:
+    """The pieces sampled every ``SPACING_MM``, with the heights ``tops`` gives (points (K, 2),
+    outward normals (K, 2) → (K,) mm), the surface's beyond from ``heights``, and each
+    piece's 1σ across it and of its turn: its fit's with the floor of a piece the crossed
+    scan's lines check, or not (:func:`insitu.locate.uncertainty.reference_floor`)."""
     pts, nrm = (np.concatenate(a) for a in zip(*(q.sample(SPACING_MM) for q in pieces)))
     below = edge_heights(heights, pts, nrm)[1]
-    sigma = np.concatenate([np.full(len(q.sample(SPACING_MM)[0]), SCAN_REFERENCE_MM[
-        "checked" if q.scan >= MIN_CHECK and np.isfinite(q.offset_mm) else "fitted"])
-        for q in pieces])
-    return Outline(np.column_stack([pts, top_heights(heights, pts, nrm)]), nrm, below, sigma)
+    count = [len(q.sample(SPACING_MM)[0]) for q in pieces]
+    floor = [reference_floor(q.rms_mm, q.scan >= MIN_CHECK and np.isfinite(q.offset_mm))
+             for q in pieces]
+    sigma = np.repeat([np.hypot(f, q.sigma_mm) for f, q in zip(floor, pieces)], count)
+    tilt = np.repeat([np.hypot(f, q.tilt_mm) for f, q in zip(floor, pieces)], count)
+    return Outline(np.column_stack([pts, tops(pts, nrm)]), nrm, below, sigma, tilt)
+
+
+def _tops(heights: HeightImage, part: np.ndarray | None):
+    """The top's height at edge points (K, 2) with outward normals (K, 2), mm: the scan's
+    points' (:func:`scan_heights`) where they give it, else the splat's
+    (:func:`top_heights`)."""
+    tree = None if part is None or not len(part) else cKDTree(part[:, :2])
+
+    def tops(edge: np.ndarray, n: np.ndarray) -> np.ndarray:
+        splat = top_heights(heights, edge, n)
+        return splat if tree is None else scan_heights(tree, part[:, 2], edge, n, splat)
+    return tops
+
+
+def scan_heights(tree: cKDTree, z: np.ndarray, edge: np.ndarray, n: np.ndarray,
+                 fallback: np.ndarray) -> np.ndarray:
+    """(K,) mm: the top's height at each edge point ``edge`` (K, 2): a line through the
+    heights ``z`` (N,) of the scan points (``tree`` of their x, y) nearest to places every
+    0.15 mm of ``DEEP_MM`` inside along the outward normal ``n`` (K, 2), carried on to the
+    edge; ``fallback`` (K,) where fewer than three such points lie within ``NEAREST_MM``."""
+    depth = np.arange(DEEP_MM[0], DEEP_MM[1] + 1e-9, 0.15)
+    q = edge[:, None, :] - depth[None, :, None] * n[:, None, :]
+    dist, k = tree.query(q.reshape(-1, 2), distance_upper_bound=NEAREST_MM)
+    ok = np.isfinite(dist).reshape(len(edge), -1)
+    zz = np.where(ok, np.append(z, 0.0)[np.minimum(k, len(z))].reshape(ok.shape), 0.0)
+    m = ok.sum(axis=1)
+    mm = np.maximum(m, 1)
+    d_mean = (ok * depth).sum(axis=1) / mm
+    z_mean = zz.sum(axis=1) / mm
+    dd = np.where(ok, depth - d_mean[:, None], 0.0)
+    slope = (dd * (zz - z_mean[:, None])).sum(axis=1) / np.maximum((dd ** 2).sum(axis=1),
+                                                                     1e-12)
+    return np.where(m >= 3, z_mean - slope * d_mean, fallback)
 
 
 def top_heights(heights: HeightImage, edge: np.ndarray, n: np.ndarray) -> np.ndarray:
@@ -209,13 +209,6 @@ def top_heights(heights: HeightImage, edge: np.ndarray, n: np.ndarray) -> np.nda
     slope = (dd * (z - z_mean[:, None])).sum(axis=1) / np.maximum((dd ** 2).sum(axis=1), 1e-12)
     return z_mean - slope * d_mean
 
-
-def _fitted(xy: np.ndarray, normals: np.ndarray, z: np.ndarray, spacing_mm: float,
-            source: str = "frame") -> list[Piece]:
-    """The pieces fitted to edge points ``xy`` (K, 2) (outward ``normals`` (K, 2), heights
-    ``z`` (K,)) found about ``spacing_mm`` apart along their edges."""
-    return _merged([piece for chain in _chains(xy, normals, z) for piece in
-                    _pieces(xy[chain], normals[chain], z[chain], spacing_mm, source)])
 
 
 def _near_rough(piece: Piece, rough: Outline) -> bool:
@@ -238,100 +231,13 @@ def _from_scan(pieces: list[Piece], rough: Outline, scan: EdgeSamples,
     nu = np.einsum("ij,ij->i", scan.dirs, rough.normals[k])
     keep = far & (nu > 0.3)
     return [replace(q, offset_mm=0.0) for q in
-            _fitted(xy[keep], rough.normals[k][keep], scan.points[keep, 2], SCAN_SPACING_MM,
+            fitted(xy[keep], rough.normals[k][keep], scan.points[keep, 2], SCAN_SPACING_MM,
                     "scan")]
 
 
-def _chains(xy: np.ndarray, normals: np.ndarray, z: np.ndarray) -> list[np.ndarray]:
-    """Index arrays of the edge points chained ``LINK_MM`` apart, normals within
-    ``TURN_DEG``, heights within 0.5 mm."""
-    pairs = cKDTree(xy).query_pairs(LINK_MM, output_type="ndarray")
-    if len(pairs):
-        a, b = pairs.T
-        pairs = pairs[(np.einsum("ij,ij->i", normals[a], normals[b])
-                       > np.cos(np.radians(TURN_DEG))) & (np.abs(z[a] - z[b]) < 0.5)]
-    graph = coo_matrix((np.ones(len(pairs)), tuple(pairs.T)) if len(pairs) else
-                       ([], ([], [])), shape=(len(xy), len(xy)))
-    label = connected_components(graph, directed=False)[1]
-    return [np.flatnonzero(label == k) for k in np.unique(label)]
 
 
-def _pieces(xy: np.ndarray, normals: np.ndarray, z: np.ndarray, spacing_mm: float,
-            source: str, depth: int = 0) -> list[Piece]:
-    """A line, else a circle fitted to a chain's points ``xy`` (K, 2) (outward ``normals``
-    (K, 2), heights ``z`` (K,), found ``spacing_mm`` apart along it); split at its corner
-    when neither fits. None from a chain shorter than ``MIN_PIECE_MM`` or with fewer points
-    than ``DENSE`` of its length's."""
-    if len(xy) < 5:
-        return []
-    m = xy.mean(axis=0)
-    axis = np.linalg.svd(xy - m, full_matrices=False)[2][0]
-    t = (xy - m) @ axis
-    if np.ptp(t) < MIN_PIECE_MM or len(xy) < DENSE * np.ptp(t) / spacing_mm:
-        return []
-    left = np.array([-axis[1], axis[0]])
-    r_line = (xy - m) @ left
-    if _rms(r_line) <= FIT_MM:
-        sign = 1.0 if np.mean(normals @ left) > 0 else -1.0
-        return [Piece("line", m, axis, np.inf, sign, (float(t.min()), float(t.max())),
-                      float(np.ptp(t)), _rms(r_line), len(xy), float(np.median(z)), source)]
-    c, radius = _circle(xy)
-    radial = (xy - c) / np.maximum(np.linalg.norm(xy - c, axis=1, keepdims=True), 1e-12)
-    r_circle = np.linalg.norm(xy - c, axis=1) - radius
-    if np.isfinite(radius) and _rms(r_circle) <= FIT_MM:
-        ang = np.unwrap(np.arctan2(radial[:, 1], radial[:, 0])[np.argsort(t)])
-        span = (float(ang.min()), float(ang.max()))
-        if np.ptp(ang) > 1.9 * np.pi:                     # closed: the whole circle
-            span = (0.0, 2 * np.pi)
-        sign = 1.0 if np.mean(np.einsum("ij,ij->i", normals, radial)) > 0 else -1.0
-        return [Piece("circle", c, None, radius, sign, span, radius * (span[1] - span[0]),
-                      _rms(r_circle), len(xy), float(np.median(z)), source)]
-    if depth > 6:
-        return []
-    corner = np.argmax(np.abs(r_line - np.interp(t, [t.min(), t.max()],
-                                                 [r_line[np.argmin(t)], r_line[np.argmax(t)]])))
-    cut = t <= t[corner]
-    return (_pieces(xy[cut], normals[cut], z[cut], spacing_mm, source, depth + 1)
-            + _pieces(xy[~cut], normals[~cut], z[~cut], spacing_mm, source, depth + 1))
 
-
-def _merged(pieces: list[Piece]) -> list[Piece]:
-    """The lines that continue one another (within ``MERGE_DEG`` and ``FIT_MM`` of each
-    other, on one level) as one (their points' fits pooled, their extents joined)."""
-    lines = sorted((p for p in pieces if p.kind == "line"), key=lambda p: -p.length_mm)
-    out = [p for p in pieces if p.kind != "line"]
-    for p in lines:
-        for k, q in enumerate(out):
-            if (q.kind == "line" and q.source == p.source and abs(q.z_mm - p.z_mm) < 0.5
-                    and q.outward * p.outward * (q.axis @ p.axis) > np.cos(np.radians(MERGE_DEG))
-                    and abs(q.distance(p.centre[None])[0]) < FIT_MM):
-                ends = np.concatenate([[(p.centre + s * p.axis - q.centre) @ q.axis
-                                        for s in p.extent], q.extent])
-                w = p.points + q.points
-                out[k] = replace(q, extent=(float(ends.min()), float(ends.max())),
-                                 length_mm=float(np.ptp(ends)), points=w,
-                                 rms_mm=float(np.hypot(q.rms_mm * np.sqrt(q.points / w),
-                                                       p.rms_mm * np.sqrt(p.points / w))))
-                break
-        else:
-            out.append(p)
-    return out
-
-
-def _circle(xy: np.ndarray) -> tuple[np.ndarray, float]:
-    """Kåsa's least-squares circle through (K, 2) points: (centre (2,), radius)."""
-    A = np.column_stack([xy, np.ones(len(xy))])
-    b = (xy ** 2).sum(axis=1)
-    sol, *_ = np.linalg.lstsq(A, b, rcond=None)
-    c = sol[:2] / 2
-    r2 = sol[2] + c @ c
-    return c, float(np.sqrt(r2)) if r2 > 0 else float("inf")
-
-
-def _rms(r: np.ndarray) -> float:
-    """RMS of residuals after the 1 % furthest are left out (a stray edge point)."""
-    a = np.sort(np.abs(r - np.median(r)))
-    return float(np.sqrt(np.mean(a[: max(1, int(np.ceil(0.99 * len(a))))] ** 2)))
 
 
 def _anchored(pieces: list[Piece], scan: EdgeSamples) -> tuple[list[Piece], float]:

@@ -208,7 +208,7 @@ def reference_from_cloud(points: np.ndarray, source: str, band_mm: float = 0.5,
     if image is not None and camera is not None:
         scan = (None if lines is None else
                 edge_samples(pts, np.asarray(lines), ~above_table(pts, table, band_mm), camera))
-        fit = fit_outline(heights, image, camera, scan)
+        fit = fit_outline(heights, image, camera, scan, part)
         if isinstance(fit, str):
             raise MeasurementError(f"{source}: its room-light frame gives no outline: {fit}")
         heights = stamp(heights, fit.anchored)

@@ -58,11 +58,13 @@ CAD): the insert's side 0.3° off a pixel row turned 0.5 px end to end read bili
 px through a cubic spline; sides that cross 10–60 rows, 0.03 px."""
 
 
-CHECKED_MM = 0.03
+CHECKED_MM = 0.015
 """1σ across a scan reference's piece its crossed scan's lines cross (at least
-``outline_fit.MIN_CHECK`` of them, its offset from them measured): the pieces so checked lay
-0.003–0.046 mm (mean) from the CAD outline on the tuning half's references (step block, arc,
-insert), the unchecked ones up to 0.16 mm."""
+``outline_fit.MIN_CHECK`` of them, its offset from them measured), clearly lit: fitted
+robustly and cut at the scan's heights, the pieces so checked lay −0.019 … +0.035 mm (mean;
++0.012 common to all) from the CAD outline on the simulated corpus' references (step block,
+arc, insert, four lights), the arc's far end 0.067 mm (its points scatter 0.037 mm rms), the
+unchecked ones up to 0.09 mm."""
 
 
 @dataclass(frozen=True)
@@ -75,7 +77,8 @@ class FitTerms:
     ν); ``spread_mm`` the residuals' robust 1σ; ``tilt`` (K,) the change of the point's
     edge's bias end to end, ± in the bias' unit (None: the bias itself; a frame's:
     :func:`frame_tilt`); ``reference`` (K,) 1σ of the reference's outline at each point, mm
-    (None: ``reference_mm`` of :func:`covariance` for all)."""
+    (None: ``reference_mm`` of :func:`covariance` for all), ``reference_tilt`` (K,) of the
+    change of its edge's error end to end, ± mm (None: as ``reference``)."""
 
     J: np.ndarray
     w: np.ndarray
@@ -87,9 +90,22 @@ class FitTerms:
     spread_mm: float
     tilt: np.ndarray | None = None
     reference: np.ndarray | None = None
+    reference_tilt: np.ndarray | None = None
 
 
 SCAN_REFERENCE_MM = {"checked": CHECKED_MM, "fitted": 0.1, "splat": 0.15}
+CLEAR_RMS_MM = 0.02
+"""A frame's edge points scatter this little (rms) about a clearly lit piece."""
+
+
+def reference_floor(rms_mm: float, checked: bool) -> float:
+    """1σ, mm, of a scan reference's piece across it and of its turn (± at its ends), beyond
+    what its own fit's scatter gives (:func:`insitu.locate.pieces.piece_sigma`): the grey
+    step's bias, ``SCAN_REFERENCE_MM["checked"]`` when the crossed scan's lines check the
+    piece, ``"fitted"`` otherwise, in proportion to its points' scatter ``rms_mm`` beyond
+    :data:`CLEAR_RMS_MM` (a weak step, a textured or dim edge)."""
+    return SCAN_REFERENCE_MM["checked" if checked else "fitted"] * max(1.0,
+                                                                        rms_mm / CLEAR_RMS_MM)
 """1σ of a scan reference's outline, per edge, across it (and its change end to end): a piece
 fitted from its room-light frame that the crossed scan's lines cross (``checked``:
 :data:`CHECKED_MM`); one they do not ("fitted"): the frame's grey steps alone, 0.03–0.16 mm
@@ -180,9 +196,10 @@ def covariance(t: FitTerms, bias_mm: float, segment_mm: float = SEGMENT_MM,
     ones = np.ones(len(w))
     tilt = ones if t.tilt is None or bias_mm <= 0 else t.tilt / bias_mm
     own = reference_mm * ones if t.reference is None else t.reference
+    own_tilt = ones if t.reference_tilt is None else t.reference_tilt / np.maximum(own, 1e-12)
     for scale, along, turned in ((bias_mm, t.along, tilt), (float(own.max(initial=0.0)),
                                                              own / max(own.max(initial=0.0),
-                                                                       1e-12), ones)):
+                                                                       1e-12), own_tilt)):
         if scale > 0:
             lever = np.zeros((2 * E, p))
             wj = J * (w * along)[:, None]
