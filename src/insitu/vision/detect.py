@@ -60,7 +60,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from insitu.vision.chains import carry_ends, junction, median3, short_ridges
+from insitu.vision.chains import carry_ends, junction, leading, median3, short_ridges
 from insitu.vision.chains import continuity as chain_support
 from insitu.vision.laser_image import full_scale, noise_sigma
 from insitu.vision.tracks import candidates, on_longest_track
@@ -149,6 +149,8 @@ def gather(img: np.ndarray, rows: np.ndarray, cols: np.ndarray):
     """img[rows, cols] as float32 (k, n) with rows (k, n) clipped, and the (k, n) inside mask
     (one take from the flattened image: a third of the time of a two-index gather)."""
     H, W = img.shape
+    if rows.size and rows.min() >= 0 and rows.max() < H:             # the common case
+        return img.reshape(-1).take(rows * W + cols).astype(np.float32), np.ones(rows.shape, bool)
     inside = (rows >= 0) & (rows < H)
     flat = np.clip(rows, 0, H - 1) * W + cols
     return img.reshape(-1).take(flat).astype(np.float32), inside
@@ -189,8 +191,7 @@ def _half_width(pre, row, gmax, w, cols) -> np.ndarray:
     the least of its ±w band to its peak, on the wider side, px."""
     g, inside = gather(pre, row[None, :] + np.arange(-w, w + 1)[:, None], cols)
     above = (g > (gmax + np.where(inside, g, np.inf).min(axis=0)) / 2) & inside
-    up = np.logical_and.accumulate(above[w::-1], axis=0).sum(axis=0)
-    down = np.logical_and.accumulate(above[w:], axis=0).sum(axis=0)
+    up, down = leading(above[w::-1]), leading(above[w:])
     return np.minimum(np.maximum(up, down), w)
 
 
@@ -375,6 +376,5 @@ def fwhm(g, inside, base, gmax) -> np.ndarray:
     FWHM in px. A bright area on one side of the line is not counted in its width."""
     above = (g > (base + gmax) / 2) & inside
     k = len(g) // 2
-    up = np.logical_and.accumulate(above[k::-1], axis=0).sum(axis=0)
-    down = np.logical_and.accumulate(above[k:], axis=0).sum(axis=0)
+    up, down = leading(above[k::-1]), leading(above[k:])
     return np.maximum(up + down - 1, 0).astype(np.float64)

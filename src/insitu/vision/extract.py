@@ -23,6 +23,7 @@ from scipy.signal import savgol_coeffs
 from insitu.errors import ConfigError
 from insitu.formats.validation import one_of
 from insitu.vision.centres import CENTRE_METHODS, line_centres
+from insitu.vision.chains import median_of
 from insitu.vision.detect import LineCentres, frame_noise
 from insitu.vision.laser_image import check_bits
 from insitu.vision.steger import moment_solve
@@ -153,7 +154,7 @@ def _jumps(u: np.ndarray, v: np.ndarray, jump_px: float) -> np.ndarray:
     if not len(du):
         return np.zeros(0, bool)
     near = (du > 0.5) & (du < 1.5)
-    slope = float(np.median(dv[near] / du[near])) if near.any() else 0.0
+    slope = median_of(dv[near] / du[near]) if near.any() else 0.0
     return np.abs(dv - slope * du) > jump_px
 
 

@@ -23,6 +23,7 @@ import numpy as np
 from numpy.lib.stride_tricks import sliding_window_view
 from scipy.special import ndtr
 
+from insitu.vision.chains import leading, median_of
 from insitu.vision.detect import (
     FWHM_PER_SIGMA,
     LineCentres,
@@ -50,8 +51,9 @@ def _flank_fit(g, inside, x, sat_mask, floor, unit=1.0):
     falls[:k] = g[:k] <= g[1:k + 1]
     falls[k + 1:] = g[k + 1:] <= g[k:-1]
     above &= falls | sat_mask
-    use[:k] &= np.logical_and.accumulate(above[k::-1], axis=0)[:0:-1]
-    use[k:] &= np.logical_and.accumulate(above[k:], axis=0)
+    rows = np.arange(k + 1)[:, None]
+    use[:k] &= (rows < leading(above[k::-1]))[:0:-1]
+    use[k:] &= rows[:len(x) - k] < leading(above[k:])
     wgt = np.where(use, g, 0.0).astype(np.float64)
     ly = np.log(np.maximum(g, unit), where=use, out=np.zeros(g.shape)).astype(np.float64)
     powers = x.astype(np.float64) ** np.arange(5)                  # (k, 5)
@@ -268,7 +270,7 @@ def steger(image: np.ndarray, sigma: float | None = None, min_peak: float = 40.0
     width = fwhm(g, inside, det.gmax - det.contrast, det.gmax)
     if sigma is None:
         own = width if det.carried.all() else width[~det.carried]
-        sigma = max(1.0, float(np.median(own)) / (2 * np.sqrt(3))) if n else 1.0
+        sigma = max(1.0, median_of(own) / (2 * np.sqrt(3))) if n else 1.0
     if min_curvature is None:
         min_curvature = 0.1 * min_contrast * unit / sigma**2
     Iu, Iv, Iuu, Ivv, Iuv = _derivatives(img, r, c, sigma)
