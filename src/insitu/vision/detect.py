@@ -242,6 +242,21 @@ def _peak_rows(search, lo, fill, top):
     return np.where(search[np.arange(len(j)), j] == fill, lo, j + top)
 
 
+def _second_rows(search, j1, lo, fill, top, w, live, min_peak):
+    """:func:`_peak_rows` of ``search`` with each column's ±w rows about its first peak j1
+    (W,) set to ``fill``, worked out only in the ``live`` columns (W,) bool (those whose first
+    peak can pass) whose greatest value left reaches ``min_peak``; the first row of its band
+    in every other column (a peak that cannot pass)."""
+    n = search.shape[1]
+    out, cols = lo.copy(), np.flatnonzero(live)
+    part = search[cols]
+    guard = np.clip((j1[cols] - top)[:, None] + np.arange(-w, w + 1), 0, n - 1)
+    part.reshape(-1)[guard + (np.arange(len(cols)) * n)[:, None]] = fill
+    keep = part.max(axis=1, initial=fill) >= min_peak
+    out[cols[keep]] = _peak_rows(part[keep], lo[cols[keep]], fill, top)
+    return out
+
+
 def detect(image, median=3, band=None, window=12, min_peak=40.0, min_contrast=20.0,
            snr=6.0, continuity=True, max_jump=4.0, decisive=1.25,
            extend_ends=True, upper=0, *, scale=None, allow=None,
@@ -284,10 +299,8 @@ def detect(image, median=3, band=None, window=12, min_peak=40.0, min_contrast=20
         row, gmax, bg, contrast, ok, run = candidate(j1)
         ambiguous, locked = np.zeros(W, bool), np.zeros(W, bool)
     if not ridge and continuity and W > 2 and span > 2 * w + 1:
-        n = search.shape[1]
-        guard = np.clip(j1[:, None] - top + np.arange(-w, w + 1)[None, :], 0, n - 1)
-        search.reshape(-1)[guard + (np.arange(W) * n)[:, None]] = fill
-        row2, gmax2, bg2, contrast2, ok2, run2 = candidate(_peak_rows(search, lo, fill, top))
+        row2, gmax2, bg2, contrast2, ok2, run2 = candidate(
+            _second_rows(search, j1, lo, fill, top, w, gmax >= min_peak, min_peak))
         ambiguous = ok & ok2
         if ambiguous.any():
             s1, s2, lab1, lab2 = chain_support(row, row2, ok, ok2, contrast, contrast2,
@@ -345,7 +358,9 @@ def frame_noise(img: np.ndarray, median: int = 3) -> float:
         rows_pre = as_image(img[rows])
     n = len(idx)
     if rows_pre.dtype.kind == "u":                     # integers: the median of a histogram
-        counts = np.cumsum(np.bincount(cv2.absdiff(rows_pre[:n], rows_pre[n:])[:, ::2].ravel()))
+        diff = np.ascontiguousarray(cv2.absdiff(rows_pre[:n], rows_pre[n:])[:, ::2])
+        counts = np.cumsum(cv2.calcHist([diff], [0], None, [256], [0, 256]).ravel().astype(
+            np.int64) if diff.dtype == np.uint8 else np.bincount(diff.ravel()))
         m = counts[-1]
         mid = np.searchsorted(counts, [(m - 1) // 2, m // 2], side="right").mean()
     else:

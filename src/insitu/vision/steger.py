@@ -19,6 +19,8 @@ the vertex by about 1 px (0.24 mm on the step block).
 
 from __future__ import annotations
 
+from functools import lru_cache
+
 import numpy as np
 from numpy.lib.stride_tricks import sliding_window_view
 from scipy.special import ndtr
@@ -200,19 +202,28 @@ def _derivatives(img, r, c, sigma):
     H, W = img.shape
     R, M = int(np.ceil(3.5 * sigma)), _M + 1
     L, K, n = 2 * M + 2 * R + 1, 2 * R + 1, len(r)
-    kernels = gaussian_kernels(sigma, R)
+    kernels, v0, v1, v2 = _filters(float(sigma), R, M)
     if n and r.min() >= M + R and r.max() < H - M - R and c.min() >= R and c.max() < W - R:
         P = sliding_window_view(img, (L, K))[r - M - R, c - R]
     else:
         rows = np.clip(r[:, None, None] + np.arange(-M - R, M + R + 1)[None, :, None], 0, H - 1)
         P = img[rows, np.clip(c[:, None, None] + np.arange(-R, R + 1)[None, None, :], 0, W - 1)]
-    A = (P.reshape(n * L, K).astype(np.float32) @ np.stack(kernels, 1)).reshape(n, L, 3)
-    T0, T1, T2 = (_banded(h, 2 * M + 1, L) for h in kernels)
+    A = (P.reshape(n * L, K).astype(np.float32) @ kernels).reshape(n, L, 3)
     k = 2 * M + 1
-    a0 = np.ascontiguousarray(A[:, :, 0]) @ np.hstack([T1, T2])
-    a1 = np.ascontiguousarray(A[:, :, 1]) @ np.hstack([T0, T1])
-    a2 = np.ascontiguousarray(A[:, :, 2]) @ T0
+    a0 = np.ascontiguousarray(A[:, :, 0]) @ v0
+    a1 = np.ascontiguousarray(A[:, :, 1]) @ v1
+    a2 = np.ascontiguousarray(A[:, :, 2]) @ v2
     return a1[:, :k], a0[:, :k], a2, a0[:, k:], a1[:, k:]
+
+
+@lru_cache(maxsize=16)
+def _filters(sigma: float, R: int, M: int):
+    """:func:`_derivatives`' filters for σ, R, M: the three kernels (2R+1, 3) float32 along u,
+    and the banded matrices along v that the u-filtered smoothed, first- and second-derivative
+    patches are multiplied by: [T1 T2], [T0 T1], T0 (:func:`_banded`)."""
+    kernels = gaussian_kernels(sigma, R)
+    T0, T1, T2 = (_banded(h, 2 * M + 1, 2 * M + 2 * R + 1) for h in kernels)
+    return np.stack(kernels, 1), np.hstack([T1, T2]), np.hstack([T0, T1]), T0
 
 
 def _banded(h, rows, length):
