@@ -144,7 +144,8 @@ def light_plane(pivot_height_mm: float, start: np.ndarray, end: np.ndarray,
     b = np.array([start[0], start[1], 0.0])
     c = np.array([end[0], end[1], 0.0])
     a = np.array([b[0], b[1], pivot_height_mm]) if telecentric else np.array([0, 0, pivot_height_mm])
-    n = np.cross(c - b, a - b)
+    (p, q, r), (x, y, z) = c - b, a - b
+    n = np.array([q * z - r * y, r * x - p * z, p * y - q * x])    # (c − b) × (a − b)
     norm = np.linalg.norm(n)
     if norm < 1e-12:
         raise ValueError("light plane undefined: the line and the pivot are collinear")

@@ -7,6 +7,7 @@ import numpy as np
 
 from insitu.geometry.beams import light_plane
 from insitu.geometry.camera import CameraModel
+from insitu.vision.chains import median_of
 
 
 def intersect_plane(camera: CameraModel, uv: np.ndarray, plane: np.ndarray) -> np.ndarray:
@@ -65,11 +66,12 @@ def band_and_side(camera: CameraModel, start, end, pivot_height_mm: float,
     along, across = (0, 1) if along_rows else (1, 0)
     n = camera.width if along_rows else camera.height
     grid = np.arange(n, dtype=np.float64)
+    z = np.asarray(z_range_mm, np.float64)[:, None]                 # the two ends, (2, 1)
+    p = np.empty((2, len(xy), 3))
+    p[..., :2], p[..., 2] = xy, z
+    p[..., axis] = -(plane[1 - axis] * p[..., 1 - axis] + plane[2] * z + plane[3]) / plane[axis]
     edges = []
-    for z in z_range_mm:
-        p = np.column_stack([xy, np.full(len(xy), float(z))])
-        p[:, axis] = -(plane[1 - axis] * p[:, 1 - axis] + plane[2] * z + plane[3]) / plane[axis]
-        uv = camera.project(p)
+    for uv in camera.project(p.reshape(-1, 3)).reshape(2, -1, 2):
         uv = uv[np.isfinite(uv).all(axis=1)]
         if len(uv) < 2:
             return np.full(n, np.nan), np.full(n, np.nan), 0
@@ -77,5 +79,5 @@ def band_and_side(camera: CameraModel, start, end, pivot_height_mm: float,
         edges.append(np.interp(grid, uv[o, along], uv[o, across], left=np.nan, right=np.nan))
     rise = (edges[1] - edges[0]) * np.sign(z_range_mm[1] - z_range_mm[0])
     rise = rise[np.isfinite(rise)]
-    side = int(np.sign(np.median(rise))) if len(rise) else 0
+    side = int(np.sign(median_of(rise))) if len(rise) else 0
     return np.fmin(*edges) - margin_px, np.fmax(*edges) + margin_px, side
