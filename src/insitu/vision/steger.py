@@ -104,6 +104,16 @@ def _plateau_centre(raw, inside, x, sat_mask, noise, unit=1.0):
     g = np.where(inside, raw - bg, 0)
     floor = np.maximum(max(3.0 * unit, 3.0 * noise), np.abs(bg[-1] - bg[0]))
     vertex = _flank_fit(g, inside, x, sat_mask, floor, unit)
+    rest = np.flatnonzero(~np.isfinite(vertex))
+    if len(rest):
+        vertex[rest] = _run_centroid(raw[:, rest], inside[:, rest], x, sat_mask[:, rest],
+                                     bg[:, rest], g[:, rest])
+    return vertex
+
+
+def _run_centroid(raw, inside, x, sat_mask, bg, g):
+    """:func:`_plateau_centre`'s centroid of the pixels joined to each column's plateau, where
+    the flank fit failed; bg, g: the band's sloping background and raw − bg (k, n)."""
     k, cols = len(raw) // 2, np.arange(raw.shape[1])
     peak = k - 2 + np.argmax(raw[k - 2:k + 3], axis=0)         # the clipped pixel nearest
     run = _segment(sat_mask, peak)
@@ -115,8 +125,7 @@ def _plateau_centre(raw, inside, x, sat_mask, noise, unit=1.0):
                      bg + g.max(axis=0) / 2)
     near = _segment((inside & (raw > level)) | run, peak)
     weight = np.where(near, raw - level, 0)
-    cen = (weight * x).sum(axis=0) / np.maximum(weight.sum(axis=0), 1e-9)
-    return np.where(np.isfinite(vertex), vertex, cen)
+    return (weight * x).sum(axis=0) / np.maximum(weight.sum(axis=0), 1e-9)
 
 
 def gaussian_peak(image: np.ndarray, min_peak: float = 40.0, window: int = 12, median: int = 3,
