@@ -40,8 +40,9 @@ from insitu.formats.materials import DEFAULT_MATERIALS
 from insitu.formats.pointcloud import PointCloud
 from insitu.marking import Placement
 from insitu.marking.engrave_depth import DepthSettings, measure_depth
-from insitu.services.engrave import DEPTH_CENTRES, EngraveRequest, engrave, station_seconds
+from insitu.services.engrave import EngraveRequest, engrave, station_seconds
 from insitu.services.plan import plan_mark
+from insitu.services.pocket import DEPTH_CENTRES
 from insitu.services.scan import scan_live
 from insitu.services.station import connect
 from insitu.sim.ablation import ABLATION, Engraving

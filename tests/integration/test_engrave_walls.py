@@ -17,8 +17,9 @@ from insitu.marking.engrave_depth import (
     viewpoints,
 )
 from insitu.marking.engrave_plan import CellHistory, learn, plan_round
-from insitu.services.engrave import DEPTH_CENTRES, EngraveRequest, engrave
+from insitu.services.engrave import EngraveRequest, engrave
 from insitu.services.engrave_report import depth_picture
+from insitu.services.pocket import DEPTH_CENTRES
 from insitu.services.scan import scan_live
 from insitu.services.station import connect
 from insitu.sim.ablation import ABLATION, Engraving

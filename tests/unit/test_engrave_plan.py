@@ -20,7 +20,13 @@ from insitu.marking.engrave_depth import (
     unreachable,
 )
 from insitu.marking.engrave_layers import layer_paths, passes_given
-from insitu.marking.engrave_plan import RATE_MARGIN, CellHistory, learn, plan_round
+from insitu.marking.engrave_plan import (
+    RATE_MARGIN,
+    STOP_SIGMAS,
+    CellHistory,
+    learn,
+    plan_round,
+)
 
 TARGET = 0.2
 
@@ -199,3 +205,61 @@ def test_before_a_trusted_measurement_a_round_stops_where_the_floor_stays_measur
     wall = np.where(np.arange(4) == 0, WALL, MEASURED)[None, :].repeat(4, 0)
     rest = plan_round(h, wall, TARGET, 100)
     assert np.all(rest.passes[wall == WALL] <= np.round(TARGET / h.rate[wall == WALL]) - 13)
+
+
+def test_a_cell_within_its_measurement_s_sigma_gets_no_pass_and_none_beyond_the_model():
+    """The stop rule: cells 0.8 pass short but within STOP_SIGMAS σ of their measured depth
+    get nothing (without σ: the rounded rest, one pass); a cell that reads 60 µm short
+    among cells at depth (a persistent error of its measurement) gets no more than one pass
+    beyond what the pocket's slowest likely rate reaches."""
+    cells = _cells(8)
+    rng = np.random.default_rng(1)
+    state = np.full(cells.shape, MEASURED)
+    h = CellHistory.start(cells.shape, 0.005)
+    h.given(np.full(cells.shape, 40.0))
+    short = _map(cells, np.full(cells.shape, TARGET - 0.004), state, sem=0.005)
+    learn(h, short, 0.005)
+    assert plan_round(h, state, TARGET, rescan_every=10).passes.min() >= 1
+    assert STOP_SIGMAS * 0.005 > 0.004
+    assert plan_round(h, state, TARGET, 10, sigma_mm=short.sem).layers == 0
+    h = CellHistory.start(cells.shape, 0.005)
+    h.given(np.full(cells.shape, 40.0))
+    depth = TARGET * (1 + 0.03 * rng.standard_normal(cells.shape))
+    depth[2, 6] = TARGET - 0.06
+    dm = _map(cells, depth, state, sem=0.005)
+    learn(h, dm, 0.005)
+    free = plan_round(h, state, TARGET, rescan_every=10)
+    plan = plan_round(h, state, TARGET, rescan_every=10, sigma_mm=dm.sem)
+    pocket = float(np.median(h.rate))
+    slow = pocket - 2 * float(np.std(h.rate))
+    assert 1 <= plan.passes[2, 6] < free.passes[2, 6]
+    assert (h.passes[2, 6] + plan.passes[2, 6]) * slow <= TARGET + pocket + 1e-9
+
+
+def _line_scan(rng, own_mm: float):
+    """A 3 × 3 mm pocket 0.3 mm deep scanned by lines 0.1 mm apart, each line's floor points
+    off by an error of σ ``own_mm`` its top points do not share, and 20 µm point noise."""
+    pts, line = [], []
+    for k, x in enumerate(np.arange(-3.0, 3.01, 0.1)):
+        y = np.arange(-3.5, 3.5, 0.05)
+        inside = (np.abs(x) < 1.5) & (np.abs(y) < 1.5)
+        own = own_mm * rng.standard_normal()
+        z = 5.0 - np.where(inside, 0.3 + own, 0.0) + 0.004 * rng.standard_normal() \
+            + 0.02 * rng.standard_normal(len(y))
+        pts.append(np.column_stack([np.full(len(y), x), y, z]))
+        line.append(np.full(len(y), k))
+    return np.vstack(pts), np.concatenate(line)
+
+
+@pytest.mark.parametrize("seed", [0, 2])
+def test_each_scan_line_s_own_floor_error_is_removed_and_counted_in_the_cells_error(seed):
+    """Lines whose floor is off by 12 µm (σ) each: the cells' depths spread by less than
+    4 µm about their mean (10 µm lines over 2.5 lines a cell would leave ~5), and their
+    standard errors cover what is left."""
+    p, line = _line_scan(np.random.default_rng(seed), 0.012)
+    dm = measure_depth(p, line, shapely.box(-1.5, -1.5, 1.5, 1.5), DepthSettings())
+    m = dm.state == MEASURED
+    err = dm.depth[m] - 0.3
+    assert m.sum() >= 64
+    assert err.std() <= 0.004
+    assert (err - err.mean()).std() / np.median(dm.sem[m]) <= 1.6

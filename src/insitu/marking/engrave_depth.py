@@ -187,7 +187,10 @@ def measure_depth(points: np.ndarray, line: np.ndarray, region, settings: DepthS
     d = top_at(points[floor], line[floor]) - points[floor, 2]
     trusted = dist[floor] >= s.wall_band_mm + s.bias_per_depth * np.maximum(d, 0.0)
     fx, fy, d = points[floor, 0][trusted], points[floor, 1][trusted], d[trusted]
-    depth, sem, neff, sigma, keep = _cell_means(cells, fx, fy, d, s.kernel_mm)
+    fline = np.unique(line[floor][trusted], return_inverse=True)[1]
+    d, line_var = _line_terms(fx, fy, d, fline, s.kernel_mm)
+    depth, sem, neff, sigma, keep = _cell_means(cells, fx, fy, d, s.kernel_mm, fline,
+                                                line_var)
     state = np.full(cells.shape, OUTSIDE, np.int8)
     state[cells.inside] = UNMEASURED
     enough = np.unique(line[floor][trusted]).size >= s.min_lines
@@ -241,10 +244,48 @@ def _top_model(p: np.ndarray, line: np.ndarray):
     return top_at, rms
 
 
-def _cell_means(cells: PocketCells, x, y, d, kernel_mm: float):
+def _line_terms(x, y, d, line, kernel_mm: float) -> tuple[np.ndarray, np.ndarray]:
+    """The floor's depths ``d`` (N,) with each scan line's own error removed, and the
+    variance (mm²) of what is left of it per line (L,) (``line`` (N,): 0 … L−1).
+
+    A line's floor points share an error the top's offset does not catch (the speckle and
+    texture of the floor it crosses). Each point's residual against the other lines' points
+    around it (Gaussian weights, σ ``kernel_mm``) averages, per line, to the line's term;
+    the terms are shrunk by their evidence (a random effect: their spread beyond the
+    residuals' noise) and centred, so the floor's mean depth is left as the lines give it."""
+    n_lines = int(line.max()) + 1 if len(line) else 0
+    if n_lines < 3:
+        return d, np.zeros(n_lines)
+    pts = np.column_stack([x, y])
+    tree = cKDTree(pts)
+    pairs = tree.query_pairs(3 * kernel_mm, output_type="ndarray")
+    pairs = pairs[line[pairs[:, 0]] != line[pairs[:, 1]]]
+    i, j = np.concatenate([pairs[:, 0], pairs[:, 1]]), np.concatenate([pairs[:, 1], pairs[:, 0]])
+    w = np.exp(-((x[i] - x[j]) ** 2 + (y[i] - y[j]) ** 2) / (2 * kernel_mm ** 2))
+    wsum = np.bincount(i, w, minlength=len(d))
+    term, var = np.zeros(n_lines), np.zeros(n_lines)
+    for _ in range(2):
+        fixed = d - term[line]
+        ref = np.bincount(i, w * fixed[j], minlength=len(d)) / np.maximum(wsum, 1e-12)
+        ok = wsum > 1e-6
+        r = d - ref
+        n = np.bincount(line[ok], minlength=n_lines).astype(float)
+        mean = np.bincount(line[ok], r[ok], minlength=n_lines) / np.maximum(n, 1)
+        noise = (np.median(np.abs(r[ok] - mean[line[ok]])) * 1.4826) ** 2 / np.maximum(n, 1)
+        has = n > 0
+        between = max(float(np.var(mean[has]) - np.mean(noise[has])), 0.0) if has.any() else 0
+        shrink = between / (between + noise)
+        term = np.where(has, mean * shrink, 0.0)
+        term -= np.average(term[has], weights=n[has]) if has.any() else 0.0
+        var = np.where(has, noise * shrink, between)
+    return d - term[line], var
+
+
+def _cell_means(cells: PocketCells, x, y, d, kernel_mm: float, line=None, line_var=None):
     """Per cell the Gaussian-weighted mean depth of the floor points, its standard error
-    and effective points; the robust point scatter; which points were kept (beyond 4σ of
-    their cell's mean: left out, a ghost or a dropped centre)."""
+    (the points' scatter and what is left of their lines' errors, ``line_var`` (L,) mm² by
+    ``line`` (N,)) and effective points; the robust point scatter; which points were kept
+    (beyond 4σ of their cell's mean: left out, a ghost or a dropped centre)."""
     shape = cells.shape
     if len(d) == 0:
         zero = np.zeros(shape)
@@ -252,8 +293,11 @@ def _cell_means(cells: PocketCells, x, y, d, kernel_mm: float):
     gx, gy = cells.centres()
     tree = cKDTree(np.column_stack([x, y]))
     keep = np.ones(len(d), bool)
+    if line is None:
+        line, line_var = np.zeros(len(d), int), np.zeros(1)
     for _ in range(2):
         depth, wsum, w2sum = np.zeros(shape), np.zeros(shape), np.zeros(shape)
+        shared = np.zeros(shape)
         near = tree.query_ball_point(np.column_stack([gx.ravel(), gy.ravel()]), 3 * kernel_mm)
         for k, idx in enumerate(near):
             idx = np.asarray(idx, int)
@@ -265,12 +309,14 @@ def _cell_means(cells: PocketCells, x, y, d, kernel_mm: float):
             i, j = divmod(k, shape[1])
             depth[i, j] = (w * d[idx]).sum() / w.sum()
             wsum[i, j], w2sum[i, j] = w.sum(), (w * w).sum()
+            by_line = np.bincount(line[idx], w, minlength=len(line_var)) / w.sum()
+            shared[i, j] = (by_line ** 2 * line_var).sum()
         row, col = cells.index(x, y)
         resid = d - depth[row, col]
         sigma = float(np.median(np.abs(resid[keep])) * 1.4826)
         keep = np.abs(resid) <= 4 * max(sigma, 1e-6)
     neff = np.where(w2sum > 0, wsum ** 2 / np.where(w2sum > 0, w2sum, 1), 0.0)
-    sem = np.where(neff > 0, sigma / np.sqrt(np.maximum(neff, 1e-9)), np.inf)
+    sem = np.where(neff > 0, np.sqrt(sigma ** 2 / np.maximum(neff, 1e-9) + shared), np.inf)
     return depth, sem, neff, sigma, keep
 
 

@@ -46,6 +46,7 @@ from insitu.marking.engrave_depth import (
 APPROACH = 0.9          # while far: this fraction of the passes the model says are missing
 RATE_MARGIN = 1.15      # a cell not seen is planned as if it ablated this much faster
 UNTRUSTED_SIGMAS = 2.0  # a cell not measured is planned at its rate + this many σ of its rate
+STOP_SIGMAS = 1.0       # a measured cell gets more passes only when this many σ short
 SCAN_ERROR_MM = 0.004   # a depth scan's error shared by the pocket's cells (the floor's speckle
                         # changes pass to pass; benchmarks/engrave.py measure: 1 … 7 µm)
 _FIELDS = ("passes", "spp", "sp2", "rate", "rate_var", "estimate")
@@ -131,6 +132,23 @@ def learn(history: CellHistory, dm: DepthMap, nominal_rate_mm: float) -> Learnt:
     return Learnt(rate, float(np.sqrt(rate_sem2)), float(np.sqrt(tau2)), int(fit.sum()))
 
 
+def _stopped(history: CellHistory, need: np.ndarray, rate: np.ndarray, target_mm: float,
+             sigma_mm: np.ndarray, measured: np.ndarray) -> np.ndarray:
+    """The passes the measured cells still need once the stop rule has spoken: none where the
+    depth missing is within :data:`STOP_SIGMAS` σ of the cell's depth (its last measurement's
+    standard error and its estimate's), and never more than reach the depth plus one pass at
+    the slowest rate the pocket's cells likely have (its median less two σ of their
+    spread): what the model predicts bounds what a measurement can ask for."""
+    sigma = np.hypot(np.nan_to_num(sigma_mm, nan=np.inf, posinf=np.inf),
+                     history.passes * np.sqrt(history.rate_var))
+    missing = need * rate
+    need = np.where(missing > STOP_SIGMAS * sigma, need, np.minimum(need, 0.0))
+    pocket = float(np.median(rate[measured]))
+    slow = max(pocket - 2.0 * float(np.std(rate[measured])), 0.5 * pocket)
+    most = np.floor((target_mm + pocket) / slow) - history.passes
+    return np.minimum(need, most)
+
+
 @dataclass(frozen=True)
 class RoundPlan:
     """The passes (ny, nx) int each cell gets in the next round; ``finishing``: the last
@@ -147,17 +165,22 @@ class RoundPlan:
 
 
 def plan_round(history: CellHistory, state: np.ndarray, target_mm: float,
-               rescan_every: int, trusted_to_mm: np.ndarray | None = None) -> RoundPlan:
+               rescan_every: int, trusted_to_mm: np.ndarray | None = None,
+               sigma_mm: np.ndarray | None = None) -> RoundPlan:
     """The next round's passes per cell (``state``: the last depth map's cell states; all
     measured before the first measurement). ``trusted_to_mm`` (ny, nx): the depth down to
-    which each cell's measurement is trusted (None: any)."""
+    which each cell's measurement is trusted (None: any); ``sigma_mm`` (ny, nx): the last
+    measurement's standard error per cell (None: not measured yet)."""
     inside = state != OUTSIDE
     rate = np.maximum(history.rate, 1e-6)
     need = np.where(inside, (target_mm - history.estimate) / rate, 0.0)
+    measured = inside & (state == MEASURED)
+    if sigma_mm is not None and measured.any():
+        need = np.where(measured, _stopped(history, need, rate, target_mm, sigma_mm, measured),
+                        need)
     blind = inside & (state == HIDDEN)
     rate_hi = np.maximum(RATE_MARGIN * rate, rate + 3.0 * np.sqrt(history.rate_var))
     allowed = np.floor(target_mm / rate_hi - history.passes + 1e-9)
-    measured = inside & (state == MEASURED)
     untrusted = inside & ~measured & ~blind
     far = np.floor(APPROACH * need)
     finishing = not (far[measured] >= 1).any() if measured.any() else True

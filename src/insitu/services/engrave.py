@@ -51,8 +51,6 @@ from insitu.marking.engrave_depth import (
     DepthSettings,
     Outline,
     PocketCells,
-    measure_depth,
-    viewpoints,
 )
 from insitu.marking.engrave_layers import layer_paths, passes_given
 from insitu.marking.engrave_plan import CellHistory, Learnt, learn, plan_round
@@ -69,19 +67,15 @@ from insitu.services.common import Progress
 from insitu.services.engrave_report import centres as _centres
 from insitu.services.engrave_report import depth_picture, histogram_picture
 from insitu.services.engrave_report import measure_summary as _summary
-from insitu.services.height import centre_settings
 from insitu.services.mark import mark
 from insitu.services.plan import plan_mark
-from insitu.services.scan import Cancelled, scan_live
+from insitu.services.pocket import measure_pocket
+from insitu.services.scan import Cancelled
 from insitu.services.station import Station
-from insitu.vision.extract import CentreSettings
 
 MAX_ROUNDS = 60
 MAX_PASSES = 1000
 """The most passes an engraving plans (at the table's rate): a deeper target is beyond reach."""
-DEPTH_CENTRES = dict(method="gaussian", smooth_half_window=0, smooth_grains=0.0)
-"""How a depth scan finds line centres: across the line only (a Gaussian per row), nothing
-smoothed along it, so a wall's step is not carried onto the floor beside it."""
 
 
 @dataclass(frozen=True)
@@ -278,29 +272,21 @@ class _Engraving:
     def measure(self, record: EngraveRecord, history: CellHistory, cancel, progress
                 ) -> tuple[DepthMap, Learnt]:
         """Scan the pocket, map its depth, learn the rate; recorded."""
-        s, req = self.req.settings, self.req
-        x0, y0, x1, y1 = self.region.bounds
-        band = s.wall_band_mm + 0.3
-        region = (x0 - band, x1 + band, y0 - s.ring_mm, y1 + s.ring_mm)
-        settings = CentreSettings(**{**(centre_settings(req.height_cal).to_dict()
-                                        if req.height_cal is not None else {}),
-                                     **DEPTH_CENTRES})
+        req = self.req
         timer = StepTimer(self.station.clock)
         try:
-            scan = scan_live(self.station, req.spacing_mm, region, req.height_cal,
-                             centres=settings, cancel=cancel, progress=progress,
-                             room_light=False)
+            scan = measure_pocket(self.station, self.region, req.settings, req.spacing_mm,
+                                  req.height_cal, cancel, progress, self.outline, self.cells,
+                                  history.estimate)
         except Cancelled:
             record.state = "cancelled"
             self.save(record, history)
             raise
-        dm = measure_depth(scan.cloud.points, scan.cloud.attributes["line"], self.region, s,
-                           self.outline, self.cells, viewpoints(self.station.rig),
-                           history.estimate)
+        dm = scan.map
         learnt = learn(history, dm, self.nominal)
         k = len(record.measures) + 1
         record.measures.append(_summary(len(record.rounds), dm, learnt, history, req.depth_mm,
-                                        scan.summary.frames,
+                                        scan.frames,
                                         _seconds(timer.elapsed())))
         self.last = dm
         depth_picture(req.report_dir / f"measure-{k:02d}.png", dm, req.depth_mm,
@@ -333,11 +319,11 @@ def engrave(station: Station, req: EngraveRequest, cancel: threading.Event | Non
         record = e.new_record()
         history = CellHistory.from_dict(record.history)
         e.save(record, history)
-        state = np.where(e.cells.inside, 0, -1)
+        state, sigma = np.where(e.cells.inside, 0, -1), None
     else:
         history = _resumed(e, record, req)
         dm, _ = e.measure(record, history, cancel, progress)
-        state = dm.state
+        state, sigma = dm.state, dm.sem
     if req.open_loop_passes is not None:
         passes = np.where(e.cells.inside, req.open_loop_passes, 0)
         if e.mark_round(record, history, passes, True, cancel, progress):
@@ -345,7 +331,7 @@ def engrave(station: Station, req: EngraveRequest, cancel: threading.Event | Non
             e.save(record, history)
         return EngraveOutcome(record, None)
     while len(record.rounds) < MAX_ROUNDS:
-        plan = plan_round(history, state, req.depth_mm, req.rescan_every, e.trusted_to)
+        plan = plan_round(history, state, req.depth_mm, req.rescan_every, e.trusted_to, sigma)
         if plan.layers == 0:
             e.finish(record, history, plan.held, state)
             return EngraveOutcome(record, e.last)
@@ -357,7 +343,7 @@ def engrave(station: Station, req: EngraveRequest, cancel: threading.Event | Non
                                    f"per pass, {learnt.rate_mm / e.nominal:.0%} of the "
                                    f"{req.material} table's: check the laser, the focus and "
                                    "the material")
-        state = dm.state
+        state, sigma = dm.state, dm.sem
     raise MeasurementError(f"the pocket is not at depth after {MAX_ROUNDS} rounds")
 
 

@@ -1,22 +1,43 @@
 """A pocket measured on the station, as an engraving measures it between rounds: a local scan
 of lines across the pocket and the top around it, their centres found across the line only
-(:data:`insitu.services.engrave.DEPTH_CENTRES`: nothing smoothed along it, so a wall's step
-is not carried onto the floor), the depth mapped per cell against the top of the same lines
+(:data:`DEPTH_CENTRES`: nothing smoothed along it, so a wall's step is not carried onto the
+floor), the depth mapped per cell against the top of the same lines
 (:func:`insitu.marking.engrave_depth.measure_depth`), the cells the camera or the beam
 cannot reach past a wall told apart."""
 
 from __future__ import annotations
 
 import threading
+from dataclasses import dataclass
+
+import numpy as np
 
 from insitu.formats.calibration import HeightCalibration
-from insitu.marking.engrave_depth import DepthMap, DepthSettings, measure_depth, viewpoints
+from insitu.marking.engrave_depth import (
+    DepthMap,
+    DepthSettings,
+    Outline,
+    PocketCells,
+    measure_depth,
+    viewpoints,
+)
 from insitu.services.common import Progress
-from insitu.services.engrave import DEPTH_CENTRES
 from insitu.services.height import centre_settings
 from insitu.services.scan import scan_live
 from insitu.services.station import Station
 from insitu.vision.extract import CentreSettings
+
+DEPTH_CENTRES = dict(method="gaussian", smooth_half_window=0, smooth_grains=0.0)
+"""How a depth scan finds line centres: across the line only (a Gaussian per row), nothing
+smoothed along it, so a wall's step is not carried onto the floor beside it."""
+
+
+@dataclass(frozen=True)
+class PocketScan:
+    """A pocket's depth ``map`` and the ``frames`` its scan took."""
+
+    map: DepthMap
+    frames: int
 
 
 def pocket_scan_region(region, settings: DepthSettings) -> tuple[float, float, float, float]:
@@ -27,17 +48,31 @@ def pocket_scan_region(region, settings: DepthSettings) -> tuple[float, float, f
     return (x0 - band, x1 + band, y0 - settings.ring_mm, y1 + settings.ring_mm)
 
 
-def scan_pocket(station: Station, region, settings: DepthSettings | None = None,
-                spacing_mm: float = 0.1, height_cal: HeightCalibration | None = None,
-                cancel: threading.Event | None = None,
-                progress: Progress | None = None) -> DepthMap:
+def measure_pocket(station: Station, region, settings: DepthSettings | None = None,
+                   spacing_mm: float = 0.1, height_cal: HeightCalibration | None = None,
+                   cancel: threading.Event | None = None, progress: Progress | None = None,
+                   outline: Outline | None = None, cells: PocketCells | None = None,
+                   expected_mm: np.ndarray | None = None) -> PocketScan:
     """Scan the pocket ``region`` on ``station`` (lines ``spacing_mm`` apart; heights by
-    ``height_cal``, None: the light plane alone) and map its depth. Cancelled when
-    ``cancel`` is set; MeasurementError when too few points land on the top or the floor."""
+    ``height_cal``, None: the light plane alone) and map its depth (``outline``, ``cells``,
+    ``expected_mm``: as :func:`~insitu.marking.engrave_depth.measure_depth` takes them).
+    Cancelled when ``cancel`` is set; MeasurementError when too few points land on the top
+    or the floor."""
     s = settings or DepthSettings()
     centres = CentreSettings(**{**(centre_settings(height_cal).to_dict()
                                    if height_cal is not None else {}), **DEPTH_CENTRES})
     scan = scan_live(station, spacing_mm, pocket_scan_region(region, s), height_cal,
                      centres=centres, cancel=cancel, progress=progress, room_light=False)
-    return measure_depth(scan.cloud.points, scan.cloud.attributes["line"], region, s,
-                         viewpoints=viewpoints(station.rig))
+    dm = measure_depth(scan.cloud.points, scan.cloud.attributes["line"], region, s, outline,
+                       cells, viewpoints(station.rig), expected_mm)
+    return PocketScan(dm, scan.summary.frames)
+
+
+def scan_pocket(station: Station, region, settings: DepthSettings | None = None,
+                spacing_mm: float = 0.1, height_cal: HeightCalibration | None = None,
+                cancel: threading.Event | None = None,
+                progress: Progress | None = None) -> DepthMap:
+    """The depth map of :func:`measure_pocket` (the pocket on its own, no engraving's
+    cells)."""
+    return measure_pocket(station, region, settings, spacing_mm, height_cal, cancel,
+                          progress).map
