@@ -20,8 +20,9 @@ is measured (truth.json only to score).
 ``walls``: a 0.8 mm slot to 0.2 mm and a 2 × 3 mm pocket to 0.5 mm whose walls hide part of
 its floor: the cells not measured and the hidden ones reported, the truth's deepest point.
 
-Run: nice .venv/bin/python benchmarks/engrave.py loop|measure|walls [--quick]
-(--quick: 2 mm pockets 0.05 mm deep, one material; the full table takes hours of CPU).
+Run: nice .venv/bin/python benchmarks/engrave.py loop|measure|walls [--quick] [--seed N]
+[--material M] [--pattern P] [--loops closed|open] (--quick: 2 mm pockets 0.05 mm deep, one
+material; the full table takes hours of CPU: run rows of it with --material, --pattern).
 """
 
 from __future__ import annotations
@@ -107,22 +108,23 @@ def run_pocket(material: str, pattern: str, width: float | None, depth: float, c
 def loop(args, folder: Path) -> None:
     """Seeds 0, 2, … tune (the settings were fixed on them), 1, 3, … are held out; each row
     says which."""
-    materials = ["stainless-steel"] if args.quick else list(BLANK)
+    materials = ["stainless-steel"] if args.quick else args.material or list(BLANK)
     size, depth = (2.0, 0.05) if args.quick else (6.0, 0.2)
     patterns = [("square", _square(folder, size), None)]
     if not args.quick:
         patterns.append(("text 10 mm", 'text:"IS";size=8', 10.0))
+    patterns = [p for p in patterns if not args.pattern or p[0].split()[0] in args.pattern]
     t = Table(title=f"engraving {depth:g} mm: closed vs open loop (simulator's truth)")
     for col in ("material", "pocket", "loop", "seed", "mean err µm", "95 % |err| µm",
                 "deepest over µm", "passes (cell mean)", "re-measures", "station s"):
         t.add_column(col, justify="right")
     for material in materials:
         for name, pattern, width in patterns:
-            for closed in (True, False):
+            for closed in {"both": (True, False), "closed": (True,), "open": (False,)}[args.loops]:
                 r = run_pocket(material, pattern, width, depth, closed, args.seed,
                                args.rescan_every, folder)
                 t.add_row(material, name, "closed" if closed else "open",
-                          f"{args.seed} ({'held out' if args.seed % 2 else 'tuning'})",
+                          f"{args.seed} ({_half(args.seed)})",
                           f"{r['mean'] * 1e3:+.1f}", f"{r['band'] * 1e3:.1f}",
                           f"{r['over'] * 1e3:+.1f}", f"{r['passes']:.1f}",
                           str(r["measures"]), f"{r['station_s']:.0f}")
@@ -190,22 +192,30 @@ def walls(args, folder: Path) -> None:
     2 × 3 mm to 0.5 mm whose wall towards the camera (~150 mm off to −x at 330 mm) hides
     0.23 mm of its floor (hidden cells reported, never over-burnt)."""
     t = Table(title="walls: never over-burnt (simulator's truth)")
-    for col in ("pocket", "depth mm", "state", "hidden (held)", "not measured",
-                "mean err µm", "deepest over µm", "passes", "re-measures"):
+    for col in ("pocket", "depth mm", "seed", "state", "hidden (held)", "not measured",
+                "mean err µm", "95 % |err| µm", "deepest over µm", "passes", "re-measures"):
         t.add_column(col, justify="right")
     runs = [("slot 0.8 × 1.2 mm", 0.8, 1.2, 0.2)]
     if not args.quick:
         runs.append(("pocket 2 × 3 mm", 2.0, 3.0, 0.5))
+    runs = [r for r in runs if not args.pattern or r[0].split()[0] in args.pattern]
     for name, w, h, depth in runs:
         path = folder / f"rect-{w:g}x{h:g}.svg"
         path.write_text(f'<svg xmlns="http://www.w3.org/2000/svg" width="{w}mm" '
                         f'height="{h}mm" viewBox="0 0 {w} {h}"><rect width="{w}" '
                         f'height="{h}"/></svg>')
         r = run_pocket("stainless-steel", str(path), None, depth, True, args.seed, 25, folder)
-        t.add_row(name, f"{depth:g}", r["state"], str(r["held"]), str(r["model"]),
-                  f"{r['mean'] * 1e3:+.1f}", f"{r['over'] * 1e3:+.1f}", f"{r['passes']:.1f}",
+        t.add_row(name, f"{depth:g}", f"{args.seed} ({_half(args.seed)})", r["state"],
+                  str(r["held"]), str(r["model"]), f"{r['mean'] * 1e3:+.1f}",
+                  f"{r['band'] * 1e3:.1f}", f"{r['over'] * 1e3:+.1f}", f"{r['passes']:.1f}",
                   str(r["measures"]))
+        console.print(f"{name} seed {args.seed}: {r}", highlight=False)
     console.print(t)
+
+
+def _half(seed: int) -> str:
+    """Which half of the seeds ``seed`` is in: 0, 2, … tune, 1, 3, … are held out."""
+    return "held out" if seed % 2 else "tuning"
 
 
 def main() -> None:
@@ -214,6 +224,13 @@ def main() -> None:
     ap.add_argument("--quick", action="store_true")
     ap.add_argument("--seed", type=int, default=1)
     ap.add_argument("--rescan-every", type=int, default=10)
+    ap.add_argument("--material", action="append", choices=list(BLANK),
+                    help="loop: only this material (repeat for more; default all)")
+    ap.add_argument("--pattern", action="append",
+                    choices=("square", "text", "slot", "pocket"),
+                    help="loop: square or text; walls: slot or pocket (default all)")
+    ap.add_argument("--loops", choices=("both", "closed", "open"), default="both",
+                    help="loop: closed and open loop, or one of them")
     args = ap.parse_args()
     with tempfile.TemporaryDirectory() as d:
         {"loop": loop, "measure": measure, "walls": walls}[args.what](args, Path(d))

@@ -9,7 +9,14 @@ import pytest
 from insitu.errors import FormatError
 from insitu.formats.materials import DEFAULT_MATERIALS, LaserSource, Material, read_materials
 from insitu.formats.pens import Pen
-from insitu.sim.ablation import ABLATION, CELL_MM, Engraving, MarkingBeam, ablate
+from insitu.sim.ablation import (
+    ABLATION,
+    CELL_MM,
+    Engraving,
+    MarkingBeam,
+    ablate,
+    engraved_part,
+)
 from insitu.sim.workpieces import make_workpiece
 
 BEAM = MarkingBeam()
@@ -95,6 +102,27 @@ def test_a_floor_deepens_pass_after_pass_and_its_walls_are_tapered():
     prof = row[(xs > 0.3) & (xs < 0.8)]
     x90, x10 = edge[np.argmax(prof < 0.9 * depth)], edge[np.argmax(prof < 0.1 * depth)]
     assert x10 - x90 > 2 * CELL_MM
+
+
+def test_the_surface_the_camera_sees_is_the_floor_removed_not_one_phase_of_its_hatch():
+    """Six passes of a hatch 0.02 mm apart leave ridges at the removal grid's finest period;
+    the ray-cast mesh (every 2nd node) stands at the floor's mean depth, not at its ridges'
+    or furrows' (sampled at one phase they differ from it by ~5 %)."""
+    part = make_workpiece("blank-stainless")
+    eng = Engraving(ABLATION["blank-stainless"], seed=2)
+    for k in range(6):
+        _hatch(eng, part, 80.0, seed=k)
+    xs, ys = eng.nodes()
+    inner = np.ix_(np.abs(ys) < 0.35, np.abs(xs) < 0.35)
+    mean = float(eng.removed[inner].mean())
+    phases = [float(eng.removed[inner][a::2, b::2].mean()) for a in (0, 1) for b in (0, 1)]
+    assert max(abs(p - mean) for p in phases) > 0.02 * mean      # the ridges are there
+    mesh = engraved_part(part, eng)
+    v = mesh.vertices
+    top = float(part.height(np.array([0.0]), np.array([0.0]))[0])
+    on = (np.abs(v[:, 0]) < 0.35) & (np.abs(v[:, 1]) < 0.35) & (v[:, 2] > top - 1.0)
+    assert on.sum() > 500
+    assert top - float(v[on, 2].mean()) == pytest.approx(mean, rel=0.005)
 
 
 def test_material_table_depth_per_pass_is_the_law_of_its_constants():

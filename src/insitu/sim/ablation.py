@@ -155,6 +155,15 @@ class Engraving:
         return map_coordinates(self.removed, [fy.ravel(), fx.ravel()], order=1,
                                mode="constant", cval=0.0).reshape(np.shape(u)).astype(float)
 
+    def mesh_depth(self) -> np.ndarray:
+        """(ny, nx) the removed depth low-passed for a mesh on every :data:`MESH_STEP`-th
+        node: each node the mean of the grid around it (a box of MESH_STEP cells, twice: a
+        tent), so that no detail finer than the mesh (a hatch's 0.02 mm ridges) is sampled at
+        one phase and shifts the surface the camera sees from the one removed."""
+        k = np.convolve(np.ones(MESH_STEP), np.ones(MESH_STEP)) / MESH_STEP ** 2
+        return cv2.sepFilter2D(self.removed, -1, k.astype(np.float32), k.astype(np.float32),
+                               borderType=cv2.BORDER_REPLICATE)
+
 
 def _rate_field(m: AblationMaterial, seed: int, gx: np.ndarray, gy: np.ndarray) -> np.ndarray:
     """(ny, nx) the blank's δ factor at part-frame nodes: one draw within ±rate_spread, times
@@ -267,8 +276,9 @@ def _smooth_noise(rng: np.random.Generator, shape, sigma_cells: float) -> np.nda
 
 def engraved_part(part: Workpiece, eng: Engraving) -> Workpiece:
     """``part`` with the material ``eng`` removed: its top rebuilt as a height field whose grid
-    takes the part's own nodes and the engraving's (every :data:`MESH_STEP`-th), so that the
-    ray casting sees the pockets and their walls; its true height is the engraved surface."""
+    takes the part's own nodes and the engraving's (every :data:`MESH_STEP`-th, the depth
+    low-passed for it: :meth:`Engraving.mesh_depth`), so that the ray casting sees the
+    pockets and their walls; its true height is the engraved surface."""
     if eng.removed.size == 0 or not np.any(eng.removed > 0):
         return part
     p = part.params
@@ -277,13 +287,16 @@ def engraved_part(part: Workpiece, eng: Engraving) -> Workpiece:
     top = part.vertices[:, 2] > z0 + 1e-9
     xs, ys = eng.nodes()
     xs, ys = xs[::MESH_STEP], ys[::MESH_STEP]
+    low = eng.mesh_depth()
     gx = np.unique(np.round(np.concatenate([u[top], xs]), 9))
     gy = np.unique(np.round(np.concatenate([v[top], ys]), 9))
     gx = gx[(gx >= u.min() - 1e-9) & (gx <= u.max() + 1e-9)]
     gy = gy[(gy >= v.min() - 1e-9) & (gy <= v.max() + 1e-9)]
     mx, my = np.meshgrid(gx, gy, indexing="ij")
     wx, wy = to_world(part, mx, my)
-    height = part.height(wx, wy) - eng.depth_at(mx, my)
+    fx, fy = (mx - eng.origin[0]) / CELL_MM, (my - eng.origin[1]) / CELL_MM
+    height = part.height(wx, wy) - map_coordinates(low, [fy.ravel(), fx.ravel()], order=1,
+                                                   mode="constant", cval=0.0).reshape(mx.shape)
     height = np.where(np.isfinite(height), height, z0 + 1e-3)
     verts, tris = meshes.heightfield_block(gx, gy, np.maximum(height, z0 + 1e-3), z0)
     verts = meshes.place(verts, p.get("x", 0.0), p.get("y", 0.0), p.get("angle_deg", 0.0))
