@@ -17,6 +17,11 @@ the outline (the simulator: 37 µm short 0.2 mm from it at 0.2 mm deep, 85 µm a
 speckle of the floor it crosses, about 0.01 mm): a floor crossed by fewer than ``min_lines``
 lines with trusted points is not measured at all.
 
+The lines: a line's floor points also share an error its top points do not see (the floor
+it crosses); each line's share, estimated from its points' residuals against the other lines'
+around them, is removed before the map is made (:func:`_line_terms`), and what is left of it
+counts in the cells' standard errors.
+
 The map: a cell's depth is the Gaussian-weighted mean of the floor points around its centre
 (σ ``kernel_mm``), with its standard error; each cell of the pocket is
   measured   — enough trusted floor points around it (``min_points`` effective), its centre

@@ -22,7 +22,12 @@ first such measurement, a round stops where the deepest-trusted cell would leave
 Each round's passes: the depth still missing over the cell's rate, at most ``rescan_every``;
 while the floor is far, :data:`APPROACH` of it (the next measurement corrects the rate), once
 no measured cell is more than a pass or so short, the rounded rest. A cell at its depth gets
-no more energy. A cell the camera cannot see (a wall hides it) gets passes only while its
+no more energy, and the stop rule speaks for the measurement's uncertainty: a measured cell
+gets more passes only while the depth it misses exceeds :data:`STOP_SIGMAS` σ of its
+measured depth (the last map's standard error, with the estimate's), and never more than
+reach the depth plus one pass at the slowest rate the pocket's cells likely have (what the
+model predicts bounds what one measurement can ask for: an error the scans repeat cannot
+pull a cell down). A cell the camera cannot see (a wall hides it) gets passes only while its
 passes at its highest likely rate (:data:`RATE_MARGIN` × its rate, or its rate plus three
 times the σ of the cells' spread and of the rate's estimate, whichever is higher) stay short
 of the target: it is never over-burnt, and is reported when that leaves it short.
