@@ -156,3 +156,25 @@ def test_a_reference_piece_left_unchecked_counts_more_than_a_checked_one():
     assert np.allclose(same, covariance(terms, 0.0, reference_mm=0.03))
     one = covariance(replace(terms, reference=np.where(edge == 0, 0.1, 0.03)), 0.0)
     assert one[1, 1] > 2 * same[1, 1] and np.isclose(one[2, 2], same[2, 2], rtol=0.2)
+
+
+def test_two_independent_turns_are_joined_only_against_a_mesh_and_when_they_agree():
+    """The scan's turn (1σ 0.04°) and the frame's (0.03°) of one part against a mesh: joined
+    by their inverse variances (0.024°), turned about the top's centre (which stays); against
+    a scan reference (whose outline both share), or 2σ apart, the pose is left as it was."""
+    from types import SimpleNamespace
+
+    from insitu.geometry.pose import pose_matrix
+    from insitu.locate.search import Solution, joined_turn
+
+    centre = np.array([3.0, -2.0])
+    ref = SimpleNamespace(kind="mesh", top_centroid=centre)
+    sol = Solution(10.0, 5.0, 0.0, 30.0, 1.0, 1.0, 0.01, edges=100, sigma_deg=0.04)
+    got = joined_turn(ref, sol, 30.05, 0.03)
+    assert np.isclose(got.angle_deg, 30.0 + 0.05 * 0.04 ** 2 / (0.04 ** 2 + 0.03 ** 2))
+    assert np.isclose(got.sigma_deg, 0.024) and np.isclose(got.turn_sigma_deg, 0.024)
+    stays = [(pose_matrix(o.x_mm, o.y_mm, o.angle_deg) @ [*centre, 0, 1])[:2] for o in (sol, got)]
+    assert np.allclose(*stays, atol=1e-9)
+    assert joined_turn(SimpleNamespace(kind="cloud", top_centroid=centre), sol, 30.05, 0.03) is sol
+    assert joined_turn(ref, sol, 30.11, 0.03) is sol                   # 2.2σ apart
+    assert joined_turn(ref, sol, 30.05, None) is sol

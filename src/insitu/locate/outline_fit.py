@@ -155,8 +155,8 @@ def _sampled(heights: HeightImage, pieces: list[Piece], tops) -> Outline:
     count = [len(q.sample(SPACING_MM)[0]) for q in pieces]
     floor = [reference_floor(q.rms_mm, q.scan >= MIN_CHECK and np.isfinite(q.offset_mm))
              for q in pieces]
-    sigma = np.repeat([np.hypot(f, q.sigma_mm) for f, q in zip(floor, pieces)], count)
-    tilt = np.repeat([np.hypot(f, q.tilt_mm) for f, q in zip(floor, pieces)], count)
+    sigma = np.repeat([np.hypot(f[0], q.sigma_mm) for f, q in zip(floor, pieces)], count)
+    tilt = np.repeat([np.hypot(f[1], q.tilt_mm) for f, q in zip(floor, pieces)], count)
     return Outline(np.column_stack([pts, tops(pts, nrm)]), nrm, below, sigma, tilt)
 
 

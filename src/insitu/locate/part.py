@@ -5,16 +5,14 @@ and a shift), or a refusal naming why — never a doubtful pose.
 2. Global step (:mod:`insitu.locate.search`): FPFH + RANSAC starts (up to
    :data:`RANSAC_RUNS` runs) and a search over turns, each refined by a flat ICP; the
    distinct solutions scored by ``fitness``, ``coverage`` and the inliers' RMSE.
-3. x, y and the turn from the edges the scan lines cross (:mod:`insitu.locate.edge_align`),
-   which flat tops do not give the ICP.
-4. The best is refused when it fits poorly or is only partly in the scan; when a second
-   distinct solution scores within ``ambiguity`` of it (a symmetric part) unless
-   ``prefer_angle`` picks exactly one of them.
+3. x, y and the turn from the edges the scan lines cross (:mod:`insitu.locate.edge_align`).
+4. The best is refused when it fits poorly, is only partly in the scan, or a second distinct
+   solution scores within ``ambiguity`` of it unless ``prefer_angle`` picks one of them.
 5. With a room-light frame of the camera the scan was measured through, x, y and the turn
    are taken from the top's edges in it (:mod:`insitu.locate.image_edges`) when they hold
-   the pose better than the scan's edges and agree with them (3σ of the two together and
-   ``agree_mm``; ``UNHELD_MM`` where the scan's edges do not hold it); a frame that disagrees
-   refuses the pose.
+   the pose better than the scan's edges and agree with them (3σ and ``agree_mm``;
+   ``UNHELD_MM`` where the scan's edges do not hold it; against a mesh the two turns joined:
+   :func:`~insitu.locate.search.joined_turn`); a frame that disagrees refuses the pose.
 6. The pose is given only when its σ (:mod:`insitu.locate.uncertainty`: segments of each
    edge, a bias and a tilt per edge, the reference's own outline) puts it within the
    tolerance: :data:`SIGMAS` σ at the part's rim within ``tolerance_mm``, 3σ of the turn
@@ -41,6 +39,7 @@ from insitu.locate.search import (
     Solution,
     distinct,
     global_fits,
+    joined_turn,
     pose_of,
     refine,
     solution_of,
@@ -195,9 +194,8 @@ def _imaged(ref: PartReference, best: Solution, image: np.ndarray, camera: Camer
             s: LocateSettings) -> Solution:
     """``best`` with x, y and the turn from the room-light frame's edges when they agree with
     the scan's (within 3σ of the two together and ``agree_mm``; where the scan's edges left
-    a direction free, along it by up to ``UNHELD_MM``) and hold the pose better; else
-    ``best`` with why not (``image_note``; ``image_conflict`` when the two disagree where
-    the scan held the pose: the part is refused)."""
+    a direction free, along it by up to ``UNHELD_MM``) and hold the pose better; else why
+    not (``image_note``; ``image_conflict``: the two disagree where the scan held it)."""
     scan = best.rim_sigma_mm
     start = best.T_world_part
     if not SIGMAS * scan <= s.tolerance_mm:     # the scan's pose may lie tenths of a mm off
@@ -210,10 +208,11 @@ def _imaged(ref: PartReference, best: Solution, image: np.ndarray, camera: Camer
     if isinstance(fit, str):
         return replace(best, image_note=f"not used: {fit}")
     sigma = rim_sigma(fit.cov, ref.rim @ rot_z(fit.angle_rad)[:2, :2].T)
-    if not sigma < scan:
-        return replace(best, image_note=f"not used: its edges hold the pose to {sigma:.3f} mm "
-                                        f"(1σ) at the part's rim, the scan's to {scan:.3f}")
     angle = (np.degrees(fit.angle_rad) + 180.0) % 360.0 - 180.0
+    if not sigma < scan:
+        return joined_turn(ref, replace(best, image_note=f"not used: its edges hold the pose "
+                           f"to {sigma:.3f} mm (1σ) at the part's rim, the scan's to {scan:.3f}"),
+                           angle, fit.sigma_deg)
     framed = replace(best, x_mm=float(fit.xy_mm[0]), y_mm=float(fit.xy_mm[1]),
                      angle_deg=float(angle), image_edges=fit.edges,
                      image_sigma_mm=fit.sigma_mm, image_sigma_deg=fit.sigma_deg,
@@ -240,10 +239,11 @@ def _imaged(ref: PartReference, best: Solution, image: np.ndarray, camera: Camer
         best = replace(best, sigma_rim_mm=max(scan, floor), image_note=note)
         framed = replace(framed, image_sigma_rim_mm=max(sigma, floor), image_note=note)
     if not _margin(framed, s) < _margin(best, s):
-        return best if best.image_note else replace(best, image_note=(
+        return joined_turn(ref, best if best.image_note else replace(best, image_note=(
             f"not used: its edges hold the pose to {sigma:.3f} mm at the part's rim and "
-            f"{fit.sigma_deg:.3f}° (1σ), the scan's to {scan:.3f} mm and {best.sigma_deg:.3f}°"))
-    return framed
+            f"{fit.sigma_deg:.3f}° (1σ), the scan's to {scan:.3f} mm and {best.sigma_deg:.3f}°")),
+            angle, fit.sigma_deg)
+    return joined_turn(ref, framed, best.angle_deg, best.sigma_deg)
 
 
 def _margin(sol: Solution, s: LocateSettings) -> float:

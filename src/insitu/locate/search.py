@@ -12,7 +12,7 @@ reference's top measured by the scan) and the inliers' RMSE.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy.spatial import cKDTree
@@ -185,3 +185,27 @@ def solution_of(fit: Fit, ref: PartReference, scan_tree: cKDTree, cover_mm: floa
     ang = (np.degrees(a) + 180.0) % 360.0 - 180.0
     return Solution(float(t[0]), float(t[1]), float(t[2]), float(ang), fit.fitness, cover,
                     fit.rmse_mm)
+
+
+def joined_turn(ref: PartReference, sol: Solution, other_deg: float,
+                other_sigma: float | None) -> Solution:
+    """``sol`` with its turn joined by inverse variances to ``other_deg`` (1σ
+    ``other_sigma``), an independent measure of the same turn (the scan's edges and the
+    room-light frame's: independent against a mesh ``ref``, not against a scan reference
+    whose outline both share), turned about the top's centre (where ``sol`` put it stays);
+    ``sol`` unchanged when either turn is not measured or the two lie further apart than 2σ
+    of the two together (one of them biased). The σ at the rim stays ``sol``'s."""
+    a, b = sol.turn_sigma_deg, other_sigma
+    if ref.kind != "mesh" or b is None or not (np.isfinite(a) and np.isfinite(b) and a > 0
+                                                and b > 0):
+        return sol
+    d = (other_deg - sol.angle_deg + 180.0) % 360.0 - 180.0
+    if abs(d) > 2 * np.hypot(a, b):
+        return sol
+    angle = sol.angle_deg + d * a ** 2 / (a ** 2 + b ** 2)
+    R0, R1 = rot_z(np.radians(sol.angle_deg))[:2, :2], rot_z(np.radians(angle))[:2, :2]
+    xy = np.array([sol.x_mm, sol.y_mm]) + (R0 - R1) @ ref.top_centroid
+    joined = float(a * b / np.hypot(a, b))
+    return replace(sol, x_mm=float(xy[0]), y_mm=float(xy[1]),
+                   angle_deg=float((angle + 180.0) % 360.0 - 180.0),
+                   **{"image_sigma_deg" if sol.image_edges else "sigma_deg": joined})

@@ -94,24 +94,25 @@ class FitTerms:
 
 
 SCAN_REFERENCE_MM = {"checked": CHECKED_MM, "fitted": 0.1, "splat": 0.15}
+CHECKED_TILT_MM = 0.01
+"""The same for a checked piece's turn, ± at its ends: the pieces' errors changed by −0.005 …
++0.012 mm end to end under diffuse light and a lamp, by up to ±0.04 mm under the textured
+low-contrast light (their points scatter 0.024–0.028 mm rms there)."""
 CLEAR_RMS_MM = 0.02
 """A frame's edge points scatter this little (rms) about a clearly lit piece."""
 
 
-def reference_floor(rms_mm: float, checked: bool) -> float:
-    """1σ, mm, of a scan reference's piece across it and of its turn (± at its ends), beyond
+def reference_floor(rms_mm: float, checked: bool) -> tuple[float, float]:
+    """(1σ, mm, of a scan reference's piece across it, of its turn ± at its ends) beyond
     what its own fit's scatter gives (:func:`insitu.locate.pieces.piece_sigma`): the grey
-    step's bias, ``SCAN_REFERENCE_MM["checked"]`` when the crossed scan's lines check the
-    piece, ``"fitted"`` otherwise, in proportion to its points' scatter ``rms_mm`` beyond
-    :data:`CLEAR_RMS_MM` (a weak step, a textured or dim edge)."""
-    return SCAN_REFERENCE_MM["checked" if checked else "fitted"] * max(1.0,
-                                                                        rms_mm / CLEAR_RMS_MM)
-"""1σ of a scan reference's outline, per edge, across it (and its change end to end): a piece
-fitted from its room-light frame that the crossed scan's lines cross (``checked``:
-:data:`CHECKED_MM`); one they do not ("fitted"): the frame's grey steps alone, 0.03–0.16 mm
-out on some edges and not others (a lit wall, a splat's height low beside a wall the camera
-does not see); its height image alone (the splat of its lines), 0.15–0.3 mm out beside
-walls."""
+    step's bias, ``SCAN_REFERENCE_MM["checked"]`` (its turn :data:`CHECKED_TILT_MM`) when
+    the crossed scan's lines check the piece, ``"fitted"`` otherwise, in proportion to its
+    points' scatter ``rms_mm`` beyond :data:`CLEAR_RMS_MM` (a weak step, a textured or dim
+    edge)."""
+    scale = max(1.0, rms_mm / CLEAR_RMS_MM)
+    if checked:
+        return SCAN_REFERENCE_MM["checked"] * scale, CHECKED_TILT_MM * scale
+    return SCAN_REFERENCE_MM["fitted"] * scale, SCAN_REFERENCE_MM["fitted"] * scale
 
 
 def edges_of(xy: np.ndarray, normals: np.ndarray, z: np.ndarray) -> np.ndarray:
