@@ -198,7 +198,8 @@ def main() -> None:
     }
     res = measure(frames, methods, a.rounds)
     t = Table(title=f"line centres, {W} × {H} uint8, one core, median over {a.rounds} rounds")
-    for col in ("frames", "method", "ms/frame CPU", "ms wall", "× Horus", "points/frame"):
+    for col in ("frames", "method", "ms/frame CPU", "frames/s CPU", "ms wall", "× Horus",
+                "points/frame"):
         t.add_column(col, justify="left" if col in ("frames", "method") else "right")
     for src in dict.fromkeys(k[1] for k in res):
         n = sum(f["source"].startswith(src) for f in frames)
@@ -206,7 +207,8 @@ def main() -> None:
         for name in methods:
             cpu, wall, pts = res[(name, src)]
             t.add_row(f"{src} ({n})", name, f"{np.median(cpu) * 1e3:.2f}",
-                      f"{np.median(wall) * 1e3:.2f}", f"{base / np.median(cpu):.1f}",
+                      f"{1 / np.median(cpu):.0f}", f"{np.median(wall) * 1e3:.2f}",
+                      f"{base / np.median(cpu):.1f}",
                       f"{np.mean(pts):.0f}")
     Console(width=140).print(t)
     for f in dict.fromkeys(f["source"] for f in frames):
