@@ -7,11 +7,15 @@ simulator's drawing), the processing held to one core (BLAS and OpenCV one threa
 
 Data: insitu's simulator (rig seed 11), the step block at random poses (seed 1), binning 2,
 Method 2 with ``tests/data/height-cal-b2.json`` (no crossed sheet: no second look), no field
-correction (timing only: where the code lands is benchmarks/production_run.py's), lines
-0.5 mm apart swept at 10 m/s (the simulated head's own speed; the recipe's default is
-2 m/s), the QR 0.35 mm modules on the 3 mm step.
+correction, the part's footprint + 4 mm scanned with lines ``--spacing`` apart swept at
+10 m/s (the simulated head's fastest; the recipe's default is 2 m/s), the QR 0.35 mm modules
+on the 3 mm step. Beside the times: the code's read-back (decoded, grade, the marks' largest
+offset from their planned place, mm; where the code lands to the truth is
+benchmarks/production_run.py's) and the marking's own estimate split into marks, the pens'
+delays and jumps.
 
 Run: nice taskset -c 0 .venv/bin/python benchmarks/produce_clock.py [--parts 3]
+[--spacing 0.5,1] [--per-frame 1,auto]
 """
 
 from __future__ import annotations
@@ -35,7 +39,7 @@ from insitu.formats.json_file import load_json_model  # noqa: E402
 from insitu.formats.mesh import write_mesh  # noqa: E402
 from insitu.formats.production_log import read_log  # noqa: E402
 from insitu.formats.recipe import Recipe, RecipeScan, write_recipe  # noqa: E402
-from insitu.marking import Placement  # noqa: E402
+from insitu.marking import Placement, estimate_time, read_job  # noqa: E402
 from insitu.services import production  # noqa: E402
 from insitu.services.height import scan_camera  # noqa: E402
 from insitu.services.locate import recipe_locator  # noqa: E402
@@ -47,15 +51,17 @@ PART, STEPS = "step-block", ("scan", "locate", "plan", "mark", "read")
 RIG_SEED = 11               # the rig tests/data/height-cal-b2.json was recorded on
 
 
-def run(folder: Path, per_frame, parts: int, seed: int, binning: int) -> list:
-    """One produce run of ``parts`` parts with ``per_frame`` lines a frame: its log."""
+def run(folder: Path, per_frame, parts: int, seed: int, binning: int,
+        spacing: float = 0.5) -> tuple[list, list]:
+    """One produce run of ``parts`` parts with ``per_frame`` lines a frame, lines
+    ``spacing`` mm apart: its log and each marked part's marking estimate."""
     height = load_json_model(ROOT / "tests/data/height-cal-b2.json", HeightCalibration)
     part = make_workpiece(PART)
     write_mesh(folder / "part.stl", np.array(part.vertices), np.array(part.triangles))
     p = Placement('qr:"{serial:05d}";ec=M', (0.0, -30.0), 21 * 0.35, 20.0)
     recipe_path = folder / "recipe.json"
     write_recipe(recipe_path, Recipe(folder / "part.stl", "mesh", (p,), serial_start=1,
-                                     scan=RecipeScan(margin_mm=4.0, spacing_mm=0.5,
+                                     scan=RecipeScan(margin_mm=4.0, spacing_mm=spacing,
                                                      speed_mm_s=10000.0,
                                                      lines_per_frame=per_frame),
                                      workpiece=PART))
@@ -68,7 +74,9 @@ def run(folder: Path, per_frame, parts: int, seed: int, binning: int) -> list:
         job = production.Production(recipe, station, folder / "run.jsonl", parts, locate,
                                     production.read_part, present, height_cal=height)
         production.produce(job)
-    return read_log(folder / "run.jsonl")
+    log = read_log(folder / "run.jsonl")
+    jobs = [folder / f"part-{r.part:04d}.job.json" for r in log if r.outcome == "marked"]
+    return log, [estimate_time(read_job(j)) for j in jobs if j.exists()]
 
 
 def main() -> None:
@@ -76,29 +84,42 @@ def main() -> None:
     ap.add_argument("--parts", type=int, default=3)
     ap.add_argument("--seed", type=int, default=1)
     ap.add_argument("--binning", type=int, default=2)
+    ap.add_argument("--spacing", default="0.5,1", help="line spacings, mm")
+    ap.add_argument("--per-frame", default="1", help="lines a frame: 1, auto, K (comma list)")
     args = ap.parse_args()
     cv2.setNumThreads(1)
-    t = Table(title=f"produce, {PART} + QR, binning {args.binning}, lines 0.5 mm apart: "
-                    "station s / processing CPU s (one core) per step, mean of the marked "
-                    "parts")
-    for col in ("lines a frame", "parts marked", *STEPS, "part: station s", "part: CPU s",
-                "CPU / station"):
+    t = Table(title=f"produce, {PART} + QR, binning {args.binning}: station s / processing "
+                    "CPU s (one core) per step, mean of the marked parts")
+    for col in ("lines", "marked", *STEPS, "part: station s", "part: CPU s", "CPU / station",
+                "read back", "mark: marks / delays / jumps s"):
         t.add_column(col)
-    for per_frame in (None, "auto"):
-        with tempfile.TemporaryDirectory() as tmp:
-            log = run(Path(tmp), per_frame, args.parts, args.seed, args.binning)
-        done = [r for r in log if r.outcome == "marked"] or log
-        cells, st_total, cpu_total = [], 0.0, 0.0
-        for s in STEPS:
-            st = np.mean([getattr(r, f"{s}_station_s") or 0.0 for r in done])
-            cpu = np.mean([getattr(r, f"{s}_cpu_s") or 0.0 for r in done])
-            cells.append(f"{st:.2f} / {cpu:.2f}")
-            st_total, cpu_total = st_total + st, cpu_total + cpu
-        t.add_row(str(per_frame or 1), f"{sum(r.outcome == 'marked' for r in log)} of "
-                  f"{len(log)}", *cells, f"{st_total:.2f}", f"{cpu_total:.2f}",
-                  f"{cpu_total / st_total:.2f}")
-        print(per_frame, [(r.part, r.outcome, r.error) for r in log], flush=True)
-    Console(width=170).print(t)
+    for spacing in (float(v) for v in args.spacing.split(",")):
+        for per_frame in args.per_frame.split(","):
+            k = None if per_frame == "1" else per_frame if per_frame == "auto" else int(per_frame)
+            with tempfile.TemporaryDirectory() as tmp:
+                log, est = run(Path(tmp), k, args.parts, args.seed, args.binning, spacing)
+            t.add_row(*row(log, est, spacing, per_frame))
+            print(spacing, per_frame, [(r.part, r.outcome, r.error) for r in log], flush=True)
+    Console(width=190).print(t)
+
+
+def row(log, est, spacing: float, per_frame: str) -> list[str]:
+    """The table's row of one run."""
+    done = [r for r in log if r.outcome == "marked"] or log
+    cells, st_total, cpu_total = [], 0.0, 0.0
+    for s in STEPS:
+        st = np.mean([getattr(r, f"{s}_station_s") or 0.0 for r in done])
+        cpu = np.mean([getattr(r, f"{s}_cpu_s") or 0.0 for r in done])
+        cells.append(f"{st:.2f} / {cpu:.2f}")
+        st_total, cpu_total = st_total + st, cpu_total + cpu
+    grades = "".join(sorted(r.grade or "-" for r in done))
+    worst = max((r.offset_mm or 0.0 for r in done), default=0.0)
+    read = f"{sum(bool(r.decoded) for r in done)} decoded, {grades}, ≤ {worst:.3f} mm"
+    split = (" / ".join(f"{np.mean([getattr(e, k) for e in est]):.2f}"
+                        for k in ("mark_s", "delay_s", "jump_s")) if est else "-")
+    return [f"{spacing:g} mm, {per_frame} a frame",
+            f"{sum(r.outcome == 'marked' for r in log)} of {len(log)}", *cells,
+            f"{st_total:.2f}", f"{cpu_total:.2f}", f"{cpu_total / st_total:.2f}", read, split]
 
 
 if __name__ == "__main__":

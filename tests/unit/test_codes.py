@@ -69,9 +69,16 @@ def test_default_code_hatch_runs_along_the_modules():
     spacing, angle = pl.code_hatch(p)
     assert angle == 30.0 and spacing == pytest.approx(0.25 / 5)     # 5 lines per module
     lines = pl.polylines(p)
-    d = np.concatenate([np.diff(q, axis=0) for q in lines if len(q) == 2])
+    hatched = [q for q in lines if not np.allclose(q[0], q[-1])]       # not an outline
+    d = np.concatenate([np.diff(q, axis=0) for q in hatched])
     along = np.degrees(np.arctan2(d[:, 1], d[:, 0])) % 180
-    assert np.allclose(along, 30.0, atol=1e-6)
+    step = np.hypot(*d.T)
+    # the lines run along the modules; joined back and forth by one spacing straight across
+    assert np.allclose(along[step > 1.01 * spacing], 30.0, atol=1e-6)
+    across = step <= 1.01 * spacing
+    assert np.allclose(along[across], 120.0, atol=1e-6)
+    assert np.allclose(step[across], spacing) and across.any()
+    assert len(hatched) < 0.5 * (len(d) - across.sum())                 # fewer paths than lines
 
 
 @pytest.mark.parametrize("rotate", [0.0, 30.0, 90.0])

@@ -300,6 +300,21 @@ def test_hatch_square_line_count_and_centering():
     assert all(abs(s[1, 0] - s[0, 0]) == pytest.approx(10) for s in segs)
 
 
+def test_joined_hatch_runs_back_and_forth_only_along_a_straight_edge():
+    """An L: its 100 lines joined where they end along one edge (across by one spacing),
+    split where the L's step moves the end (a step across would mark outside)."""
+    ell = Pattern((np.array([[0, 0], [10, 0], [10, 5], [4, 5], [4, 10], [0, 10]], float),))
+    plain = hatch(ell, 0.1, outline=False)
+    lines = hatch(ell, 0.1, outline=False, join=True)
+    assert len(plain) == 100 and len(lines) <= 3
+    d = np.concatenate([np.diff(q, axis=0) for q in lines])
+    across = np.abs(d[:, 1]) > 1e-9
+    assert np.allclose(d[across, 0], 0.0) and np.allclose(np.abs(d[across, 1]), 0.1)
+    assert across.sum() == 100 - len(lines)
+    assert np.abs(d[~across, 0]).sum() == pytest.approx(            # the same lines
+        sum(float(np.linalg.norm(q[1] - q[0])) for q in plain))
+
+
 def test_hatch_inside_cross_doubles_and_hole_unfilled():
     for p in (load_pattern(str(SAMPLES / "logo.svg")), load_pattern("text:&g@"),
               _square_with_hole()):

@@ -77,13 +77,16 @@ class Placement:
 
     def polylines(self, pattern: Pattern) -> list[np.ndarray]:
         """What to mark of the placed ``pattern``, in marking order: hatched fill and outlines
-        with ``hatch_mm``, else the outlines and open paths. (N, 2) world mm each."""
+        with ``hatch_mm`` (a code's hatch lines joined back and forth where they end along a
+        module edge: :func:`~insitu.patterns.fill.joined`), else the outlines and open
+        paths. (N, 2) world mm each."""
+        code = pattern.code is not None      # a code's lines joined along its module edges
         if self.hatch_mm is not None:
             return hatch(pattern, self.hatch_mm, self.hatch_angle_deg, self.cross,
-                         start=self.at_mm)
-        if pattern.code is not None and pattern.frame is not None:
+                         start=self.at_mm, join=code)
+        if code and pattern.frame is not None:
             spacing, angle = self.code_hatch(pattern)
-            return hatch(pattern, spacing, angle, self.cross, start=self.at_mm)
+            return hatch(pattern, spacing, angle, self.cross, start=self.at_mm, join=True)
         if pattern.is_empty:
             raise FormatError(f"pattern {pattern.name}: empty (nothing to mark)")
         loops = [np.vstack([c, c[:1]]) for c in pattern.contours]
