@@ -15,7 +15,7 @@ benchmarks/production_run.py's) and the marking's own estimate split into marks,
 delays and jumps.
 
 Run: nice taskset -c 0 .venv/bin/python benchmarks/produce_clock.py [--parts 3]
-[--spacing 0.5,1] [--per-frame 1,auto]
+[--seed 1] [--spacing 0.5,0.7] [--per-frame 1,auto]
 """
 
 from __future__ import annotations
@@ -84,7 +84,7 @@ def main() -> None:
     ap.add_argument("--parts", type=int, default=3)
     ap.add_argument("--seed", type=int, default=1)
     ap.add_argument("--binning", type=int, default=2)
-    ap.add_argument("--spacing", default="0.5,1", help="line spacings, mm")
+    ap.add_argument("--spacing", default="0.5,0.7", help="line spacings, mm")
     ap.add_argument("--per-frame", default="1", help="lines a frame: 1, auto, K (comma list)")
     args = ap.parse_args()
     cv2.setNumThreads(1)

@@ -164,7 +164,7 @@ def test_quit_while_marking_asks_to_abort_first(qtbot, window):
     place(qtbot, window, spec='qr:"insitu"', at=(0.0, 28.0), width=10.1)
     window.session.update_selected(hatch_mm=0.03)
     qtbot.waitUntil(lambda: window.mark_panel.job() is not None
-                    and len(window.mark_panel.job().paths) > 200
+                    and len(window.mark_panel.job().paths) > 100
                     and not window._plan_timer.isActive()
                     and not window.runner.running("plan"), timeout=WAIT_MS)
     qtbot.mouseClick(window.mark_panel.ui.markButton, Qt.LeftButton)

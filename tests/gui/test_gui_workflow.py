@@ -325,7 +325,7 @@ def test_pilot_preview_then_abort_stops_mid_job(qtbot, window, tmp_path):
     assert 0 < window.session.placements.items[-1].hatch_mm <= 0.05   # a code: hatched
     window.session.update_selected(hatch_mm=0.03)
     qtbot.waitUntil(lambda: window.mark_panel.job() is not None
-                    and len(window.mark_panel.job().paths) > 200
+                    and len(window.mark_panel.job().paths) > 100
                     and not window._plan_timer.isActive()
                     and not window.runner.running("plan"), timeout=WAIT_MS)
     mark, world = window.mark_panel.ui, window.station.world
