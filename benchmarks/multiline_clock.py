@@ -24,9 +24,10 @@ import numpy as np
 from rich.console import Console
 from rich.table import Table
 
+from insitu.reconstruct.bands import Packing
 from insitu.reconstruct.packing import FramePlan
 from insitu.services.scan import plan_lines, reconstructor
-from insitu.services.scan_frames import back_and_forth, region_of_interest
+from insitu.services.scan_frames import drawing_order, region_of_interest
 from insitu.services.station import simulated
 from insitu.sim.clock import SimTiming, roi_size
 from insitu.sim.render import NOMINAL_EXPOSURE_MS
@@ -43,7 +44,7 @@ def scan_seconds(timing: SimTiming, frames, rows: int, cols: int, speed: float,
     at, total = np.zeros(2), 0.0
     readout = timing.readout_s(rows, cols)
     for f in frames:
-        drawn = back_and_forth(f) if len(f) > 1 else f
+        drawn = drawing_order(f, at) if len(f) > 1 else f
         setup = timing.jump_s(float(np.linalg.norm(np.asarray(drawn[0][0]) - at)))
         at = np.asarray(drawn[-1][1] if len(drawn) > 1 else drawn[0][0], float)
         exposure = timing.exposure_s(drawn, NOMINAL_EXPOSURE_MS * len(f), speed)
@@ -64,9 +65,13 @@ def main() -> None:
     rec = reconstructor(rig.camera, rig.head.pivot_height_mm, False, rig.head.z_range_mm,
                         None, None, "timing")
     roi = region_of_interest(rec, lines)
-    plan = FramePlan(lines, rec.sheets, rig.head.z_range_mm, "auto")
-    packed = plan.surveys() + plan.frames((SURVEYED[0] + 0.5, SURVEYED[1] - 0.5))
-    ks = tuple(sorted({len(f.lines) for f in packed if len(f.lines) > 1 and not f.survey}))
+    plans = {}
+    for most in (2, 3, 4):          # at most this many lines a frame, as their bands allow
+        plan = FramePlan(lines, rec.sheets, rig.head.z_range_mm, "auto", Packing(most_lines=most))
+        packed = plan.surveys() + plan.frames((SURVEYED[0] + 0.5, SURVEYED[1] - 0.5))
+        plans[f"≤ {most} (auto)"] = (
+            [list(f.lines) for f in packed],
+            tuple(sorted({len(f.lines) for f in packed if len(f.lines) > 1 and not f.survey})))
     length = sum(float(np.linalg.norm(np.subtract(b, a))) for a, b in lines)
     power = timing.scan_power_w()
     t = Table(title=f"station seconds, step block, {len(lines)} lines 0.5 mm apart "
@@ -77,11 +82,8 @@ def main() -> None:
     for col in ("frames", "camera reads", "lines a frame", "station s", "× one line a frame"):
         t.add_column(col)
     base = None
-    for what, frames, window, off in (
-            ("1", [[line] for line in lines], None, ()),
-            ("≤ 4 (auto)", [list(f.lines) for f in packed], None, ks),
-            ("1", [[line] for line in lines], roi, ()),
-            ("≤ 4 (auto)", [list(f.lines) for f in packed], roi, ks)):
+    ways = [("1", [[line] for line in lines], ())] + [(k, *v) for k, v in plans.items()]
+    for window, (what, frames, off) in [(w, way) for w in (None, roi) for way in ways]:
         rows, cols = roi_size(window, rig.camera.width, rig.camera.height)
         total = scan_seconds(timing, frames, rows, cols, speed, off)
         base = base or total

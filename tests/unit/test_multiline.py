@@ -136,3 +136,19 @@ def test_bad_lines_are_refused_naming_the_field(tmp_path, kind, frame, said):
         with SequenceWriter(tmp_path / "r", kind, HEAD, camera=CAMERA) as w:
             w.add(img, **frame)
     assert not (tmp_path / "r").exists()
+
+
+def test_a_frames_lines_are_drawn_from_the_end_nearest_the_head():
+    """The same lines back and forth, starting where the head is: after a frame that ended
+    at the far end of its last line, the next starts at the near end of its nearest line."""
+    from insitu.services.scan_frames import drawing_order
+
+    lines = [(np.array([float(x), -40.0]), np.array([float(x), 40.0])) for x in (0, 8, 16)]
+    as_planned = drawing_order(lines)
+    assert [tuple(a) for a, _ in as_planned] == [(0, -40), (8, 40), (16, -40)]
+    drawn = drawing_order(lines, (16.5, 40.0))        # the head at the last line's far end
+    assert tuple(drawn[0][0]) == (16.0, 40.0) and tuple(drawn[-1][1]) == (0.0, -40.0)
+    undirected = lambda ls: sorted(tuple(sorted((tuple(a), tuple(b)))) for a, b in ls)  # noqa: E731
+    assert undirected(drawn) == undirected(lines)                   # the same lines
+    assert all(np.sign(b[1] - a[1]) != np.sign(d[1] - c[1])       # back and forth
+               for (a, b), (c, d) in zip(drawn, drawn[1:]))

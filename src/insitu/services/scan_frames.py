@@ -53,6 +53,7 @@ class Shots:
         self.base = camera.exposure_ms if isinstance(camera, ExposureCamera) else None
         self.roi = roi if isinstance(camera, RoiCamera) else None
         self._roi_set = False
+        self._at = None                 # where the last frame's lines left the head, mm
 
     def _expose(self, k: int) -> None:
         """The region of interest set, the exposure of a frame of ``k`` lines."""
@@ -83,8 +84,11 @@ class Shots:
             self._expose(len(frame.lines))
             if len(frame.lines) == 1:
                 self.head.show_line(*frame.lines[0])
+                self._at = frame.lines[0][0]
             else:
-                self.head.show_lines(back_and_forth(frame.lines))
+                drawn = drawing_order(frame.lines, self._at)
+                self.head.show_lines(drawn)
+                self._at = drawn[-1][1]
             return self.camera.grab()
         except DeviceError as e:
             self.head.off()
@@ -150,6 +154,18 @@ def back_and_forth(lines) -> list:
     """``lines`` ((start, end) each) with every second one drawn end → start: the head's
     jump between two lines is then across them, not back along them (the same lines)."""
     return [(a, b) if k % 2 == 0 else (b, a) for k, (a, b) in enumerate(lines)]
+
+
+def drawing_order(lines, at=None) -> list:
+    """``lines`` ((start, end) mm each) as the head draws them in one exposure: back and
+    forth, from whichever end of the first or the last line lies nearest ``at`` (x, y mm:
+    where the head is; None: the first line's start). The same lines, in the same exposure:
+    only the head's jump to them is shorter."""
+    ways = [back_and_forth(lines), back_and_forth(list(lines)[::-1])]
+    ways += [[(b, a) for a, b in w] for w in ways]
+    if at is None:
+        return ways[0]
+    return min(ways, key=lambda w: float(np.linalg.norm(np.subtract(w[0][0], at))))
 
 
 def laser_off_frames(shot: Shots, frames: list[Frame]) -> dict[int, np.ndarray]:
