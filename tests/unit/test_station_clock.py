@@ -102,15 +102,19 @@ def test_the_scans_light_is_power_times_dwell_at_a_power_that_never_marks():
 
 
 def test_lines_in_one_exposure_take_one_pass_over_all_of_them():
+    from dataclasses import replace
+
     t = SimTiming(line_speed_mm_s=1000.0, jump_mm_s=2000.0, settle_ms=0.5)
     lines = [(np.array([0.0, -40.0]), np.array([0.0, 40.0])),
              (np.array([8.0, -40.0]), np.array([8.0, 40.0]))]
-    # 2 × 80 mm swept, jumps of √(8² + 80²) mm (end of one to start of the next) twice
+    # 2 × 80 mm swept, jumps of √(8² + 80²) mm (end of one to start of the next)
     jump = np.hypot(8.0, 80.0) / 2000.0 + 0.5e-3
-    assert t.cycle_s(lines, None) == pytest.approx(0.160 + 2 * jump)
-    assert t.cycle_s(lines[:1], 500.0) == pytest.approx(0.160)
     # the light of 2 lines takes far less than a pass: one pass, no jump back to the first
     assert t.exposure_s(lines, 20.0, None) == pytest.approx(0.160 + jump)
+    dim = replace(t, scan_threshold_j_cm2=1e-5)          # light for ~3 passes: whole cycles
+    passes = np.ceil(dim.light_s(160.0) / 0.160)
+    assert passes > 1 and dim.exposure_s(lines, 20.0, None) == pytest.approx(
+        passes * (0.160 + 2 * jump) - jump)
     assert t.exposure_s(lines[:1], 10.0, 500.0) == pytest.approx(0.160)
     assert t.frame_s(10.0, 0.002, 0.001) == pytest.approx(0.012 + t.trigger_us * 1e-6)
 

@@ -41,7 +41,7 @@ from insitu.sim.render import NOMINAL_EXPOSURE_MS
 @dataclass(frozen=True)
 class SimTiming:
     """The simulated station's device timing (see the module docstring); seconds from
-    :meth:`readout_s`, :meth:`jump_s`, :meth:`cycle_s` and :meth:`frame_s`."""
+    :meth:`readout_s`, :meth:`jump_s`, :meth:`exposure_s` and :meth:`frame_s`."""
 
     row_us: float = 13.75
     blank_rows: int = 10
@@ -87,12 +87,6 @@ class SimTiming:
             return 0.0
         return distance_mm / self.jump_mm_s + self.settle_ms * 1e-3
 
-    def cycle_s(self, lines, speed_mm_s: float | None) -> float:
-        """One cycle over every line of ``lines`` ((start, end) mm each), swept at
-        ``speed_mm_s`` (None: :meth:`max_sweep_mm_s`), with the jumps between them and
-        back to the first (a single line is swept back and forth: no jump)."""
-        return self._sweep_s(lines, speed_mm_s) + sum(self._jumps_s(lines))
-
     def exposure_s(self, lines, exposure_ms: float, speed_mm_s: float | None) -> float:
         """The exposure (s) of a frame of ``lines`` ((start, end) mm each) swept at
         ``speed_mm_s`` that the camera set to ``exposure_ms`` takes: the light its lines
@@ -107,6 +101,7 @@ class SimTiming:
         return passes * (sweep + sum(jumps)) - (jumps[-1] if jumps else 0.0)
 
     def _sweep_s(self, lines, speed_mm_s: float | None) -> float:
+        """Sweeping every line of ``lines`` once at ``speed_mm_s`` (None: the fastest)."""
         v = speed_mm_s or self.max_sweep_mm_s()
         return sum(float(np.linalg.norm(np.subtract(b, a))) for a, b in lines) / v
 
