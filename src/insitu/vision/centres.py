@@ -31,6 +31,7 @@ from insitu.vision.detect import (
 from insitu.vision.laser_image import (
     CHANNELS,
     ImageInputError,
+    WHITE,
     LaserImage,
     colour_margin,
     excess,
@@ -188,6 +189,10 @@ gaps filled from the laser's colour (:func:`_fill_gaps`)."""
 FILL_PX = 4.0
 """How far (px) a centre filling a gap may lie from the course of the stripe's centres on
 either side (:func:`_fill_gaps`)."""
+COURSE = 0.06
+"""Half the span of scan lines, of the frame's shorter side, over which a photograph's stripe
+is taken as straight (:func:`_on_course`): a stretch of centres slid onto the rim of a dark
+dot or the edge of a square is shorter."""
 PHOTO_RUN = 20
 """Least columns (or rows) of a stripe in anyone's photograph (:func:`photo_centres`)."""
 FRINGE_MARGIN = 1.0
@@ -209,8 +214,9 @@ def line_centres(image: np.ndarray, method: str = "gray", direction: str | None 
     subtracted), pixel_bits: :func:`~insitu.vision.laser_image.laser_image` (a colour image's
     peaks are taken only where laser-coloured light lies within reach). A colour image with
     channel "auto" is measured in its laser's channel, or in the sum of its channels when the
-    laser's channel is clipped at most of the stripe's peaks (a halo clips it; the core clips
-    white, the halo does not) or the sum holds the longer stripe; peak and contrast are then
+    laser's channel is clipped at most of the stripe's peaks in it, or at
+    :data:`~insitu.vision.laser_image.WHITE` of full scale (a JPEG's clipping) at most of
+    the sum's (a halo clips it; the core clips white, the halo does not) or the sum holds the longer stripe; peak and contrast are then
     the channels' mean, on the frame's scale. direction: "rows" (one
     point per column), "cols" (one per row: the frame is transposed and u, v swapped back) or
     None (auto, :func:`line_direction`). band: (lo, hi) allowed range of the cross coordinate
@@ -247,14 +253,28 @@ def _centres_in(li: LaserImage, method, direction, band, clipped, kw,
     if li.total is not None:
         t = _along(fn, li.total, direction, band, allow, scaled(3 * li.full_scale))
         if (np.mean(c.saturated) > 0.5 if len(c) else False) or \
+                _clipped_at(t, li.gray, WHITE * li.full_scale) > 0.5 or \
                 _stripe_length(t, direction) > _stripe_length(c, direction):
             c = replace(t, peak=t.peak / 3, contrast=t.contrast / 3, full_scale=c.full_scale)
+    if colour:
+        c = _on_course(c, direction == "rows", COURSE * min(img.shape))
     scan = c.u if direction == "rows" else c.v
     if colour and li.bgr is not None and 1 < len(c) < GAPS * (np.ptp(scan) + 1) \
             and not _clips(li):
         e = _along(fn, excess(li), direction, band, allow, scaled(li.full_scale))
         c = _fill_gaps(c, e, direction == "rows")
     return c
+
+
+def _clipped_at(c: LineCentres, gray: np.ndarray, level: float) -> float:
+    """The share of the centres ``c`` at which ``gray`` (H, W) is at or above ``level``
+    (0 without centres)."""
+    if not len(c):
+        return 0.0
+    H, W = gray.shape
+    u = np.clip(np.round(c.u).astype(np.int64), 0, W - 1)
+    v = np.clip(np.round(c.v).astype(np.int64), 0, H - 1)
+    return float(np.mean(gray[v, u] >= level))
 
 
 def _clips(li: LaserImage) -> bool:
@@ -283,6 +303,64 @@ def _fill_gaps(c: LineCentres, e: LineCentres, along_rows: bool) -> LineCentres:
     keep = np.argsort(np.r_[sc, se[add]], kind="stable")
     fields = ("u", "v", "peak", "width", "contrast", "saturated", "ambiguous")
     return replace(c, **{f: np.r_[getattr(c, f), getattr(e, f)[add]][keep] for f in fields})
+
+
+def _on_course(c: LineCentres, along_rows: bool, half: float) -> LineCentres:
+    """``c`` without the centres off the stripe's course by more than :data:`FILL_PX`: the
+    running median of all centres over ±``half`` scan lines (a median keeps a step in depth),
+    their median slope taken out first; a piece shorter than ``half`` (pieces part where the
+    stripe jumps more than 4 px a scan line) is judged by its neighbours instead
+    (:func:`_between_neighbours`). A stripe is straight over that span; a stretch of centres
+    slid onto the rim of a dark mark or onto a bright square's edge beside it is off it."""
+    s = np.round(c.u if along_rows else c.v).astype(np.int64)
+    x = c.v if along_rows else c.u
+    if len(s) < 3:
+        return c
+    order = np.argsort(s, kind="stable")
+    s, x = s[order], x[order]
+    ds, dx = np.diff(s), np.diff(x)
+    h = max(int(half), 1)
+    cut = np.r_[0, np.cumsum((np.abs(dx) > 4.0 * ds) | (ds > h))]
+    steep = dx[cut[1:] == cut[:-1]] / np.maximum(ds[cut[1:] == cut[:-1]], 1)
+    flat = x - (np.median(steep) if len(steep) else 0.0) * s
+    dense = np.full(int(s[-1] - s[0]) + 1 + 2 * h, np.inf)
+    dense[s - s[0] + h] = flat
+    win = np.sort(np.lib.stride_tricks.sliding_window_view(dense, 2 * h + 1)[s - s[0]], axis=1)
+    n = np.isfinite(win).sum(axis=1)
+    mid = (np.take_along_axis(win, ((n - 1) // 2)[:, None], 1)[:, 0]
+           + np.take_along_axis(win, (n // 2)[:, None], 1)[:, 0]) / 2
+    first = np.r_[0, np.flatnonzero(np.diff(cut)) + 1]
+    short = (s[np.r_[first[1:], len(s)] - 1] - s[first] < h)[cut]
+    on = np.where(short, _between_neighbours(s, x, cut, h), np.abs(flat - mid) <= FILL_PX)
+    keep = np.zeros(len(s), bool)
+    keep[order] = on
+    if keep.all():
+        return c
+    fields = ("u", "v", "peak", "width", "contrast", "saturated", "ambiguous")
+    return replace(c, **{f: getattr(c, f)[keep] for f in fields})
+
+
+def _between_neighbours(s, x, cut, h) -> np.ndarray:
+    """(n,) bool: False on the pieces (labels ``cut``, (n,)) of fewer than ``h`` scan lines
+    that lie more than :data:`FILL_PX` off the straight line fitted through the other
+    pieces' centres within ``h`` scan lines before and after them, where those lie on it
+    (median residual ≤ FILL_PX / 4) on both sides. s, x: (n,) scan line and cross
+    coordinate, sorted by s."""
+    keep = np.ones(len(s), bool)
+    first = np.r_[0, np.flatnonzero(np.diff(cut)) + 1]
+    last = np.r_[first[1:], len(s)] - 1
+    for a, b in zip(first, last):
+        if s[b] - s[a] >= h:
+            continue                                      # a long piece: judged elsewhere
+        side = (cut != cut[a]) & (np.abs(s - (s[a] + s[b]) / 2) <= (s[b] - s[a]) / 2 + h)
+        before, after = side & (s < s[a]), side & (s > s[b])
+        if before.sum() < 3 or after.sum() < 3:
+            continue
+        fit = np.polyfit(s[side], x[side], 1)
+        if np.median(np.abs(np.polyval(fit, s[side]) - x[side])) > FILL_PX / 4:
+            continue
+        keep[a:b + 1] = np.abs(np.median(x[a:b + 1] - np.polyval(fit, s[a:b + 1]))) <= FILL_PX
+    return keep
 
 
 def _stripe_length(c: LineCentres, direction: str) -> int:

@@ -41,6 +41,10 @@ clipped core (a JPEG smears its chroma a few tens of gray values below full scal
 EDGES = 0.02
 """The fraction of a frame's pixels, of the strongest gradient, whose colour fringes
 :func:`colour_margin` weighs the line's colour against."""
+LIT = 0.15
+"""Least thin ridge of the laser's channel itself, of full scale, that is the laser's light
+(a reflection of the stripe, a glint, the stripe on furniture), not a colour fringe: a
+fringe is a step in that channel (:func:`colour_margin`)."""
 _SIDE = 640         # the structure of the line is judged on the frame shrunk to ≤ this, px
 _HAT = 7            # top-hat structuring element, px of the shrunk frame (> the line's width)
 
@@ -156,7 +160,10 @@ def colour_margin(li: LaserImage, u: np.ndarray, v: np.ndarray) -> float:
     colour fringes at the frame's edges (a lens's chromatic aberration, JPEG chroma): the
     median over the centres of the thin ridges of the laser's excess (``li.ridge``) within
     reach, over their 99th percentile at the frame's strongest edges (the top
-    :data:`EDGES` of the laser channel's gradient) away from the line. Below 1 the colour
+    :data:`EDGES` of the laser channel's gradient) away from the line (and its halo: 4 reach
+    on either side) and from the thin
+    ridges of the laser's channel itself (:data:`LIT`: its reflections and glints are no
+    fringes). Below 1 the colour
     cannot tell the line from the edges of a bright pattern. inf for a gray image or no
     centres."""
     if li.ridge is None or not len(u):
@@ -171,11 +178,15 @@ def colour_margin(li: LaserImage, u: np.ndarray, v: np.ndarray) -> float:
     cv_ = np.clip((np.asarray(v) / f).astype(np.int64), 0, h - 1)
     line = np.zeros((h, w), np.uint8)
     line[cv_, cu] = 1
-    line = cv2.dilate(line, np.ones((2 * r + 1, 2 * r + 1), np.uint8)) > 0
+    side = 2 * (r + 2 * (reach // f)) + 1                 # the line and its halo, ±4 reach
+    line = cv2.dilate(line, np.ones((side, side), np.uint8)) > 0
     gray = li.gray if f == 1 else cv2.resize(li.gray, (w, h), interpolation=cv2.INTER_AREA)
     grad = cv2.magnitude(cv2.Sobel(gray, cv2.CV_32F, 1, 0), cv2.Sobel(gray, cv2.CV_32F, 0, 1))
     least = np.percentile(grad.ravel()[::4], 100 * (1 - EDGES))           # every 4th pixel
-    edge = (grad >= least) & (grad > 0) & ~line
+    lit = cv2.morphologyEx(gray, cv2.MORPH_TOPHAT, np.ones((r, r), np.uint8),
+                           borderType=cv2.BORDER_REPLICATE) >= LIT * li.full_scale
+    lit = cv2.dilate(lit.view(np.uint8), np.ones((r, r), np.uint8)) > 0
+    edge = (grad >= least) & (grad > 0) & ~line & ~lit
     fringe = float(np.percentile(near_max[edge], 99)) if edge.any() else 0.0
     stripe = float(np.median(near_max[cv_, cu]))
     return stripe / max(fringe, CHROMA * li.full_scale)

@@ -17,6 +17,9 @@ CANDIDATES = 5
 """Ridges per scan line followed: the brightest, then the brightest more than a window away
 from those, and so on (on a full-HD board's dark dots the stripe was among the 5 brightest
 in 95 % of the scan lines, the brightest in 62 %)."""
+BRIDGE, BRIDGE_SHARE = 80, 0.125
+"""Most scan lines a track is carried across (:func:`track_length`): 80, or an eighth of
+the scan lines of a larger frame (a stripe lost along the edge of a dark square)."""
 LINK = 2
 """Scan lines apart that two candidates may be linked across (a missing line or one)."""
 
@@ -78,24 +81,27 @@ def _bridged(label, col, row, bridge: int, max_jump: float) -> np.ndarray:
         at = col == end[label]
         return np.bincount(label[at], row[at], m) / np.maximum(np.bincount(label[at],
                                                                            minlength=m), 1)
-    r0, r1 = end_row(first), end_row(last)
+    mean_c, mean_r = sc / np.maximum(cnt, 1), sr / np.maximum(cnt, 1)
     big = np.flatnonzero(cnt >= 3)
     a, b = big[:, None], big[None, :]
     gap = first[b] - last[a]
     tol = max_jump + 0.1 * gap
-    join = ((gap > 0) & (gap <= bridge) & (np.abs(r1[a] + slope[a] * gap - r0[b]) <= tol)
-            & (np.abs(r0[b] - slope[b] * gap - r1[a]) <= tol))
+    sab = np.where(cnt[a] >= cnt[b], slope[a], slope[b])       # the longer piece's slope
+    join = np.zeros(gap.shape, bool)
+    for r0, r1 in ((end_row(first), end_row(last)),
+                   (mean_r + slope * (first - mean_c), mean_r + slope * (last - mean_c))):
+        join |= (gap > 0) & (gap <= bridge) & (np.abs(r1[a] + sab * gap - r0[b]) <= tol)
     ia, ib = np.nonzero(join)
     return _components(m, big[ia], big[ib])[label]
 
 
-def track_length(row: np.ndarray, ok: np.ndarray, max_jump: float,
-                 bridge: int = 80) -> np.ndarray:
+def _tracks(row: np.ndarray, ok: np.ndarray, max_jump: float, bridge: int | None):
     """(k, W) int: the scan lines (columns) of the track each candidate lies on, 0 where it is
-    not valid. row, ok: (k, W) the candidates' rows (px) and validity. A track links valid
+    not valid, and (k, W) each candidate's track (−1: not valid). row, ok: (k, W) the candidates' rows (px) and validity. A track links valid
     candidates of columns up to :data:`LINK` apart whose rows differ by at most ``max_jump``
     px per column, and goes on across gaps of up to ``bridge`` columns (:func:`_bridged`)."""
     k, W = row.shape
+    bridge = max(BRIDGE, round(BRIDGE_SHARE * W)) if bridge is None else bridge
     node = np.arange(k * W).reshape(k, W)
     src, dst = [np.zeros(0, np.int64)], [np.zeros(0, np.int64)]
     for d in range(1, min(LINK, W - 1) + 1):                  # (k, k, W − d) at once
@@ -111,18 +117,33 @@ def track_length(row: np.ndarray, ok: np.ndarray, max_jump: float,
                          row[ok].astype(np.float64), bridge, max_jump)
     pairs = np.unique(track[ok] * W + col)
     length = np.bincount(pairs // W, minlength=k * W)
-    return np.where(ok, length[np.maximum(track, 0)], 0)
+    return np.where(ok, length[np.maximum(track, 0)], 0), track
+
+
+def track_length(row: np.ndarray, ok: np.ndarray, max_jump: float,
+                 bridge: int | None = None) -> np.ndarray:
+    """(k, W) int: the scan lines of the track each candidate lies on (:func:`_tracks`)."""
+    return _tracks(row, ok, max_jump, bridge)[0]
 
 
 def on_longest_track(fields, max_jump: float):
     """Per column, the valid candidate on the longest track (:func:`track_length`; of two on
     equally long tracks the one of higher contrast): ``fields`` (row, gmax, bg, contrast,
     ok, run), each (k, W), as :func:`candidates` gives them. Returns the same six (W,)
-    and ambiguous (W,) bool: the column had more than one valid candidate."""
+    and ambiguous (W,) bool: the column had more than one valid candidate. Between the
+    first and the last column of the longest track (the stripe), a column it has no
+    candidate in gets none: what lies there off the stripe's course is something else (a
+    reflection of it, the edge of a square it runs along)."""
     row, ok, contrast = fields[0], fields[4], fields[3]
-    length = track_length(row, ok, max_jump)
+    length, track = _tracks(row, ok, max_jump, None)
     score = np.where(ok, length + contrast / (1.0 + np.abs(contrast).max(initial=0.0)), -1.0)
     pick = np.argmax(score, axis=0)[None, :]
     chosen = [np.take_along_axis(f, pick, axis=0)[0] for f in fields]
     chosen[4] = ok.any(axis=0)
+    if ok.any():
+        stripe = (track == track.ravel()[np.argmax(length)]).any(axis=0)
+        inside = np.zeros(len(stripe), bool)
+        cols = np.flatnonzero(stripe)
+        inside[cols[0]:cols[-1] + 1] = True
+        chosen[4] &= stripe | ~inside
     return (*chosen, ok.sum(axis=0) > 1)
