@@ -31,7 +31,6 @@ from insitu.vision.detect import (
 from insitu.vision.laser_image import (
     CHANNELS,
     ImageInputError,
-    WHITE,
     LaserImage,
     colour_margin,
     excess,
@@ -214,9 +213,8 @@ def line_centres(image: np.ndarray, method: str = "gray", direction: str | None 
     subtracted), pixel_bits: :func:`~insitu.vision.laser_image.laser_image` (a colour image's
     peaks are taken only where laser-coloured light lies within reach). A colour image with
     channel "auto" is measured in its laser's channel, or in the sum of its channels when the
-    laser's channel is clipped at most of the stripe's peaks in it, or at
-    :data:`~insitu.vision.laser_image.WHITE` of full scale (a JPEG's clipping) at most of
-    the sum's (a halo clips it; the core clips white, the halo does not) or the sum holds the longer stripe; peak and contrast are then
+    laser's channel is clipped at most of the stripe's peaks (a halo clips it; the core clips
+    white, the halo does not) or the sum holds the longer stripe; peak and contrast are then
     the channels' mean, on the frame's scale. direction: "rows" (one
     point per column), "cols" (one per row: the frame is transposed and u, v swapped back) or
     None (auto, :func:`line_direction`). band: (lo, hi) allowed range of the cross coordinate
@@ -249,13 +247,11 @@ def _centres_in(li: LaserImage, method, direction, band, clipped, kw,
     def scaled(fs):
         return dict(kw, scale=fs, **({"saturation": clipped * fs} if clipped < 1 else {}))
 
-    c = _along(fn, img, direction, band, allow, scaled(li.full_scale))
-    if li.total is not None:
+    if li.total is not None and _in_sum(li, method, direction, band, allow, kw, scaled):
         t = _along(fn, li.total, direction, band, allow, scaled(3 * li.full_scale))
-        if (np.mean(c.saturated) > 0.5 if len(c) else False) or \
-                _clipped_at(t, li.gray, WHITE * li.full_scale) > 0.5 or \
-                _stripe_length(t, direction) > _stripe_length(c, direction):
-            c = replace(t, peak=t.peak / 3, contrast=t.contrast / 3, full_scale=c.full_scale)
+        c = replace(t, peak=t.peak / 3, contrast=t.contrast / 3, full_scale=li.full_scale)
+    else:
+        c = _along(fn, img, direction, band, allow, scaled(li.full_scale))
     if colour:
         c = _on_course(c, direction == "rows", COURSE * min(img.shape))
     scan = c.u if direction == "rows" else c.v
@@ -266,15 +262,26 @@ def _centres_in(li: LaserImage, method, direction, band, clipped, kw,
     return c
 
 
-def _clipped_at(c: LineCentres, gray: np.ndarray, level: float) -> float:
-    """The share of the centres ``c`` at which ``gray`` (H, W) is at or above ``level``
-    (0 without centres)."""
-    if not len(c):
-        return 0.0
-    H, W = gray.shape
-    u = np.clip(np.round(c.u).astype(np.int64), 0, W - 1)
-    v = np.clip(np.round(c.v).astype(np.int64), 0, H - 1)
-    return float(np.mean(gray[v, u] >= level))
+_DETECTION = ("band", "min_peak", "min_contrast", "snr", "continuity", "extend_ends", "upper",
+              "min_run", "ridge", "noise", "median", "window")
+
+
+def _in_sum(li: LaserImage, method, direction, band, allow, kw, scaled) -> bool:
+    """Whether a colour frame's stripe is measured in the sum of its channels: where the
+    laser's channel is clipped at most of the stripe's peaks in it, or the sum holds the
+    longer stripe — both judged on the gray centroid's centres (with the method's detection
+    keywords), so that every method measures in the same image."""
+    if method == "gray":
+        probe = kw
+    else:
+        probe = dict(CENTRE_METHODS["gray"].defaults,
+                     **{k: v for k, v in kw.items() if k in _DETECTION})
+    c = _along(gray_centroid, li.gray, direction, band, allow, scaled(li.full_scale) | probe)
+    if len(c) and np.mean(c.saturated) > 0.5:
+        return True
+    t = _along(gray_centroid, li.total, direction, band, allow,
+               scaled(3 * li.full_scale) | probe)
+    return _stripe_length(t, direction) > _stripe_length(c, direction)
 
 
 def _clips(li: LaserImage) -> bool:

@@ -63,7 +63,8 @@ class LaserImage:
     total: (H, W) the sum of the three channels (full scale 3 · full_scale), where a core
     clipped white stands out over a halo that clips the laser's channel (None: gray input,
     or a channel given). bgr: the colour frame (H, W, 3) its :func:`excess` is made of (None:
-    gray input, a channel given, or a laser-off frame taken away)."""
+    gray input, a channel given, or a laser-off frame taken away). halo: as ridge, on a
+    top-hat 3 × wider, that keeps a halo wider than the reach (None: gray input)."""
 
     gray: np.ndarray
     allow: np.ndarray | None
@@ -72,6 +73,7 @@ class LaserImage:
     ridge: np.ndarray | None = None
     total: np.ndarray | None = None
     bgr: np.ndarray | None = None
+    halo: np.ndarray | None = None
 
 
 def full_scale(dtype: np.dtype, pixel_bits: int | None = None) -> float:
@@ -121,6 +123,13 @@ def line_contrast(hat: np.ndarray) -> float:
     return float(max(hat.max(axis=0).mean(), hat.max(axis=1).mean()))
 
 
+def _others(bgr: np.ndarray, c: int) -> np.ndarray:
+    """(H, W) float32: the mean of the two channels of ``bgr`` other than c."""
+    ch = cv2.split(bgr)
+    a, b = (ch[k] for k in range(3) if k != c)
+    return cv2.addWeighted(a, 0.5, b, 0.5, 0.0, dtype=cv2.CV_32F)
+
+
 def _excess(bgr: np.ndarray, c: int, ch=None) -> np.ndarray:
     """(H, W) float32: channel c minus the mean of the two others (ch: bgr's channels, when
     split already)."""
@@ -158,19 +167,19 @@ def _reach(shape) -> tuple[int, int]:
 def colour_margin(li: LaserImage, u: np.ndarray, v: np.ndarray) -> float:
     """How much more laser colour the line at centres ``u``, ``v`` (n,) px carries than the
     colour fringes at the frame's edges (a lens's chromatic aberration, JPEG chroma): the
-    median over the centres of the thin ridges of the laser's excess (``li.ridge``) within
-    reach, over their 99th percentile at the frame's strongest edges (the top
-    :data:`EDGES` of the laser channel's gradient) away from the line (and its halo: 4 reach
-    on either side) and from the thin
-    ridges of the laser's channel itself (:data:`LIT`: its reflections and glints are no
-    fringes). Below 1 the colour
-    cannot tell the line from the edges of a bright pattern. inf for a gray image or no
-    centres."""
+    median over the centres of the ridges of the laser's excess (``li.halo``: a halo wider
+    than the reach is the line's colour too) within reach, over their 99th percentile at the frame's strongest edges away from the line
+    (and its halo: 4 reach on either side) and from the thin ridges of the laser's channel
+    itself (:data:`LIT`: its reflections and glints are no fringes). The edges: the top
+    :data:`EDGES` of the gradient of the scene, the mean of the two other channels (of the
+    laser's channel when ``li.bgr`` is None): a fringe lies on an edge of the scene, a glint
+    of the laser is none. Below 1 the colour cannot tell the line from the edges of a bright
+    pattern. inf for a gray image or no centres."""
     if li.ridge is None or not len(u):
         return np.inf
     H, W = li.gray.shape
     reach, f = _reach((H, W))
-    thin = li.ridge
+    thin = li.ridge if li.halo is None else li.halo
     h, w = thin.shape
     r = 2 * (reach // f) + 1
     near_max = cv2.dilate(thin, np.ones((r, r), np.uint8))
@@ -180,8 +189,11 @@ def colour_margin(li: LaserImage, u: np.ndarray, v: np.ndarray) -> float:
     line[cv_, cu] = 1
     side = 2 * (r + 2 * (reach // f)) + 1                 # the line and its halo, ±4 reach
     line = cv2.dilate(line, np.ones((side, side), np.uint8)) > 0
-    gray = li.gray if f == 1 else cv2.resize(li.gray, (w, h), interpolation=cv2.INTER_AREA)
-    grad = cv2.magnitude(cv2.Sobel(gray, cv2.CV_32F, 1, 0), cv2.Sobel(gray, cv2.CV_32F, 0, 1))
+    def small(img):
+        return img if f == 1 else cv2.resize(img, (w, h), interpolation=cv2.INTER_AREA)
+    gray = small(li.gray)
+    scene = gray if li.bgr is None else small(_others(li.bgr, CHANNELS[li.channel]))
+    grad = cv2.magnitude(cv2.Sobel(scene, cv2.CV_32F, 1, 0), cv2.Sobel(scene, cv2.CV_32F, 0, 1))
     least = np.percentile(grad.ravel()[::4], 100 * (1 - EDGES))           # every 4th pixel
     lit = cv2.morphologyEx(gray, cv2.MORPH_TOPHAT, np.ones((r, r), np.uint8),
                            borderType=cv2.BORDER_REPLICATE) >= LIT * li.full_scale
@@ -192,15 +204,15 @@ def colour_margin(li: LaserImage, u: np.ndarray, v: np.ndarray) -> float:
     return stripe / max(fringe, CHROMA * li.full_scale)
 
 
-def _laser_coloured(bgr: np.ndarray, c: int, fs: float) -> tuple[np.ndarray, np.ndarray]:
-    """The thin ridges (white top-hat) of channel c's excess, and (H, W) bool: where they
+def _laser_coloured(bgr: np.ndarray, c: int, fs: float):
+    """The thin ridges (white top-hat) of channel c's excess, (H, W) bool: where they
     (≥ :data:`CHROMA` · fs and :data:`CHROMA_SNR` · their noise) are, or lie within reach
     (1 % of the shorter side) on both sides — above and below, or left and right — of the
     pixel or of the white run it lies in (:func:`_flanked`; a run's flanks judged on a
     top-hat 3 × wider, as a halo can be wider than the reach): the halo round a core clipped
     white; a white thing beside a red one has them on one side only. Made on the excess
     max-pooled by reach // 3 (a thin ridge keeps its peak), with reach // 3 ≥ 3 px left: a
-    full-HD frame in 3 × 3 blocks."""
+    full-HD frame in 3 × 3 blocks; and the excess's top-hat 3 × wider, on the same blocks."""
     H, W = bgr.shape[:2]
     reach, f = _reach(bgr.shape)
     ch = cv2.split(bgr)
@@ -220,15 +232,15 @@ def _laser_coloured(bgr: np.ndarray, c: int, fs: float) -> tuple[np.ndarray, np.
         a, b = (cv2.dilate(laser, np.ones(shape, np.uint8), anchor=e) for e in ends)
         near |= a & b
     wb = white > 0
+    halo = cv2.morphologyEx(excess, cv2.MORPH_TOPHAT, np.ones((6 * r + 1,) * 2, np.uint8),
+                            borderType=cv2.BORDER_REPLICATE)
     if wb.any():
-        wide = np.ones((6 * r + 1,) * 2, np.uint8)
-        lb = cv2.morphologyEx(excess, cv2.MORPH_TOPHAT, wide,
-                              borderType=cv2.BORDER_REPLICATE) >= least
+        lb = halo >= least
         near |= (_flanked(lb, wb, r) | _flanked(lb.T.copy(), wb.T.copy(), r).T).view(np.uint8)
     if f > 1:
         near = cv2.resize(near, (w * f, h * f), interpolation=cv2.INTER_NEAREST)
         near = cv2.copyMakeBorder(near, 0, H - h * f, 0, W - w * f, cv2.BORDER_REPLICATE)
-    return thin, near > 0
+    return thin, near > 0, halo
 
 
 def _flanked(laser: np.ndarray, white: np.ndarray, r: int) -> np.ndarray:
@@ -298,13 +310,13 @@ def laser_image(image, channel: str = "auto", laser_off=None,
         c = int(np.argmax(cv2.sumElems(img)[:3]))
     else:
         c = _auto_channel(img)
-    thin, allow = _laser_coloured(img, c, fs)
+    thin, allow, halo = _laser_coloured(img, c, fs)
     total = None
     if channel == "auto":
         ch, depth = cv2.split(img), cv2.CV_16U if img.dtype == np.uint8 else cv2.CV_32F
         total = cv2.add(cv2.add(ch[0], ch[1], dtype=depth), ch[2], dtype=depth)
     return LaserImage(cv2.extractChannel(img, c), allow, fs, "bgr"[c], thin, total,
-                      img if channel == "auto" and off is None else None)
+                      img if channel == "auto" and off is None else None, halo)
 
 
 def excess(li: LaserImage) -> np.ndarray:
