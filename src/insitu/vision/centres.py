@@ -247,11 +247,11 @@ def _centres_in(li: LaserImage, method, direction, band, clipped, kw,
     def scaled(fs):
         return dict(kw, scale=fs, **({"saturation": clipped * fs} if clipped < 1 else {}))
 
-    if li.total is not None and _in_sum(li, method, direction, band, allow, kw, scaled):
-        t = _along(fn, li.total, direction, band, allow, scaled(3 * li.full_scale))
-        c = replace(t, peak=t.peak / 3, contrast=t.contrast / 3, full_scale=li.full_scale)
-    else:
-        c = _along(fn, img, direction, band, allow, scaled(li.full_scale))
+    in_sum = li.total is not None and _in_sum(li, direction, band, allow, kw, scaled)
+    c = _along(fn, li.total if in_sum else img, direction, band, allow,
+               scaled((3 if in_sum else 1) * li.full_scale))
+    if in_sum:
+        c = replace(c, peak=c.peak / 3, contrast=c.contrast / 3, full_scale=li.full_scale)
     if colour:
         c = _on_course(c, direction == "rows", COURSE * min(img.shape))
     scan = c.u if direction == "rows" else c.v
@@ -266,20 +266,24 @@ _DETECTION = ("band", "min_peak", "min_contrast", "snr", "continuity", "extend_e
               "min_run", "ridge", "noise", "median", "window")
 
 
-def _in_sum(li: LaserImage, method, direction, band, allow, kw, scaled) -> bool:
+def _in_sum(li: LaserImage, direction, band, allow, kw, scaled) -> bool:
     """Whether a colour frame's stripe is measured in the sum of its channels: where the
     laser's channel is clipped at most of the stripe's peaks in it, or the sum holds the
     longer stripe — both judged on the gray centroid's centres (with the method's detection
-    keywords), so that every method measures in the same image."""
-    if method == "gray":
-        probe = kw
-    else:
-        probe = dict(CENTRE_METHODS["gray"].defaults,
-                     **{k: v for k, v in kw.items() if k in _DETECTION})
-    c = _along(gray_centroid, li.gray, direction, band, allow, scaled(li.full_scale) | probe)
+    keywords; on every second scan line when no band is given), so that every method
+    measures in the same image."""
+    probe = dict(CENTRE_METHODS["gray"].defaults,
+                 **{k: v for k, v in kw.items() if k in _DETECTION})
+    every = (slice(None), slice(None, None, 2)) if direction == "rows" else \
+        (slice(None, None, 2), slice(None))
+    if band is not None:
+        every = (slice(None), slice(None))
+    allow = None if allow is None else allow[every]
+    c = _along(gray_centroid, li.gray[every], direction, band, allow,
+               scaled(li.full_scale) | probe)
     if len(c) and np.mean(c.saturated) > 0.5:
         return True
-    t = _along(gray_centroid, li.total, direction, band, allow,
+    t = _along(gray_centroid, li.total[every], direction, band, allow,
                scaled(3 * li.full_scale) | probe)
     return _stripe_length(t, direction) > _stripe_length(c, direction)
 
@@ -316,7 +320,8 @@ def _on_course(c: LineCentres, along_rows: bool, half: float) -> LineCentres:
     """``c`` without the centres off the stripe's course by more than :data:`FILL_PX`: the
     running median of all centres over ±``half`` scan lines (a median keeps a step in depth),
     their median slope taken out first; a piece shorter than ``half`` (pieces part where the
-    stripe jumps more than 4 px a scan line) is judged by its neighbours instead
+    stripe, its slope taken out, jumps more than FILL_PX plus a tenth of the scan lines
+    between) is judged by its neighbours instead
     (:func:`_between_neighbours`). A stripe is straight over that span; a stretch of centres
     slid onto the rim of a dark mark or onto a bright square's edge beside it is off it."""
     s = np.round(c.u if along_rows else c.v).astype(np.int64)
@@ -327,12 +332,14 @@ def _on_course(c: LineCentres, along_rows: bool, half: float) -> LineCentres:
     s, x = s[order], x[order]
     ds, dx = np.diff(s), np.diff(x)
     h = max(int(half), 1)
-    cut = np.r_[0, np.cumsum((np.abs(dx) > 4.0 * ds) | (ds > h))]
-    steep = dx[cut[1:] == cut[:-1]] / np.maximum(ds[cut[1:] == cut[:-1]], 1)
-    flat = x - (np.median(steep) if len(steep) else 0.0) * s
+    slope = float(np.median(dx[ds == 1])) if (ds == 1).any() else 0.0
+    cut = np.r_[0, np.cumsum((np.abs(dx - slope * ds) > FILL_PX + 0.1 * ds) | (ds > h))]
+    flat = x - slope * s
     dense = np.full(int(s[-1] - s[0]) + 1 + 2 * h, np.inf)
     dense[s - s[0] + h] = flat
-    win = np.sort(np.lib.stride_tricks.sliding_window_view(dense, 2 * h + 1)[s - s[0]], axis=1)
+    step = max(1, h // 16)                               # ≤ 33 samples of each window
+    win = np.sort(np.lib.stride_tricks.sliding_window_view(dense, 2 * h + 1)[s - s[0], ::step],
+                  axis=1)
     n = np.isfinite(win).sum(axis=1)
     mid = (np.take_along_axis(win, ((n - 1) // 2)[:, None], 1)[:, 0]
            + np.take_along_axis(win, (n // 2)[:, None], 1)[:, 0]) / 2

@@ -123,13 +123,6 @@ def line_contrast(hat: np.ndarray) -> float:
     return float(max(hat.max(axis=0).mean(), hat.max(axis=1).mean()))
 
 
-def _others(bgr: np.ndarray, c: int) -> np.ndarray:
-    """(H, W) float32: the mean of the two channels of ``bgr`` other than c."""
-    ch = cv2.split(bgr)
-    a, b = (ch[k] for k in range(3) if k != c)
-    return cv2.addWeighted(a, 0.5, b, 0.5, 0.0, dtype=cv2.CV_32F)
-
-
 def _excess(bgr: np.ndarray, c: int, ch=None) -> np.ndarray:
     """(H, W) float32: channel c minus the mean of the two others (ch: bgr's channels, when
     split already)."""
@@ -171,8 +164,8 @@ def colour_margin(li: LaserImage, u: np.ndarray, v: np.ndarray) -> float:
     than the reach is the line's colour too) within reach, over their 99th percentile at the frame's strongest edges away from the line
     (and its halo: 4 reach on either side) and from the thin ridges of the laser's channel
     itself (:data:`LIT`: its reflections and glints are no fringes). The edges: the top
-    :data:`EDGES` of the gradient of the scene, the mean of the two other channels (of the
-    laser's channel when ``li.bgr`` is None): a fringe lies on an edge of the scene, a glint
+    :data:`EDGES` of the gradient of the scene, the sum of the two other channels (of the
+    laser's channel when ``li.total`` is None): a fringe lies on an edge of the scene, a glint
     of the laser is none. Below 1 the colour cannot tell the line from the edges of a bright
     pattern. inf for a gray image or no centres."""
     if li.ridge is None or not len(u):
@@ -192,7 +185,8 @@ def colour_margin(li: LaserImage, u: np.ndarray, v: np.ndarray) -> float:
     def small(img):
         return img if f == 1 else cv2.resize(img, (w, h), interpolation=cv2.INTER_AREA)
     gray = small(li.gray)
-    scene = gray if li.bgr is None else small(_others(li.bgr, CHANNELS[li.channel]))
+    scene = gray if li.total is None else \
+        small(li.total).astype(np.float32) - gray.astype(np.float32)
     grad = cv2.magnitude(cv2.Sobel(scene, cv2.CV_32F, 1, 0), cv2.Sobel(scene, cv2.CV_32F, 0, 1))
     least = np.percentile(grad.ravel()[::4], 100 * (1 - EDGES))           # every 4th pixel
     lit = cv2.morphologyEx(gray, cv2.MORPH_TOPHAT, np.ones((r, r), np.uint8),

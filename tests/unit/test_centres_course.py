@@ -1,0 +1,84 @@
+"""A photograph's stripe keeps its course across the scan lines: centres that slide off it (onto
+the rim of a dark dot, along a bright square's edge) are dropped, a step in depth is kept, and
+between the ends of the stripe's track no other track's candidate is taken for it."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from insitu.vision.centres import FILL_PX, _on_course
+from insitu.vision.detect import LineCentres
+from insitu.vision.tracks import on_longest_track, track_length
+
+
+def centres(u, v) -> LineCentres:
+    n = len(u)
+    return LineCentres(np.asarray(u, float), np.asarray(v, float), np.full(n, 200.0),
+                       np.full(n, 3.0), np.full(n, 100.0), np.zeros(n, bool),
+                       np.zeros(n, bool), 255.0)
+
+
+def test_a_stretch_slid_off_the_course_goes_a_step_in_depth_stays():
+    """A line v = 300 + 0.1 u over 600 columns: columns 200–239 slide 1 → 8 px off (joined to
+    the line, a rim), columns 400–599 are 40 px lower (a step in depth); half span 60."""
+    u = np.arange(600.0)
+    v = 300 + 0.1 * u
+    v[200:240] += np.linspace(1, 8, 40)
+    v[400:] += 40
+    kept = _on_course(centres(u, v), True, 60.0)
+    slid = (kept.u >= 200) & (kept.u < 240)
+    off = np.abs(kept.v - (300 + 0.1 * kept.u + 40 * (kept.u >= 400))) > FILL_PX
+    assert not off.any() and slid.sum() < 25
+    assert ((kept.u >= 400).sum() >= 195) and ((kept.u < 200).sum() >= 195)
+
+
+def test_a_short_piece_between_two_that_run_on_straight_goes_unless_on_their_line():
+    """A 30-column piece 12 px off a straight line running on either side of it is dropped;
+    the same piece on the line is kept; a short piece past the line's end (no neighbours on
+    one side) is kept. The same by rows (a line running down the columns)."""
+    u = np.r_[np.arange(100.0), np.arange(110.0, 140.0), np.arange(150.0, 250.0)]
+    v = 200 + 0.2 * u
+    for off, n_kept in ((12.0, 200), (0.0, 230)):
+        w = v.copy()
+        w[100:130] += off
+        assert len(_on_course(centres(u, w), True, 60.0)) == n_kept
+        assert len(_on_course(centres(w, u), False, 60.0)) == n_kept
+    tail = np.r_[np.arange(100.0), np.arange(110.0, 130.0)]
+    w = 200 + 0.2 * tail
+    w[100:] += 30
+    assert len(_on_course(centres(tail, w), True, 60.0)) == 120
+
+
+def fields(row, ok):
+    k, W = row.shape
+    contrast = np.where(ok, 50.0, 0.0)
+    return (row, np.full((k, W), 200.0), np.zeros((k, W)), contrast, ok,
+            np.ones((k, W), np.int64))
+
+
+def test_between_the_stripes_ends_no_other_track_stands_in_for_it():
+    """The stripe (row 100, 300 columns, lost at columns 120–159) and its reflection (row 250,
+    columns 60–219, 160 columns): the stripe's pieces are one track of 260 columns; in its gap
+    the reflection is the only candidate, and no column there gets one."""
+    W = 300
+    cols = np.arange(W)
+    row = np.zeros((2, W))
+    ok = np.zeros((2, W), bool)
+    row[0], ok[0] = 100.0, (cols < 120) | (cols >= 160)
+    row[1], ok[1] = 250.0, (cols >= 60) & (cols < 220)
+    assert track_length(row, ok, 4.0)[0, 0] == 260
+    chosen_row, *_, valid, _run, _amb = on_longest_track(fields(row, ok), 4.0)
+    assert not valid[120:160].any()
+    assert valid[:120].all() and valid[160:].all() and (chosen_row[valid] == 100).all()
+
+
+def test_a_track_whose_end_slid_still_bridges_by_its_course():
+    """A piece whose last 10 columns slide 8 px off (onto an edge) still joins the piece
+    that resumes on its course 20 columns later: its course, not its end row, is carried
+    across the gap."""
+    W = 300
+    cols = np.arange(W, dtype=float)
+    row = np.full((1, W), 100.0)
+    row[0, 90:100] += np.linspace(1, 8, 10)
+    ok = ((cols < 100) | (cols >= 120))[None, :]
+    assert track_length(row, ok, 4.0)[0, 0] == 280
