@@ -82,7 +82,8 @@ def test_the_stamped_edge_is_where_the_outline_puts_it():
 
 def test_a_recorded_scans_frame_gives_the_blocks_sides():
     """The binning-4 recording of the step block with its room-light frame: its long sides
-    (x = ±10 mm, the block at the origin) fitted within a third of a pixel (0.35 mm a pixel)."""
+    (x = ±10 mm, the block at the origin) fitted within a third of a pixel (0.35 mm a pixel);
+    the recipe's report gives its edges' 1σ."""
     from insitu.formats.camera_spec import CameraSpec
     from insitu.formats.sequence import Sequence
     from insitu.locate.reference import reference_from_cloud
@@ -102,3 +103,8 @@ def test_a_recorded_scans_frame_gives_the_blocks_sides():
     for p in sides:
         assert abs(abs(p.centre[0]) - 10.0) < 0.12, p.centre
     assert 0.3 < ref.fitted.covered <= 1.0
+    from insitu.services.reference_outline import outline_findings
+
+    fit = dict((label, text) for _, label, text in outline_findings(ref))["fit"]
+    lo, hi = ref.fitted.outline.sigma_mm.min(), ref.fitted.outline.sigma_mm.max()
+    assert f"1σ {lo:.3f}–{hi:.3f} mm" in fit and 0.01 < lo <= hi, fit

@@ -43,11 +43,14 @@ def outline_findings(ref: PartReference) -> list[tuple[str, str, str]]:
     worst = max(fit.pieces, key=lambda p: p.rms_mm)
     offsets = [abs(p.offset_mm) for p in fit.pieces if math.isfinite(p.offset_mm)]
     crossed = fit.length_mm(crossed=True) / max(fit.length_mm(), 1e-9)
+    sigma = fit.outline.sigma_mm
     out = [("info", "outline", f"{kinds.count('line')} straight and {kinds.count('circle')} "
             f"round edges, {fit.length_mm():.1f} mm; the frame shows {fit.covered:.0%} of "
             "the scan's outline"),
            ("info", "fit", f"edge points within {worst.rms_mm:.3f} mm (rms, worst edge) of "
-            "their line or circle"),
+            f"their line or circle; each edge placed to 1σ {sigma.min():.3f}–{sigma.max():.3f} "
+            "mm (its fit, its light's bias; more where the crossed scan's lines do not check "
+            "it)"),
            ("info", "lines", f"{crossed:.0%} of it crossed from two directions; the frame's "
             "edges " + (f"within {max(offsets):.3f} mm of where the lines end" if offsets
                         else "not crossed by the lines"))]
