@@ -58,9 +58,11 @@ def _rig_frame(true_cam, given, top, pose):
 @pytest.mark.parametrize("framed", [False, True])
 @pytest.mark.parametrize("opened", [False, True])
 def test_the_posed_arc_is_located_honestly_or_refused(posed_arc, framed, opened):
-    """At the default 0.05 mm / 0.1° it is refused, naming what would pin it down; with the
-    gates opened (1 mm, 1°) the pose given is within 3σ at the rim — the frame's edges on that
-    renderer lie 0.095 mm at the rim from the lines' pose, and the σ takes that in."""
+    """At the default 0.05 mm / 0.1° the lines alone are refused by the turn (3σ 0.107°),
+    naming what would pin it down; with its room-light frame the turn is measured twice
+    (the lines' and the frame's, joined) and the pose given; with the gates opened (1 mm, 1°)
+    it is given either way. Whatever is given lies within 3σ at the rim and 0.10 mm / 0.10°
+    of the rig frame."""
     cloud, cad, camera, frame, truth = posed_arc
     settings = LocateSettings(tolerance_mm=1.0, turn_bound_deg=1.0) if opened else \
         LocateSettings()
@@ -68,9 +70,9 @@ def test_the_posed_arc_is_located_honestly_or_refused(posed_arc, framed, opened)
         b = locate_part(cad, cloud.points, settings, (-90, 90), cloud.attributes["line"],
                         camera, frame if framed else None).best
     except LocateRefused as e:
-        assert not opened and "what would pin it down" in str(e), str(e)
+        assert not opened and not framed and "what would pin it down" in str(e), str(e)
         return
-    assert opened, "accepted at 0.05 mm"
+    assert opened or framed, "accepted at 0.05 mm from its lines alone"
     err = rim_moved(cad.rim, pose_matrix(b.x_mm, b.y_mm, b.angle_deg), pose_matrix(*truth))
     turn = abs((b.angle_deg - truth[2] + 180.0) % 360.0 - 180.0)
     assert err <= 3 * b.rim_sigma_mm and err < 0.10 and turn < 0.10, (err, b.rim_sigma_mm)
