@@ -24,6 +24,10 @@ DATA to the benchmark. Each set says where its photographs, camera and board are
   same, laser off). Camera and the fitted light plane: ``Parameters.xml``. Board pose: the dots
   found in the laser-off photograph.
 
+Not a set: SONG-KUN/A-novel-approach-for-Camera-and-Laser-line-calibration (commit 6a88671)
+has full-HD images of a board and a blue line with a fitted plane, but they are renders of a
+simulated scene, not photographs.
+
 A board's ``area`` (board mm, x0, x1, y0, y1) is where a point is surely on its white face: the
 printed pattern and as much of its white border as every photograph shows (the dots' board:
 inside its black frame; the Bouguet set: the squares clicked).
@@ -190,6 +194,7 @@ SETS = {s.name: s for s in (DESKTOP, STRIPE, OUC, CIRCLES)}
 TUNED = {"desktop": "defaults chosen on all of it",
          "circles": "the tracks shaped on all of it",
          "ouc": "first half (bc1–bc7) looked at, nothing tuned on it; second half held out",
-         "stripe": "tuned on the first half (2_, 3_right), second half held out"}
+         "stripe": "tuned on the first half (2_, 3_right); all of it seen when the channel "
+                   "rule was chosen"}
 """How each set has been used: the halves are real_lines.half's of the set's photographs with
 a board pose (``files``' order)."""
