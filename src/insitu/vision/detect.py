@@ -246,7 +246,8 @@ def _second_rows(search, j1, lo, fill, top, w, live, min_peak):
     """:func:`_peak_rows` of ``search`` with each column's ±w rows about its first peak j1
     (W,) set to ``fill``, worked out only in the ``live`` columns (W,) bool (those whose first
     peak can pass) whose greatest value left reaches ``min_peak``; the first row of its band
-    in every other column (a peak that cannot pass)."""
+    in every other column. Also (W,) bool: the columns worked out, the only ones whose
+    second peak may pass (a band's first row can hold the first peak's flank)."""
     n = search.shape[1]
     out, cols = lo.copy(), np.flatnonzero(live)
     part = search[cols]
@@ -254,7 +255,9 @@ def _second_rows(search, j1, lo, fill, top, w, live, min_peak):
     part.reshape(-1)[guard + (np.arange(len(cols)) * n)[:, None]] = fill
     keep = part.max(axis=1, initial=fill) >= min_peak
     out[cols[keep]] = _peak_rows(part[keep], lo[cols[keep]], fill, top)
-    return out
+    found = np.zeros(len(lo), bool)
+    found[cols[keep]] = True
+    return out, found
 
 
 def detect(image, median=3, band=None, window=12, min_peak=40.0, min_contrast=20.0,
@@ -299,8 +302,9 @@ def detect(image, median=3, band=None, window=12, min_peak=40.0, min_contrast=20
         row, gmax, bg, contrast, ok, run = candidate(j1)
         ambiguous, locked = np.zeros(W, bool), np.zeros(W, bool)
     if not ridge and continuity and W > 2 and span > 2 * w + 1:
-        row2, gmax2, bg2, contrast2, ok2, run2 = candidate(
-            _second_rows(search, j1, lo, fill, top, w, gmax >= min_peak, min_peak))
+        j2, found = _second_rows(search, j1, lo, fill, top, w, gmax >= min_peak, min_peak)
+        row2, gmax2, bg2, contrast2, ok2, run2 = candidate(j2)
+        ok2 &= found
         ambiguous = ok & ok2
         if ambiguous.any():
             s1, s2, lab1, lab2 = chain_support(row, row2, ok, ok2, contrast, contrast2,
