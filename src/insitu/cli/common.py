@@ -24,8 +24,8 @@ from typer._click import exceptions as usage  # typer vendors click: its errors,
 from insitu.errors import InsituError
 from insitu.formats.bounds import BOUNDS
 
-console = Console(markup=False, emoji=False)
-err_console = Console(stderr=True, markup=False, emoji=False)
+console = Console(markup=False, emoji=False, soft_wrap=True)
+err_console = Console(stderr=True, markup=False, emoji=False, soft_wrap=True)
 
 
 def tagged(tag: str, style: str, message: str) -> Text:
@@ -35,20 +35,20 @@ def tagged(tag: str, style: str, message: str) -> Text:
 
 def fail(message: str) -> None:
     """Print one line naming the problem and exit non-zero."""
-    err_console.print(tagged("error:", "bold red", message), highlight=False, soft_wrap=True)
+    err_console.print(tagged("error:", "bold red", message), highlight=False)
     raise typer.Exit(1)
 
 
 def missing(message: str) -> None:
     """A required option not given, found by the command (options required only without
     another): one line, exit 2 as click's own usage errors."""
-    err_console.print(tagged("error:", "bold red", message), highlight=False, soft_wrap=True)
+    err_console.print(tagged("error:", "bold red", message), highlight=False)
     raise typer.Exit(2)
 
 
 def warn(message: str) -> None:
     """Print one warning line on stderr."""
-    err_console.print(tagged("warning:", "yellow", message), highlight=False, soft_wrap=True)
+    err_console.print(tagged("warning:", "yellow", message), highlight=False)
 
 
 def bounded(name: str) -> Callable:
@@ -130,7 +130,7 @@ def _plain_progress(description: str, unit: str) -> Iterator:
 
     def line(done: int, total: int) -> None:
         text = f"{description}: {done} of {total}" + (f" {unit}" if unit else "")
-        err_console.print(text, highlight=False, soft_wrap=True)
+        err_console.print(text, highlight=False)
         last.update(t=time.monotonic(), shown=done)
 
     def update(done: int, total: int) -> None:
@@ -241,5 +241,5 @@ class OneLineUsage(typer.core.TyperGroup):
                     break
                 command, path = sub, f"{path} {word}"
             err_console.print(tagged("error:", "bold red", usage_line(e, command, path)),
-                              highlight=False, soft_wrap=True)
+                              highlight=False)
             raise typer.Exit(USAGE_EXIT) from None

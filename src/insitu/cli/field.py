@@ -67,7 +67,7 @@ def field(
                   f"{r['cv_fold_rms_mean_mm']:.4f} ± {r['cv_fold_rms_std_mm']:.4f})")
     console.print(table)
     console.print("\n".join(format_area_rows(cal.areas_before, cal.areas_after)),
-                  highlight=False, soft_wrap=True)
+                  highlight=False)
 
 
 @one_line_errors
@@ -145,4 +145,4 @@ def check(
              "recalibrate the field")
     console.print(f"{field_file} holds: RMS {d.rms_mm:.4f} mm, max {d.max_mm:.4f} mm (point "
                   f"{worst + 1}), tolerance {d.tolerance_mm:.4f} mm, {len(err)} points",
-                  highlight=False, soft_wrap=True)
+                  highlight=False)

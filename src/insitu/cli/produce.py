@@ -120,7 +120,7 @@ def produce(recipe: RecipeFile, rig: Rig = None, field: Field = None, count: Cou
                  else production.NoWait())
         with progress_bar("producing", "parts") as progress:
             def on_record(rec) -> None:
-                console.print(part_line(rec), highlight=False, soft_wrap=True)
+                console.print(part_line(rec), highlight=False)
                 progress(rec.part, count)
 
             locate = recipe_locator(r, scan_camera(station.rig.camera, cal))
