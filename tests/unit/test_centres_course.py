@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from insitu.vision.centres import FILL_PX, _on_course
+from insitu.vision.course import FILL_PX, on_course
 from insitu.vision.detect import LineCentres
 from insitu.vision.tracks import on_longest_track, track_length
 
@@ -25,7 +25,7 @@ def test_a_stretch_slid_off_the_course_goes_a_step_in_depth_stays():
     v = 300 + 0.1 * u
     v[200:240] += np.linspace(1, 8, 40)
     v[400:] += 40
-    kept = _on_course(centres(u, v), True, 60.0)
+    kept = on_course(centres(u, v), True, 60.0)
     slid = (kept.u >= 200) & (kept.u < 240)
     off = np.abs(kept.v - (300 + 0.1 * kept.u + 40 * (kept.u >= 400))) > FILL_PX
     assert not off.any() and slid.sum() < 25
@@ -41,12 +41,12 @@ def test_a_short_piece_between_two_that_run_on_straight_goes_unless_on_their_lin
     for off, n_kept in ((12.0, 200), (0.0, 230)):
         w = v.copy()
         w[100:130] += off
-        assert len(_on_course(centres(u, w), True, 60.0)) == n_kept
-        assert len(_on_course(centres(w, u), False, 60.0)) == n_kept
+        assert len(on_course(centres(u, w), True, 60.0)) == n_kept
+        assert len(on_course(centres(w, u), False, 60.0)) == n_kept
     tail = np.r_[np.arange(100.0), np.arange(110.0, 130.0)]
     w = 200 + 0.2 * tail
     w[100:] += 30
-    assert len(_on_course(centres(tail, w), True, 60.0)) == 120
+    assert len(on_course(centres(tail, w), True, 60.0)) == 120
 
 
 def fields(row, ok):

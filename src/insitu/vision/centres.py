@@ -18,6 +18,7 @@ import cv2
 import numpy as np
 
 from insitu.vision.chains import longest_ridge
+from insitu.vision.course import fill_gaps, on_course
 from insitu.vision.detect import (
     LineCentres,
     as_image,
@@ -184,14 +185,11 @@ frame's longer side, from which a photograph's stripe counts as clipping the cha
 it."""
 GAPS = 0.95
 """A photograph's stripe with centres on fewer of the scan lines between its ends has its
-gaps filled from the laser's colour (:func:`_fill_gaps`)."""
-FILL_PX = 4.0
-"""How far (px) a centre filling a gap may lie from the course of the stripe's centres on
-either side (:func:`_fill_gaps`)."""
+gaps filled from the laser's colour (:func:`~insitu.vision.course.fill_gaps`)."""
 COURSE = 0.06
 """Half the span of scan lines, of the frame's shorter side, over which a photograph's stripe
-is taken as straight (:func:`_on_course`): a stretch of centres slid onto the rim of a dark
-dot or the edge of a square is shorter."""
+is taken as straight (:func:`~insitu.vision.course.on_course`): a stretch of centres slid
+onto the rim of a dark dot or the edge of a square is shorter."""
 PHOTO_RUN = 20
 """Least columns (or rows) of a stripe in anyone's photograph (:func:`photo_centres`)."""
 FRINGE_MARGIN = 1.0
@@ -239,7 +237,8 @@ def _check(method: str, direction: str | None) -> None:
 def _centres_in(li: LaserImage, method, direction, band, clipped, kw,
                 colour: bool = False) -> LineCentres:
     """:func:`line_centres` in the laser's light ``li``; colour: the gaps of the stripe
-    filled from the laser channel's excess over the others (:func:`_fill_gaps`)."""
+    filled from the laser channel's excess over the others
+    (:func:`~insitu.vision.course.fill_gaps`)."""
     fn = CENTRE_METHODS[method].find
     img, allow = li.gray, li.allow
     if direction is None:
@@ -253,12 +252,12 @@ def _centres_in(li: LaserImage, method, direction, band, clipped, kw,
     if in_sum:
         c = replace(c, peak=c.peak / 3, contrast=c.contrast / 3, full_scale=li.full_scale)
     if colour:
-        c = _on_course(c, direction == "rows", COURSE * min(img.shape))
+        c = on_course(c, direction == "rows", COURSE * min(img.shape))
     scan = c.u if direction == "rows" else c.v
     if colour and li.bgr is not None and 1 < len(c) < GAPS * (np.ptp(scan) + 1) \
             and not _clips(li):
         e = _along(fn, excess(li), direction, band, allow, scaled(li.full_scale))
-        c = _fill_gaps(c, e, direction == "rows")
+        c = fill_gaps(c, e, direction == "rows")
     return c
 
 
@@ -294,87 +293,6 @@ def _clips(li: LaserImage) -> bool:
     H, W = li.gray.shape
     hit = cv2.compare(li.gray, li.full_scale, cv2.CMP_GE) & li.allow.view(np.uint8)
     return cv2.countNonZero(hit) >= CLIPPED_SHARE * max(H, W)
-
-
-def _fill_gaps(c: LineCentres, e: LineCentres, along_rows: bool) -> LineCentres:
-    """``c`` with the centres of ``e`` added on the scan lines ``c`` has none, between its
-    ends, where they lie within :data:`FILL_PX` of ``c``'s course there (interpolated
-    between its neighbours). ``e``: the centres in the laser channel's excess over the
-    others, where a neutral board's pattern cancels and a stripe running along a dark
-    square's edge (a step in the channel, no peak) is a ridge."""
-    key = (lambda x: x.u) if along_rows else (lambda x: x.v)
-    cross = (lambda x: x.v) if along_rows else (lambda x: x.u)
-    sc, se = np.round(key(c)).astype(np.int64), np.round(key(e)).astype(np.int64)
-    order = np.argsort(sc)
-    course = np.interp(se, sc[order], cross(c)[order])
-    add = ((se > sc.min()) & (se < sc.max()) & ~np.isin(se, sc)
-           & (np.abs(cross(e) - course) <= FILL_PX))
-    if not add.any():
-        return c
-    keep = np.argsort(np.r_[sc, se[add]], kind="stable")
-    fields = ("u", "v", "peak", "width", "contrast", "saturated", "ambiguous")
-    return replace(c, **{f: np.r_[getattr(c, f), getattr(e, f)[add]][keep] for f in fields})
-
-
-def _on_course(c: LineCentres, along_rows: bool, half: float) -> LineCentres:
-    """``c`` without the centres off the stripe's course by more than :data:`FILL_PX`: the
-    running median of all centres over ±``half`` scan lines (a median keeps a step in depth),
-    their median slope taken out first; a piece shorter than ``half`` (pieces part where the
-    stripe, its slope taken out, jumps more than FILL_PX plus a tenth of the scan lines
-    between) is judged by its neighbours instead
-    (:func:`_between_neighbours`). A stripe is straight over that span; a stretch of centres
-    slid onto the rim of a dark mark or onto a bright square's edge beside it is off it."""
-    s = np.round(c.u if along_rows else c.v).astype(np.int64)
-    x = c.v if along_rows else c.u
-    if len(s) < 3:
-        return c
-    order = np.argsort(s, kind="stable")
-    s, x = s[order], x[order]
-    ds, dx = np.diff(s), np.diff(x)
-    h = max(int(half), 1)
-    slope = float(np.median(dx[ds == 1])) if (ds == 1).any() else 0.0
-    cut = np.r_[0, np.cumsum((np.abs(dx - slope * ds) > FILL_PX + 0.1 * ds) | (ds > h))]
-    flat = x - slope * s
-    dense = np.full(int(s[-1] - s[0]) + 1 + 2 * h, np.inf)
-    dense[s - s[0] + h] = flat
-    step = max(1, h // 16)                               # ≤ 33 samples of each window
-    win = np.sort(np.lib.stride_tricks.sliding_window_view(dense, 2 * h + 1)[s - s[0], ::step],
-                  axis=1)
-    n = np.isfinite(win).sum(axis=1)
-    mid = (np.take_along_axis(win, ((n - 1) // 2)[:, None], 1)[:, 0]
-           + np.take_along_axis(win, (n // 2)[:, None], 1)[:, 0]) / 2
-    first = np.r_[0, np.flatnonzero(np.diff(cut)) + 1]
-    short = (s[np.r_[first[1:], len(s)] - 1] - s[first] < h)[cut]
-    on = np.where(short, _between_neighbours(s, x, cut, h), np.abs(flat - mid) <= FILL_PX)
-    keep = np.zeros(len(s), bool)
-    keep[order] = on
-    if keep.all():
-        return c
-    fields = ("u", "v", "peak", "width", "contrast", "saturated", "ambiguous")
-    return replace(c, **{f: getattr(c, f)[keep] for f in fields})
-
-
-def _between_neighbours(s, x, cut, h) -> np.ndarray:
-    """(n,) bool: False on the pieces (labels ``cut``, (n,)) of fewer than ``h`` scan lines
-    that lie more than :data:`FILL_PX` off the straight line fitted through the other
-    pieces' centres within ``h`` scan lines before and after them, where those lie on it
-    (median residual ≤ FILL_PX / 4) on both sides. s, x: (n,) scan line and cross
-    coordinate, sorted by s."""
-    keep = np.ones(len(s), bool)
-    first = np.r_[0, np.flatnonzero(np.diff(cut)) + 1]
-    last = np.r_[first[1:], len(s)] - 1
-    for a, b in zip(first, last):
-        if s[b] - s[a] >= h:
-            continue                                      # a long piece: judged elsewhere
-        side = (cut != cut[a]) & (np.abs(s - (s[a] + s[b]) / 2) <= (s[b] - s[a]) / 2 + h)
-        before, after = side & (s < s[a]), side & (s > s[b])
-        if before.sum() < 3 or after.sum() < 3:
-            continue
-        fit = np.polyfit(s[side], x[side], 1)
-        if np.median(np.abs(np.polyval(fit, s[side]) - x[side])) > FILL_PX / 4:
-            continue
-        keep[a:b + 1] = np.abs(np.median(x[a:b + 1] - np.polyval(fit, s[a:b + 1]))) <= FILL_PX
-    return keep
 
 
 def _stripe_length(c: LineCentres, direction: str) -> int:

@@ -1,0 +1,96 @@
+"""A photograph's stripe kept on its course: the scan lines it has no centre on filled from
+the laser colour's excess (:func:`fill_gaps`), and the stretches of centres that slid off it
+onto the rim of a dark mark or a bright square's edge dropped (:func:`on_course`)."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+
+from insitu.vision.detect import LineCentres
+
+FILL_PX = 4.0
+"""How far (px) a centre filling a gap may lie from the course of the stripe's centres on
+either side (:func:`fill_gaps`)."""
+
+
+def fill_gaps(c: LineCentres, e: LineCentres, along_rows: bool) -> LineCentres:
+    """``c`` with the centres of ``e`` added on the scan lines ``c`` has none, between its
+    ends, where they lie within :data:`FILL_PX` of ``c``'s course there (interpolated
+    between its neighbours). ``e``: the centres in the laser channel's excess over the
+    others, where a neutral board's pattern cancels and a stripe running along a dark
+    square's edge (a step in the channel, no peak) is a ridge."""
+    key = (lambda x: x.u) if along_rows else (lambda x: x.v)
+    cross = (lambda x: x.v) if along_rows else (lambda x: x.u)
+    sc, se = np.round(key(c)).astype(np.int64), np.round(key(e)).astype(np.int64)
+    order = np.argsort(sc)
+    course = np.interp(se, sc[order], cross(c)[order])
+    add = ((se > sc.min()) & (se < sc.max()) & ~np.isin(se, sc)
+           & (np.abs(cross(e) - course) <= FILL_PX))
+    if not add.any():
+        return c
+    keep = np.argsort(np.r_[sc, se[add]], kind="stable")
+    fields = ("u", "v", "peak", "width", "contrast", "saturated", "ambiguous")
+    return replace(c, **{f: np.r_[getattr(c, f), getattr(e, f)[add]][keep] for f in fields})
+
+
+def on_course(c: LineCentres, along_rows: bool, half: float) -> LineCentres:
+    """``c`` without the centres off the stripe's course by more than :data:`FILL_PX`: the
+    running median of all centres over ±``half`` scan lines (a median keeps a step in depth),
+    their median slope taken out first; a piece shorter than ``half`` (pieces part where the
+    stripe, its slope taken out, jumps more than FILL_PX plus a tenth of the scan lines
+    between) is judged by its neighbours instead
+    (:func:`_between_neighbours`). A stripe is straight over that span; a stretch of centres
+    slid onto the rim of a dark mark or onto a bright square's edge beside it is off it."""
+    s = np.round(c.u if along_rows else c.v).astype(np.int64)
+    x = c.v if along_rows else c.u
+    if len(s) < 3:
+        return c
+    order = np.argsort(s, kind="stable")
+    s, x = s[order], x[order]
+    ds, dx = np.diff(s), np.diff(x)
+    h = max(int(half), 1)
+    slope = float(np.median(dx[ds == 1])) if (ds == 1).any() else 0.0
+    cut = np.r_[0, np.cumsum((np.abs(dx - slope * ds) > FILL_PX + 0.1 * ds) | (ds > h))]
+    flat = x - slope * s
+    dense = np.full(int(s[-1] - s[0]) + 1 + 2 * h, np.inf)
+    dense[s - s[0] + h] = flat
+    step = max(1, h // 16)                               # ≤ 33 samples of each window
+    win = np.sort(np.lib.stride_tricks.sliding_window_view(dense, 2 * h + 1)[s - s[0], ::step],
+                  axis=1)
+    n = np.isfinite(win).sum(axis=1)
+    mid = (np.take_along_axis(win, ((n - 1) // 2)[:, None], 1)[:, 0]
+           + np.take_along_axis(win, (n // 2)[:, None], 1)[:, 0]) / 2
+    first = np.r_[0, np.flatnonzero(np.diff(cut)) + 1]
+    short = (s[np.r_[first[1:], len(s)] - 1] - s[first] < h)[cut]
+    on = np.where(short, _between_neighbours(s, x, cut, h), np.abs(flat - mid) <= FILL_PX)
+    keep = np.zeros(len(s), bool)
+    keep[order] = on
+    if keep.all():
+        return c
+    fields = ("u", "v", "peak", "width", "contrast", "saturated", "ambiguous")
+    return replace(c, **{f: getattr(c, f)[keep] for f in fields})
+
+
+def _between_neighbours(s, x, cut, h) -> np.ndarray:
+    """(n,) bool: False on the pieces (labels ``cut``, (n,)) of fewer than ``h`` scan lines
+    that lie more than :data:`FILL_PX` off the straight line fitted through the other
+    pieces' centres within ``h`` scan lines before and after them, where those lie on it
+    (median residual ≤ FILL_PX / 4) on both sides. s, x: (n,) scan line and cross
+    coordinate, sorted by s."""
+    keep = np.ones(len(s), bool)
+    first = np.r_[0, np.flatnonzero(np.diff(cut)) + 1]
+    last = np.r_[first[1:], len(s)] - 1
+    for a, b in zip(first, last):
+        if s[b] - s[a] >= h:
+            continue                                      # a long piece: judged elsewhere
+        side = (cut != cut[a]) & (np.abs(s - (s[a] + s[b]) / 2) <= (s[b] - s[a]) / 2 + h)
+        before, after = side & (s < s[a]), side & (s > s[b])
+        if before.sum() < 3 or after.sum() < 3:
+            continue
+        fit = np.polyfit(s[side], x[side], 1)
+        if np.median(np.abs(np.polyval(fit, s[side]) - x[side])) > FILL_PX / 4:
+            continue
+        keep[a:b + 1] = np.abs(np.median(x[a:b + 1] - np.polyval(fit, s[a:b + 1]))) <= FILL_PX
+    return keep
