@@ -57,10 +57,10 @@ def test_pilot_line_is_redrawn_until_changed_then_off(board):
 
 
 def test_marking_laser_at_pilot_power(board):
-    head = projector(board, source="laser", power_pct=1.0, sweeps=1)
+    head = projector(board, source="laser", power_pct=0.5, frequency_khz=80.0, sweeps=1)
     head.show_line(np.array([0.0, -5.0]), np.array([0.0, 5.0]))
     head.off()
-    assert (0x8012, 41, 0, 0, 0, 0) in list_entries(board)         # 1 % of 0xFFF
+    assert (0x8012, 20, 0, 0, 0, 0) in list_entries(board)         # 0.5 % of 0xFFF
     assert len(board.marks) >= 2 and not board.laser_output()
     head.controller.close()
 
@@ -82,8 +82,16 @@ def test_outside_the_field_is_refused(board):
     head.controller.close()
 
 
+def test_marking_laser_that_would_mark_is_refused(board):
+    """1 % of 20 W at 20 kHz puts 1.0 J/cm² in a 50 µm spot's pulse: beech (0.7 J/cm²)
+    would be marked; at 80 kHz and 0.5 % a pulse carries 0.13 J/cm², under 0.25 × 0.7."""
+    with pytest.raises(SafetyError, match=r"beech.*power_pct ≤ 0\.17"):
+        projector(board, source="laser", power_pct=1.0)
+    assert board.marks == [] and not board.laser_output()
+
+
 def test_fault_while_projecting_stops_it_laser_off(board):
-    head = projector(board, source="laser", power_pct=1.0)
+    head = projector(board, source="laser", power_pct=0.5, frequency_khz=80.0)
     head.show_line(np.array([0.0, -5.0]), np.array([0.0, 5.0]))
     board.unplug_after(30)
     time.sleep(0.3)

@@ -20,18 +20,27 @@ from insitu.devices.galvo import Command, FieldCorrection, joint_from_targets
 from insitu.devices.protocols import check_in_field
 from insitu.errors import ConfigError, DeviceError, SafetyError
 from insitu.formats.bounds import check
+from insitu.formats.materials import DEFAULT_MATERIALS, MaterialTable
 from insitu.geometry.beams import TwoMirrorHead
+
+SCAN_FLUENCE_SHARE = 0.25
+"""The most a scan's pulse may carry of the lowest ablation threshold in the station's
+materials (as the simulated station scans, :mod:`insitu.sim.clock`)."""
 
 
 class GalvoLineProjector:
     """``head``: nominal kinematics; ``correction``: the field correction, as for marking;
-    ``speed_mm_s``: sweep speed; ``sweeps``: back-and-forth passes per list."""
+    ``speed_mm_s``: sweep speed; ``sweeps``: back-and-forth passes per list; ``materials``:
+    the station's laser and materials — the marking laser (``source="laser"``) is refused at
+    a power whose pulses reach :data:`SCAN_FLUENCE_SHARE` of the lowest ablation threshold
+    (the scan would mark the part)."""
 
     def __init__(self, controller, head: TwoMirrorHead, field_size_mm: tuple[float, float],
                  z_range_mm: tuple[float, float], correction: FieldCorrection | None = None,
                  speed_mm_s: float = 2000.0, sweeps: int = 4, source: str = "pilot",
                  power_pct: float = 1.0, frequency_khz: float = 20.0,
-                 first_draw_timeout_s: float = 5.0):
+                 first_draw_timeout_s: float = 5.0,
+                 materials: MaterialTable = DEFAULT_MATERIALS):
         if source not in ("pilot", "laser"):
             raise DeviceError(f"line projection: source must be 'pilot' or 'laser', got {source!r}")
         for key, bound, value in (("speed_mm_s", "mark_speed_mm_s", speed_mm_s),
@@ -39,6 +48,8 @@ class GalvoLineProjector:
                                   ("power_pct", "power_pct", power_pct),
                                   ("frequency_khz", "frequency_khz", frequency_khz)):
             check(bound, value, f"options.projection.{key}", ConfigError)
+        if source == "laser":
+            _never_marks(materials, float(power_pct), float(frequency_khz))
         self.controller, self.head, self.correction = controller, head, correction
         self.field_size_mm, self.z_range_mm = tuple(field_size_mm), tuple(z_range_mm)
         self.speed, self.sweeps, self.source = float(speed_mm_s), int(sweeps), source
@@ -154,3 +165,19 @@ class GalvoLineProjector:
             if thread is not None and thread is not threading.current_thread():
                 thread.join(timeout=5.0)
             self.controller.laser_off()        # after the last sweep list ended
+
+
+def _never_marks(materials: MaterialTable, power_pct: float, frequency_khz: float) -> None:
+    """SafetyError when the marking laser at ``power_pct`` % and ``frequency_khz`` would mark
+    the softest of ``materials`` (pulses beyond :data:`SCAN_FLUENCE_SHARE` of its threshold)."""
+    soft, laser = materials.softest(), materials.laser
+    fluence = laser.peak_fluence_j_cm2(power_pct, frequency_khz)
+    limit = SCAN_FLUENCE_SHARE * soft.threshold_j_cm2
+    if fluence > limit:
+        most = power_pct * limit / fluence
+        raise SafetyError(
+            f"options.projection: the marking laser at {power_pct:g} % and {frequency_khz:g} kHz "
+            f"puts {fluence:.3g} J/cm² in each pulse, over {SCAN_FLUENCE_SHARE:g} × the "
+            f"ablation threshold of {soft.name} ({soft.threshold_j_cm2:g} J/cm²): the scan "
+            f"would mark the part; set power_pct ≤ {most:.3g} at this frequency, or source "
+            f"'pilot'")

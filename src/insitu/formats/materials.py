@@ -47,6 +47,13 @@ class LaserSource(_Strict):
     power_w: Power = 20.0
     spot_um: Spot = 50.0
 
+    def peak_fluence_j_cm2(self, power_pct: float, frequency_khz: float) -> float:
+        """A pulse's peak fluence F0 = 2E / (π w²) (J/cm²) at ``power_pct`` % and
+        ``frequency_khz``, in focus."""
+        w_cm = self.spot_um / 2 * 1e-4
+        energy_j = self.power_w * power_pct / 100.0 / (frequency_khz * 1e3)
+        return 2 * energy_j / (math.pi * w_cm ** 2)
+
 
 class Material(_Strict):
     """One material: ablation constants (``threshold_j_cm2`` F_th, ``penetration_um`` δ),
@@ -64,10 +71,9 @@ class Material(_Strict):
         """Nominal depth (mm) one pass of the pen removes from a flat floor in focus
         (``power_pct``: instead of the pen's); 0 below the threshold."""
         pen = self.pen
-        w_cm = laser.spot_um / 2 * 1e-4
         pct = pen.power_pct if power_pct is None else power_pct
-        energy_j = laser.power_w * pct / 100.0 / (pen.frequency_khz * 1e3)
-        log_f = math.log(max(2 * energy_j / (math.pi * w_cm ** 2), 1e-30) / self.threshold_j_cm2)
+        log_f = math.log(max(laser.peak_fluence_j_cm2(pct, pen.frequency_khz), 1e-30)
+                         / self.threshold_j_cm2)
         if log_f <= 0:
             return 0.0
         w_mm, delta_mm = laser.spot_um / 2e3, self.penetration_um * 1e-3
@@ -89,6 +95,10 @@ class MaterialTable(_Strict):
     @property
     def names(self) -> tuple[str, ...]:
         return tuple(m.name for m in self.materials)
+
+    def softest(self) -> Material:
+        """The material with the lowest ablation threshold: what a scan must never mark."""
+        return min(self.materials, key=lambda m: m.threshold_j_cm2)
 
     def material(self, name: str, where: str = "material") -> Material:
         """The material called ``name``; FormatError naming ``where`` and the materials."""
