@@ -1,6 +1,7 @@
 """Line projection for scanning on a real head (here the fake LMC board behind pyusb): the
 line is drawn repeatedly at pilot power until it changes, and a fault stops it, laser off."""
 
+import json
 import struct
 import time
 
@@ -87,6 +88,20 @@ def test_marking_laser_that_would_mark_is_refused(board):
     would be marked; at 80 kHz and 0.5 % a pulse carries 0.13 J/cm², under 0.25 × 0.7."""
     with pytest.raises(SafetyError, match=r"beech.*power_pct ≤ 0\.17"):
         projector(board, source="laser", power_pct=1.0)
+    assert board.marks == [] and not board.laser_output()
+
+
+def test_the_stations_own_materials_file_sets_the_limit(board, tmp_path):
+    """A station whose materials file holds paper (0.1 J/cm²): 0.5 % at 80 kHz (0.13 J/cm² a
+    pulse) would mark it."""
+    table = {"format": "insitu-materials/1", "laser": {"power_w": 20, "spot_um": 50},
+             "materials": [{"name": "paper", "threshold_j_cm2": 0.1, "penetration_um": 5,
+                            "pen": {"name": "engrave-paper", "power_pct": 5}}]}
+    path = tmp_path / "materials.json"
+    path.write_text(json.dumps(table))
+    with pytest.raises(SafetyError, match=r"paper.*power_pct ≤ 0\.0"):
+        projector(board, source="laser", power_pct=0.5, frequency_khz=80.0,
+                  materials_file=path)
     assert board.marks == [] and not board.laser_output()
 
 

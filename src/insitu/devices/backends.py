@@ -31,7 +31,7 @@ from insitu.devices.protocols import Camera, ScanHead, Stage
 from insitu.errors import ConfigError
 from insitu.geometry.beams import TwoMirrorHead
 
-PATH_KEYS = {"producer", "library", "correction_file", "program_dir"}
+PATH_KEYS = {"producer", "library", "correction_file", "program_dir", "materials_file"}
 
 
 @dataclass

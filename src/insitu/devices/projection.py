@@ -13,6 +13,7 @@ stops the thread with the laser off; the next call raises it as DeviceError.
 from __future__ import annotations
 
 import threading
+from pathlib import Path
 
 import numpy as np
 
@@ -20,7 +21,7 @@ from insitu.devices.galvo import Command, FieldCorrection, joint_from_targets
 from insitu.devices.protocols import check_in_field
 from insitu.errors import ConfigError, DeviceError, SafetyError
 from insitu.formats.bounds import check
-from insitu.formats.materials import DEFAULT_MATERIALS, MaterialTable
+from insitu.formats.materials import DEFAULT_MATERIALS, MaterialTable, read_materials
 from insitu.geometry.beams import TwoMirrorHead
 
 SCAN_FLUENCE_SHARE = 0.25
@@ -30,17 +31,18 @@ materials (as the simulated station scans, :mod:`insitu.sim.clock`)."""
 
 class GalvoLineProjector:
     """``head``: nominal kinematics; ``correction``: the field correction, as for marking;
-    ``speed_mm_s``: sweep speed; ``sweeps``: back-and-forth passes per list; ``materials``:
-    the station's laser and materials — the marking laser (``source="laser"``) is refused at
-    a power whose pulses reach :data:`SCAN_FLUENCE_SHARE` of the lowest ablation threshold
-    (the scan would mark the part)."""
+    ``speed_mm_s``: sweep speed; ``sweeps``: back-and-forth passes per list; ``materials_file``:
+    the station's materials file (None: the built-in table) — the marking laser
+    (``source="laser"``) is refused at a power whose pulses reach
+    :data:`SCAN_FLUENCE_SHARE` of its lowest ablation threshold (the scan would mark the
+    part)."""
 
     def __init__(self, controller, head: TwoMirrorHead, field_size_mm: tuple[float, float],
                  z_range_mm: tuple[float, float], correction: FieldCorrection | None = None,
                  speed_mm_s: float = 2000.0, sweeps: int = 4, source: str = "pilot",
                  power_pct: float = 1.0, frequency_khz: float = 20.0,
                  first_draw_timeout_s: float = 5.0,
-                 materials: MaterialTable = DEFAULT_MATERIALS):
+                 materials_file: str | Path | None = None):
         if source not in ("pilot", "laser"):
             raise DeviceError(f"line projection: source must be 'pilot' or 'laser', got {source!r}")
         for key, bound, value in (("speed_mm_s", "mark_speed_mm_s", speed_mm_s),
@@ -49,7 +51,9 @@ class GalvoLineProjector:
                                   ("frequency_khz", "frequency_khz", frequency_khz)):
             check(bound, value, f"options.projection.{key}", ConfigError)
         if source == "laser":
-            _never_marks(materials, float(power_pct), float(frequency_khz))
+            table = DEFAULT_MATERIALS if materials_file is None else read_materials(
+                materials_file)
+            _never_marks(table, float(power_pct), float(frequency_khz))
         self.controller, self.head, self.correction = controller, head, correction
         self.field_size_mm, self.z_range_mm = tuple(field_size_mm), tuple(z_range_mm)
         self.speed, self.sweeps, self.source = float(speed_mm_s), int(sweeps), source
