@@ -11,7 +11,7 @@ from __future__ import annotations
 import cv2
 import numpy as np
 import pytest
-from hypothesis import given, settings
+from hypothesis import example, given, settings
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 from scipy.special import ndtr
@@ -23,7 +23,7 @@ from insitu.vision.centres import (
     line_centres,
     line_direction,
 )
-from insitu.vision.steger import gaussian_kernels, steger
+from insitu.vision.steger import _T_MAX, gaussian_kernels, steger
 
 METHODS = {"gray": gray_centroid, "gaussian": gaussian_peak, "steger": steger}
 H, W = 256, 640
@@ -290,7 +290,34 @@ def test_kernels_are_exact_on_polynomials():
 frames = arrays(np.uint8, st.tuples(st.integers(1, 40), st.integers(1, 40)))
 
 
+def _one_per_line(scan, reach: float) -> bool:
+    """Whether each scan coordinate (n,) can have a scan line (an integer) of its own within
+    ``reach`` px of it (Steger moves a centre up to its |t·n| limit along the scan)."""
+    used = -np.inf
+    for s in np.sort(scan):
+        line = max(np.ceil(s - reach), used + 1)
+        if line > s + reach:
+            return False
+        used = line
+    return True
+
+
+def _diagonal_blob() -> np.ndarray:
+    """A frame hypothesis found where Steger moves a centre 0.56 px along the scan."""
+    img = np.zeros((13, 13), np.uint8)
+    img[9, 4], img[10, 3], img[10, 6], img[12, 3] = 33, 12, 25, 1
+    img[11, 3:6] = 6, 15, 30
+    return img
+
+
+def test_one_point_per_line_check():
+    assert _one_per_line(np.array([10.0, 10.44, 12.0]), 0.6)      # 10.44 is line 11's
+    assert not _one_per_line(np.array([10.0, 10.44, 12.0]), 0.5)
+    assert not _one_per_line(np.array([10.0, 10.0]), 0.6)
+
+
 @settings(max_examples=150, deadline=None)
+@example(img=_diagonal_blob(), method="steger", direction=None, banded=False)
 @given(img=frames, method=st.sampled_from(sorted(METHODS)),
        direction=st.sampled_from([None, "rows", "cols"]), banded=st.booleans())
 def test_random_frames_never_crash(img, method, direction, banded):
@@ -306,7 +333,7 @@ def test_random_frames_never_crash(img, method, direction, banded):
         assert a.shape == (len(res),) and np.isfinite(a).all(), f
     assert res.saturated.shape == res.ambiguous.shape == (len(res),)
     scan = res.u if direction == "rows" else res.v
-    assert len(np.unique(np.round(scan))) == len(res)               # ≤ one point per line
+    assert _one_per_line(scan, _T_MAX if method == "steger" else 0.5)   # ≤ one point per line
     Hh, Ww = img.shape
     assert ((res.u >= -1) & (res.u <= Ww) & (res.v >= -1) & (res.v <= Hh)).all()
 
