@@ -34,7 +34,9 @@ from dataclasses import dataclass, fields
 
 import numpy as np
 
+from insitu.devices.projection import SCAN_FLUENCE_SHARE
 from insitu.errors import ConfigError
+from insitu.formats.materials import LaserSource
 from insitu.sim.render import NOMINAL_EXPOSURE_MS
 
 
@@ -56,15 +58,16 @@ class SimTiming:
     scan_spot_um: float = 50.0
     scan_pulse_khz: float = 1000.0
     scan_threshold_j_cm2: float = 0.7
-    scan_fluence_share: float = 0.25
+    scan_fluence_share: float = SCAN_FLUENCE_SHARE
     source_power_w: float = 20.0
 
     def scan_power_w(self) -> float:
         """The highest power (W) of the scan that never marks: a pulse's peak fluence at most
         ``scan_fluence_share`` × ``scan_threshold_j_cm2``, and the source's power at most."""
-        w_cm = self.scan_spot_um / 2 * 1e-4
-        pulse_j = self.scan_fluence_share * self.scan_threshold_j_cm2 * np.pi * w_cm ** 2 / 2
-        return min(pulse_j * self.scan_pulse_khz * 1e3, self.source_power_w)
+        source = LaserSource(power_w=self.source_power_w, spot_um=self.scan_spot_um)
+        full = source.peak_fluence_j_cm2(100.0, self.scan_pulse_khz)
+        limit = self.scan_fluence_share * self.scan_threshold_j_cm2
+        return self.source_power_w * min(limit / full, 1.0)
 
     def max_sweep_mm_s(self) -> float:
         """The fastest a line can be swept (mm/s): the galvo's, and one pulse a spot
