@@ -14,7 +14,7 @@ from insitu.errors import ConfigError, SafetyError
 from insitu.marking import Placement
 from insitu.marking.engrave_depth import DepthSettings
 from insitu.marking.journal import journal_path_for
-from insitu.services.engrave import EngraveOutcome, EngraveRequest, engrave
+from insitu.services.engrave import NO_HEIGHT_CAL, EngraveOutcome, EngraveRequest, engrave
 from insitu.services.scan import scan_live
 from insitu.services.station import connect
 
@@ -78,7 +78,9 @@ def test_an_abort_is_resumed_measuring_first(run):
     first = run.first.record
     assert first.state == "cancelled" and first.rounds[0].state == "cut"
     assert "resume it" in run.refused
-    assert run.notes[0].startswith("measured after round 1")      # a resume measures first
+    # the table and the depth scale said first (no height calibration: good to ±2 %)
+    assert run.notes[:2] == ["materials: the built-in table", NO_HEIGHT_CAL]
+    assert run.notes[2].startswith("measured after round 1")      # a resume measures first
 
 
 def test_the_report_and_a_finished_record(run):

@@ -1,5 +1,7 @@
 """``insitu engrave`` refuses bad input with one line, the laser off and nothing written."""
 
+import json
+
 import numpy as np
 import pytest
 from typer.testing import CliRunner
@@ -42,4 +44,35 @@ def test_bad_input_is_refused_in_one_line_and_nothing_is_written(tmp_path, args,
     assert res.exit_code != 0
     lines = [ln for ln in res.output.splitlines() if ln.strip()]
     assert len(lines) == 1 and message in " ".join(res.output.split()), res.output
+    assert not (tmp_path / "rep").exists()
+
+
+PAPER = {"format": "insitu-materials/1", "laser": {"power_w": 20, "spot_um": 50},
+         "materials": [{"name": "paper", "threshold_j_cm2": 0.1, "penetration_um": 5,
+                        "pen": {"name": "engrave-paper", "power_pct": 5}}]}
+
+
+def test_the_rig_files_materials_file_is_the_default_table(tmp_path):
+    """Without --materials the table is the one the rig file names (options.projection.
+    materials_file, relative to the rig file), said in one line; the built-in one else."""
+    from insitu.cli.engrave import _materials
+    from insitu.formats.json_file import load_json_model
+    from insitu.formats.rig import RigConfig
+
+    (tmp_path / "paper.json").write_text(json.dumps(PAPER))
+    rig = tmp_path / "rig.json"
+    rig.write_text(json.dumps({"options": {"projection": {"materials_file": "paper.json"}}}))
+    table, said = _materials(None, load_json_model(rig, RigConfig), "paper")
+    assert [m.name for m in table.materials] == ["paper"]
+    assert said == f"{tmp_path / 'paper.json'} (the rig file's options.projection.materials_file)"
+    table, said = _materials(None, RigConfig(), "beech")
+    assert said == "the built-in table" and len(table.materials) == 3
+    # through the command: stainless steel is not in the rig's table, refused naming its file
+    (tmp_path / "sq.svg").write_text(SQUARE)
+    cloud = _cloud(tmp_path / "c.ply", -6, 6, -6, 6, 5.0)
+    res = runner.invoke(app, ["engrave", "--cloud", str(cloud), "--pattern",
+                              str(tmp_path / "sq.svg"), "--at", "0", "0", "--depth", "0.2",
+                              "--rig", str(rig), "-o", str(tmp_path / "rep")])
+    assert res.exit_code != 0
+    assert "paper.json" in res.output and "'paper'" in res.output, res.output
     assert not (tmp_path / "rep").exists()

@@ -33,7 +33,7 @@ MaterialName = Annotated[str, typer.Option(
                        "constants, where the removal rate starts.")]
 MaterialsFile = Annotated[Path | None, typer.Option(
     "--materials", metavar="MATERIALS.json", help="Materials file (insitu-materials/1) "
-    "instead of the built-in table.")]
+    "(default: the rig file's options.projection.materials_file, else the built-in table).")]
 HeightCal = Annotated[Path | None, typer.Option(
     "--height-cal", help="Height calibration (file or recorded folder) for the depth scans "
                          "(default: the light plane alone).")]
@@ -65,7 +65,6 @@ def engrave(
     measurement (engrave.json). A run stopped (ABORT, Ctrl-C, a fault) goes on with
     --resume, which measures the pocket first."""
     from insitu.cli.job import stop_on_signals
-    from insitu.formats.materials import DEFAULT_MATERIALS, read_materials
     from insitu.formats.pointcloud import read_ply
     from insitu.marking import Placement
     from insitu.services.engrave import EngraveRequest
@@ -79,18 +78,37 @@ def engrave(
                 "--depth: missing; expected a number, mm")
     if not out.parent.is_dir():
         raise typer.BadParameter(f"{out}: folder {out.parent} does not exist", param_hint="-o")
-    table = read_materials(materials) if materials is not None else DEFAULT_MATERIALS
-    table.material(material, str(materials) if materials else "--material")
     cal = load_height_calibration(height_cal) if height_cal is not None else None
-    req = EngraveRequest(out, Placement(pattern, tuple(at), width, rotate), read_ply(cloud),
-                         depth, rescan_every, material, table, cal, scan_spacing,
-                         resume=resume)
+    surface = read_ply(cloud)
     with connect(rig, workpiece, seed, field=field, pose=pose) as station:
+        table, source = _materials(materials, station.cfg, material)
+        req = EngraveRequest(out, Placement(pattern, tuple(at), width, rotate), surface,
+                             depth, rescan_every, material, table, cal, scan_spacing,
+                             resume=resume, materials_from=source)
         with stop_on_signals("engraving", f" (insitu engrave ... --resume -o {out} goes on)"), \
                 progress_bar("engraving", "steps") as progress:
             outcome = run(station, req, progress=progress,
                           notify=lambda text: console.print(text, highlight=False))
     _summary(outcome, out)
+
+
+def _materials(given: Path | None, cfg, material: str):
+    """(the materials table, where it was read): ``given`` (--materials), else the file the
+    rig file ``cfg`` names in ``options.projection.materials_file``, else the built-in table;
+    ``material`` checked in it (FormatError naming the file)."""
+    from insitu.formats.materials import DEFAULT_MATERIALS, read_materials
+
+    named = cfg.options.get("projection", {}).get("materials_file")
+    if given is not None:
+        table, source, where = read_materials(given), f"{given} (--materials)", str(given)
+    elif named:
+        path = cfg.resolve(named)
+        table, where = read_materials(path), str(path)
+        source = f"{path} (the rig file's options.projection.materials_file)"
+    else:
+        table, source, where = DEFAULT_MATERIALS, "the built-in table", "--material"
+    table.material(material, where)
+    return table, source
 
 
 def _summary(outcome, out: Path) -> None:

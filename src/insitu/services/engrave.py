@@ -73,6 +73,8 @@ from insitu.services.pocket import measure_pocket
 from insitu.services.scan import Cancelled
 from insitu.services.station import Station
 
+NO_HEIGHT_CAL = ("warning: no height calibration: the depth scans' scale is the light plane's "
+                 "alone, good to about ±2 % of the depth")
 MAX_ROUNDS = 60
 MAX_PASSES = 1000
 """The most passes an engraving plans (at the table's rate): a deeper target is beyond reach."""
@@ -86,7 +88,7 @@ class EngraveRequest:
     depth scans' heights (None: the light plane alone); ``spacing_mm``: their lines';
     ``resume``: go on with the engraving in ``report_dir`` (measured first);
     ``open_loop_passes``: instead, this many passes everywhere and nothing measured (what
-    counting passes gives)."""
+    counting passes gives); ``materials_from``: where ``materials`` was read (said once)."""
 
     report_dir: Path
     placement: Placement
@@ -100,6 +102,7 @@ class EngraveRequest:
     settings: DepthSettings = field(default_factory=DepthSettings)
     resume: bool = False
     open_loop_passes: int | None = None
+    materials_from: str = "the built-in table"
 
     def ask(self) -> EngraveAsk:
         p = self.placement
@@ -310,6 +313,9 @@ def engrave(station: Station, req: EngraveRequest, cancel: threading.Event | Non
     like any mark; ConfigError for a report folder holding another engraving, or a finished
     or interrupted one without ``resume``."""
     e = _Engraving(station, req, notify, measured)
+    e.notify(f"materials: {req.materials_from}")
+    if req.height_cal is None and req.open_loop_passes is None:
+        e.notify(NO_HEIGHT_CAL)
     req.report_dir.mkdir(exist_ok=True)
     record = read_record(req.report_dir)
     if record is None:
