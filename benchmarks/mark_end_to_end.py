@@ -41,7 +41,8 @@ from insitu.services.plan import plan_mark
 from insitu.services.record import record_height_calibration, record_marked_field_calibration
 from insitu.services.scan import scan_live
 from insitu.services.station import simulated
-from insitu.sim.devices import SimController, SimInspectionCamera
+from insitu.sim.controller import SimController
+from insitu.sim.devices import SimInspectionCamera
 from insitu.sim.marks import find_marks
 from insitu.sim.rig import default_rig
 from insitu.sim.world import SimWorld, sim_world

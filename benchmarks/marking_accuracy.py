@@ -44,7 +44,7 @@ from insitu.services.mark import check_codes
 from insitu.services.record import record_height_calibration
 from insitu.services.scan import scan_live
 from insitu.services.station import simulated
-from insitu.sim.devices import SimController
+from insitu.sim.controller import SimController
 from insitu.sim.marks import find_marks, render_inspection
 from insitu.sim.rig import default_rig
 from insitu.sim.world import SimWorld, sim_world

@@ -24,7 +24,7 @@ from insitu.devices.lmc import LmcListBuilder, LmcSettings
 from insitu.devices.rtc import RtcListBuilder, RtcSettings
 from insitu.formats.pens import DEFAULT_PENS
 from insitu.marking import GalvoDriver, Placement, estimate_time, make_job, run_job, with_pen
-from insitu.sim.devices import SimController
+from insitu.sim.controller import SimController
 from insitu.sim.marks import mark_darkness
 from insitu.sim.rig import default_rig
 from insitu.sim.world import SimWorld

@@ -63,7 +63,7 @@ from insitu.services.plan import plan_mark
 from insitu.services.record import record_height_calibration, record_marked_field_calibration
 from insitu.services.room_light import station_room_light
 from insitu.services.station import simulated
-from insitu.sim.devices import SimController
+from insitu.sim.controller import SimController
 from insitu.sim.rig import default_rig
 from insitu.sim.workpieces import make_workpiece, part_matrix, random_pose
 from insitu.sim.world import SimWorld, sim_world

@@ -39,7 +39,7 @@ from insitu.marking.verify import render
 from insitu.services.inspect import read_back_image
 from insitu.services.plan import plan_mark
 from insitu.services.station import simulated
-from insitu.sim.devices import SimController
+from insitu.sim.controller import SimController
 from insitu.sim.marks import RoomLightView, render_inspection
 from insitu.sim.world import sim_world
 from insitu.vision.dpm_grade import letter

@@ -31,7 +31,7 @@ from pathlib import Path
 import numpy as np
 
 from insitu.marking import history, make_job, progress_path_for, read_job, write_job
-from insitu.sim.devices import MARK_LOG_ENV, last_position
+from insitu.sim.controller import MARK_LOG_ENV, last_position
 
 CLI = [sys.executable, "-c", "from insitu.cli.main import main; main()"]
 

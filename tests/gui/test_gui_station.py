@@ -92,7 +92,7 @@ def test_mark_arms_shows_the_job_and_fires_only_when_confirmed(qtbot, window):
 # -- 2. resume ----------------------------------------------------------------------------
 def test_resume_after_a_fault_marks_the_rest(qtbot, window, tmp_path, monkeypatch):
     from insitu.errors import DeviceError
-    from insitu.sim.devices import SimController
+    from insitu.sim.controller import SimController
 
     scan_recording(qtbot, window)
     place(qtbot, window)

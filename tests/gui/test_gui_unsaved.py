@@ -18,7 +18,7 @@ from test_gui_workflow import DATA, WAIT_MS, fire, place, scan_recording
 
 from insitu.devices.galvo import list_digest
 from insitu.marking import journal_path_for, read_job, read_journal
-from insitu.sim.devices import MARK_LOG_ENV, SimController
+from insitu.sim.controller import MARK_LOG_ENV, SimController
 from insitu.ui.model.session import RigChoice
 from insitu.ui.qt.main_window import MainWindow
 
@@ -131,7 +131,7 @@ from pathlib import Path
 from PySide6.QtCore import QSettings
 from PySide6.QtWidgets import QApplication
 app = QApplication([])
-from insitu.sim.devices import SimController
+from insitu.sim.controller import SimController
 from insitu.ui.model.session import RigChoice
 from insitu.ui.qt.main_window import MainWindow
 from insitu.ui.qt.open_files import open_file

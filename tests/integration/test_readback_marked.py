@@ -14,7 +14,7 @@ from insitu.services.inspect import raw_path, read_back_image, save_read_back
 from insitu.services.mark import save_image
 from insitu.services.plan import plan_mark
 from insitu.services.station import simulated
-from insitu.sim.devices import SimController
+from insitu.sim.controller import SimController
 from insitu.sim.marks import RoomLightView, render_inspection
 from insitu.sim.world import sim_world
 

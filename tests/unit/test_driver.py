@@ -27,7 +27,7 @@ from insitu.marking import (
     run_preview,
     write_job,
 )
-from insitu.sim.devices import SimController
+from insitu.sim.controller import SimController
 from insitu.sim.marks import find_marks, mark_darkness, render_inspection
 from insitu.sim.rig import default_rig
 from insitu.sim.workpieces import make_workpiece

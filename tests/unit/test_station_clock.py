@@ -13,7 +13,8 @@ from insitu.marking import GalvoDriver, estimate_time, make_job, run_job
 from insitu.services.scan import scan_live
 from insitu.services.station import connect
 from insitu.sim.clock import SimTiming
-from insitu.sim.devices import SimCamera, SimController, SimScanHead, SimStage
+from insitu.sim.controller import SimController
+from insitu.sim.devices import SimCamera, SimScanHead, SimStage
 from insitu.sim.world import sim_world
 
 
