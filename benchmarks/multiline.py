@@ -45,7 +45,8 @@ from scipy.spatial import cKDTree  # noqa: E402
 
 from insitu.formats.calibration import HeightCalibration  # noqa: E402
 from insitu.formats.json_file import load_json_model, save_json_model  # noqa: E402
-from insitu.formats.sequence import Sequence, SequenceWriter  # noqa: E402
+from insitu.formats.sequence import Sequence  # noqa: E402
+from insitu.formats.sequence_writer import SequenceWriter  # noqa: E402
 from insitu.geometry.beams import line_commands  # noqa: E402
 from insitu.reconstruct.bands import Packing, Sheets, survey  # noqa: E402
 from insitu.reconstruct.packing import line_ids  # noqa: E402

@@ -39,7 +39,8 @@ from insitu.formats.pens import DEFAULT_PENS, read_pens, write_pens
 from insitu.formats.pointcloud import PointCloud, read_ply, write_ply
 from insitu.formats.project import Project, RigChoice, ScanSettings, read_project, write_project
 from insitu.formats.rig import RigConfig
-from insitu.formats.sequence import Sequence, SequenceWriter
+from insitu.formats.sequence import Sequence
+from insitu.formats.sequence_writer import SequenceWriter
 from insitu.geometry.beams import TwoMirrorHead
 from insitu.marking import (
     PROJECTIONS,

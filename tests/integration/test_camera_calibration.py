@@ -24,7 +24,8 @@ from insitu.cli.camera import camera as camera_cmd
 from insitu.errors import CalibrationError
 from insitu.formats.calibration import CameraCalibration
 from insitu.formats.json_file import load_json_model
-from insitu.formats.sequence import Sequence, SequenceWriter
+from insitu.formats.sequence import Sequence
+from insitu.formats.sequence_writer import SequenceWriter
 from insitu.geometry.camera import CameraModel
 from insitu.sim.checkerboard import board_corners, random_board_poses
 from insitu.sim.rig import default_rig

@@ -15,7 +15,8 @@ from insitu.calibrate.fiducials import find_circles
 from insitu.calibrate.field_file import load_field_correction
 from insitu.cli.field import correct, field
 from insitu.errors import CalibrationError, FormatError
-from insitu.formats.sequence import Sequence, SequenceWriter
+from insitu.formats.sequence import Sequence
+from insitu.formats.sequence_writer import SequenceWriter
 from insitu.services.field import calibrate_field, check_drift, measure_spots
 from insitu.services.record import record_field_calibration
 from insitu.services.station import simulated

@@ -22,7 +22,7 @@ from insitu.calibrate.pose_from_spots import (
 )
 from insitu.cli.main import app
 from insitu.errors import CalibrationError
-from insitu.formats.sequence import SequenceWriter
+from insitu.formats.sequence_writer import SequenceWriter
 from insitu.geometry.camera import CameraModel, rotation_about
 from insitu.services.camera import pose_change
 from insitu.sim.rig import default_rig

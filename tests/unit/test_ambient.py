@@ -13,7 +13,8 @@ import pytest
 
 from insitu.errors import FormatError
 from insitu.formats.pointcloud import PointCloud, read_ply, write_ply
-from insitu.formats.sequence import Sequence, SequenceWriter
+from insitu.formats.sequence import Sequence
+from insitu.formats.sequence_writer import SequenceWriter
 from insitu.reconstruct.preview import save_cloud_picture
 from insitu.reconstruct.scan import ScanReconstructor, grey_at
 from insitu.services.record import record_scan

@@ -16,7 +16,8 @@ import numpy as np
 import pytest
 
 from insitu.errors import FormatError
-from insitu.formats.sequence import Sequence, SequenceWriter
+from insitu.formats.sequence import Sequence
+from insitu.formats.sequence_writer import SequenceWriter
 from insitu.services import load_height_calibration, scan_replay
 from insitu.sim.workpieces import make_workpiece
 from insitu.vision.centres import ImageInputError, line_centres

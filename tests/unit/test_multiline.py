@@ -9,7 +9,8 @@ import numpy as np
 import pytest
 
 from insitu.errors import FormatError
-from insitu.formats.sequence import Sequence, SequenceWriter
+from insitu.formats.sequence import Sequence
+from insitu.formats.sequence_writer import SequenceWriter
 from insitu.reconstruct.bands import Band, Packing, exclusive
 from insitu.reconstruct.scan import ScanReconstructor
 from insitu.vision.band_centres import centres_in_bands

@@ -19,7 +19,8 @@ from insitu.errors import FormatError
 from insitu.formats import limits
 from insitu.formats.images import image_size, read_image
 from insitu.formats.pointcloud import PointCloud, read_ply, write_ply
-from insitu.formats.sequence import Sequence, SequenceWriter
+from insitu.formats.sequence import Sequence
+from insitu.formats.sequence_writer import SequenceWriter
 from insitu.formats.validation import read_json
 from insitu.marking import read_job
 from insitu.patterns import vector

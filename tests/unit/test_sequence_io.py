@@ -17,7 +17,8 @@ from hypothesis import strategies as st
 from insitu.errors import FormatError
 from insitu.formats import atomic
 from insitu.formats.atomic import atomic_folder, atomic_write_bytes, atomic_write_text
-from insitu.formats.sequence import CameraSpec, Sequence, SequenceSpec, SequenceWriter
+from insitu.formats.sequence import CameraSpec, Sequence, SequenceSpec
+from insitu.formats.sequence_writer import SequenceWriter
 
 W, H = 64, 48
 CAMERA = {"width": W, "height": H, "K": [[60.0, 0, 32.0], [0, 60.0, 24.0], [0, 0, 1]],

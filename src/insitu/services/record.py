@@ -13,7 +13,7 @@ import numpy as np
 
 from insitu.devices.protocols import ExposureCamera, pixel_bits_of
 from insitu.errors import ConfigError, DeviceError
-from insitu.formats.sequence import SequenceWriter
+from insitu.formats.sequence_writer import SequenceWriter
 from insitu.geometry.beams import axis_lines
 from insitu.reconstruct.packing import Frame, FramePlan
 from insitu.reconstruct.plan import check_region
