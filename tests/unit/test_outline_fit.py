@@ -105,6 +105,18 @@ def test_a_recorded_scans_frame_gives_the_blocks_sides():
     assert 0.3 < ref.fitted.covered <= 1.0
     from insitu.services.reference_outline import outline_findings
 
-    fit = dict((label, text) for _, label, text in outline_findings(ref))["fit"]
+    found = {label: (level, text) for level, label, text in outline_findings(ref)}
+    fit = found["fit"][1]
     lo, hi = ref.fitted.outline.sigma_mm.min(), ref.fitted.outline.sigma_mm.max()
     assert f"1σ {lo:.3f}–{hi:.3f} mm" in fit and 0.01 < lo <= hi, fit
+    # what its outline pins: x, y and the turn each to a 1σ; a tolerance it cannot hold warned
+    from insitu.locate.uncertainty import outline_hold
+
+    o = ref.fitted.outline
+    h = outline_hold(o.points[:, :2], o.normals, o.points[:, 2], o.sigma_mm, o.tilt_mm, ref.rim)
+    assert f"along x to {h.x_mm:.3f} mm, along y to {h.y_mm:.3f} mm" in found["pins"][1]
+    # its frame shows the block's long sides, not its ends (68 % of the outline): x pinned,
+    # y not — so parts located against it will be refused, and the report says so
+    assert 0.003 < h.x_mm < 0.1 < 0.5 < h.y_mm, (h.x_mm, h.y_mm)
+    level, text = found["pinned"]
+    assert level == "warning" and "weakest along y" in text and "CAD mesh" in text, text

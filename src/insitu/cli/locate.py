@@ -65,6 +65,10 @@ TurnBound = Annotated[float, typer.Option(
     "--turn-bound", metavar="DEG", callback=bounded("turn_bound_deg"),
     help="And only when 3σ of its turn lies within this, degrees (a small part's turn matters "
          "little at its rim, but is never far off).")]
+TurnTolerance = Annotated[float, typer.Option(
+    "--turn-tolerance", metavar="DEG", callback=bounded("turn_bound_deg"),
+    help="And only when 2σ of its turn lies within this, degrees (the marks' angle "
+         "tolerance).")]
 
 
 @one_line_errors
@@ -74,7 +78,8 @@ def locate(reference: Reference, cloud: Cloud, out: Output, prefer_angle: Prefer
            height_cal: HeightCal = None, room_light: RoomLight = None,
            reference_room_light: ReferenceRoomLight = None,
            tolerance: Tolerance = _D.tolerance_mm,
-           turn_bound_deg: TurnBound = _D.turn_bound_deg) -> None:
+           turn_bound_deg: TurnBound = _D.turn_bound_deg,
+           turn_tolerance: TurnTolerance = _D.turn_tolerance_deg) -> None:
     """Find the part of REFERENCE in CLOUD: the table taken away, a global registration
     (FPFH features + RANSAC, and a search over turns about z), point-to-plane ICP kept flat
     on the table, then x, y and the turn from the edges the scan lines cross (or, with
@@ -100,7 +105,8 @@ def locate(reference: Reference, cloud: Cloud, out: Output, prefer_angle: Prefer
                         expect=(camera.width, camera.height), expected="the camera's frame is"))
     settings = LocateSettings(min_fitness=min_fitness, min_coverage=min_coverage,
                               max_rmse_mm=max_rmse, table_z_mm=table_z,
-                              tolerance_mm=tolerance, turn_bound_deg=turn_bound_deg)
+                              tolerance_mm=tolerance, turn_bound_deg=turn_bound_deg,
+                              turn_tolerance_deg=turn_tolerance)
     with progress_bar("locating") as progress:
         progress(0, 1)
         pose = svc(reference, cloud, out, settings, prefer_angle, camera, frame,
@@ -116,7 +122,8 @@ def _show(pose, out: Path, framed: bool) -> None:
     table.add_row("turn about z", f"{b.angle_deg:.3f}°")
     table.add_row("uncertainty", f"1σ {b.rim_sigma_mm:.3f} mm at the part's rim, "
                                  f"{b.turn_sigma_deg:.3f}° (2σ within {pose.tolerance[0]:g} "
-                                 f"mm, 3σ within {pose.tolerance[1]:g}°)")
+                                 f"mm and {pose.turn_tolerance_deg:g}°, 3σ within "
+                                 f"{pose.tolerance[1]:g}°)")
     table.add_row("fit", f"fitness {b.fitness:.1%}, coverage {b.coverage:.1%}, inlier RMSE "
                          f"{b.rmse_mm:.3f} mm")
     table.add_row("edges", f"{b.edges} samples, 1σ {b.sigma_mm:.3f} mm, {b.sigma_deg:.3f}°"

@@ -152,7 +152,8 @@ def new(reference: Reference, pattern: Pattern, at: At, out: Output, width: Widt
     check_output(out, ".json")
     per_line = per_frame(lines_per_frame)
     kind = reference_kind(reference)
-    check_reference(reference, kind, reference_room_light, height_cal)
+    check_reference(reference, kind, reference_room_light, height_cal,
+                    (tolerance, turn_bound_deg))
     recipe = Recipe(
         reference=reference.absolute(), reference_kind=kind,
         placements=(_placement(pattern, at, width, rotate, mode, hatch, hatch_angle, beam),),
@@ -171,7 +172,8 @@ def new(reference: Reference, pattern: Pattern, at: At, out: Output, width: Widt
 
 
 def check_reference(reference: Path, kind: str, room_light: Path | None,
-                    height_cal: Path | None) -> None:
+                    height_cal: Path | None, tolerance: tuple[float, float] = (0.05, 0.1)
+                    ) -> None:
     """A table of what the reference gives locating (a mesh's exact outline, or a scan's
     top coverage, :mod:`insitu.services.reference_check`, and its outline fitted from its
     room-light frame, :func:`insitu.services.reference_outline.outline_findings`), warnings
@@ -194,7 +196,7 @@ def check_reference(reference: Path, kind: str, room_light: Path | None,
     table.add_row("kind", f"a scan: {len(ref.points):,} points above the table")
     table.add_row(Text("coverage", "yellow") if cover.level == "warning" else "coverage",
                   cover.text)
-    for level, label, text in outline_findings(ref):
+    for level, label, text in outline_findings(ref, tolerance):
         table.add_row(Text(label, "yellow") if level == "warning" else label, text)
     console.print(table)
 

@@ -31,7 +31,7 @@ from scipy.spatial import cKDTree
 from insitu.errors import MeasurementError
 from insitu.geometry.camera import CameraModel
 from insitu.geometry.pose import apply, matrix, rot_z
-from insitu.locate.edge_align import align_edges, crossed, edge_samples
+from insitu.locate.edge_align import align_edges, edge_samples
 from insitu.locate.flat_icp import score
 from insitu.locate.image_edges import SEARCH_PX, align_image
 from insitu.locate.reference import PartReference, above_table, find_table, thin
@@ -46,7 +46,7 @@ from insitu.locate.search import (
     subsample,
 )
 from insitu.locate.uncertainty import rim_moved, rim_sigma
-from insitu.locate.unheld import direction_name, unheld_reason
+from insitu.locate.unheld import direction_name, pin_advice, unheld_reason
 
 MIN_POINTS = 200
 SIGMAS = 2.0
@@ -85,8 +85,9 @@ class LocateSettings:
     """Thresholds and grids of :func:`locate_part` (mm, degrees, fractions 0 … 1).
     ``table_z_mm``: the table's height when known (None: found in the scan);
     ``tolerance_mm``: a pose is given only when :data:`SIGMAS` × its 1σ at the part's rim
-    lies within it (the marking tolerance), and 3σ of its turn within ``turn_bound_deg`` (a
-    small part's turn matters little at its rim, but is never far off)."""
+    lies within it (the marking tolerance), 3σ of its turn within ``turn_bound_deg`` and
+    :data:`SIGMAS` σ of it within ``turn_tolerance_deg`` (a small part's turn, which matters
+    little at its rim, is still held to the marks' angle tolerance)."""
 
     table_band_mm: float = 0.5
     table_z_mm: float | None = None
@@ -100,6 +101,7 @@ class LocateSettings:
     ambiguity: float = 0.05
     tolerance_mm: float = 0.05
     turn_bound_deg: float = 0.1
+    turn_tolerance_deg: float = 0.05
     turn_step_deg: float = 5.0
     turn_candidates: int = 6
     agree_mm: float = 0.05   # + 3σ: how far the frame's pose may lie from the scan's (whose
@@ -118,6 +120,7 @@ class PartPose:
     points: int
     seconds: float
     tolerance: tuple[float, float] | None = None
+    turn_tolerance_deg: float = LocateSettings.turn_tolerance_deg
 
     @property
     def T_world_part(self) -> np.ndarray:
@@ -185,9 +188,9 @@ def locate_part(reference: PartReference, points: np.ndarray,
     framed = (None if image is None or camera is None else
               lambda best: _imaged(reference, best, image, camera, s))
     best, second = _choose(sols, len(part), where, s, prefer_angle, framed)
-    _pinned(best, s, lambda: _advice(reference, lines, pts, image is not None))
+    _pinned(best, s, lambda: pin_advice(reference.kind, lines, pts, image is not None))
     return PartPose(best, second, table, len(part), time.perf_counter() - t0,
-                    (s.tolerance_mm, s.turn_bound_deg))
+                    (s.tolerance_mm, s.turn_bound_deg), s.turn_tolerance_deg)
 
 
 def _imaged(ref: PartReference, best: Solution, image: np.ndarray, camera: CameraModel,
@@ -248,8 +251,9 @@ def _imaged(ref: PartReference, best: Solution, image: np.ndarray, camera: Camer
 
 def _margin(sol: Solution, s: LocateSettings) -> float:
     """How much of the tolerance and of the turn's bound a pose's σ takes (≤ 1: given)."""
-    return max(SIGMAS * sol.rim_sigma_mm / s.tolerance_mm, 3 * sol.turn_sigma_deg
-               / s.turn_bound_deg)
+    turn = sol.turn_sigma_deg
+    return max(SIGMAS * sol.rim_sigma_mm / s.tolerance_mm, 3 * turn / s.turn_bound_deg,
+               SIGMAS * turn / s.turn_tolerance_deg)
 
 
 def _aligned(ref: PartReference, pts: np.ndarray, lines: np.ndarray | None,
@@ -379,22 +383,6 @@ def _pinned(best: Solution, s: LocateSettings, advice) -> None:
         raise LocateRefused(
             "poor-fit", f"not pinned down to the tolerance at {best.describe()}: {by} hold it "
             f"to {sigma:.3f} mm at the part's rim and {turn:.3f}° (1σ; {SIGMAS:g}σ within "
-            f"{s.tolerance_mm:g} mm and 3σ within {s.turn_bound_deg:g}° needed){frame}; "
-            f"{advice()}", best)
+            f"{s.tolerance_mm:g} mm and {s.turn_tolerance_deg:g}°, 3σ within "
+            f"{s.turn_bound_deg:g}° needed){frame}; {advice()}", best)
 
-
-def _advice(ref: PartReference, lines: np.ndarray | None, points: np.ndarray,
-            framed: bool) -> str:
-    """What would pin a pose down: a crossed pass, the room-light frame, a CAD reference,
-    finer lines."""
-    if lines is None:
-        return "what would pin it down: a cloud with its scan lines (insitu scan writes them)"
-    out = []
-    if not crossed(points, np.asarray(lines)):
-        out.append("a crossed pass (scan --cross)")
-    if not framed:
-        out.append("the room-light frame (--room-light with --height-cal)")
-    if ref.kind != "mesh":
-        out.append("a CAD reference (a mesh of the part)")
-    out.append("finer lines (spacing, binning)")
-    return "what would pin it down: " + ", ".join(out)

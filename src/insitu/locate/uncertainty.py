@@ -229,3 +229,40 @@ def rim_moved(rim: np.ndarray, T_a: np.ndarray, T_b: np.ndarray) -> float:
     q = np.column_stack([rim, np.zeros(len(rim))])
     return float(np.linalg.norm((q @ T_a[:3, :3].T + T_a[:3, 3])[:, :2]
                                 - (q @ T_b[:3, :3].T + T_b[:3, 3])[:, :2], axis=1).max())
+
+
+@dataclass(frozen=True)
+class OutlineHold:
+    """How well a reference's own outline can hold a part located against it, every edge of
+    it seen and the frame's edges error-free: ``cov`` (3, 3) of the turn (rad, about the
+    top's centre) and shift (mm) from its edges' own errors alone, ``rim_mm`` its 1σ at the
+    part's rim, ``x_mm``, ``y_mm`` (1σ along the part frame's axes) and ``turn_deg``; the
+    ``weakest`` direction (2,) of the shift (unit, part frame)."""
+
+    cov: np.ndarray
+    rim_mm: float
+    x_mm: float
+    y_mm: float
+    turn_deg: float
+    weakest: np.ndarray
+
+
+def outline_hold(xy: np.ndarray, normals: np.ndarray, z: np.ndarray, sigma_mm: np.ndarray,
+                 tilt_mm: np.ndarray, rim: np.ndarray) -> OutlineHold:
+    """:class:`OutlineHold` of an outline's points ``xy`` (K, 2) mm, outward ``normals``
+    (K, 2), heights ``z`` (K,), each point's 1σ across its edge ``sigma_mm`` (K,) and of its
+    edge's turn ± at its ends ``tilt_mm`` (K,), for a part whose rim is ``rim`` (M, 2): the
+    least-squares fit's covariance with no scatter and no light's bias, only the outline's
+    own per-edge errors (:func:`covariance`) — a lower bound on a located pose's σ."""
+    centre = xy.mean(axis=0)
+    lever = xy - centre
+    J = np.column_stack([normals[:, 1] * lever[:, 0] - normals[:, 0] * lever[:, 1], normals])
+    ones = np.ones(len(xy))
+    t = FitTerms(J, ones / np.maximum(sigma_mm, 1e-6) ** 2, np.zeros(len(xy)), xy, normals,
+                 z, ones, 0.0, reference=sigma_mm, reference_tilt=tilt_mm)
+    cov = covariance(t, 0.0)
+    shift = cov[1:, 1:]
+    vals, vecs = np.linalg.eigh(shift)
+    return OutlineHold(cov, rim_sigma(cov, rim - centre), float(np.sqrt(shift[0, 0])),
+                       float(np.sqrt(shift[1, 1])), float(np.degrees(np.sqrt(cov[0, 0]))),
+                       vecs[:, -1])

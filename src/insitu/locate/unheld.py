@@ -8,7 +8,14 @@ from __future__ import annotations
 import numpy as np
 
 from insitu.geometry.pose import rot_z
-from insitu.locate.edge_align import MIN_COS, MIN_FOUND, MIN_SAMPLES, edge_distance, near_edges
+from insitu.locate.edge_align import (
+    MIN_COS,
+    MIN_FOUND,
+    MIN_SAMPLES,
+    crossed,
+    edge_distance,
+    near_edges,
+)
 from insitu.locate.height_image import HeightImage
 
 
@@ -56,3 +63,21 @@ def direction_name(d: np.ndarray) -> tuple[str, str]:
     near = np.cos(np.radians(20))
     return (("x", "±y") if abs(d[0]) > near else ("y", "±x") if abs(d[1]) > near
             else (f"({d[0]:+.2f}, {d[1]:+.2f})", f"({-d[1]:+.2f}, {d[0]:+.2f})"))
+
+
+def pin_advice(kind: str, lines: np.ndarray | None, points: np.ndarray,
+            framed: bool) -> str:
+    """What would pin a pose down, as a sentence: a crossed pass (unless the scan's
+    ``lines`` (N,) of ``points`` (N, 3) cross), the room-light frame (unless ``framed``), a
+    CAD reference (unless the reference's ``kind`` is "mesh"), finer lines."""
+    if lines is None:
+        return "what would pin it down: a cloud with its scan lines (insitu scan writes them)"
+    out = []
+    if not crossed(points, np.asarray(lines)):
+        out.append("a crossed pass (scan --cross)")
+    if not framed:
+        out.append("the room-light frame (--room-light with --height-cal)")
+    if kind != "mesh":
+        out.append("a CAD reference (a mesh of the part)")
+    out.append("finer lines (spacing, binning)")
+    return "what would pin it down: " + ", ".join(out)

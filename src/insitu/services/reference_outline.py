@@ -7,8 +7,12 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
+import numpy as np
+
 from insitu.errors import ConfigError
+from insitu.locate.part import SIGMAS
 from insitu.locate.reference import PartReference
+from insitu.locate.uncertainty import outline_hold
 
 COVERED_BELOW = 0.5
 """The frame shows less of the outline than this: a warning."""
@@ -32,8 +36,10 @@ def scan_reference(reference: Path, room_light: Path | None,
     return load_reference(reference, room_light=room_light, camera=camera)
 
 
-def outline_findings(ref: PartReference) -> list[tuple[str, str, str]]:
-    """(level "info" | "warning", label, text) of a scan reference's outline."""
+def outline_findings(ref: PartReference, tolerance: tuple[float, float] = (0.05, 0.1)
+                     ) -> list[tuple[str, str, str]]:
+    """(level "info" | "warning", label, text) of a scan reference's outline; ``tolerance``
+    (mm at the rim, 2σ; degrees of the turn, 3σ): what a located pose is held to."""
     fit = ref.fitted
     if fit is None:
         return [("warning", "outline", "its scan lines' ends only (0.15–0.3 mm out beside "
@@ -54,6 +60,7 @@ def outline_findings(ref: PartReference) -> list[tuple[str, str, str]]:
            ("info", "lines", f"{crossed:.0%} of it crossed from two directions; the frame's "
             "edges " + (f"within {max(offsets):.3f} mm of where the lines end" if offsets
                         else "not crossed by the lines"))]
+    out += _holds(ref, tolerance)
     if fit.covered < COVERED_BELOW:
         out.append(("warning", "coverage", f"the frame shows only {fit.covered:.0%} of the "
                     "outline (walls seen edge-on, tops alike): light the part so its edges "
@@ -65,4 +72,31 @@ def outline_findings(ref: PartReference) -> list[tuple[str, str, str]]:
         out.append(("warning", "agreement", f"the frame and the lines disagree by up to "
                     f"{max(offsets):.3f} mm on an edge: its parts will be located less "
                     "precisely (or refused)"))
+    return out
+
+
+def _holds(ref: PartReference, tolerance: tuple[float, float]) -> list[tuple[str, str, str]]:
+    """What the outline pins (:func:`insitu.locate.uncertainty.outline_hold`): x, y and the
+    turn, each to its 1σ; a warning naming the direction it cannot hold to ``tolerance``."""
+    o = ref.fitted.outline
+    h = outline_hold(o.points[:, :2], o.normals, o.points[:, 2], o.sigma_mm, o.tilt_mm,
+                     ref.rim)
+    out = [("info", "pins", f"its edges alone hold a part along x to {h.x_mm:.3f} mm, along "
+            f"y to {h.y_mm:.3f} mm, its turn to {h.turn_deg:.3f}° (1σ; {h.rim_mm:.3f} mm at "
+            "its rim), before the later frame's own errors")]
+    short = []
+    if SIGMAS * h.rim_mm > tolerance[0]:
+        reach = float(np.linalg.norm(ref.rim - ref.rim.mean(axis=0), axis=1).max())
+        weakest = ("its turn" if np.radians(h.turn_deg) * reach > max(h.x_mm, h.y_mm) else
+                   "along " + ("x" if abs(h.weakest[0]) >= abs(h.weakest[1]) else "y"))
+        short.append(f"{SIGMAS:g}σ at the rim {SIGMAS * h.rim_mm:.3f} mm > {tolerance[0]:g} "
+                     f"mm (weakest {weakest}: the edges that fix it short, unlit or not "
+                     "crossed by the lines)")
+    if 3 * h.turn_deg > tolerance[1]:
+        short.append(f"3σ of the turn {3 * h.turn_deg:.3f}° > {tolerance[1]:g}° (its "
+                     "straight edges too short to fix the turn)")
+    if short:
+        out.append(("warning", "pinned", "parts located against it will be refused: "
+                    + "; ".join(short) + ": a CAD mesh of the part, or a reference scanned "
+                    "crossed under a clearer light, would pin it"))
     return out
