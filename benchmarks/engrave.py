@@ -7,7 +7,10 @@ material table's nominal rate says the depth takes, nothing measured — what co
 gives). Per run: the floor's mean depth error against the target and the band holding 95 % of
 its cells (|truth − target|, the floor beyond the walls' 0.2 mm band sampled every 0.05 mm),
 the deepest point over the target, the passes a cell had (mean), the rounds, the station's
-seconds (marking + depth scans, the station clock).
+seconds (marking + depth scans, the station clock); and how honest the cells' σ is: over every
+measured cell of every re-measure, the rms of (measured − true cell mean) / σ (1 when honest)
+and the share within 2σ (95 % when honest); σ: the map's standard error of the cell with the
+error a scan shares over the pocket (``SCAN_ERROR_MM``), as the stop rule counts them.
 
 ``measure``: the depth measurement (floor against the top of the same lines,
 ``marking.engrave_depth``) against the truth on pockets cut straight into the simulated blank
@@ -41,7 +44,8 @@ from rich.table import Table
 from insitu.formats.materials import DEFAULT_MATERIALS
 from insitu.formats.pointcloud import PointCloud
 from insitu.marking import Placement
-from insitu.marking.engrave_depth import DepthSettings, measure_depth
+from insitu.marking.engrave_depth import MEASURED, DepthSettings, measure_depth
+from insitu.marking.engrave_plan import SCAN_ERROR_MM
 from insitu.services.engrave import EngraveRequest, engrave, station_seconds
 from insitu.services.plan import plan_mark
 from insitu.services.pocket import DEPTH_CENTRES
@@ -89,6 +93,16 @@ def _floor_truth(world, region, target: float) -> tuple[float, float, float, flo
             float(cells.max()))
 
 
+def cell_truth(world, cells) -> np.ndarray:
+    """(ny, nx) the truth's mean depth over each 0.25 mm cell (5 × 5 samples), mm."""
+    gx, gy = cells.centres()
+    off = (np.arange(5) - 2) * cells.cell_mm / 5
+    ox, oy = np.meshgrid(off, off)
+    x = gx[..., None] + ox.ravel()
+    y = gy[..., None] + oy.ravel()
+    return world.true_depth(x.ravel(), y.ravel()).reshape(x.shape).mean(-1)
+
+
 def run_pocket(material: str, pattern: str, width: float | None, depth: float, closed: bool,
                seed: int, rescan_every: int, folder: Path) -> dict:
     nominal = DEFAULT_MATERIALS.material(material).depth_per_pass_mm(DEFAULT_MATERIALS.laser)
@@ -98,7 +112,14 @@ def run_pocket(material: str, pattern: str, width: float | None, depth: float, c
         out = Path(tempfile.mkdtemp(dir=folder))
         req = EngraveRequest(out, Placement(pattern, (0.0, 0.0), width, 0.0), cloud, depth,
                              rescan_every, material, open_loop_passes=budget)
-        outcome = engrave(st, req)
+        log: list[np.ndarray] = []
+
+        def measured(dm, summary):
+            ok = (dm.state == MEASURED) & np.isfinite(dm.depth) & np.isfinite(dm.sem)
+            truth = cell_truth(st.world, dm.cells)
+            sigma = np.hypot(dm.sem, SCAN_ERROR_MM)
+            log.append(np.where(ok, (dm.depth - truth) / sigma, np.nan))
+        outcome = engrave(st, req, measured=measured)
         region = plan_mark(cloud, Placement(pattern, (0.0, 0.0), width, 0.0),
                            st.driver).pattern.to_shapely()
         mean, band, over, cell_over = _floor_truth(st.world, region, depth)
@@ -106,7 +127,10 @@ def run_pocket(material: str, pattern: str, width: float | None, depth: float, c
     seconds = station_seconds(rec)["total"]
     passes = rec.measures[-1]["passes_mean"] if rec.measures else budget
     out = rec.outcome or {}
-    return {"mean": mean, "band": band, "over": over, "cell_over": cell_over, "passes": passes,
+    z = np.concatenate([m[np.isfinite(m)] for m in log]) if log else np.zeros(0)
+    return {"z_rms": float(np.sqrt(np.mean(z ** 2))) if len(z) else float("nan"),
+            "z_2": float(np.mean(np.abs(z) <= 2)) if len(z) else float("nan"),
+            "mean": mean, "band": band, "over": over, "cell_over": cell_over, "passes": passes,
             "rounds": len(rec.rounds), "measures": len(rec.measures), "station_s": seconds,
             "state": rec.state, "held": out.get("held_cells", 0),
             "model": out.get("model_cells", 0)}
@@ -123,7 +147,8 @@ def loop(args, folder: Path) -> None:
     patterns = [p for p in patterns if not args.pattern or p[0].split()[0] in args.pattern]
     t = Table(title=f"engraving {depth:g} mm: closed vs open loop (simulator's truth)")
     for col in ("material", "pocket", "loop", "seed", "mean err µm", "95 % |err| µm",
-                "deepest over µm", "passes (cell mean)", "re-measures", "station s"):
+                "deepest over µm", "passes (cell mean)", "re-measures", "station s",
+                "|err|/σ rms", "|err| ≤ 2σ"):
         t.add_column(col, justify="right")
     for material in materials:
         for name, pattern, width in patterns:
@@ -134,7 +159,8 @@ def loop(args, folder: Path) -> None:
                           f"{args.seed} ({_half(args.seed)})",
                           f"{r['mean'] * 1e3:+.1f}", f"{r['band'] * 1e3:.1f}",
                           f"{r['over'] * 1e3:+.1f}", f"{r['passes']:.1f}",
-                          str(r["measures"]), f"{r['station_s']:.0f}")
+                          str(r["measures"]), f"{r['station_s']:.0f}",
+                          f"{r['z_rms']:.2f}", f"{r['z_2']:.0%}")
                 console.print(f"{material} {name} {'closed' if closed else 'open'}: {r}",
                               highlight=False)
     console.print(t)

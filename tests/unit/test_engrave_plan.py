@@ -263,3 +263,33 @@ def test_each_scan_line_s_own_floor_error_is_removed_and_counted_in_the_cells_er
     assert m.sum() >= 64
     assert err.std() <= 0.004
     assert (err - err.mean()).std() / np.median(dm.sem[m]) <= 1.6
+
+
+def _speckled_scan(rng, grain_mm: float, speckle_mm: float):
+    """A 3 × 3 mm pocket 0.2 mm deep scanned by lines 0.1 mm apart, points every 0.02 mm, each
+    off by an error that holds over ``grain_mm`` of its line (σ ``speckle_mm``: the speckle's
+    grains) and 2 µm of its own."""
+    pts, line = [], []
+    for k, x in enumerate(np.arange(-3.0, 3.01, 0.1)):
+        y = np.arange(-3.5, 3.5, 0.02)
+        inside = (np.abs(x) < 1.5) & (np.abs(y) < 1.5)
+        grains = speckle_mm * rng.standard_normal(int(7.0 / grain_mm) + 2)
+        shift = rng.uniform(0, grain_mm)
+        z = 5.0 - np.where(inside, 0.2, 0.0) + grains[((y + 3.5 + shift) / grain_mm).astype(int)] \
+            + 0.002 * rng.standard_normal(len(y))
+        pts.append(np.column_stack([np.full(len(y), x), y, z]))
+        line.append(np.full(len(y), k))
+    return np.vstack(pts), np.concatenate(line)
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_a_cells_error_counts_the_speckles_grains_not_the_points(seed):
+    """Points whose errors go together over 0.25 mm of their line (6 µm): the cells' standard
+    errors are what their depths spread by (counting points: 2 to 4 × too small)."""
+    p, line = _speckled_scan(np.random.default_rng(seed), 0.25, 0.006)
+    dm = measure_depth(p, line, shapely.box(-1.5, -1.5, 1.5, 1.5), DepthSettings())
+    m = dm.state == MEASURED
+    err = dm.depth[m] - 0.2
+    assert m.sum() >= 64
+    ratio = err.std() / np.sqrt(np.mean(dm.sem[m] ** 2))
+    assert 0.6 <= ratio <= 1.5, ratio

@@ -19,8 +19,8 @@ lines with trusted points is not measured at all.
 
 The lines: a line's floor points also share an error its top points do not see (the floor
 it crosses); each line's share, estimated from its points' residuals against the other lines'
-around them, is removed before the map is made (:func:`_line_terms`), and what is left of it
-counts in the cells' standard errors.
+around them, is removed before the map is made (:func:`_line_terms`); what is left of it counts
+in the cells' standard errors, which count lines, not points (:func:`_cell_means`).
 
 The map: a cell's depth is the Gaussian-weighted mean of the floor points around its centre
 (σ ``kernel_mm``), with its standard error; each cell of the pocket is
@@ -251,7 +251,8 @@ def _top_model(p: np.ndarray, line: np.ndarray):
 
 def _line_terms(x, y, d, line, kernel_mm: float) -> tuple[np.ndarray, np.ndarray]:
     """The floor's depths ``d`` (N,) with each scan line's own error removed, and the
-    variance (mm²) of what is left of it per line (L,) (``line`` (N,): 0 … L−1).
+    variance (mm²) of what is left of it per line (L,) (``line`` (N,): 0 … L−1): the lines'
+    scatter in a cell does not show it (each was fitted to the lines around it).
 
     A line's floor points share an error the top's offset does not catch (the speckle and
     texture of the floor it crosses). Each point's residual against the other lines' points
@@ -287,10 +288,18 @@ def _line_terms(x, y, d, line, kernel_mm: float) -> tuple[np.ndarray, np.ndarray
 
 
 def _cell_means(cells: PocketCells, x, y, d, kernel_mm: float, line=None, line_var=None):
-    """Per cell the Gaussian-weighted mean depth of the floor points, its standard error
-    (the points' scatter and what is left of their lines' errors, ``line_var`` (L,) mm² by
-    ``line`` (N,)) and effective points; the robust point scatter; which points were kept
-    (beyond 4σ of their cell's mean: left out, a ghost or a dropped centre)."""
+    """Per cell the Gaussian-weighted mean depth of the floor points, its standard error, and
+    effective points; the robust point scatter; which points were kept (beyond 4σ of their
+    cell's mean: left out, a ghost or a dropped centre).
+
+    The standard error counts lines, not points: a floor point's error goes with its
+    neighbours' along the line (the speckle's grains, the texture, what is left of the line's
+    own error) and stays where it is scan after scan, while the lines (0.1 mm apart, each its
+    own frame) are independent. A cell's depth is the weighted mean of its lines' means; the
+    variance of a line's mean (pooled over the cells: their lines' weighted scatter about the
+    cell's depth, the cell's own share taken out) times Σ (the line's weight share)², with
+    what is left of the lines' own errors (``line_var`` (L,) mm², which the scatter does not
+    show)."""
     shape = cells.shape
     if len(d) == 0:
         zero = np.zeros(shape)
@@ -301,8 +310,8 @@ def _cell_means(cells: PocketCells, x, y, d, kernel_mm: float, line=None, line_v
     if line is None:
         line, line_var = np.zeros(len(d), int), np.zeros(1)
     for _ in range(2):
-        depth, wsum, w2sum = np.zeros(shape), np.zeros(shape), np.zeros(shape)
-        shared = np.zeros(shape)
+        depth, wsum, w2sum, share2, shared = (np.zeros(shape) for _ in range(5))
+        scatter, dof = 0.0, 0.0
         near = tree.query_ball_point(np.column_stack([gx.ravel(), gy.ravel()]), 3 * kernel_mm)
         for k, idx in enumerate(near):
             idx = np.asarray(idx, int)
@@ -314,14 +323,22 @@ def _cell_means(cells: PocketCells, x, y, d, kernel_mm: float, line=None, line_v
             i, j = divmod(k, shape[1])
             depth[i, j] = (w * d[idx]).sum() / w.sum()
             wsum[i, j], w2sum[i, j] = w.sum(), (w * w).sum()
-            by_line = np.bincount(line[idx], w, minlength=len(line_var)) / w.sum()
-            shared[i, j] = (by_line ** 2 * line_var).sum()
+            lines, inv = np.unique(line[idx], return_inverse=True)
+            wl = np.bincount(inv, w)
+            ml = np.bincount(inv, w * d[idx]) / wl
+            share = wl / w.sum()
+            share2[i, j] = (share ** 2).sum()
+            shared[i, j] = (share ** 2 * line_var[lines]).sum()
+            scatter += (wl * (ml - depth[i, j]) ** 2).sum()
+            dof += (wl * (1.0 - share)).sum()
         row, col = cells.index(x, y)
         resid = d - depth[row, col]
         sigma = float(np.median(np.abs(resid[keep])) * 1.4826)
         keep = np.abs(resid) <= 4 * max(sigma, 1e-6)
     neff = np.where(w2sum > 0, wsum ** 2 / np.where(w2sum > 0, w2sum, 1), 0.0)
-    sem = np.where(neff > 0, np.sqrt(sigma ** 2 / np.maximum(neff, 1e-9) + shared), np.inf)
+    unit = scatter / dof if dof > 0 else sigma ** 2
+    sem = np.where(neff > 0, np.sqrt(np.maximum(unit * share2, sigma ** 2 / np.maximum(
+        neff, 1e-9)) + shared), np.inf)
     return depth, sem, neff, sigma, keep
 
 
