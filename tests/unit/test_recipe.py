@@ -47,7 +47,8 @@ def _recipe(reference, **kw):
 def test_a_recipe_reads_back_as_written(tmp_path, reference):
     sub = tmp_path / "recipes"
     sub.mkdir()
-    r = _recipe(reference, scan=RecipeScan((-40, 40, -60, 60), 4.0, 0.4, lines_per_frame="auto"),
+    r = _recipe(reference, scan=RecipeScan((-40, 40, -60, 60), 4.0, 0.4, lines_per_frame="auto",
+                                           survey_mm=4.0),
                 prefer_angle_deg=(-90.0, 90.0), serial_start=100, fields={"lot": "A7"},
                 workpiece="step-block")
     path = sub / "r.json"
@@ -61,6 +62,7 @@ def test_a_recipe_reads_back_as_written(tmp_path, reference):
     assert back.placements == r.placements
     assert back.scan == r.scan and back.prefer_angle_deg == (-90.0, 90.0)
     assert raw["scan"]["lines_per_frame"] == "auto" and back.scan.lines_per_frame == "auto"
+    assert raw["scan"]["survey_mm"] == 4.0 and back.scan.survey_mm == 4.0
     assert back.counter == sub / "serial.counter.json" and back.serial_start == 100
     assert back.fields == {"lot": "A7"} and back.workpiece == "step-block"
     assert back.laser == r.laser
@@ -73,6 +75,7 @@ def test_a_recipe_reads_back_as_written(tmp_path, reference):
     (lambda d: d["scan"].update(margin_mm=0), r"scan\.margin_mm: 0 is outside"),
     (lambda d: d["scan"].update(lines_per_frame=0), r"scan\.lines_per_frame"),
     (lambda d: d["scan"].update(lines_per_frame="many"), r"scan\.lines_per_frame"),
+    (lambda d: d["scan"].update(survey_mm=0), r"scan\.survey_mm: 0 is outside"),
     (lambda d: d.update(reference={"mesh": "a.stl", "cloud": "b.ply"}),
      r"reference: expected exactly one of mesh, cloud"),
     (lambda d: d.update(reference={"cloud": "gone.ply"}), r"reference\.cloud: gone\.ply not found"),

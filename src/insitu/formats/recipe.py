@@ -12,7 +12,8 @@
               "speed_mm_s": 2000,                   # region: world (x0, x1, y0, y1) mm
               "cross": true, "cross_spacing_mm": 0.5,   # a crossed pass (absent: none)
               "second_look": true,                 # along y only: crossed when unheld
-              "lines_per_frame": "auto"},          # K or "auto" a frame (absent: one)
+              "lines_per_frame": "auto",           # K or "auto" a frame (absent: one)
+              "survey_mm": 4},                     # a first pass finds the part (absent: none)
      "locate": {"prefer_angle_deg": null,          # which of a symmetric part's turns
                 "tolerance_mm": 0.05, "turn_bound_deg": 0.1},  # 2σ at its rim, 3σ of its turn
      "serial": {"counter": "serial.counter.json", "start": 1, "fields": {}}}
@@ -28,8 +29,10 @@ apart, null: ``spacing_mm``), so every edge of the part is crossed by some line 
 turn; absent (older recipes): along y only; ``insitu recipe new`` turns it on.
 ``scan.second_look`` (default on): a scan along y only whose lines run along the part's
 edges, so that they leave its pose unheld, is followed by a crossed scan over where the part
-lies, and the part is located on that. ``serial.start`` creates the counter when it does not
-exist yet.
+lies, and the part is located on that. ``scan.survey_mm``: a first pass of lines this far
+apart finds the part and the heights it spans; the scan's lines then sweep only over the
+part and its margin, searched at those heights (:mod:`insitu.services.survey`; absent: the
+whole region). ``serial.start`` creates the counter when it does not exist yet.
 """
 
 from __future__ import annotations
@@ -96,6 +99,7 @@ class _Scan(_Strict):
     cross_spacing_mm: Spacing | None = None
     second_look: bool = True
     lines_per_frame: Annotated[int, Field(ge=1)] | Literal["auto"] | None = None
+    survey_mm: Spacing | None = None
 
 
 class _Locate(_Strict):
@@ -132,7 +136,8 @@ class RecipeScan:
     it (``insitu recipe new`` asks for it by default); ``second_look``: without ``cross``,
     scan crossed over the part when the lines along y leave its pose unheld;
     ``lines_per_frame``: K or "auto", several lines per exposure
-    (:mod:`insitu.reconstruct.packing`; None: one)."""
+    (:mod:`insitu.reconstruct.packing`; None: one); ``survey_mm``: a first pass of lines this
+    far apart bounds where the part lies and its heights (None: the whole region)."""
 
     region: tuple[float, float, float, float] | None = None
     margin_mm: float = 5.0
@@ -143,6 +148,7 @@ class RecipeScan:
     cross_spacing_mm: float | None = None
     second_look: bool = True
     lines_per_frame: int | str | None = None
+    survey_mm: float | None = None
 
 
 @dataclass(frozen=True)
@@ -202,7 +208,7 @@ def recipe_json(recipe: Recipe, path: Path) -> str:
         scan=_Scan(region=s.region, margin_mm=s.margin_mm, spacing_mm=s.spacing_mm,
                    exposure_ms=s.exposure_ms, speed_mm_s=s.speed_mm_s, cross=s.cross,
                    cross_spacing_mm=s.cross_spacing_mm, second_look=s.second_look,
-                   lines_per_frame=s.lines_per_frame),
+                   lines_per_frame=s.lines_per_frame, survey_mm=s.survey_mm),
         locate=_Locate(prefer_angle_deg=recipe.prefer_angle_deg,
                        tolerance_mm=recipe.tolerance[0], turn_bound_deg=recipe.tolerance[1]),
         serial=_Serial(counter=_rel(counter, folder), start=recipe.serial_start,
@@ -247,7 +253,8 @@ def read_recipe(path: str | Path, placement: Callable[..., Any],
         reference=_abs(getattr(d.reference, kind), folder, f"reference.{kind}", path),
         reference_kind=kind, placements=tuple(placements), laser=d.laser.model_dump(),
         scan=RecipeScan(s.region, s.margin_mm, s.spacing_mm, s.exposure_ms, s.speed_mm_s,
-                        s.cross, s.cross_spacing_mm, s.second_look, s.lines_per_frame),
+                        s.cross, s.cross_spacing_mm, s.second_look, s.lines_per_frame,
+                        s.survey_mm),
         prefer_angle_deg=d.locate.prefer_angle_deg,
         counter=_abs(d.serial.counter, folder, "serial.counter", path, must_exist=False),
         serial_start=d.serial.start, fields=dict(d.serial.fields), workpiece=d.workpiece,

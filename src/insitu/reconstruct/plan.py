@@ -55,3 +55,22 @@ def check_region(region: Sequence[float], field_size_mm: Sequence[float]) -> Non
     if max(abs(x0), abs(x1)) > half[0] or max(abs(y0), abs(y1)) > half[1]:
         raise MeasurementError(f"region {x0:g} {x1:g} {y0:g} {y1:g}: outside the scan field "
                                f"±{half[0]:g} × ±{half[1]:g} mm", field="region")
+
+
+def clip_lines(lines: Sequence, outline: np.ndarray, least_mm: float) -> list:
+    """The parts of ``lines`` ((start, end) mm each) inside the convex polygon ``outline``
+    (M, 2) mm, each kept in its own direction; a line that misses it or keeps less than
+    ``least_mm`` is left out."""
+    import shapely
+
+    poly = shapely.Polygon(np.asarray(outline, float))
+    out = []
+    for a, b in lines:
+        piece = poly.intersection(shapely.LineString([a, b]))
+        if piece.geom_type != "LineString" or piece.length < least_mm:
+            continue
+        p, q = np.asarray(piece.coords[0]), np.asarray(piece.coords[-1])
+        if np.dot(q - p, np.subtract(b, a)) < 0:
+            p, q = q, p
+        out.append((p, q))
+    return out

@@ -38,6 +38,7 @@ from insitu.services.locate import Located, Locator
 from insitu.services.mark_job import JobRequest, WrittenJob, write_mark_job
 from insitu.services.scan import Cancelled, ScanResult, scan_live
 from insitu.services.station import Station
+from insitu.services.survey import scan_found
 
 
 class StartSignal(Protocol):
@@ -231,7 +232,7 @@ def _stage(run: Production, part: _Part, name: str, work: Callable[[], Any]) -> 
 
 
 def _run_part(run: Production, part: _Part) -> PartRecord:
-    scanned = _scan_part(run, part, "scan", scan_region(run), run.recipe.scan.cross)
+    scanned = _scan_part(run, part, "scan", scan_region(run), run.recipe.scan.cross, True)
     try:
         cloud, located = _locate(run, part, scanned)
         x, y, a = located.pose()
@@ -248,14 +249,24 @@ def _run_part(run: Production, part: _Part) -> PartRecord:
     return _read(run, part, planned.outcomes, cloud)
 
 
-def _scan_part(run: Production, part: _Part, stage: str, region, cross: bool) -> ScanResult:
-    """The part's scan over ``region`` as the recipe says (``cross``: with the crossed pass),
-    its cloud written where the run keeps the part's cloud."""
+def _scan_part(run: Production, part: _Part, stage: str, region, cross: bool,
+               survey: bool = False) -> ScanResult:
+    """The part's scan over ``region`` as the recipe says (``cross``: with the crossed pass;
+    with ``survey`` and the recipe's ``survey_mm`` its lines only over the part and its
+    margin as a first pass found them: :func:`~insitu.services.survey.scan_found`), its
+    cloud written where the run keeps the part's cloud."""
     s = run.recipe.scan
-    scanned = _stage(run, part, stage, lambda: scan_live(
-        run.station, s.spacing_mm, region, run.height_cal, exposure_ms=s.exposure_ms,
-        speed_mm_s=s.speed_mm_s, cancel=run.cancel, cross=cross,
-        cross_spacing=s.cross_spacing_mm, lines_per_frame=s.lines_per_frame))
+
+    def scan() -> ScanResult:
+        settings = dict(spacing=s.spacing_mm, exposure_ms=s.exposure_ms,
+                        speed_mm_s=s.speed_mm_s, cancel=run.cancel, cross=cross,
+                        cross_spacing=s.cross_spacing_mm, lines_per_frame=s.lines_per_frame)
+        if survey and s.survey_mm is not None:
+            return scan_found(run.station, region, s.survey_mm, s.margin_mm, run.height_cal,
+                              **settings)
+        return scan_live(run.station, region=region, height_cal=run.height_cal, **settings)
+
+    scanned = _stage(run, part, stage, scan)
     write_ply(run.cloud_path(part.number), scanned.cloud)
     return scanned
 

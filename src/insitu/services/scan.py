@@ -21,7 +21,7 @@ from insitu.formats.sequence import Sequence
 from insitu.geometry.camera import CameraModel
 from insitu.reconstruct.bands import Packing
 from insitu.reconstruct.packing import FramePlan, RecordedPlan
-from insitu.reconstruct.plan import check_region, scan_lines
+from insitu.reconstruct.plan import check_region, clip_lines, scan_lines
 from insitu.reconstruct.scan import ScanReconstructor, excess_room_light
 from insitu.reconstruct.turned_sheet import CROSS_ANGLE_DEG
 from insitu.services.common import Progress, camera_model
@@ -120,6 +120,10 @@ def _finish(rec: ScanReconstructor, t0: StepTimer, rig: RigRecord | None = None,
             packing: str = "one line a frame") -> ScanResult:
     """The result so far, its cloud recording ``rig`` (the station's; None for a replay)."""
     cloud = replace(rec.cloud(), rig=rig)
+    if not len(cloud):
+        raise MeasurementError(f"no point of the {rec.frames} frames' lines passed the "
+                               "outlier tests (too few neighbours: lines too far apart, or "
+                               "frames too coarse)")
     lo, hi = cloud.points.min(axis=0), cloud.points.max(axis=0)
     t = t0.elapsed()
     return ScanResult(cloud, ScanSummary(len(cloud), rec.frames, rec.frames_with_line, rec.method,
@@ -210,17 +214,21 @@ def scan_live(station: Station, spacing: float = 0.5, region=None,
               cross_spacing: float | None = None, lines_per_frame: int | str | None = None,
               heights: tuple[float, float] | None = None,
               packing: Packing = Packing(),
-              centres: CentreSettings | None = None, room_light: bool = True) -> ScanResult:
+              centres: CentreSettings | None = None, room_light: bool = True,
+              within: np.ndarray | None = None) -> ScanResult:
     """Drive the station: step the line over ``region`` (x0, x1, y0, y1) mm (default: the
     station's, which a real rig does not have), with ``cross`` a second pass of crossed
     lines over it ``cross_spacing`` mm apart (:func:`plan_lines`), and reconstruct each
     frame as it arrives
     (``on_frame`` sees each; ``exposure_ms``: the camera's, default its own, for each line;
     ``speed_mm_s``: the head's line sweep speed, default its own; ``centres``: how line
-    centres are found, default as the height calibration was made). ``lines_per_frame``:
-    None or 1, K or "auto" (:mod:`insitu.reconstruct.packing`: a survey frame bounds the
-    heights, unless ``heights`` (low, high) mm are known, then the lines are packed by
-    them; a frame of K lines is exposed K times as long). First, with ``room_light``, a
+    centres are found, default as the height calibration was made; ``within``: a convex
+    outline (M, 2) mm the lines are clipped to, :func:`~insitu.reconstruct.plan.clip_lines`).
+    ``heights`` (low, high) mm, when known: each line is searched only where they put it
+    (None: the head's focus range). ``lines_per_frame``: None or 1, K or "auto"
+    (:mod:`insitu.reconstruct.packing`: a survey frame bounds the heights, unless
+    ``heights`` are known, then the lines are packed by them; a frame of K lines is exposed
+    K times as long). First, with ``room_light``, a
     frame with the laser off under the room light, auto-exposed
     (:func:`~insitu.services.room_light.station_room_light`), gives each point its
     ``ambient`` grey value; the camera then reads out only the region the lines can reach
@@ -231,9 +239,11 @@ def scan_live(station: Station, spacing: float = 0.5, region=None,
     rig = station.rig
     check_region(region, rig.head.field_size_mm)
     lines = plan_lines(region, spacing, cross, height_cal, cross_spacing)
+    if within is not None:
+        lines = clip_lines(lines, within, spacing)
     rec = reconstructor(rig.camera, rig.head.pivot_height_mm, rig.head.lens == "telecentric",
-                        rig.head.z_range_mm, height_cal, model, "live scan", cross, centres,
-                        pixel_bits_of(station.devices.camera))
+                        heights or rig.head.z_range_mm, height_cal, model, "live scan", cross,
+                        centres, pixel_bits_of(station.devices.camera))
     plan = FramePlan(lines, rec.sheets, rig.head.z_range_mm, lines_per_frame, packing, heights)
     camera, head = station.devices.camera, station.devices.head
     if exposure_ms is not None:
