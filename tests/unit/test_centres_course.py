@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from insitu.vision.course import FILL_PX, on_course
+from insitu.vision.course import FILL_PX, on_course, on_laser
 from insitu.vision.detect import LineCentres
 from insitu.vision.tracks import on_longest_track, track_length
 
@@ -82,3 +82,31 @@ def test_a_track_whose_end_slid_still_bridges_by_its_course():
     row[0, 90:100] += np.linspace(1, 8, 10)
     ok = ((cols < 100) | (cols >= 120))[None, :]
     assert track_length(row, ok, 4.0)[0, 0] == 280
+
+
+def _edge_photo(H: int = 60, W: int = 40, edge: int = 34):
+    """(H, W, 3) uint8 BGR: a black square above row ``edge``, a white one from it, and a red
+    stripe at row 30 (σ 2 px) whose halo lifts the red channel of both; its core on the black
+    square is red, not white."""
+    rows = np.arange(H, dtype=np.float32)[:, None]
+    ambient = np.where(rows < edge, 35.0, 190.0) * np.ones((1, W), np.float32)
+    laser = 600.0 * np.exp(-0.5 * ((rows - 30) / 2.0) ** 2) \
+        + 60.0 * np.exp(-0.5 * ((rows - 30) / 8.0) ** 2)
+    bgr = np.stack([ambient + 0.08 * laser, ambient + 0.12 * laser, ambient + laser], axis=2)
+    return np.clip(bgr, 0, 255).astype(np.uint8)
+
+
+def test_a_centre_pulled_onto_a_white_squares_edge_has_laser_colour_on_one_side_only():
+    """The stripe's centres at row 30 stay; centres on the white square's side of the edge
+    (rows 36–40, the neutral step a method's centre is pulled onto) go: below them the white
+    square carries no laser colour. A core clipped white with a red halo on both sides stays."""
+    bgr = _edge_photo()
+    u = np.arange(40.0)
+    v = np.where(u < 20, 30.0, 36.0 + (u - 20) / 4)
+    kept = on_laser(centres(u, v), bgr, 2, 0.85 * 255, True, 11)
+    assert np.array_equal(kept.u, u[:20])
+    assert np.array_equal(on_laser(centres(v, u), bgr.transpose(1, 0, 2).copy(), 2,
+                                   0.85 * 255, False, 11).v, u[:20])
+    core = bgr.copy()
+    core[29:32] = 255                                          # clipped white, halo around
+    assert len(on_laser(centres(u, np.full(40, 30.0)), core, 2, 0.85 * 255, True, 11)) == 40

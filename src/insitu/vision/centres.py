@@ -18,7 +18,7 @@ import cv2
 import numpy as np
 
 from insitu.vision.chains import longest_ridge
-from insitu.vision.course import fill_gaps, on_course
+from insitu.vision.course import fill_gaps, on_course, on_laser
 from insitu.vision.detect import (
     LineCentres,
     as_image,
@@ -31,9 +31,11 @@ from insitu.vision.detect import (
 )
 from insitu.vision.laser_image import (
     CHANNELS,
+    WHITE,
     ImageInputError,
     LaserImage,
     colour_margin,
+    colour_reach,
     excess,
     laser_image,
     ridges,
@@ -178,11 +180,6 @@ CENTRE_METHODS: dict[str, CentreMethod] = {
 }
 
 
-CLIPPED_SHARE = 0.1
-"""Pixels of laser-coloured light at full scale in the laser's channel, as a share of the
-frame's longer side, from which a photograph's stripe counts as clipping the channel
-(:func:`_clips`): its excess over the others is 0 where it is white, no gap is filled from
-it."""
 GAPS = 0.95
 """A photograph's stripe with centres on fewer of the scan lines between its ends has its
 gaps filled from the laser's colour (:func:`~insitu.vision.course.fill_gaps`)."""
@@ -251,11 +248,13 @@ def _centres_in(li: LaserImage, method, direction, band, clipped, kw,
                scaled((3 if in_sum else 1) * li.full_scale))
     if in_sum:
         c = replace(c, peak=c.peak / 3, contrast=c.contrast / 3, full_scale=li.full_scale)
+    if colour and li.bgr is not None:
+        c = on_laser(c, li.bgr, CHANNELS[li.channel], WHITE * li.full_scale,
+                     direction == "rows", colour_reach(img.shape)[0])
     if colour:
         c = on_course(c, direction == "rows", COURSE * min(img.shape))
     scan = c.u if direction == "rows" else c.v
-    if colour and li.bgr is not None and 1 < len(c) < GAPS * (np.ptp(scan) + 1) \
-            and not _clips(li):
+    if colour and li.bgr is not None and 1 < len(c) < GAPS * (np.ptp(scan) + 1):
         e = _along(fn, excess(li), direction, band, allow, scaled(li.full_scale))
         c = fill_gaps(c, e, direction == "rows")
     return c
@@ -285,14 +284,6 @@ def _in_sum(li: LaserImage, direction, band, allow, kw, scaled) -> bool:
     t = _along(gray_centroid, li.total[every], direction, band, allow,
                scaled(3 * li.full_scale) | probe)
     return _stripe_length(t, direction) > _stripe_length(c, direction)
-
-
-def _clips(li: LaserImage) -> bool:
-    """Whether the laser's channel is clipped on laser-coloured light (``li.allow``) in at
-    least :data:`CLIPPED_SHARE` of the frame's longer side's count of pixels."""
-    H, W = li.gray.shape
-    hit = cv2.compare(li.gray, li.full_scale, cv2.CMP_GE) & li.allow.view(np.uint8)
-    return cv2.countNonZero(hit) >= CLIPPED_SHARE * max(H, W)
 
 
 def _stripe_length(c: LineCentres, direction: str) -> int:

@@ -1,6 +1,8 @@
-"""A photograph's stripe kept on its course: the scan lines it has no centre on filled from
-the laser colour's excess (:func:`fill_gaps`), and the stretches of centres that slid off it
-onto the rim of a dark mark or a bright square's edge dropped (:func:`on_course`)."""
+"""A photograph's stripe kept on its course: the centres on no laser-coloured ridge dropped
+(:func:`on_laser`: a bright square's edge beside the stripe), the scan lines it has no centre
+on filled from the laser colour's excess (:func:`fill_gaps`), and the stretches of centres
+that slid off it onto the rim of a dark mark or a bright square's edge dropped
+(:func:`on_course`)."""
 
 from __future__ import annotations
 
@@ -10,9 +12,41 @@ import numpy as np
 
 from insitu.vision.detect import LineCentres
 
+FLANKS = 0.5
+"""Least laser colour on each side of a centre that is not white, of the most within reach
+(:func:`on_laser`)."""
 FILL_PX = 4.0
 """How far (px) a centre filling a gap may lie from the course of the stripe's centres on
 either side (:func:`fill_gaps`)."""
+
+
+def on_laser(c: LineCentres, bgr: np.ndarray, channel: int, white: float, along_rows: bool,
+             reach: int) -> LineCentres:
+    """``c`` without the centres that lie on no laser-coloured ridge: a centre stays where its
+    pixel is white (all three channels ≥ ``white``: a clipped core), or where the laser's
+    excess X = I_c − (I_a + I_b) / 2 reaches :data:`FLANKS` of its greatest value within
+    ±``reach`` px across the line on both sides — from the centre up to ``reach`` px before it
+    and from it up to ``reach`` px after it. A stripe is a ridge of the laser's colour: both
+    its flanks carry it, also round a core clipped white. A bright square's edge beside the
+    stripe is a neutral step: the methods' centre pulled onto it has the stripe's colour on
+    one side only. bgr: (H, W, 3) the photograph; channel: the laser's (BGR index)."""
+    if not len(c):
+        return c
+    H, W = bgr.shape[:2]
+    s = np.round(c.u if along_rows else c.v).astype(np.int64)
+    x = np.round(c.v if along_rows else c.u).astype(np.int64)
+    across = np.clip(x[None, :] + np.arange(-reach, reach + 1)[:, None], 0,
+                     (H if along_rows else W) - 1)
+    px = bgr[across, s] if along_rows else bgr[s, across]              # (2 reach + 1, n, 3)
+    px = px.astype(np.float32)
+    others = [k for k in range(3) if k != channel]
+    ex = px[..., channel] - (px[..., others[0]] + px[..., others[1]]) / 2
+    flanks = np.minimum(ex[:reach + 1].max(axis=0), ex[reach:].max(axis=0))
+    keep = (px[reach].min(axis=1) >= white) | (flanks >= FLANKS * ex.max(axis=0))
+    if keep.all():
+        return c
+    fields = ("u", "v", "peak", "width", "contrast", "saturated", "ambiguous")
+    return replace(c, **{f: getattr(c, f)[keep] for f in fields})
 
 
 def fill_gaps(c: LineCentres, e: LineCentres, along_rows: bool) -> LineCentres:

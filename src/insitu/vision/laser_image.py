@@ -150,7 +150,7 @@ def _auto_channel(bgr: np.ndarray) -> int:
     return int(np.argmax([line_contrast(ridges(_excess(small, c))) for c in range(3)]))
 
 
-def _reach(shape) -> tuple[int, int]:
+def colour_reach(shape) -> tuple[int, int]:
     """How far (px) laser colour is looked for beside a line in a frame of ``shape``: 1 % of
     its shorter side, ≥ 3; and the block size (px) its colour is pooled in (reach // 3)."""
     reach = max(3, round(min(shape[:2]) / 100))
@@ -171,7 +171,7 @@ def colour_margin(li: LaserImage, u: np.ndarray, v: np.ndarray) -> float:
     if li.ridge is None or not len(u):
         return np.inf
     H, W = li.gray.shape
-    reach, f = _reach((H, W))
+    reach, f = colour_reach((H, W))
     thin = li.ridge if li.halo is None else li.halo
     h, w = thin.shape
     r = 2 * (reach // f) + 1
@@ -208,7 +208,7 @@ def _laser_coloured(bgr: np.ndarray, c: int, fs: float):
     max-pooled by reach // 3 (a thin ridge keeps its peak), with reach // 3 ≥ 3 px left: a
     full-HD frame in 3 × 3 blocks; and the excess's top-hat 3 × wider, on the same blocks."""
     H, W = bgr.shape[:2]
-    reach, f = _reach(bgr.shape)
+    reach, f = colour_reach(bgr.shape)
     ch = cv2.split(bgr)
     excess = _excess(bgr, c, ch)
     white = cv2.compare(cv2.min(cv2.min(ch[0], ch[1]), ch[2]), WHITE * fs, cv2.CMP_GE)
