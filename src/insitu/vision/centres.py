@@ -24,6 +24,7 @@ from insitu.vision.detect import (
     as_image,
     band_background,
     detect,
+    frame_noise,
     fwhm,
     gather,
     raw_saturated,
@@ -255,9 +256,48 @@ def _centres_in(li: LaserImage, method, direction, band, clipped, kw,
         c = on_course(c, direction == "rows", COURSE * min(img.shape))
     scan = c.u if direction == "rows" else c.v
     if colour and li.bgr is not None and 1 < len(c) < GAPS * (np.ptp(scan) + 1):
-        e = _along(fn, excess(li), direction, band, allow, scaled(li.full_scale))
-        c = fill_gaps(c, e, direction == "rows")
+        c = fill_gaps(c, _in_excess(li, c, fn, direction, scaled), direction == "rows")
     return c
+
+
+def _in_excess(li: LaserImage, c: LineCentres, fn, direction, scaled) -> LineCentres:
+    """``fn``'s centres in the laser channel's excess over the others, found only round the
+    gaps of the stripe's centres ``c``: in each window from a gap's last centre before to its
+    first after, ± 4 × the colour's reach along and across the line (windows that overlap
+    joined), with the whole excess's noise (:func:`~insitu.vision.course.fill_gaps` takes
+    only centres on the gaps, near their course)."""
+    rows = direction == "rows"
+    scan, cross = (c.u, c.v) if rows else (c.v, c.u)
+    order = np.argsort(scan, kind="stable")
+    s, x = np.round(scan[order]).astype(np.int64), cross[order]
+    ex = excess(li)
+    noise = frame_noise(ex if rows else ex.T)
+    margin = 4 * colour_reach(ex.shape)[0]
+    gap = np.flatnonzero(np.diff(s) > 1)
+    starts, ends = s[gap] - margin, s[gap + 1] + margin
+    found = []
+    for a, b in _joined(starts, ends):
+        near = (s >= a) & (s <= b)
+        lo, hi = max(int(x[near].min()) - margin, 0), int(np.ceil(x[near].max())) + margin + 1
+        a, b = max(a, 0), b + 1
+        cut = (slice(lo, hi), slice(a, b)) if rows else (slice(a, b), slice(lo, hi))
+        e = _along(fn, np.ascontiguousarray(ex[cut]), direction, None,
+                   np.ascontiguousarray(li.allow[cut]), scaled(li.full_scale) | {"noise": noise})
+        found.append(replace(e, u=e.u + (a if rows else lo), v=e.v + (lo if rows else a)))
+    fields = ("u", "v", "peak", "width", "contrast", "saturated", "ambiguous")
+    return replace(c, **{f: np.concatenate([getattr(e, f) for e in found] or [getattr(c, f)[:0]])
+                         for f in fields})
+
+
+def _joined(starts: np.ndarray, ends: np.ndarray) -> list[tuple[int, int]]:
+    """The windows [starts[i], ends[i]] (sorted by start) with those that overlap joined."""
+    out: list[list[int]] = []
+    for a, b in zip(starts.tolist(), ends.tolist()):
+        if out and a <= out[-1][1]:
+            out[-1][1] = max(out[-1][1], b)
+        else:
+            out.append([a, b])
+    return [(a, b) for a, b in out]
 
 
 _DETECTION = ("band", "min_peak", "min_contrast", "snr", "continuity", "extend_ends", "upper",
