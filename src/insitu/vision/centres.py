@@ -263,30 +263,45 @@ def _centres_in(li: LaserImage, method, direction, band, clipped, kw,
 def _in_excess(li: LaserImage, c: LineCentres, fn, direction, scaled) -> LineCentres:
     """``fn``'s centres in the laser channel's excess over the others, found only round the
     gaps of the stripe's centres ``c``: in each window from a gap's last centre before to its
-    first after, ± 4 × the colour's reach along and across the line (windows that overlap
-    joined), with the whole excess's noise (:func:`~insitu.vision.course.fill_gaps` takes
-    only centres on the gaps, near their course)."""
+    first after, ± 2 × the colour's reach along and across the line (windows that overlap
+    joined), measured in one pass over the windows laid side by side
+    (:data:`_APART` blank scan lines between), with the whole excess's noise
+    (:func:`~insitu.vision.course.fill_gaps` takes only centres on the gaps, near their
+    course)."""
     rows = direction == "rows"
     scan, cross = (c.u, c.v) if rows else (c.v, c.u)
     order = np.argsort(scan, kind="stable")
     s, x = np.round(scan[order]).astype(np.int64), cross[order]
     ex = excess(li)
-    noise = frame_noise(ex if rows else ex.T)
+    ex, allow = (ex, li.allow) if rows else (ex.T, li.allow.T)        # (cross, scan)
     margin = 4 * colour_reach(ex.shape)[0]
     gap = np.flatnonzero(np.diff(s) > 1)
-    starts, ends = s[gap] - margin, s[gap + 1] + margin
-    found = []
-    for a, b in _joined(starts, ends):
+    windows = []
+    for a, b in _joined(s[gap] - margin, s[gap + 1] + margin):
         near = (s >= a) & (s <= b)
-        lo, hi = max(int(x[near].min()) - margin, 0), int(np.ceil(x[near].max())) + margin + 1
-        a, b = max(a, 0), b + 1
-        cut = (slice(lo, hi), slice(a, b)) if rows else (slice(a, b), slice(lo, hi))
-        e = _along(fn, np.ascontiguousarray(ex[cut]), direction, None,
-                   np.ascontiguousarray(li.allow[cut]), scaled(li.full_scale) | {"noise": noise})
-        found.append(replace(e, u=e.u + (a if rows else lo), v=e.v + (lo if rows else a)))
-    fields = ("u", "v", "peak", "width", "contrast", "saturated", "ambiguous")
-    return replace(c, **{f: np.concatenate([getattr(e, f) for e in found] or [getattr(c, f)[:0]])
-                         for f in fields})
+        lo = max(int(x[near].min()) - margin, 0)
+        hi = min(int(np.ceil(x[near].max())) + margin + 1, ex.shape[0])
+        windows.append((max(a, 0), min(b + 1, ex.shape[1]), lo, hi))
+    if not windows:
+        return replace(c, **{f: getattr(c, f)[:0] for f in _FIELDS})
+    height = max(hi - lo for _, _, lo, hi in windows)
+    at = np.cumsum([0] + [b - a + _APART for a, b, _, _ in windows])
+    img = np.zeros((height, at[-1]), np.float32)
+    ok = np.zeros((height, at[-1]), bool)
+    for (a, b, lo, hi), k in zip(windows, at):
+        img[:hi - lo, k:k + b - a] = ex[lo:hi, a:b]
+        ok[:hi - lo, k:k + b - a] = allow[lo:hi, a:b]
+    e = _along(fn, img, "rows", None, ok, scaled(li.full_scale) | {"noise": frame_noise(ex)})
+    i = np.searchsorted(at, np.round(e.u), side="right") - 1
+    start, top = np.array([w[0] for w in windows]), np.array([w[2] for w in windows])
+    along, across = e.u - at[i] + start[i], e.v + top[i]
+    return replace(e, u=along, v=across) if rows else replace(e, u=across, v=along)
+
+
+_APART = 16
+"""Blank scan lines between the windows of :func:`_in_excess` (more than a line's track
+carries across)."""
+_FIELDS = ("u", "v", "peak", "width", "contrast", "saturated", "ambiguous")
 
 
 def _joined(starts: np.ndarray, ends: np.ndarray) -> list[tuple[int, int]]:

@@ -64,7 +64,9 @@ class LaserImage:
     clipped white stands out over a halo that clips the laser's channel (None: gray input,
     or a channel given). bgr: the colour frame (H, W, 3) its :func:`excess` is made of (None:
     gray input, a channel given, or a laser-off frame taken away). halo: as ridge, on a
-    top-hat 3 × wider, that keeps a halo wider than the reach (None: gray input)."""
+    top-hat 3 × wider, that keeps a halo wider than the reach (None: gray input). chroma:
+    (H, W) float32, the laser channel's excess over the mean of the two others in bgr (None
+    with bgr)."""
 
     gray: np.ndarray
     allow: np.ndarray | None
@@ -74,6 +76,7 @@ class LaserImage:
     total: np.ndarray | None = None
     bgr: np.ndarray | None = None
     halo: np.ndarray | None = None
+    chroma: np.ndarray | None = None
 
 
 def full_scale(dtype: np.dtype, pixel_bits: int | None = None) -> float:
@@ -147,7 +150,8 @@ def noise_sigma(img: np.ndarray) -> float:
 def _auto_channel(bgr: np.ndarray) -> int:
     """The channel whose excess over the others forms the strongest thin ridges."""
     small = shrink(bgr)
-    return int(np.argmax([line_contrast(ridges(_excess(small, c))) for c in range(3)]))
+    ch = cv2.split(small)
+    return int(np.argmax([line_contrast(ridges(_excess(small, c, ch))) for c in range(3)]))
 
 
 def colour_reach(shape) -> tuple[int, int]:
@@ -198,7 +202,7 @@ def colour_margin(li: LaserImage, u: np.ndarray, v: np.ndarray) -> float:
     return stripe / max(fringe, CHROMA * li.full_scale)
 
 
-def _laser_coloured(bgr: np.ndarray, c: int, fs: float):
+def _laser_coloured(bgr: np.ndarray, c: int, fs: float, ch):
     """The thin ridges (white top-hat) of channel c's excess, (H, W) bool: where they
     (≥ :data:`CHROMA` · fs and :data:`CHROMA_SNR` · their noise) are, or lie within reach
     (1 % of the shorter side) on both sides — above and below, or left and right — of the
@@ -206,11 +210,11 @@ def _laser_coloured(bgr: np.ndarray, c: int, fs: float):
     top-hat 3 × wider, as a halo can be wider than the reach): the halo round a core clipped
     white; a white thing beside a red one has them on one side only. Made on the excess
     max-pooled by reach // 3 (a thin ridge keeps its peak), with reach // 3 ≥ 3 px left: a
-    full-HD frame in 3 × 3 blocks; and the excess's top-hat 3 × wider, on the same blocks."""
+    full-HD frame in 3 × 3 blocks; and the excess's top-hat 3 × wider, on the same blocks;
+    also the excess itself, (H, W) float32. ch: bgr's three channels (cv2.split)."""
     H, W = bgr.shape[:2]
     reach, f = colour_reach(bgr.shape)
-    ch = cv2.split(bgr)
-    excess = _excess(bgr, c, ch)
+    excess = chroma = _excess(bgr, c, ch)
     white = cv2.compare(cv2.min(cv2.min(ch[0], ch[1]), ch[2]), WHITE * fs, cv2.CMP_GE)
     h, w = H // f, W // f
     if f > 1:
@@ -234,7 +238,7 @@ def _laser_coloured(bgr: np.ndarray, c: int, fs: float):
     if f > 1:
         near = cv2.resize(near, (w * f, h * f), interpolation=cv2.INTER_NEAREST)
         near = cv2.copyMakeBorder(near, 0, H - h * f, 0, W - w * f, cv2.BORDER_REPLICATE)
-    return thin, near > 0, halo
+    return thin, near > 0, halo, chroma
 
 
 def _flanked(laser: np.ndarray, white: np.ndarray, r: int) -> np.ndarray:
@@ -304,17 +308,19 @@ def laser_image(image, channel: str = "auto", laser_off=None,
         c = int(np.argmax(cv2.sumElems(img)[:3]))
     else:
         c = _auto_channel(img)
-    thin, allow, halo = _laser_coloured(img, c, fs)
+    ch = cv2.split(img)
+    thin, allow, halo, chroma = _laser_coloured(img, c, fs, ch)
     total = None
     if channel == "auto":
-        ch, depth = cv2.split(img), cv2.CV_16U if img.dtype == np.uint8 else cv2.CV_32F
+        depth = cv2.CV_16U if img.dtype == np.uint8 else cv2.CV_32F
         total = cv2.add(cv2.add(ch[0], ch[1], dtype=depth), ch[2], dtype=depth)
-    return LaserImage(cv2.extractChannel(img, c), allow, fs, "bgr"[c], thin, total,
-                      img if channel == "auto" and off is None else None, halo)
+    keep = channel == "auto" and off is None
+    return LaserImage(ch[c], allow, fs, "bgr"[c], thin, total, img if keep else None, halo,
+                      chroma if keep else None)
 
 
 def excess(li: LaserImage) -> np.ndarray:
     """(H, W) float32 ≥ 0: the laser channel's excess over the mean of the two others in
     ``li.bgr``, where a neutral board's pattern (black on white) cancels and the laser's
     light stays, also where the stripe runs along a square's edge."""
-    return cv2.max(_excess(li.bgr, CHANNELS[li.channel]), 0.0)
+    return cv2.max(li.chroma, 0.0)
