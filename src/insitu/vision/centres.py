@@ -263,7 +263,7 @@ def _centres_in(li: LaserImage, method, direction, band, clipped, kw,
 def _in_excess(li: LaserImage, c: LineCentres, fn, direction, scaled) -> LineCentres:
     """``fn``'s centres in the laser channel's excess over the others, found only round the
     gaps of the stripe's centres ``c``: in each window from a gap's last centre before to its
-    first after, ± 2 × the colour's reach along and across the line (windows that overlap
+    first after, ± 4 × the colour's reach along and across the line (windows that overlap
     joined), measured in one pass over the windows laid side by side
     (:data:`_APART` blank scan lines between), with the whole excess's noise
     (:func:`~insitu.vision.course.fill_gaps` takes only centres on the gaps, near their
