@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from insitu.vision.course import FILL_PX, on_course, on_laser
+from insitu.vision.course import FILL_PX, in_frame, on_course, on_laser
 from insitu.vision.detect import LineCentres
 from insitu.vision.tracks import on_longest_track, track_length
 
@@ -110,3 +110,15 @@ def test_a_centre_pulled_onto_a_white_squares_edge_has_laser_colour_on_one_side_
     core = bgr.copy()
     core[29:32] = 255                                          # clipped white, halo around
     assert len(on_laser(centres(u, np.full(40, 30.0)), core, 2, 0.85 * 255, True, 11)) == 40
+
+
+def test_a_centre_outside_the_frame_is_dropped():
+    """A flank fit with no curvature put one centre 5·10⁹ px off: it goes, as does one left
+    of the first column; the others stay."""
+    u = np.arange(100.0)
+    v = 50 + 0.1 * u
+    v[40] = 5e9
+    u2 = u.copy()
+    u2[0] = -0.6
+    kept = in_frame(centres(u2, v), (120, 100))
+    assert len(kept) == 98 and kept.v.max() < 120 and kept.u.min() >= 0

@@ -18,7 +18,7 @@ import cv2
 import numpy as np
 
 from insitu.vision.chains import longest_ridge
-from insitu.vision.course import fill_gaps, on_course, on_laser
+from insitu.vision.course import fill_gaps, in_frame, on_course, on_laser
 from insitu.vision.detect import (
     LineCentres,
     as_image,
@@ -253,7 +253,7 @@ def _centres_in(li: LaserImage, method, direction, band, clipped, kw,
         c = on_laser(c, li.bgr, CHANNELS[li.channel], WHITE * li.full_scale,
                      direction == "rows", colour_reach(img.shape)[0])
     if colour:
-        c = on_course(c, direction == "rows", COURSE * min(img.shape))
+        c = on_course(in_frame(c, img.shape), direction == "rows", COURSE * min(img.shape))
     scan = c.u if direction == "rows" else c.v
     if colour and li.bgr is not None and 1 < len(c) < GAPS * (np.ptp(scan) + 1):
         c = fill_gaps(c, _in_excess(li, c, fn, direction, scaled), direction == "rows")

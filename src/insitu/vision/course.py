@@ -20,6 +20,18 @@ FILL_PX = 4.0
 either side (:func:`fill_gaps`)."""
 
 
+def in_frame(c: LineCentres, shape: tuple[int, int]) -> LineCentres:
+    """``c`` without the centres outside the frame (H, W) ``shape``: a flank fit of a
+    plateau with no curvature puts its vertex anywhere, and one such centre spoils the
+    course its neighbours are judged by (:func:`on_course`)."""
+    H, W = shape
+    keep = (c.u >= 0) & (c.u <= W - 1) & (c.v >= 0) & (c.v <= H - 1)
+    if keep.all():
+        return c
+    fields = ("u", "v", "peak", "width", "contrast", "saturated", "ambiguous")
+    return replace(c, **{f: getattr(c, f)[keep] for f in fields})
+
+
 def on_laser(c: LineCentres, bgr: np.ndarray, channel: int, white: float, along_rows: bool,
              reach: int) -> LineCentres:
     """``c`` without the centres that lie on no laser-coloured ridge: a centre stays where its
