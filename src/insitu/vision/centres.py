@@ -265,8 +265,10 @@ def _in_excess(li: LaserImage, c: LineCentres, fn, direction, scaled) -> LineCen
     gaps of the stripe's centres ``c``: in each window from a gap's last centre before to its
     first after, ± 4 × the colour's reach along and across the line (windows that overlap
     joined), measured in one pass over the windows laid side by side
-    (:data:`_APART` blank scan lines between), with the whole excess's noise
-    (:func:`~insitu.vision.course.fill_gaps` takes only centres on the gaps, near their
+    (:data:`_APART` blank scan lines between), with the whole excess's noise, each scan
+    line's peak its brightest laser-coloured pixel rather than the ridge on the longest
+    track (a window round a gap holds the stripe's colour and little else;
+    :func:`~insitu.vision.course.fill_gaps` takes only centres on the gaps, near their
     course)."""
     rows = direction == "rows"
     scan, cross = (c.u, c.v) if rows else (c.v, c.u)
@@ -291,7 +293,8 @@ def _in_excess(li: LaserImage, c: LineCentres, fn, direction, scaled) -> LineCen
     for (a, b, lo, hi), k in zip(windows, at):
         img[:hi - lo, k:k + b - a] = ex[lo:hi, a:b]
         ok[:hi - lo, k:k + b - a] = allow[lo:hi, a:b]
-    e = _along(fn, img, "rows", None, ok, scaled(li.full_scale) | {"noise": frame_noise(ex)})
+    e = _along(fn, img, "rows", None, ok,
+               scaled(li.full_scale) | {"noise": frame_noise(ex), "ridge": False})
     i = np.searchsorted(at, np.round(e.u), side="right") - 1
     start, top = np.array([w[0] for w in windows]), np.array([w[2] for w in windows])
     along, across = e.u - at[i] + start[i], e.v + top[i]
