@@ -14,8 +14,12 @@ along y, so Horus gets each frame transposed (before the clock starts: a mountin
 insitu: exactly what a scan runs per frame (:class:`~insitu.reconstruct.scan.ScanReconstructor`):
 the band the commanded line can fall in over the head's focus range
 (:func:`~insitu.reconstruct.plane.band_and_side`) and :func:`~insitu.vision.extract.extract_centres`
-with the default settings (Steger, the along-line window of issue 11's robustness) in it; and,
-for reference, the same extraction over the whole frame (no band).
+with the default settings (Steger, the along-line window of issue 11's robustness) in it; the
+same in the narrower band of the heights a survey measured (as ``produce`` with a recipe's
+``scan.survey_mm`` searches its lines, :mod:`insitu.services.survey`: eight frames spread
+over the recording, or eight lines 8 mm apart over the simulated part, reconstructed by
+Method 1, their heights padded by ``HEIGHT_PAD_MM``); and, for reference, the same
+extraction over the whole frame (no band).
 
 Frames: 2448 × 2048 uint8 — the independent recordings (another renderer,
 ``shared/recordings``: the two scans, frames spread over each) and our simulator's (the step
@@ -55,7 +59,9 @@ from rich.table import Table  # noqa: E402
 
 from insitu.formats.sequence import Sequence  # noqa: E402
 from insitu.reconstruct.plane import band_and_side, line_runs_along_rows  # noqa: E402
+from insitu.reconstruct.scan import ScanReconstructor  # noqa: E402
 from insitu.services.common import camera_model  # noqa: E402
+from insitu.services.survey import HEIGHT_PAD_MM  # noqa: E402
 from insitu.sim.render import NOMINAL_EXPOSURE_MS  # noqa: E402
 from insitu.sim.rig import NOMINAL_HEAD, default_rig  # noqa: E402
 from insitu.sim.workpieces import make_workpiece  # noqa: E402
@@ -114,13 +120,33 @@ def recorded(root: Path, per_scan: int) -> list[dict]:
         if seq.kind != "scan":
             continue
         cam, head = camera_model(seq.camera), seq.scan_head
+        spread = np.linspace(0, len(seq) - 1, 8).round().astype(int)
+        z = survey_heights(cam, head.pivot_height_mm, tuple(head.z_range_mm),
+                           [(seq.read_frame(int(i)), *commanded(seq, i)) for i in spread])
         for i in np.linspace(0, len(seq) - 1, per_scan).round().astype(int):
-            f = seq.spec.frames[i]
             out.append(dict(source=f"recordings: {seq_json.parent.name}",
                             image=seq.read_frame(int(i)), camera=cam,
                             pivot=head.pivot_height_mm, z_range=tuple(head.z_range_mm),
-                            line=(np.asarray(f.line.start, float), np.asarray(f.line.end, float))))
+                            survey_z=z, line=commanded(seq, i)))
     return out
+
+
+def commanded(seq: Sequence, i: int) -> tuple[np.ndarray, np.ndarray]:
+    """Frame ``i``'s commanded line (start, end) mm."""
+    f = seq.spec.frames[int(i)]
+    return np.asarray(f.line.start, float), np.asarray(f.line.end, float)
+
+
+def survey_heights(camera, pivot: float, z_range: tuple[float, float], frames: list
+                   ) -> tuple[float, float]:
+    """The heights (low, high) mm a survey of ``frames`` ((image, start, end) each) measures
+    (Method 1), padded by HEIGHT_PAD_MM and kept within ``z_range``: the band a scan with a
+    survey searches its lines in."""
+    rec = ScanReconstructor(camera, pivot, z_range_mm=z_range)
+    for k, (image, start, end) in enumerate(frames):
+        rec.add(k, image, start, end)
+    lo, hi = rec.heights()
+    return max(lo - HEIGHT_PAD_MM, z_range[0]), min(hi + HEIGHT_PAD_MM, z_range[1])
 
 
 SIM_SETTINGS = [("step-block", 0, 1.0), ("arc", 1, 0.5), ("freeform", 2, 2.0)]
@@ -134,24 +160,31 @@ def simulated(n: int) -> list[dict]:
     for part, seed, gain in SIM_SETTINGS:
         rig = default_rig(seed=seed)
         r = SimWorld(rig, parts=[make_workpiece(part)], seed=seed).renderer()
+        ends = [(np.array([x, -45.0]), np.array([x, 45.0])) for x in np.arange(-28, 29, 8)]
+        z = survey_heights(rig.operator.camera, NOMINAL_HEAD.pivot_height_mm,
+                           tuple(NOMINAL_HEAD.z_range_mm),
+                           [(r.line_frame(a, b, exposure_ms=gain * NOMINAL_EXPOSURE_MS), a, b)
+                            for a, b in ends])
         for x in np.linspace(-8, 8, per):
             start, end = np.array([x, -45.0]), np.array([x, 45.0])
             img = r.line_frame(start, end, exposure_ms=gain * NOMINAL_EXPOSURE_MS)
             out.append(dict(source=f"simulator: {part}, seed {seed}, exposure ×{gain:g}",
                             image=img, camera=rig.operator.camera,
                             pivot=NOMINAL_HEAD.pivot_height_mm,
-                            z_range=tuple(NOMINAL_HEAD.z_range_mm), line=(start, end)))
+                            z_range=tuple(NOMINAL_HEAD.z_range_mm), survey_z=z,
+                            line=(start, end)))
     return out[:n] if n else []
 
 
-def ours(frame: dict, banded: bool = True):
-    """The scan's centres of one frame (ScanReconstructor.add's extraction)."""
+def ours(frame: dict, banded: bool = True, heights: str = "z_range"):
+    """The scan's centres of one frame (ScanReconstructor.add's extraction), in the band of
+    the frame's ``heights`` ("z_range": the focus range; "survey_z": a survey's)."""
     start, end = frame["line"]
     rows = line_runs_along_rows(frame["camera"], start, end)
     band, upper = None, 0
     if banded:
         lo, hi, upper = band_and_side(frame["camera"], start, end, frame["pivot"],
-                                      frame["z_range"], along_rows=rows)
+                                      frame[heights], along_rows=rows)
         band = (lo, hi)
     return extract_centres(frame["image"], CentreSettings(), band, rows, upper)
 
@@ -194,6 +227,8 @@ def main() -> None:
         "Horus (threshold, blur, window, centre of mass, SGF)":
             lambda f: (seg.compute_2d_points, f["horus"]),
         "insitu default, the scan's band (what a scan runs)": lambda f: (ours, f),
+        "insitu default, the band of a survey's heights": lambda f: (
+            lambda g: ours(g, heights="survey_z"), f),
         "insitu default, whole frame": lambda f: (lambda g: ours(g, banded=False), f),
     }
     res = measure(frames, methods, a.rounds)
@@ -211,8 +246,9 @@ def main() -> None:
                       f"{base / np.median(cpu):.1f}",
                       f"{np.mean(pts):.0f}")
     Console(width=140).print(t)
-    for f in dict.fromkeys(f["source"] for f in frames):
-        print(" ", f)
+    for f in dict.fromkeys((f["source"], f["z_range"], f["survey_z"]) for f in frames):
+        print(" ", f[0], "focus range {:g} … {:g} mm".format(*f[1]),
+              "survey's heights {:.1f} … {:.1f} mm".format(*f[2]))
 
 
 if __name__ == "__main__":
