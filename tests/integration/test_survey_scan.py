@@ -20,8 +20,14 @@ def test_the_scan_sweeps_the_outline_at_the_heights_the_survey_saw(monkeypatch):
         assert -3.5 < lo < 0.0 and 15.0 < hi < 18.5             # the table … the top step
         whole = scan_live(station, 2.0, region, room_light=False)
         assert len(scan_lines(region, 2.0)) == whole.summary.camera_frames
+        camera, placed = station.devices.camera, []
+        place = camera.set_region_of_interest
+        monkeypatch.setattr(camera, "set_region_of_interest", lambda roi: placed.append(roi)
+                            or place(roi))
         dense = scan_live(station, 2.0, region, within=found.outline, heights=found.heights,
                           room_light=False)
+        windows = {(u1 - u0, v1 - v0) for u0, v0, u1, v1 in placed[1:-1]}
+        assert len(placed) > dense.summary.frames and len(windows) == 1  # each its own window
         assert dense.summary.station_s < 0.6 * whole.summary.station_s  # the survey: 1/2 at
         assert found.station_s < 0.6 * whole.summary.station_s          # 2 mm, 1/8 at 0.5 mm
         top = [r.cloud.points[r.cloud.points[:, 2] > 0.5] for r in (dense, whole)]

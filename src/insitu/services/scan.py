@@ -33,6 +33,7 @@ from insitu.services.scan_frames import (
     Stream,
     describe_packing,
     laser_off_frames,
+    moving_window,
     recorded_excess,
     region_of_interest,
     survey_heights,
@@ -272,7 +273,8 @@ def _scan(camera: Camera, head: ScanHead, plan, rec: ScanReconstructor, t0: Step
     (K − 1)/K of it subtracted from those frames; ``excess``: those given, K → the excess,
     a recording's); the laser off at the end,
     on a cancel (:class:`Cancelled`) or a device fault (:class:`ScanInterrupted`), each keeping what was
-    measured. The camera reads ``roi`` only during the lines."""
+    measured. The camera reads ``roi`` only during the lines, and each frame of lines only
+    in its own window of one size (:func:`~insitu.services.scan_frames.moving_window`)."""
     ambient, room, taken, packing = "none", None, 0, "one line a frame"
     shot = Shots(camera, head, roi)
     try:
@@ -290,6 +292,8 @@ def _scan(camera: Camera, head: ScanHead, plan, rec: ScanReconstructor, t0: Step
             off = laser_off_frames(shot, frames)
             excess = {k: excess_room_light(image, k) for k, image in off.items()}
             taken += len(off)
+        if roi is not None:
+            shot.follow(moving_window(rec, frames, rec.camera.width, rec.camera.height))
         stream = Stream(shot, frames)
         try:
             for i, f, image in stream:

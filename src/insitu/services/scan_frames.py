@@ -27,6 +27,15 @@ class ScanInterrupted(DeviceError):
 def region_of_interest(rec: ScanReconstructor, lines) -> tuple[int, int, int, int] | None:
     """The pixels (u0, v0, u1, v1) every line's band (its search at the focus range) lies in;
     None when one reaches no pixel."""
+    boxes = line_boxes(rec, lines)
+    if boxes is None:
+        return None
+    u0, v0, u1, v1 = np.array(boxes).T
+    return int(u0.min()), int(v0.min()), int(np.ceil(u1.max())), int(np.ceil(v1.max()))
+
+
+def line_boxes(rec: ScanReconstructor, lines) -> list[tuple[float, ...]] | None:
+    """Each line's band as a box (u0, v0, u1, v1) px; None when one reaches no pixel."""
     boxes = []
     for a, b in lines:
         rows = line_runs_along_rows(rec.camera, a, b)
@@ -37,9 +46,33 @@ def region_of_interest(rec: ScanReconstructor, lines) -> tuple[int, int, int, in
             return None
         across = (np.nanmin(lo), np.nanmax(hi) + 1)
         along = (ok[0], ok[-1] + 1)
-        boxes.append((*along, *across) if rows else (*across, *along))
-    u0, u1, v0, v1 = np.array(boxes).T
-    return int(u0.min()), int(v0.min()), int(np.ceil(u1.max())), int(np.ceil(v1.max()))
+        boxes.append((along[0], across[0], along[1], across[1]) if rows
+                     else (across[0], along[0], across[1], along[1]))
+    return boxes
+
+
+def moving_window(rec: ScanReconstructor, frames: list[Frame], width: int, height: int
+                  ) -> list[tuple[int, int, int, int]] | None:
+    """A region of interest (u0, v0, u1, v1) px for each of ``frames``, all of one size (the
+    largest of their bands' boxes) and each over its own frame's lines: a camera moves its
+    region between frames without stopping when only its place changes (the frame's size
+    stays). None when a line reaches no pixel."""
+    boxes = []
+    for f in frames:
+        got = line_boxes(rec, f.lines)
+        if got is None:
+            return None
+        b = np.array(got)
+        boxes.append((b[:, 0].min(), b[:, 1].min(), b[:, 2].max(), b[:, 3].max()))
+    b = np.array(boxes)
+    cols = min(int(np.ceil((b[:, 2] - b[:, 0]).max())) + 16, width)
+    rows = min(int(np.ceil((b[:, 3] - b[:, 1]).max())) + 2, height)
+    out = []
+    for u0, v0, _, _ in b:
+        u = int(np.clip(np.floor(u0 / 16) * 16, 0, width - cols))
+        v = int(np.clip(np.floor(v0 / 2) * 2, 0, height - rows))
+        out.append((u, v, u + cols, v + rows))
+    return out
 
 
 class Shots:
@@ -52,14 +85,23 @@ class Shots:
         self.camera, self.head = camera, head
         self.base = camera.exposure_ms if isinstance(camera, ExposureCamera) else None
         self.roi = roi if isinstance(camera, RoiCamera) else None
-        self._roi_set = False
+        self.windows: list | None = None
+        self._roi_set = None
         self._at = None                 # where the last frame's lines left the head, mm
 
-    def _expose(self, k: int) -> None:
-        """The region of interest set, the exposure of a frame of ``k`` lines."""
-        if self.roi is not None and not self._roi_set:
-            self.camera.set_region_of_interest(self.roi)
-            self._roi_set = True
+    def follow(self, windows: list | None) -> None:
+        """From now on frame i is read in ``windows[i]`` (:func:`moving_window`; None: the
+        whole scan's region)."""
+        if self.roi is not None:
+            self.windows = windows
+
+    def _expose(self, k: int, i: int | None = None) -> None:
+        """The region of interest set (frame ``i``'s window, when it has one), the exposure
+        of a frame of ``k`` lines."""
+        roi = self.roi if self.windows is None or i is None else self.windows[i]
+        if roi is not None and roi != self._roi_set:
+            self.camera.set_region_of_interest(roi)
+            self._roi_set = roi
         if self.base is not None:
             want = self.base * k
             if self.camera.exposure_ms != want:
@@ -81,7 +123,7 @@ class Shots:
 
     def take(self, frame: Frame, i: int, n: int, partial) -> np.ndarray:
         try:
-            self._expose(len(frame.lines))
+            self._expose(len(frame.lines), i)
             if len(frame.lines) == 1:
                 self.head.show_line(*frame.lines[0])
                 self._at = frame.lines[0][0]
@@ -98,7 +140,7 @@ class Shots:
 
     def done(self) -> None:
         self.head.off()
-        if self._roi_set:
+        if self._roi_set is not None:
             self.camera.set_region_of_interest(None)
         if self.base is not None and self.camera.exposure_ms != self.base:
             self.camera.set_exposure(self.base)

@@ -31,9 +31,11 @@ ABOVE_TABLE_MM = 0.5
 """Points this much above the table are the part's (the table's own points lie within a few
 hundredths of a millimetre of it)."""
 
-CHORD_SLACK_MM = 0.5
-"""How far a chord's measured end may lie from the part's edge (the line's width and the
-outlier tests at a wall): each bound through two chords' ends is loosened by it."""
+CHORD_SLACK_MM = 1.5
+"""How far a chord's measured end may lie from the part's edge: each bound through two
+chords' ends is loosened by it. Where a line crosses a low step's wall at a glancing angle
+(near a turned part's corner) the camera loses up to 3 mm of it; the hull of the other
+chords restores most of that, and the dense scan's check (:func:`scan_found`) the rest."""
 
 HEIGHT_PAD_MM = 3.0
 """The dense lines are searched this far below and above the heights the pass saw (a part's

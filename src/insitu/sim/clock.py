@@ -7,7 +7,9 @@ the JAI GO-5000M-PGE's 165 clocks of 12 MHz a row, 10 blank rows) and the link's
 pixels at ``link_gbit_s``, the payload GigE carries), both for the rows and columns of the
 region of interest; a frame's exposure overlaps the previous frame's readout, so a frame
 takes the longer of (the head's jump and settling, the trigger's latency, the exposure) and
-the readout.
+the readout. A region of interest moved between frames without changing its size (its
+offsets written while grabbing, as many GigE Vision cameras allow, since the frames' size
+stays) takes ``roi_move_ms`` (a register write's round trip over the link).
 
 The scan's light: the head draws its lines with the marking source's beam at a power that
 never marks. A line's light is energy per mm of line (power × dwell): the camera's picture
@@ -60,6 +62,7 @@ class SimTiming:
     scan_threshold_j_cm2: float = 0.7
     scan_fluence_share: float = SCAN_FLUENCE_SHARE
     source_power_w: float = 20.0
+    roi_move_ms: float = 0.3
 
     def scan_power_w(self) -> float:
         """The highest power (W) of the scan that never marks: a pulse's peak fluence at most

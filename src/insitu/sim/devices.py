@@ -40,7 +40,9 @@ class SimCamera:
     def set_region_of_interest(self, roi: tuple[int, int, int, int] | None) -> None:
         """Read out only the pixels u0 ≤ u < u1, v0 ≤ v < v1 (``roi`` = (u0, v0, u1, v1),
         widened to the sensor's steps: 16 columns, 2 rows; None: the whole frame). A frame
-        then reads out faster; the pixels outside it come as 0."""
+        then reads out faster; the pixels outside it come as 0. Moving a region of the same
+        size while grabbing (OffsetX, OffsetY written between frames) takes
+        ``roi_move_ms`` of the station's time."""
         if roi is None:
             self.roi = None
             return
@@ -50,7 +52,11 @@ class SimCamera:
         if not (u0 < u1 and v0 < v1):
             raise DeviceError(f"simulated camera: region of interest {list(roi)} holds no "
                               f"pixel of the {self.width}×{self.height} frame")
-        self.roi = (u0, v0, u1, v1)
+        new = (u0, v0, u1, v1)
+        if (self.roi is not None and self.roi != new and roi_size(self.roi, 0, 0)
+                == roi_size(new, 0, 0)):
+            self.world.clock.advance("frames", self.world.timing.roi_move_ms * 1e-3)
+        self.roi = new
 
     def fail_after(self, frames: int | None) -> None:
         """Fault injection (tests, benchmarks): after ``frames`` more frames every grab
