@@ -21,16 +21,16 @@ LAMP, GLINT = (120, 160), (600, 420)             # centres px
 CUPBOARD = 830                                   # its edge, px
 
 
-def clipped_photo(seed: int = 0, halo: float = 5.0, floor: float = 0.0):
+def clipped_photo(seed: int = 0, halo: float = 5.0, floor: float = 0.0, board: float = 215.0):
     """(H, W, 3) uint8 BGR JPEG-decoded photograph and the stripe's true row per column (W,);
     halo: its sigma, px (the reach the laser colour is looked for in is 5 px here); floor:
     the peak of the stripe's reflection in a glossy floor under the board (row 520, columns
-    300–700; 0: none)."""
+    300–700; 0: none); board: its white face's gray value."""
     rng = np.random.default_rng(seed)
     yy, xx = np.mgrid[0:H, 0:W].astype(np.float32)
     room = 120.0 + 0.05 * xx                                           # a wall, lit unevenly
     x0, x1, y0, y1 = BOARD
-    room[(xx > x0) & (xx < x1) & (yy > y0) & (yy < y1)] = 215.0
+    room[(xx > x0) & (xx < x1) & (yy > y0) & (yy < y1)] = board
     for cx in range(260, 740, 80):
         for cy in range(130, 480, 80):
             room[(xx - cx) ** 2 + (yy - cy) ** 2 < 18 ** 2] = 35.0     # the dots
@@ -145,3 +145,17 @@ def test_a_white_run_counts_only_with_laser_colour_on_both_sides_and_when_short(
     out = _flanked(laser, white, 2)
     assert out[0, 5:8].all() and out[0].sum() == 3
     assert not out[1].any() and not out[2].any()
+
+
+def test_a_halo_clipped_wide_in_the_red_channel_is_measured_in_the_sum():
+    """On a brighter board (235) a halo of sigma 10 px clips the red channel over a plateau
+    some 30 px wide: there the red channel holds no ridge, and its own centres go to the
+    stripe's weak, thin, unclipped reflection in the floor (row 520). The sum of the channels
+    holds the stripe as a ridge whose red channel is clipped: the photograph is measured in
+    the sum, on the stripe (not refused for the colour of the reflection's centres)."""
+    bgr, true = clipped_photo(1, halo=10.0, floor=60.0, board=235.0)
+    c = photo_centres(bgr, "gray")
+    err = errors(c, true)[ON]
+    right = np.abs(np.nan_to_num(err, nan=99)) <= 5
+    assert right.mean() >= 0.4 and (np.isfinite(err) & ~right).mean() <= 0.01
+    assert not (np.abs(c.v - 520) < 20).any()

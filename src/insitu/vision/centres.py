@@ -341,7 +341,21 @@ def _in_sum(li: LaserImage, direction, band, allow, kw, scaled) -> bool:
         return True
     t = _along(gray_centroid, li.total[every], direction, band, allow,
                scaled(3 * li.full_scale) | probe)
+    if len(t) and np.mean(_clipped_at(li.gray[every], t, scaled(li.full_scale))) > 0.5:
+        return True
     return _stripe_length(t, direction) > _stripe_length(c, direction)
+
+
+def _clipped_at(img: np.ndarray, c: LineCentres, kw) -> np.ndarray:
+    """(n,) bool: whether ``img`` (H, W), the laser's channel, is clipped (``kw``'s
+    saturation, else its scale) within ±2 px of each centre ``c`` found in the sum of the
+    channels: there the laser's channel holds a clipped plateau (a halo that clips it on a
+    bright board) wider than a ridge, where its own centres go to a thinner, weaker ridge
+    (a reflection of the stripe) and the sum's go to the stripe."""
+    level = saturation_level(img, kw.get("saturation"), kw["scale"])
+    rows = np.round(c.v).astype(np.int64)[None, :] + np.arange(-2, 3)[:, None]
+    g, _ = gather(img, rows, np.round(c.u).astype(np.int64))
+    return g.max(axis=0) >= level
 
 
 def _stripe_length(c: LineCentres, direction: str) -> int:
