@@ -35,6 +35,7 @@ from rich.console import Console
 from rich.table import Table
 from scipy.spatial import cKDTree
 
+from insitu.errors import MeasurementError
 from insitu.formats.camera_spec import CameraSpec
 from insitu.formats.pointcloud import read_ply
 from insitu.formats.sequence import Sequence
@@ -202,9 +203,17 @@ def _self_reference(table: Table, folder: str, name: str, cad: PartReference, cl
     """The recording's own scan and frame as its reference: its pieces against the true
     outline (the CAD's at the rig frame's pose: scored only), what they pin, and the scan
     located against it (the pose is the identity; a check of the σ and the gates only)."""
-    ref = reference_from_cloud(cloud.points, "scan", image=frame, camera=camera,
-                               lines=cloud.attributes["line"])
+    try:
+        ref = reference_from_cloud(cloud.points, "scan", image=frame, camera=camera,
+                                   lines=cloud.attributes["line"])
+    except MeasurementError as e:
+        console.print(f"{folder} scan reference refused: {e}", highlight=False)
+        table.add_row(name, "its own scan + frame", f"independent ({folder})", "0",
+                      "1 (no reference)", "0", *["–"] * 7)
+        return
     T = pose_matrix(*rig_truth)
+    o = ref.fitted.outline
+    at = cKDTree(o.points[:, :2])
     true_xy = outline(cad.heights).points[:, :2] @ T[:2, :2].T + T[:2, 3]
     tree = cKDTree(true_xy)
     for q in ref.fitted.pieces:
@@ -214,9 +223,8 @@ def _self_reference(table: Table, folder: str, name: str, cad: PartReference, cl
         console.print(f"{folder} scan reference: {q.kind} ({q.source}) {q.length_mm:.1f} mm "
                       f"at {pts.mean(0).round(1)}: {off.mean():+.3f} mm outward of the truth "
                       f"(ends {off[0]:+.3f} / {off[-1]:+.3f}), claimed 1σ "
-                      f"{ref.fitted.outline.sigma_mm.min():.3f}… ({q.scan} scan samples, "
+                      f"{np.median(o.sigma_mm[at.query(pts)[1]]):.3f} ({q.scan} scan samples, "
                       f"{q.directions} directions)", highlight=False)
-    o = ref.fitted.outline
     h = outline_hold(o.points[:, :2], o.normals, o.points[:, 2], o.sigma_mm, o.tilt_mm, ref.rim)
     console.print(f"{folder} scan reference pins x {h.x_mm:.3f}, y {h.y_mm:.3f} mm, turn "
                   f"{h.turn_deg:.3f}° (1σ; {h.rim_mm:.3f} mm at its rim)", highlight=False)

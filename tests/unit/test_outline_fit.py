@@ -120,3 +120,27 @@ def test_a_recorded_scans_frame_gives_the_blocks_sides():
     assert 0.003 < h.x_mm < 0.1 < 0.5 < h.y_mm, (h.x_mm, h.y_mm)
     level, text = found["pinned"]
     assert level == "warning" and "weakest along y" in text and "CAD mesh" in text, text
+
+
+def test_a_frame_edge_the_scans_top_runs_across_is_left_out():
+    """A flat top (x < 0, 5 mm high; the scan's points 0.25 mm apart) whose room-light frame
+    shows its side at x = 0 and a shadow's edge 1.5 mm inside it, both fitted to 0.02 mm rms:
+    the scan's top ends at the side (nothing beyond it but the table) and runs on across the
+    shadow's edge, which is left out — it would claim its offset to 0.01 mm while 1.5 mm off."""
+    from insitu.locate.outline_fit import CONTINUED, continued, where_the_top_ends
+    from insitu.locate.pieces import fitted
+
+    g = np.arange(-10.0, 0.0, 0.25)
+    x, y = np.meshgrid(g + 0.125, np.arange(-8.0, 8.0, 0.25))
+    part = np.column_stack([x.ravel(), y.ravel(), np.full(x.size, 5.0)])
+    rng = np.random.default_rng(3)
+    ys = np.arange(-6.0, 6.0, 0.1)
+    xy = np.vstack([np.column_stack([np.full(len(ys), at), ys]) for at in (0.0, -1.5)])
+    xy[:, 0] += rng.normal(0.0, 0.02, len(xy))
+    found = fitted(xy, np.tile([1.0, 0.0], (len(xy), 1)), np.full(len(xy), 5.0), 0.1)
+    assert len(found) == 2 and all(p.sigma_mm < 0.02 for p in found)
+    side, shadow = sorted(found, key=lambda p: -p.centre[0])
+    assert abs(side.centre[0]) < 0.02 and abs(shadow.centre[0] + 1.5) < 0.02
+    assert continued(side, part) < 0.05
+    assert continued(shadow, part) > 1.5 * CONTINUED
+    assert where_the_top_ends(found, part) == [side]

@@ -64,6 +64,17 @@ NEAR_MM = 0.5
 """Scan edge samples this close to a piece (across it) check it."""
 SCAN_SPACING_MM = 0.5
 """About how far apart along an edge a crossed scan's lines end on it."""
+BESIDE_MM = (0.3, 1.2)
+"""A frame's piece is an edge only where the scan's top ends at it: of the scan's points on
+the part this far beside it, those outward lie beyond the top (the table, left out of the
+part's points) or a step below it (more than ``STEP_MM``). Where the top runs on across a
+piece, its grey step is a texture's, a shadow's or a slope's (the independent renderer's arc:
+two such pieces 1.5–1.9 mm off its edge, fitted to 0.04–0.08 mm rms); 0.3 mm is 3σ of a piece
+the scan does not check (:data:`insitu.locate.uncertainty.SCAN_REFERENCE_MM`)."""
+STEP_MM = 1.0
+CONTINUED = 0.5
+"""A piece is left out where the scan's points on the top beyond it number more than this
+share of those inside it."""
 
 
 @dataclass(frozen=True)
@@ -101,8 +112,8 @@ def fit_outline(heights: HeightImage, image: np.ndarray, camera: CameraModel,
     tops = _tops(heights, part)
     rough = replace(rough, points=np.column_stack([rough.points[:, :2], top_heights(
         heights, rough.points[:, :2], rough.normals)]))
-    pieces, found, seen = _frame_pieces(heights, frame_of(image), camera, rough,
-                                        None if part is None else tops)
+    pieces, found, seen, left_out = _frame_pieces(heights, frame_of(image), camera, rough,
+                                                  None if part is None else tops, part)
     if seen < 50:
         return f"{seen} of the outline's {len(rough.points)} points in the camera's view"
     covered = found / len(rough.points)
@@ -112,7 +123,9 @@ def fit_outline(heights: HeightImage, image: np.ndarray, camera: CameraModel,
         pieces += _from_scan(pieces, rough, scan, inset)
     if not pieces:
         return (f"no straight or round edge fitted to the {found} edge points the frame "
-                f"shows of the outline's {len(rough.points)}")
+                f"shows of the outline's {len(rough.points)}"
+                + (f" ({left_out} left out: the scan's top runs on across them, a shadow's, "
+                   "a texture's or a slope's grey step)" if left_out else ""))
     known = [q.offset_mm for q in pieces if np.isfinite(q.offset_mm)]
     shift = float(np.median(known)) if known else 0.0
     return OutlineFit(_sampled(heights, pieces, tops), tuple(pieces), float(covered), inset,
@@ -121,16 +134,18 @@ def fit_outline(heights: HeightImage, image: np.ndarray, camera: CameraModel,
 
 
 def _frame_pieces(heights: HeightImage, frame, camera: CameraModel, rough: Outline,
-                  tops=None) -> tuple[list[Piece], int, int]:
+                  tops=None, part: np.ndarray | None = None
+                  ) -> tuple[list[Piece], int, int, int]:
     """(the pieces fitted to the frame's edges found within ``SEARCH_PX`` of the ``rough``
     outline's points (those in view, not on a wall seen edge-on) that run along it, how many
-    edge points were found, of how many in view). ``tops``: the top's heights at edge points
+    edge points were found, of how many in view, how many pieces were left out). ``tops``: the top's heights at edge points
     (:func:`_tops`), at which each edge point's ray is cut again (twice: its height where
-    it was found); None: cut at the rough outline's heights."""
+    it was found); None: cut at the rough outline's heights. ``part`` (N, 3): the scan's
+    points on the part; a piece the top runs on beyond is left out (:func:`continued`)."""
     width = wall_px(rough, camera, 0.0, np.zeros(3))
     seen = visible(heights, rough, camera, 0.0, np.zeros(3)) & ~((width > 0) & (width < WALL_PX))
     if seen.sum() < 50:
-        return [], 0, int(seen.sum())
+        return [], 0, int(seen.sum()), 0
     p, n = rough.points[seen], rough.normals[seen]
     offs = np.arange(-SEARCH_PX, SEARCH_PX + 1e-9, STEP_PX)
     found, e, _ = edge_points(frame, camera, p, n, offs,
@@ -142,7 +157,8 @@ def _frame_pieces(heights: HeightImage, frame, camera: CameraModel, rough: Outli
             z = tops(e, n)
             e = o[:2] + dirs[:, :2] * ((z - o[2]) / dirs[:, 2])[:, None]
     pieces = [q for q in fitted(e, n, z, SPACING_MM) if _near_rough(q, rough)]
-    return pieces, int(found.sum()), int(seen.sum())
+    kept = pieces if part is None else where_the_top_ends(pieces, part)
+    return kept, int(found.sum()), int(seen.sum()), len(pieces) - len(kept)
 
 
 def _sampled(heights: HeightImage, pieces: list[Piece], tops) -> Outline:
@@ -209,6 +225,24 @@ def top_heights(heights: HeightImage, edge: np.ndarray, n: np.ndarray) -> np.nda
     slope = (dd * (z - z_mean[:, None])).sum(axis=1) / np.maximum((dd ** 2).sum(axis=1), 1e-12)
     return z_mean - slope * d_mean
 
+
+def where_the_top_ends(pieces: list[Piece], part: np.ndarray) -> list[Piece]:
+    """The frame's ``pieces`` at which the scan's top, its points on the part (N, 3), ends:
+    :func:`continued` at most ``CONTINUED``."""
+    return [q for q in pieces if continued(q, part) <= CONTINUED]
+
+
+def continued(piece: Piece, part: np.ndarray) -> float:
+    """How many of the scan's points on the part (N, 3) lie ``BESIDE_MM`` outward of
+    ``piece`` less than ``STEP_MM`` below its height, over how many lie as far inside it
+    (0: the top ends at it; about 1: it runs on across it)."""
+    pts, nrm = piece.sample(SPACING_MM)
+    tree = cKDTree(part[:, :2])
+    mid, half = np.mean(BESIDE_MM), np.ptp(BESIDE_MM) / 2
+    near = [np.unique(np.concatenate(tree.query_ball_point(pts + side * mid * nrm, half))
+                      .astype(np.int64)) for side in (-1.0, 1.0)]
+    inside, outside = near[0], near[1][part[near[1], 2] > piece.z_mm - STEP_MM]
+    return len(outside) / max(len(inside), 1)
 
 
 def _near_rough(piece: Piece, rough: Outline) -> bool:
