@@ -18,7 +18,7 @@ within 0.05° (3σ within 0.1°). With --independent the posed arc is also locat
 own scan and frame as reference (its pieces scored against the true outline).
 
 Run: .venv/bin/python benchmarks/locate_honest.py [--half tune|hold|hold2] [--independent]
-     [--names step-block,arc,insert] [--lights all|diffuse,...]
+     [--names step-block,arc,insert] [--lights all|diffuse,...] [--references cad,scan]
 """
 
 from __future__ import annotations
@@ -132,9 +132,12 @@ def simulated(args, table: Table) -> None:
         ref_cloud = read_ply(ref_item.cloud)
         ref_truth = corpus.rig_frame_truth(rig, cad.top, ref_item.pose)
         qr_cad = np.array(QR_AT[name])
-        refs = {"CAD mesh": {None: cad, **{light: cad for light in lights}}}
-        refs["scan + its frame"] = {None: reference_from_cloud(ref_cloud.points, "scan")}
-        for light in lights:
+        refs = {}
+        if "cad" in args.references:
+            refs["CAD mesh"] = {None: cad, **{light: cad for light in lights}}
+        if "scan" in args.references:
+            refs["scan + its frame"] = {None: reference_from_cloud(ref_cloud.points, "scan")}
+        for light in lights if "scan" in args.references else ():
             refs["scan + its frame"][light] = reference_from_cloud(
                 ref_cloud.points, "scan", image=_read(ref_item.frames[light]), camera=camera,
                 lines=ref_cloud.attributes["line"])
@@ -257,6 +260,8 @@ def main() -> None:
     ap.add_argument("--independent", action="store_true",
                     help="also the independent recordings (score them once, at the end)")
     ap.add_argument("--skip-sim", action="store_true")
+    ap.add_argument("--references", default="cad,scan",
+                    help="which references the simulated parts are located against: cad, scan")
     args = ap.parse_args()
     table = Table(title="locate: accepted only when 2σ at the rim ≤ 0.05 mm; errors against "
                         "the rig frame (mm at the rim / of the origin, ° of the turn), |error| "

@@ -205,9 +205,11 @@ def piece_sigma(r: np.ndarray, w: np.ndarray, length_mm: float) -> tuple[float, 
     """(1σ of a piece's offset across it, of its turn ± at its ends), mm, from its residuals
     ``r`` (K,) and weights ``w`` (K,) over ``length_mm``: the weighted spread over one
     independent residual every ``CORRELATED_MM`` (the slope's over a uniform spread of
-    them: √3 times the offset's at the ends)."""
+    them: √3 times the offset's at the ends); a piece shorter than two such stretches counts
+    its length's share of them, one at least (a few millimetres of edge are one stretch
+    whose error its own scatter does not show)."""
     spread = float(np.sqrt((w * r ** 2).sum() / max(w.sum(), 1e-12)))
-    n = max(2.0, length_mm / CORRELATED_MM)
+    n = max(1.0, length_mm / CORRELATED_MM)
     return spread / np.sqrt(n), spread * np.sqrt(3.0 / n)
 
 
