@@ -197,13 +197,16 @@ def test_recipe_new_reports_a_scan_references_outline(tmp_path, reference):
     taken through is refused; the tolerance is kept."""
     out = tmp_path / "r.json"
     res = runner.invoke(app, ["recipe", "new", str(reference), "--pattern", "text:A;size=2",
-                              "--at", "0", "0", "-o", str(out), "--tolerance", "0.08"])
+                              "--at", "0", "0", "-o", str(out), "--tolerance", "0.08",
+                              "--turn-tolerance", "0.03"])
     assert res.exit_code == 0, res.output
     flat = _flat(res.output)
     assert "its scan lines' ends only" in flat and "--reference-room-light" in flat
     assert re.search(r"the scan shows \d+% of the part's top", flat), flat
     back = read_recipe(out, Placement, PROJECTIONS)
     assert back.tolerance == (0.08, 0.1) and back.reference_room_light is None
+    assert back.turn_tolerance_deg == 0.03
+    assert json.loads(out.read_text())["locate"]["turn_tolerance_deg"] == 0.03
     res = runner.invoke(app, ["recipe", "new", str(reference), "--pattern", "text:A;size=2",
                               "--at", "0", "0", "-o", str(tmp_path / "s.json"),
                               "--reference-room-light", str(tmp_path / "room.png")])

@@ -15,14 +15,16 @@
               "lines_per_frame": "auto",           # K or "auto" a frame (absent: one)
               "survey_mm": 4},                     # a first pass finds the part (absent: none)
      "locate": {"prefer_angle_deg": null,          # which of a symmetric part's turns
-                "tolerance_mm": 0.05, "turn_bound_deg": 0.1},  # 2σ at its rim, 3σ of its turn
+                "tolerance_mm": 0.05, "turn_bound_deg": 0.1,   # 2σ at its rim, 3σ of its turn
+                "turn_tolerance_deg": 0.05},       # 2σ of its turn (absent: 0.05)
      "serial": {"counter": "serial.counter.json", "start": 1, "fields": {}}}
 
 Paths are relative to the recipe's folder. The reference defines the part's frame: a mesh in
 it, or the cloud of a first scan (its world frame is then the part's) with, optionally, the
 room-light frame that scan took (its outline is fitted there). ``locate.tolerance_mm``,
 ``turn_bound_deg``: a part is marked only when its pose is known to 2σ within the first at
-its rim and its turn to 3σ within the second (absent: 0.05 mm, 0.1°). ``scan.region`` null:
+its rim and its turn to 3σ within the second (absent: 0.05 mm, 0.1°), and to 2σ within
+``turn_tolerance_deg`` (absent: 0.05°; the marks' angle on a small part). ``scan.region`` null:
 where the part lies, grown by ``margin_mm`` (the simulated rig knows where; a real rig needs
 the region). ``scan.cross``: a second, crossed pass (lines at 45° to x, ``cross_spacing_mm``
 apart, null: ``spacing_mm``), so every edge of the part is crossed by some line whatever its
@@ -106,6 +108,7 @@ class _Locate(_Strict):
     prefer_angle_deg: Annotated[tuple[float, float], each_within("angle_deg")] | None = None
     tolerance_mm: within("tolerance_mm") = 0.05
     turn_bound_deg: within("turn_bound_deg") = 0.1
+    turn_tolerance_deg: within("turn_bound_deg") = 0.05
 
 
 class _Serial(_Strict):
@@ -176,6 +179,7 @@ class Recipe:
     workpiece: str | None = None
     reference_room_light: Path | None = None
     tolerance: tuple[float, float] = (0.05, 0.1)
+    turn_tolerance_deg: float = 0.05
 
 
 def reference_kind(path: str | Path) -> str:
@@ -210,7 +214,8 @@ def recipe_json(recipe: Recipe, path: Path) -> str:
                    cross_spacing_mm=s.cross_spacing_mm, second_look=s.second_look,
                    lines_per_frame=s.lines_per_frame, survey_mm=s.survey_mm),
         locate=_Locate(prefer_angle_deg=recipe.prefer_angle_deg,
-                       tolerance_mm=recipe.tolerance[0], turn_bound_deg=recipe.tolerance[1]),
+                       tolerance_mm=recipe.tolerance[0], turn_bound_deg=recipe.tolerance[1],
+                       turn_tolerance_deg=recipe.turn_tolerance_deg),
         serial=_Serial(counter=_rel(counter, folder), start=recipe.serial_start,
                        fields=dict(recipe.fields)))
     out = data.model_dump(mode="json")
@@ -260,4 +265,5 @@ def read_recipe(path: str | Path, placement: Callable[..., Any],
         serial_start=d.serial.start, fields=dict(d.serial.fields), workpiece=d.workpiece,
         reference_room_light=(None if d.reference.room_light is None else _abs(
             d.reference.room_light, folder, "reference.room_light", path)),
-        tolerance=(d.locate.tolerance_mm, d.locate.turn_bound_deg))
+        tolerance=(d.locate.tolerance_mm, d.locate.turn_bound_deg),
+        turn_tolerance_deg=d.locate.turn_tolerance_deg)

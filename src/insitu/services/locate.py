@@ -103,7 +103,9 @@ def recipe_locator(recipe: Recipe, camera: CameraModel | None = None) -> Locator
     ``room_light`` its frame of the part, laser off (None: none), whose edges then give x, y
     and the turn; it raises the registration's one-line refusal (part not found, partly
     scanned, poor fit, ambiguous, not within the recipe's tolerance). ``locate.reference``."""
-    settings = LocateSettings(**dict(zip(("tolerance_mm", "turn_bound_deg"), recipe.tolerance)))
+    settings = LocateSettings(tolerance_mm=recipe.tolerance[0],
+                              turn_bound_deg=recipe.tolerance[1],
+                              turn_tolerance_deg=recipe.turn_tolerance_deg)
     reference = load_reference(recipe.reference, settings, recipe.reference_room_light, camera)
 
     def locate(cloud: PointCloud, room_light: np.ndarray | None = None) -> Located:
