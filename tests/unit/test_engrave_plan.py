@@ -236,19 +236,28 @@ def test_a_cell_within_its_measurement_s_sigma_gets_no_pass_and_none_beyond_the_
     assert (h.passes[2, 6] + plan.passes[2, 6]) * slow <= TARGET + pocket + 1e-9
 
 
-def _line_scan(rng, own_mm: float):
-    """A 3 × 3 mm pocket 0.3 mm deep scanned by lines 0.1 mm apart, each line's floor points
-    off by an error of σ ``own_mm`` its top points do not share, and 20 µm point noise."""
+def _pocket_scan(depth_mm: float, step_mm: float, error):
+    """A 3 × 3 mm pocket ``depth_mm`` deep in a top at z = 5, scanned by lines along y 0.1 mm
+    apart with points every ``step_mm``; ``error(y, inside)`` draws each line's height errors
+    (mm). Returns the points (N, 3) and each one's line (N,)."""
     pts, line = [], []
     for k, x in enumerate(np.arange(-3.0, 3.01, 0.1)):
-        y = np.arange(-3.5, 3.5, 0.05)
+        y = np.arange(-3.5, 3.5, step_mm)
         inside = (np.abs(x) < 1.5) & (np.abs(y) < 1.5)
-        own = own_mm * rng.standard_normal()
-        z = 5.0 - np.where(inside, 0.3 + own, 0.0) + 0.004 * rng.standard_normal() \
-            + 0.02 * rng.standard_normal(len(y))
+        z = 5.0 - np.where(inside, depth_mm, 0.0) + error(y, inside)
         pts.append(np.column_stack([np.full(len(y), x), y, z]))
         line.append(np.full(len(y), k))
     return np.vstack(pts), np.concatenate(line)
+
+
+def _line_scan(rng, own_mm: float):
+    """A pocket 0.3 mm deep, each line's floor points off by an error of σ ``own_mm`` its top
+    points do not share, and 20 µm point noise."""
+    def error(y, inside):
+        own = own_mm * rng.standard_normal()
+        return (-np.where(inside, own, 0.0) + 0.004 * rng.standard_normal()
+                + 0.02 * rng.standard_normal(len(y)))
+    return _pocket_scan(0.3, 0.05, error)
 
 
 @pytest.mark.parametrize("seed", [0, 2])
@@ -266,20 +275,14 @@ def test_each_scan_line_s_own_floor_error_is_removed_and_counted_in_the_cells_er
 
 
 def _speckled_scan(rng, grain_mm: float, speckle_mm: float):
-    """A 3 × 3 mm pocket 0.2 mm deep scanned by lines 0.1 mm apart, points every 0.02 mm, each
-    off by an error that holds over ``grain_mm`` of its line (σ ``speckle_mm``: the speckle's
-    grains) and 2 µm of its own."""
-    pts, line = [], []
-    for k, x in enumerate(np.arange(-3.0, 3.01, 0.1)):
-        y = np.arange(-3.5, 3.5, 0.02)
-        inside = (np.abs(x) < 1.5) & (np.abs(y) < 1.5)
+    """A pocket 0.2 mm deep, points every 0.02 mm, each off by an error that holds over
+    ``grain_mm`` of its line (σ ``speckle_mm``: the speckle's grains) and 2 µm of its own."""
+    def error(y, inside):
         grains = speckle_mm * rng.standard_normal(int(7.0 / grain_mm) + 2)
         shift = rng.uniform(0, grain_mm)
-        z = 5.0 - np.where(inside, 0.2, 0.0) + grains[((y + 3.5 + shift) / grain_mm).astype(int)] \
-            + 0.002 * rng.standard_normal(len(y))
-        pts.append(np.column_stack([np.full(len(y), x), y, z]))
-        line.append(np.full(len(y), k))
-    return np.vstack(pts), np.concatenate(line)
+        return (grains[((y + 3.5 + shift) / grain_mm).astype(int)]
+                + 0.002 * rng.standard_normal(len(y)))
+    return _pocket_scan(0.2, 0.02, error)
 
 
 @pytest.mark.parametrize("seed", [0, 1])
