@@ -11,7 +11,7 @@ from fakes.station import allow
 from insitu.formats.project import RigChoice
 from insitu.ui.qt.main_window import MainWindow
 
-WAIT_MS = 30_000
+WAIT_MS = 60_000
 
 
 def connect(qtbot, w: MainWindow) -> str:

@@ -18,7 +18,7 @@ from insitu.ui.model.depth_view import DepthSummary, measure_pocket, pocket_regi
 from insitu.ui.model.session import RigChoice
 from insitu.ui.qt.main_window import MainWindow
 
-WAIT_MS = 30_000
+WAIT_MS = 60_000
 TOP_Z = 5.0                             # the blank's top (sim workpiece blank-stainless)
 
 

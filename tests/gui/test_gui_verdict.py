@@ -18,7 +18,7 @@ from insitu.ui.qt.main_window import MainWindow
 from insitu.ui.qt.open_files import open_file
 
 DATA = Path(__file__).parents[1] / "data"
-WAIT_MS = 30_000
+WAIT_MS = 60_000
 
 
 @pytest.fixture(scope="module")
