@@ -56,7 +56,7 @@ def gray_centroid(image: np.ndarray, k: float = 0.5, min_peak: float = 40.0,
                   background: bool = False, extend_ends: bool = True,
                   upper: int = 0, scale: float | None = None, allow=None,
                   min_run: int = 0, ridge: bool = False,
-                  noise: float | None = None) -> LineCentres:
+                  noise: float | None = None, white=None) -> LineCentres:
     """Gray-centroid centres of a line running along the rows: Li et al.'s (§2.3, Eq. 7), or
     above the local background.
 
@@ -77,7 +77,7 @@ def gray_centroid(image: np.ndarray, k: float = 0.5, min_peak: float = 40.0,
     img = as_image(image)
     det = detect(img, median, band, window, min_peak, min_contrast, snr, continuity,
                  extend_ends=extend_ends, upper=upper, scale=scale, allow=allow,
-                 min_run=min_run, ridge=ridge, noise=noise)
+                 min_run=min_run, ridge=ridge, noise=noise, white=white)
     c, r, gmax = det.cols, det.row, det.gmax
     level = saturation_level(img, saturation, scale)
     if background and window is not None:
@@ -210,7 +210,8 @@ def line_centres(image: np.ndarray, method: str = "gray", direction: str | None 
     peaks are taken only where laser-coloured light lies within reach). A colour image with
     channel "auto" is measured in its laser's channel, or in the sum of its channels when the
     laser's channel is clipped at most of the stripe's peaks (a halo clips it; the core clips
-    white, the halo does not) or the sum holds the longer stripe; peak and contrast are then
+    white, the halo does not) or the sum holds the longer stripe (where it is clipped white, a
+    peak needs a third of the contrast: detect's ``white``); peak and contrast are then
     the channels' mean, on the frame's scale. direction: "rows" (one
     point per column), "cols" (one per row: the frame is transposed and u, v swapped back) or
     None (auto, :func:`line_direction`). band: (lo, hi) allowed range of the cross coordinate
@@ -245,8 +246,10 @@ def _centres_in(li: LaserImage, method, direction, band, clipped, kw,
         return dict(kw, scale=fs, **({"saturation": clipped * fs} if clipped < 1 else {}))
 
     in_sum = li.total is not None and _in_sum(li, direction, band, allow, kw, scaled)
+    white = {"white": li.bgr.min(axis=2) >= WHITE * li.full_scale} if in_sum and \
+        li.bgr is not None else {}
     c = _along(fn, li.total if in_sum else img, direction, band, allow,
-               scaled((3 if in_sum else 1) * li.full_scale))
+               scaled((3 if in_sum else 1) * li.full_scale) | white)
     if in_sum:
         c = replace(c, peak=c.peak / 3, contrast=c.contrast / 3, full_scale=li.full_scale)
     if colour and li.bgr is not None:
@@ -367,6 +370,7 @@ def _along(fn, img, direction, band, allow, kw) -> LineCentres:
     """``fn``'s centres of the line in ``img`` running ``direction``, in image coordinates."""
     if direction == "rows":
         return fn(img, band=band, allow=allow, **kw)
+    kw = dict(kw, white=kw["white"].T) if "white" in kw else kw
     t = fn(cv2.transpose(img), band=band, allow=None if allow is None else allow.T, **kw)
     return LineCentres(t.v, t.u, t.peak, t.width, t.contrast, t.saturated, t.ambiguous,
                        t.full_scale)

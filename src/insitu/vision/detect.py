@@ -1,12 +1,10 @@
 """The detection stage every line-centre method shares (:mod:`insitu.vision.centres`): median
-pre-filter, the peak row per column, a validity test, and a choice between two separated
-peaks. Common keyword arguments of the methods:
+pre-filter, peak row per column, validity test, choice between two separated peaks. Keywords:
 
 * extend_ends: each run of valid columns carried on, column by column, while the line's
   peak filtered along the row at the row its slope predicts passes the same thresholds
-  (:func:`carry_ends`): the square median halves the peak of a line 1–2 px wide (binning 2:
-  39 for a raw 98), and a line's dimmer last columns failed them — its ends came up to 6 px
-  short of the edge it leaves. Columns carried on this way are ``carried``.
+  (:func:`carry_ends`): the square median halves the peak of a line 1–2 px wide, and a
+  line's dimmer last columns would fail them. Columns carried on this way are ``carried``.
 * band: (v_lo, v_hi), each (W,) or scalar — rows allowed per column, e.g. the light plane's
   expected band from the geometry; NaN: the column is not searched.
 * min_peak: absolute floor, gray values; min_contrast, snr: least peak − background, and least
@@ -26,9 +24,7 @@ peaks. Common keyword arguments of the methods:
   Where a top's line ends at a step and the lower line begins, their columns overlap by the
   blur of the lower line's start; the top's end is what locates the edge, so the shared
   columns go to the line on the higher side — also when the two lie closer than ``window``
-  rows (a small step), where they are one peak per column, by :func:`carry_ends`. The
-  brighter peak lost a step block's top one or two columns at its step walls when the lower
-  line began first in the image (its samples 0.15–0.26 mm inside those edges at binning 2).
+  rows (a small step), where they are one peak per column, by :func:`carry_ends`.
 * saturation: gray value counted as saturated (None: the full scale; float frames: none).
 * scale: the frame's full scale, 2^pixel_bits − 1 (a Mono12 camera's frames: 4095, in 16
   bits); None: the dtype's (:func:`~insitu.vision.laser_image.full_scale`). min_peak and
@@ -47,6 +43,9 @@ peaks. Common keyword arguments of the methods:
 * noise: the frame's noise sigma, gray values, when the image is a crop of a frame
   (:func:`frame_noise`), so that a crop is measured with the frame's thresholds; None: the
   image's own.
+* white: (H, W) bool, where a colour frame measured in the sum of its channels is clipped
+  white in all three: a peak there needs min_contrast / 3 (≥ snr · noise): a halo clipping
+  two channels leaves a white core standing out in the third only.
 
 A stripe's clipped core is a plateau: its row is the plateau's middle, its background is
 taken beyond the plateau, and the band the methods work in (``Detection.window``) grows by
@@ -199,9 +198,9 @@ def _search(pre, band, allow, fill, ridge, thr):
     """The (W, n) array of each column's candidate values at rows top … top + n − 1 (a
     copy, ours to overwrite): ``pre`` transposed, ``fill`` outside the column's band, where
     not allowed and (ridge > 0) where the column's white top-hat over 2·ridge + 1 rows stays
-    below ``thr``; the first row of each column's band (W,), the most rows a band has, the
-    searched columns (W,) bool, and top (the rows all bands span; 0, all rows, with allow or
-    ridge)."""
+    below ``thr`` (or its (W, H) map); the first row of each column's band (W,), the most
+    rows a band has, the searched columns (W,) bool, and top (the rows all bands span; 0,
+    all rows, with allow or ridge)."""
     H, W = pre.shape
     lo, hi, searched, span = np.zeros(W, np.int64), None, np.ones(W, bool), H
     if band is not None:
@@ -263,10 +262,8 @@ def _second_rows(search, j1, lo, fill, top, w, live, min_peak):
 def detect(image, median=3, band=None, window=12, min_peak=40.0, min_contrast=20.0,
            snr=6.0, continuity=True, max_jump=4.0, decisive=1.25,
            extend_ends=True, upper=0, *, scale=None, allow=None,
-           min_run=0, ridge=False, noise=None) -> Detection:
-    """Peak row per valid column of a line running along the rows (module docstring).
-    noise: the frame's noise sigma, gray values, when ``image`` is a crop of it
-    (:func:`frame_noise`); None: measured on ``image``."""
+           min_run=0, ridge=False, noise=None, white=None) -> Detection:
+    """Peak row per valid column of a line running along the rows (module docstring)."""
     img = as_image(image)
     fs = float(scale) if scale is not None else full_scale(img.dtype)
     min_peak, min_contrast = min_peak * fs / 255, min_contrast * fs / 255
@@ -276,21 +273,25 @@ def detect(image, median=3, band=None, window=12, min_peak=40.0, min_contrast=20
     noise = noise_sigma(pre) if noise is None else float(noise)
     fill = np.iinfo(pre.dtype).min if pre.dtype.kind == "u" else -np.inf
     thr = max(min_contrast, snr * noise)
-    search, lo, span, searched, top = _search(pre, band, allow, fill, w if ridge else 0, thr)
+    least = thr if white is None else cv2.transpose(        # (W, H), as search is laid out
+        np.where(white, max(min_contrast / 3, snr * noise), thr).astype(np.float32))
+    search, lo, span, searched, top = _search(pre, band, allow, fill, w if ridge else 0, least)
+    def at(j, cols):                                 # the least contrast of peaks j, cols
+        return least if white is None else least[cols, j]
 
     def candidate(j, cols=None):
         """Stats of the peaks at rows j of the columns ``cols`` (the tracks' candidates), or
         (None) of each column's peak j (W,), worked out only where that peak can pass."""
         if cols is not None:
             row, gmax, bg, contrast, run = _stats(pre, j, w, ridge, cols)
-            ok = searched[cols] & (gmax >= min_peak) & (contrast >= thr)
+            ok = searched[cols] & (gmax >= min_peak) & (contrast >= at(j, cols))
             return row, gmax, bg, contrast, ok, run
         out = [j.copy(), *np.zeros((3, W), np.float32), np.ones(W, np.int64)]
         cols = np.flatnonzero(searched & (pre.reshape(-1)[j * W + np.arange(W)] >= min_peak))
         for a, b in zip(out, _stats(pre, j[cols], w, ridge, cols)):
             a[cols] = b
         row, gmax, bg, contrast, run = out
-        ok = searched & (gmax >= min_peak) & (contrast >= thr)
+        ok = searched & (gmax >= min_peak) & (contrast >= at(j, np.arange(W)))
         return row, gmax, bg, contrast, ok, run
 
     if ridge:
