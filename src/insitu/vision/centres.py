@@ -18,7 +18,7 @@ import cv2
 import numpy as np
 
 from insitu.vision.chains import longest_ridge
-from insitu.vision.course import fill_gaps, in_frame, on_course, on_laser
+from insitu.vision.course import fill_gaps, in_frame, kept, on_course, on_laser
 from insitu.vision.detect import (
     LineCentres,
     as_image,
@@ -288,7 +288,7 @@ def _in_excess(li: LaserImage, c: LineCentres, fn, direction, scaled) -> LineCen
         hi = min(int(np.ceil(x[near].max())) + margin + 1, ex.shape[0])
         windows.append((max(a, 0), min(b + 1, ex.shape[1]), lo, hi))
     if not windows:
-        return replace(c, **{f: getattr(c, f)[:0] for f in _FIELDS})
+        return kept(c, slice(0))
     height = max(hi - lo for _, _, lo, hi in windows)
     at = np.cumsum([0] + [b - a + _APART for a, b, _, _ in windows])
     img = np.zeros((height, at[-1]), np.float32)
@@ -307,7 +307,6 @@ def _in_excess(li: LaserImage, c: LineCentres, fn, direction, scaled) -> LineCen
 _APART = 16
 """Blank scan lines between the windows of :func:`_in_excess` (more than a line's track
 carries across)."""
-_FIELDS = ("u", "v", "peak", "width", "contrast", "saturated", "ambiguous")
 
 
 def _joined(starts: np.ndarray, ends: np.ndarray) -> list[tuple[int, int]]:

@@ -15,9 +15,16 @@ from insitu.vision.detect import LineCentres
 FLANKS = 0.5
 """Least laser colour on each side of a centre that is not white, of the most within reach
 (:func:`on_laser`)."""
+FIELDS = ("u", "v", "peak", "width", "contrast", "saturated", "ambiguous")
+"""A :class:`LineCentres`' per-centre arrays."""
 FILL_PX = 4.0
 """How far (px) a centre filling a gap may lie from the course of the stripe's centres on
 either side (:func:`fill_gaps`)."""
+
+
+def kept(c: LineCentres, keep: np.ndarray | slice) -> LineCentres:
+    """``c``'s centres at ``keep`` ((N,) bool, indices or a slice)."""
+    return replace(c, **{f: getattr(c, f)[keep] for f in FIELDS})
 
 
 def in_frame(c: LineCentres, shape: tuple[int, int]) -> LineCentres:
@@ -28,8 +35,7 @@ def in_frame(c: LineCentres, shape: tuple[int, int]) -> LineCentres:
     keep = (c.u >= 0) & (c.u <= W - 1) & (c.v >= 0) & (c.v <= H - 1)
     if keep.all():
         return c
-    fields = ("u", "v", "peak", "width", "contrast", "saturated", "ambiguous")
-    return replace(c, **{f: getattr(c, f)[keep] for f in fields})
+    return kept(c, keep)
 
 
 def on_laser(c: LineCentres, bgr: np.ndarray, channel: int, white: float, along_rows: bool,
@@ -57,8 +63,7 @@ def on_laser(c: LineCentres, bgr: np.ndarray, channel: int, white: float, along_
     keep = (px[reach].min(axis=1) >= white) | (flanks >= FLANKS * ex.max(axis=0))
     if keep.all():
         return c
-    fields = ("u", "v", "peak", "width", "contrast", "saturated", "ambiguous")
-    return replace(c, **{f: getattr(c, f)[keep] for f in fields})
+    return kept(c, keep)
 
 
 def fill_gaps(c: LineCentres, e: LineCentres, along_rows: bool) -> LineCentres:
@@ -77,8 +82,7 @@ def fill_gaps(c: LineCentres, e: LineCentres, along_rows: bool) -> LineCentres:
     if not add.any():
         return c
     keep = np.argsort(np.r_[sc, se[add]], kind="stable")
-    fields = ("u", "v", "peak", "width", "contrast", "saturated", "ambiguous")
-    return replace(c, **{f: np.r_[getattr(c, f), getattr(e, f)[add]][keep] for f in fields})
+    return replace(c, **{f: np.r_[getattr(c, f), getattr(e, f)[add]][keep] for f in FIELDS})
 
 
 def on_course(c: LineCentres, along_rows: bool, half: float) -> LineCentres:
@@ -115,8 +119,7 @@ def on_course(c: LineCentres, along_rows: bool, half: float) -> LineCentres:
     keep[order] = on
     if keep.all():
         return c
-    fields = ("u", "v", "peak", "width", "contrast", "saturated", "ambiguous")
-    return replace(c, **{f: getattr(c, f)[keep] for f in fields})
+    return kept(c, keep)
 
 
 def _between_neighbours(s, x, cut, h) -> np.ndarray:
