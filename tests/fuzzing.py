@@ -8,8 +8,8 @@ pens, SVG, DXF). Every example mutates it — bytes flipped, truncated, deleted,
 JSON field replaced by an extreme, non-finite, negative, huge or mistyped value, wrapped,
 stringified or deleted; a number of a text format replaced; a PNG header's size changed — and
 feeds it to the reader and the first use of what it read. Success or an ``insitu.errors`` error
-in one line is fine; anything else is a failure. An example that takes longer than the timeout is a hang (the worker is killed
-and restarted after it), one that kills the worker a crash.
+in one line is fine; anything else is a failure. An example that takes longer than the timeout
+is a hang (the worker is killed and restarted after it), one that kills the worker a crash.
 """
 
 from __future__ import annotations
