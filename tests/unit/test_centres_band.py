@@ -13,8 +13,9 @@ from scipy.special import ndtr
 from insitu.formats.sequence import Sequence
 from insitu.reconstruct.plane import band_and_side, line_runs_along_rows
 from insitu.services.common import camera_model
-from insitu.vision.detect import frame_noise, noise_sigma
 from insitu.vision.extract import CentreSettings, band_crop, extract_centres
+from insitu.vision.laser_image import noise_sigma
+from insitu.vision.profile import frame_noise
 
 SCAN = Path(__file__).resolve().parents[1] / "data" / "scan-step-block-b2"
 

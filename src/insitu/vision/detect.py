@@ -41,7 +41,7 @@ pre-filter, peak row per column, validity test, choice between two separated pea
   brighter. Of a column's candidates the one on the longest track across the columns is kept
   (:mod:`insitu.vision.tracks`; photographs; False: the brightest pixel and ``continuity``).
 * noise: the frame's noise sigma, gray values, when the image is a crop of a frame
-  (:func:`frame_noise`), so that a crop is measured with the frame's thresholds; None: the
+  (:func:`~insitu.vision.profile.frame_noise`), so that a crop is measured with the frame's thresholds; None: the
   image's own.
 * white: (H, W) bool, where a colour frame measured in the sum of its channels is clipped
   white in all three: a peak there needs min_contrast / 3 (≥ snr · noise): a halo clipping
@@ -62,9 +62,9 @@ import numpy as np
 from insitu.vision.chains import carry_ends, junction, leading, median3, short_ridges
 from insitu.vision.chains import continuity as chain_support
 from insitu.vision.laser_image import full_scale, noise_sigma
+from insitu.vision.peak_rows import peak_rows, search_rows, second_rows
+from insitu.vision.profile import as_image, gather
 from insitu.vision.tracks import candidates, on_longest_track
-
-FWHM_PER_SIGMA = 2.0 * np.sqrt(2.0 * np.log(2.0))
 
 
 @dataclass(frozen=True)
@@ -124,37 +124,6 @@ class Detection:
     full_scale: float
 
 
-def as_image(image) -> np.ndarray:
-    img = np.asarray(image)
-    if img.ndim != 2 or img.size == 0:
-        raise ValueError(f"expected a non-empty (H, W) gray image, got shape {img.shape}")
-    if img.dtype not in (np.uint8, np.uint16, np.float32):
-        img = img.astype(np.uint8 if img.dtype == bool else np.float32)
-    return np.ascontiguousarray(img)
-
-
-def saturation_level(img: np.ndarray, saturation: float | None,
-                     scale: float | None = None) -> float:
-    """``saturation``, else the full scale (``scale``, or the dtype's) of an integer frame; a
-    float frame has none."""
-    if saturation is not None:
-        return float(saturation)
-    if img.dtype.kind != "u":
-        return np.inf
-    return float(scale) if scale is not None else full_scale(img.dtype)
-
-
-def gather(img: np.ndarray, rows: np.ndarray, cols: np.ndarray):
-    """img[rows, cols] as float32 (k, n) with rows (k, n) clipped, and the (k, n) inside mask
-    (one take from the flattened image: a third of the time of a two-index gather)."""
-    H, W = img.shape
-    if rows.size and rows.min() >= 0 and rows.max() < H:             # the common case
-        return img.reshape(-1).take(rows * W + cols).astype(np.float32), np.ones(rows.shape, bool)
-    inside = (rows >= 0) & (rows < H)
-    flat = np.clip(rows, 0, H - 1) * W + cols
-    return img.reshape(-1).take(flat).astype(np.float32), inside
-
-
 def _stats(pre, row, w, near=False, cols=None):
     """Plateau-centred rows, peak, background, contrast and plateau length of the columns
     ``cols`` (None: all) with their peaks at ``row`` (one per column).
@@ -194,71 +163,6 @@ def _half_width(pre, row, gmax, w, cols) -> np.ndarray:
     return np.minimum(np.maximum(up, down), w)
 
 
-def _search(pre, band, allow, fill, ridge, thr):
-    """The (W, n) array of each column's candidate values at rows top … top + n − 1 (a
-    copy, ours to overwrite): ``pre`` transposed, ``fill`` outside the column's band, where
-    not allowed and (ridge > 0) where the column's white top-hat over 2·ridge + 1 rows stays
-    below ``thr`` (or its (W, H) map); the first row of each column's band (W,), the most
-    rows a band has, the searched columns (W,) bool, and top (the rows all bands span; 0,
-    all rows, with allow or ridge)."""
-    H, W = pre.shape
-    lo, hi, searched, span = np.zeros(W, np.int64), None, np.ones(W, bool), H
-    if band is not None:
-        blo, bhi = (np.broadcast_to(np.asarray(b, np.float64), (W,)) for b in band)
-        with np.errstate(invalid="ignore"):
-            flo, fhi = np.ceil(blo), np.floor(bhi)
-            searched = (np.isfinite(flo) & np.isfinite(fhi) & (flo <= fhi) & (flo <= H - 1)
-                        & (fhi >= 0))
-        lo = np.where(searched, np.clip(flo, 0, H - 1), 0).astype(np.int64)
-        hi = np.where(searched, np.clip(fhi, 0, H - 1), -1).astype(np.int64)
-        span = max(int((hi - lo).max()) if W else 0, 0) + 1
-    top, bottom = 0, H
-    if hi is not None and allow is None and not ridge and searched.any():
-        top, bottom = int(lo[searched].min()), int(hi[searched].max()) + 1
-    search = cv2.transpose(pre[top:bottom])
-    blocked = None if allow is None else ~cv2.transpose(allow.astype(np.uint8)).astype(bool)
-    if ridge:
-        hat = cv2.morphologyEx(search, cv2.MORPH_TOPHAT, np.ones((1, 2 * ridge + 1), np.uint8),
-                               borderType=cv2.BORDER_REPLICATE)
-        blocked = hat < thr if blocked is None else blocked | (hat < thr)
-    if hi is not None:
-        dt = np.int16 if H < 2**15 else np.int64                 # the compares' speed
-        rows = np.arange(top, bottom, dtype=dt)
-        inside = (rows >= lo.astype(dt)[:, None]) & (rows <= hi.astype(dt)[:, None])
-        if blocked is None and fill == 0:
-            np.multiply(search, inside, out=search, casting="unsafe")
-        else:
-            blocked = ~inside if blocked is None else blocked | ~inside
-    if blocked is not None:
-        np.putmask(search, blocked, fill)
-    return search, lo, span, searched, top
-
-
-def _peak_rows(search, lo, fill, top):
-    """Each column's row of its greatest candidate (the first of equals), or the first row of
-    its band where it has none (all ``fill``); ``search``'s first row is ``top``."""
-    j = np.argmax(search, axis=1)
-    return np.where(search[np.arange(len(j)), j] == fill, lo, j + top)
-
-
-def _second_rows(search, j1, lo, fill, top, w, live, min_peak):
-    """:func:`_peak_rows` of ``search`` with each column's ±w rows about its first peak j1
-    (W,) set to ``fill``, worked out only in the ``live`` columns (W,) bool (those whose first
-    peak can pass) whose greatest value left reaches ``min_peak``; the first row of its band
-    in every other column. Also (W,) bool: the columns worked out, the only ones whose
-    second peak may pass (a band's first row can hold the first peak's flank)."""
-    n = search.shape[1]
-    out, cols = lo.copy(), np.flatnonzero(live)
-    part = search[cols]
-    guard = np.clip((j1[cols] - top)[:, None] + np.arange(-w, w + 1), 0, n - 1)
-    part.reshape(-1)[guard + (np.arange(len(cols)) * n)[:, None]] = fill
-    keep = part.max(axis=1, initial=fill) >= min_peak
-    out[cols[keep]] = _peak_rows(part[keep], lo[cols[keep]], fill, top)
-    found = np.zeros(len(lo), bool)
-    found[cols[keep]] = True
-    return out, found
-
-
 def detect(image, median=3, band=None, window=12, min_peak=40.0, min_contrast=20.0,
            snr=6.0, continuity=True, max_jump=4.0, decisive=1.25,
            extend_ends=True, upper=0, *, scale=None, allow=None,
@@ -275,7 +179,7 @@ def detect(image, median=3, band=None, window=12, min_peak=40.0, min_contrast=20
     thr = max(min_contrast, snr * noise)
     least = thr if white is None else cv2.transpose(        # (W, H), as search is laid out
         np.where(white, max(min_contrast / 3, snr * noise), thr).astype(np.float32))
-    search, lo, span, searched, top = _search(pre, band, allow, fill, w if ridge else 0, least)
+    search, lo, span, searched, top = search_rows(pre, band, allow, fill, w if ridge else 0, least)
     def at(j, cols):                                 # the least contrast of peaks j, cols
         return least if white is None else least[cols, j]
 
@@ -299,11 +203,11 @@ def detect(image, median=3, band=None, window=12, min_peak=40.0, min_contrast=20
             candidates(search, fill, w, candidate), max_jump)
         locked = ambiguous
     else:
-        j1 = _peak_rows(search, lo, fill, top)
+        j1 = peak_rows(search, lo, fill, top)
         row, gmax, bg, contrast, ok, run = candidate(j1)
         ambiguous, locked = np.zeros(W, bool), np.zeros(W, bool)
     if not ridge and continuity and W > 2 and span > 2 * w + 1:
-        j2, found = _second_rows(search, j1, lo, fill, top, w, gmax >= min_peak, min_peak)
+        j2, found = second_rows(search, j1, lo, fill, top, w, gmax >= min_peak, min_peak)
         row2, gmax2, bg2, contrast2, ok2, run2 = candidate(j2)
         ok2 &= found
         ambiguous = ok & ok2
@@ -332,6 +236,11 @@ def detect(image, median=3, band=None, window=12, min_peak=40.0, min_contrast=20
                      carried[ok], w + wide, fs)
 
 
+def raw_saturated(img, det: Detection, sat: float) -> np.ndarray:
+    g, _ = gather(img, det.row[None, :] + np.arange(-2, 3)[:, None], det.cols)
+    return g.max(axis=0) >= sat if len(det.cols) else np.zeros(0, bool)
+
+
 def _percentile90(a: np.ndarray) -> int:
     """int(np.percentile(a, 90)) of integers ``a`` (n ≥ 1,), from the two order statistics it
     lies between (numpy's linear method and its interpolation), without a full sort."""
@@ -343,58 +252,3 @@ def _percentile90(a: np.ndarray) -> int:
     return int(lo + (hi - lo) * frac if frac < 0.5 else hi - (hi - lo) * (1 - frac))
 
 
-def frame_noise(img: np.ndarray, median: int = 3) -> float:
-    """The noise sigma :func:`detect` measures on the median-filtered frame ``img`` (H, W)
-    (any array, a transposed view too; ``median``: the methods' default pre-filter),
-    from only the rows :func:`~insitu.vision.laser_image.noise_sigma` samples: each filtered
-    with its own neighbours (3-row strips stacked; the frame's edges replicated, as
-    medianBlur does), so a crop of the frame is measured with the whole frame's noise."""
-    H = img.shape[0]
-    d = min(8, H - 1)
-    if d < 1:
-        return 0.0
-    idx = np.arange(0, H - d, max(1, (H - d) // 32))
-    rows = np.r_[idx, idx + d]
-    if median and median > 1:
-        h = median // 2
-        strips = as_image(img[np.clip(rows[:, None] + np.arange(-h, h + 1), 0, H - 1).ravel()])
-        rows_pre = cv2.medianBlur(strips, median)[h::2 * h + 1]
-    else:
-        rows_pre = as_image(img[rows])
-    n = len(idx)
-    if rows_pre.dtype.kind == "u":                     # integers: the median of a histogram
-        diff = np.ascontiguousarray(cv2.absdiff(rows_pre[:n], rows_pre[n:])[:, ::2])
-        counts = np.cumsum(cv2.calcHist([diff], [0], None, [256], [0, 256]).ravel().astype(
-            np.int64) if diff.dtype == np.uint8 else np.bincount(diff.ravel()))
-        m = counts[-1]
-        mid = np.searchsorted(counts, [(m - 1) // 2, m // 2], side="right").mean()
-    else:
-        diff = rows_pre[:n, ::2].astype(np.float32) - rows_pre[n:, ::2].astype(np.float32)
-        mid = np.median(np.abs(diff))
-    return float(1.4826 / np.sqrt(2.0) * mid)
-
-
-def raw_saturated(img, det: Detection, sat: float) -> np.ndarray:
-    g, _ = gather(img, det.row[None, :] + np.arange(-2, 3)[:, None], det.cols)
-    return g.max(axis=0) >= sat if len(det.cols) else np.zeros(0, bool)
-
-
-def band_background(g: np.ndarray) -> np.ndarray:
-    """(k, n) background under each column of a (k, n) band of rows centred on the peak: a
-    straight line between the medians of the 3 px at each end. Beside a wall or the edge of a
-    part the two sides of the line differ (a lit top on one, a dark face on the other); one
-    level for both would leave a pedestal on one flank and cut the other."""
-    (a0, a1, a2), (b0, b1, b2) = g[:3], g[-3:]
-    top, bot = median3(a0, a1, a2), median3(b0, b1, b2)
-    half = (len(g) - 1) / 2
-    return (top + bot) / 2 + (bot - top) / (2 * half) * (np.arange(len(g)) - half)[:, None]
-
-
-def fwhm(g, inside, base, gmax) -> np.ndarray:
-    """Pixels of the (k, n) band centred on the peak that stand above half-way from ``base``
-    (n,) (the brighter side's background) to the peak, contiguous with the band's middle: a
-    FWHM in px. A bright area on one side of the line is not counted in its width."""
-    above = (g > (base + gmax) / 2) & inside
-    k = len(g) // 2
-    up, down = leading(above[k::-1]), leading(above[k:])
-    return np.maximum(up + down - 1, 0).astype(np.float64)

@@ -24,8 +24,9 @@ from insitu.errors import ConfigError
 from insitu.formats.validation import one_of
 from insitu.vision.centres import CENTRE_METHODS, line_centres
 from insitu.vision.chains import median_of
-from insitu.vision.detect import LineCentres, frame_noise
+from insitu.vision.detect import LineCentres
 from insitu.vision.laser_image import check_bits
+from insitu.vision.profile import frame_noise
 from insitu.vision.steger import moment_solve
 
 

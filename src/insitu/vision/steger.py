@@ -9,7 +9,7 @@ Saturated columns (both methods): the clipped plateau's centre is the vertex of 
 log-parabola fitted to its unsaturated flanks (weights ∝ value), else the centroid of the
 pixels above half the maximum. Clipping breaks the Gaussian model, and for Steger the sampled
 plateau's sharp corners alias into a phase-dependent bias of ≈ 0.05–0.1 px. The flanks are
-taken above the column's own sloping background (:func:`~insitu.vision.detect.band_background`),
+taken above the column's own sloping background (:func:`~insitu.vision.profile.band_background`),
 and only where they stand above it by more than the background changes from one side of the
 line to the other (how wrong a straight background can be under the line), and only as far
 as they fall without a break: beside a wall or a part's edge, where one side is lit and the
@@ -26,12 +26,11 @@ from numpy.lib.stride_tricks import sliding_window_view
 from scipy.special import ndtr
 
 from insitu.vision.chains import leading, median_of
-from insitu.vision.detect import (
+from insitu.vision.detect import LineCentres, detect
+from insitu.vision.profile import (
     FWHM_PER_SIGMA,
-    LineCentres,
     as_image,
     band_background,
-    detect,
     fwhm,
     gather,
     saturation_level,
