@@ -248,16 +248,24 @@ def walls(args, folder: Path) -> None:
     console.print(t)
 
 
+HELD_OUT_SEED = 11
+"""The fresh held-out seed of ``loop``: fixed before anything was run on it, run once at the
+end. Seeds 0, 2, … tune; 1, 3, 5, 7 were held out and are spent (looked at)."""
+
+
 def _half(seed: int) -> str:
-    """Which half of the seeds ``seed`` is in: 0, 2, … tune, 1, 3, … are held out."""
-    return "held out" if seed % 2 else "tuning"
+    """Which half of the seeds ``seed`` is in: 0, 2, … tune, 1, 3, … are held out
+    (:data:`HELD_OUT_SEED` fresh, 1 … 7 spent)."""
+    if seed == HELD_OUT_SEED:
+        return "held out, fresh"
+    return ("held out, spent" if seed < HELD_OUT_SEED else "held out") if seed % 2 else "tuning"
 
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("what", choices=("loop", "measure", "walls"))
     ap.add_argument("--quick", action="store_true")
-    ap.add_argument("--seed", type=int, default=1)
+    ap.add_argument("--seed", type=int, default=HELD_OUT_SEED)
     ap.add_argument("--rescan-every", type=int, default=10)
     ap.add_argument("--material", action="append", choices=list(BLANK),
                     help="loop: only this material (repeat for more; default all)")
