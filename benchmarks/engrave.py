@@ -132,6 +132,7 @@ def run_pocket(material: str, pattern: str, width: float | None, depth: float, c
             "z_2": float(np.mean(np.abs(z) <= 2)) if len(z) else float("nan"),
             "mean": mean, "band": band, "over": over, "cell_over": cell_over, "passes": passes,
             "rounds": len(rec.rounds), "measures": len(rec.measures), "station_s": seconds,
+            "finishing": sum(r.finishing for r in rec.rounds),
             "state": rec.state, "held": out.get("held_cells", 0),
             "model": out.get("model_cells", 0)}
 
@@ -147,7 +148,8 @@ def loop(args, folder: Path) -> None:
     patterns = [p for p in patterns if not args.pattern or p[0].split()[0] in args.pattern]
     t = Table(title=f"engraving {depth:g} mm: closed vs open loop (simulator's truth)")
     for col in ("material", "pocket", "loop", "seed", "mean err µm", "95 % |err| µm",
-                "deepest over µm", "passes (cell mean)", "re-measures", "station s",
+                "deepest over µm", "passes (cell mean)", "re-measures", "finishing rounds",
+                "station s",
                 "|err|/σ rms", "|err| ≤ 2σ"):
         t.add_column(col, justify="right")
     for material in materials:
@@ -159,7 +161,7 @@ def loop(args, folder: Path) -> None:
                           f"{args.seed} ({_half(args.seed)})",
                           f"{r['mean'] * 1e3:+.1f}", f"{r['band'] * 1e3:.1f}",
                           f"{r['over'] * 1e3:+.1f}", f"{r['passes']:.1f}",
-                          str(r["measures"]), f"{r['station_s']:.0f}",
+                          str(r["measures"]), str(r["finishing"]), f"{r['station_s']:.0f}",
                           f"{r['z_rms']:.2f}", f"{r['z_2']:.0%}")
                 console.print(f"{material} {name} {'closed' if closed else 'open'}: {r}",
                               highlight=False)

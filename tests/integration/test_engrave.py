@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from insitu.errors import ConfigError, SafetyError
-from insitu.marking import Placement
+from insitu.marking import Placement, read_job
 from insitu.marking.engrave_depth import DepthSettings
 from insitu.marking.journal import journal_path_for
 from insitu.services.engrave import NO_HEIGHT_CAL, EngraveOutcome, EngraveRequest, engrave
@@ -88,6 +88,14 @@ def test_the_report_and_a_finished_record(run):
     for name in ("engrave.json", "depth-map.png", "histogram.png", "measure-01.png"):
         assert (out / name).stat().st_size > 0
     assert journal_path_for(out / rec.rounds[0].job).exists()
+    # the finishing passes: which rounds had them, with the pen's settings, in their jobs
+    fine = [r for r in rec.rounds if r.finishing]
+    assert fine, [r.passes for r in rec.rounds]
+    assert fine[0].finish_pen["name"] == "engrave-steel-finish"
+    assert fine[0].finish_pen["mark_speed_mm_s"] == 1600.0 and fine[0].finish_speed == 2.0
+    job = read_job(out / fine[0].job)
+    assert {p.laser.mark_speed_mm_s for p in job.paths if p.laser.pen.endswith("-finish")} == {
+        1600.0}
     seconds = rec.outcome["station_s"]
     assert seconds["marking"] > 0 and seconds["scanning"] > 0
     assert "the engraving is finished" in run.finished

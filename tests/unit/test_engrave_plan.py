@@ -21,9 +21,12 @@ from insitu.marking.engrave_depth import (
 )
 from insitu.marking.engrave_layers import layer_paths, passes_given
 from insitu.marking.engrave_plan import (
+    FEW_CELLS,
+    FINISH_SPEED,
     RATE_MARGIN,
     STOP_SIGMAS,
     CellHistory,
+    finishing_pen,
     learn,
     plan_round,
 )
@@ -69,8 +72,8 @@ def test_closed_loop_reaches_the_depth_and_never_over_burns_hidden_cells():
         plan = plan_round(h, state, TARGET, rescan_every=10)
         if plan.layers == 0:
             break
-        depth += plan.passes * true_rate
-        h.given(plan.passes)
+        depth += plan.equivalent() * true_rate
+        h.given(plan.equivalent())
         state = np.where(hidden, HIDDEN, MEASURED)
         learn(h, _map(cells, depth + rng.normal(0, 0.002, cells.shape), state), 0.0057)
     else:
@@ -296,3 +299,53 @@ def test_a_cells_error_counts_the_speckles_grains_not_the_points(seed):
     assert m.sum() >= 64
     ratio = err.std() / np.sqrt(np.mean(dm.sem[m] ** 2))
     assert 0.6 <= ratio <= 1.5, ratio
+
+
+def test_the_rest_below_a_pass_is_planned_as_finishing_passes_of_a_faster_pen():
+    """Cells 0.7 of a pass short (well measured) get no pass of the pen but one finishing
+    pass (the pen twice as fast: half a pass); cells at depth get nothing; the finishing pen
+    is the material's, faster only while its pulses still overlap along the line."""
+    from insitu.formats.materials import DEFAULT_MATERIALS
+
+    steel = DEFAULT_MATERIALS.material("stainless-steel")
+    pen, speed = finishing_pen(steel, DEFAULT_MATERIALS.laser)
+    assert speed == FINISH_SPEED == 2.0
+    assert pen.mark_speed_mm_s == 2 * steel.pen.mark_speed_mm_s
+    assert (pen.power_pct, pen.frequency_khz) == (steel.pen.power_pct, steel.pen.frequency_khz)
+    sparse = steel.model_copy(update={"pen": steel.pen.model_copy(
+        update={"mark_speed_mm_s": 1600.0})})                   # pulses 40 µm apart
+    assert finishing_pen(sparse, DEFAULT_MATERIALS.laser)[1] == pytest.approx(1.25)
+    cells = _cells(8)
+    state = np.full(cells.shape, MEASURED)
+    h = CellHistory.start(cells.shape, 0.01)
+    h.given(np.full(cells.shape, 19.0))
+    depth = np.full(cells.shape, TARGET - 0.007)
+    depth[:, 4:] = TARGET
+    dm = _map(cells, depth, state, sem=0.001)
+    for _ in range(3):                                       # the rate well known
+        learn(h, dm, 0.01)
+    plan = plan_round(h, state, TARGET, 10, sigma_mm=dm.sem)
+    assert np.all(plan.passes == 0)
+    assert np.all(plan.finish[:, :4] == 1) and np.all(plan.finish[:, 4:] == 0)
+    assert plan.layers == 1 and plan.finishing
+    assert plan.equivalent()[0, 0] == 0.5
+    assert not plan_round(h, state, TARGET, 10, sigma_mm=dm.sem, speed=1.0).finishing
+
+
+def test_a_few_cells_short_among_many_at_depth_are_not_worth_a_round():
+    cells = _cells(12)
+    state = np.full(cells.shape, MEASURED)
+    h = CellHistory.start(cells.shape, 0.01)
+    h.given(np.full(cells.shape, 20.0))
+    depth = np.full(cells.shape, TARGET)
+    depth[0, :2] = TARGET - 0.03                             # 2 of 144 cells short
+    dm = _map(cells, depth, state, sem=0.002)
+    learn(h, dm, 0.01)
+    assert 2 < FEW_CELLS * cells.inside.sum()
+    assert plan_round(h, state, TARGET, 10, sigma_mm=dm.sem).layers == 0
+    depth[1, :4] = TARGET - 0.03                             # 6 of 144: a round
+    h = CellHistory.start(cells.shape, 0.01)
+    h.given(np.full(cells.shape, 20.0))
+    learn(h, _map(cells, depth, state, sem=0.002), 0.01)
+    plan = plan_round(h, state, TARGET, 10, sigma_mm=dm.sem)
+    assert plan.layers > 0 and plan.equivalent()[depth < TARGET].min() >= 1

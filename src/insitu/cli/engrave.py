@@ -113,6 +113,7 @@ def _materials(given: Path | None, cfg, material: str):
 
 def _summary(outcome, out: Path) -> None:
     """The outcome's table: how it ended, each measurement, the station's time."""
+    from insitu.formats.pens import Pen
     from insitu.services.engrave import station_seconds
 
     rec = outcome.record
@@ -131,6 +132,11 @@ def _summary(outcome, out: Path) -> None:
     console.print(f"station time {s['total']:.1f} s (marking {s['marking']:.1f} s, scanning "
                   f"{s['scanning']:.1f} s); {len(rec.rounds)} rounds, {rec.layers} layers",
                   highlight=False)
+    fine = [str(k) for k, r in enumerate(rec.rounds, 1) if r.finishing]
+    if fine:
+        pen = Pen.model_validate(next(r for r in rec.rounds if r.finishing).finish_pen)
+        console.print(f"finishing passes in round{'s' * (len(fine) > 1)} {', '.join(fine)}: "
+                      f"{pen.name}, {pen.summary()}", highlight=False)
     if rec.outcome and rec.outcome.get("held_cells"):
         console.print(f"{rec.outcome['held_cells']} cells short of the depth cannot be seen "
                       "past the walls: left as they are (engrave.json: held_at_mm)",

@@ -20,9 +20,16 @@ first such measurement, a round stops where the deepest-trusted cell would leave
 :data:`RATE_MARGIN` × the rate), so that a narrow pocket is measured while its floor can be.
 
 Each round's passes: the depth still missing over the cell's rate, at most ``rescan_every``;
-while the floor is far, :data:`APPROACH` of it (the next measurement corrects the rate), once
-no measured cell is more than a pass or so short, the rounded rest. A cell at its depth gets
-no more energy, and the stop rule speaks for the measurement's uncertainty: a measured cell
+before a measurement, :data:`APPROACH` of what the table's rate says. Once the rate is learnt,
+the joined estimate: the passes that reach the target at the cell's rate plus
+:data:`AIM_SIGMAS` σ of it (short of the target by that many σ of what the passes to go add:
+their count times the rate's σ, the extrapolation's error, large while the floor is far,
+small near it; a rate known poorly gives short steps, never none), as whole passes of the pen and the fraction left as
+finishing passes (:func:`finishing_pen`: the pen faster, each pass a fraction of one), so a
+round ends within a finishing pass of where it aims. A round whose measured cells asking for
+passes are fewer than :data:`FEW_CELLS` of them is not worth its marking and scan: they are
+left (a trickle of rounds, each re-measuring the pocket for a few cells' noise, gains
+nothing the 95 % band shows). A cell at its depth gets no more energy, and the stop rule speaks for the measurement's uncertainty: a measured cell
 gets more passes only while the depth it misses exceeds :data:`STOP_SIGMAS` σ of its
 measured depth (the last map's standard error, with the estimate's), and never more than
 reach the depth plus one pass at the slowest rate the pocket's cells likely have (what the
@@ -40,6 +47,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.ndimage import distance_transform_edt
 
+from insitu.formats.materials import LaserSource, Material
+from insitu.formats.pens import Pen
 from insitu.marking.engrave_depth import (
     HIDDEN,
     MEASURED,
@@ -48,7 +57,10 @@ from insitu.marking.engrave_depth import (
     PocketCells,
 )
 
-APPROACH = 0.9          # while far: this fraction of the passes the model says are missing
+APPROACH = 0.9          # before the rate is learnt: this fraction of the passes the table says
+AIM_SIGMAS = 3.0        # once learnt: the rest short of the target by this many σ of its error
+FEW_CELLS = 0.02        # fewer measured cells than this share short: not worth a round and a scan
+FINISH_SPEED = 2.0      # a finishing pass: the pen this many times faster (fewer pulses per area)
 RATE_MARGIN = 1.15      # a cell not seen is planned as if it ablated this much faster
 UNTRUSTED_SIGMAS = 2.0  # a cell not measured is planned at its rate + this many σ of its rate
 STOP_SIGMAS = 1.0       # a measured cell gets more passes only when this many σ short
@@ -154,28 +166,66 @@ def _stopped(history: CellHistory, need: np.ndarray, rate: np.ndarray, target_mm
     return np.minimum(need, most)
 
 
+def finishing_pen(material: Material, laser: LaserSource) -> tuple[Pen, float]:
+    """The pen of the finishing passes and their speed over the material's pen's: its pen
+    moved :data:`FINISH_SPEED` times faster (the same pulses, so each pass removes that many
+    times less: exactly, whatever the true threshold, as the pulses per area set the rate),
+    slower where the pulses would no longer overlap along the line (their pitch beyond the
+    spot's diameter). Speed 1: no finishing passes."""
+    pen = material.pen
+    pitch_mm = pen.mark_speed_mm_s / (pen.frequency_khz * 1e3)
+    speed = max(min(FINISH_SPEED, laser.spot_um * 1e-3 / pitch_mm), 1.0)
+    return pen.model_copy(update={"name": f"{pen.name}-finish",
+                                  "mark_speed_mm_s": pen.mark_speed_mm_s * speed}), speed
+
+
 @dataclass(frozen=True)
 class RoundPlan:
-    """The passes (ny, nx) int each cell gets in the next round; ``finishing``: the last
-    approach (rounded rest); ``held``: cells short of the target that get no more (the camera
-    does not see them and their allowance is spent)."""
+    """The passes (ny, nx) int each cell gets in the next round with the material's pen,
+    then ``finish`` (ny, nx) int with the finishing pen (each :data:`FINISH_SPEED` times
+    fewer pulses per area: that share of a pass); ``held``: cells short of the target that
+    get no more (the camera does not see them and their allowance is spent)."""
 
     passes: np.ndarray
-    finishing: bool
+    finish: np.ndarray
     held: np.ndarray
 
     @property
     def layers(self) -> int:
-        return int(self.passes.max()) if self.passes.size else 0
+        """The round's layers: the pen's, then the finishing pen's."""
+        if not self.passes.size:
+            return 0
+        return int(self.passes.max()) + int(self.finish.max())
+
+    @property
+    def finishing(self) -> bool:
+        return bool(self.finish.any())
+
+    def equivalent(self, speed: float = FINISH_SPEED) -> np.ndarray:
+        """(ny, nx) the round's passes counted in the pen's passes."""
+        return self.passes + self.finish / speed
+
+
+def split(total: np.ndarray, cap: np.ndarray, speed: float) -> tuple[np.ndarray, np.ndarray]:
+    """``total`` (ny, nx) passes (fractional, in the pen's) as whole passes of the pen and
+    finishing passes (1 / ``speed`` of one each, the rest rounded), never beyond ``cap``."""
+    total = np.maximum(np.minimum(total, cap), 0.0)
+    whole = np.floor(total + 1e-9)
+    fine = np.round((total - whole) * speed)
+    fine = np.where(whole + fine / speed > cap + 1e-9, np.floor((cap - whole) * speed + 1e-9),
+                    fine)
+    carry = fine >= speed
+    return np.where(carry, whole + 1, whole), np.where(carry, 0.0, np.maximum(fine, 0.0))
 
 
 def plan_round(history: CellHistory, state: np.ndarray, target_mm: float,
                rescan_every: int, trusted_to_mm: np.ndarray | None = None,
-               sigma_mm: np.ndarray | None = None) -> RoundPlan:
+               sigma_mm: np.ndarray | None = None, speed: float = FINISH_SPEED) -> RoundPlan:
     """The next round's passes per cell (``state``: the last depth map's cell states; all
     measured before the first measurement). ``trusted_to_mm`` (ny, nx): the depth down to
     which each cell's measurement is trusted (None: any); ``sigma_mm`` (ny, nx): the last
-    measurement's standard error per cell (None: not measured yet)."""
+    measurement's standard error per cell (None: not measured yet); ``speed``: a finishing
+    pass's speed over the pen's (1: no finishing passes)."""
     inside = state != OUTSIDE
     rate = np.maximum(history.rate, 1e-6)
     need = np.where(inside, (target_mm - history.estimate) / rate, 0.0)
@@ -183,25 +233,33 @@ def plan_round(history: CellHistory, state: np.ndarray, target_mm: float,
     if sigma_mm is not None and measured.any():
         need = np.where(measured, _stopped(history, need, rate, target_mm, sigma_mm, measured),
                         need)
+    learnt = bool((history.sp2 > 0).any())
+    if learnt:
+        # the joined estimate: the rest at the cell's rate plus AIM_SIGMAS σ of it, so that
+        # the passes to go stay short of the target unless the rate is that much higher
+        go = need * rate / (rate + AIM_SIGMAS * np.sqrt(history.rate_var))
+    else:
+        go = np.floor(APPROACH * need)
+    cap = np.full(need.shape, float(rescan_every))
     blind = inside & (state == HIDDEN)
     rate_hi = np.maximum(RATE_MARGIN * rate, rate + 3.0 * np.sqrt(history.rate_var))
-    allowed = np.floor(target_mm / rate_hi - history.passes + 1e-9)
+    cap = np.where(blind, np.minimum(cap, target_mm / rate_hi - history.passes), cap)
     untrusted = inside & ~measured & ~blind
-    far = np.floor(APPROACH * need)
-    finishing = not (far[measured] >= 1).any() if measured.any() else True
-    n = np.round(need) if finishing else far
-    n = np.where(blind, np.minimum(n, allowed), n)
     pocket = float(np.median(rate[inside])) if inside.any() else 0.0
     rate_up = np.maximum(rate, pocket) + UNTRUSTED_SIGMAS * np.sqrt(history.rate_var)
-    n = np.where(untrusted, np.minimum(n, np.floor(target_mm / rate_up - history.passes
-                                                    + 1e-9)), n)
-    most = rescan_every
-    if trusted_to_mm is not None and not (history.sp2 > 0).any() and inside.any():
+    cap = np.where(untrusted, np.minimum(cap, target_mm / rate_up - history.passes), cap)
+    if trusted_to_mm is not None and not learnt and inside.any():
         reach = float(trusted_to_mm[inside].max())
         fastest = RATE_MARGIN * float(rate[inside].max())
         if reach < target_mm and reach >= fastest:
-            most = min(most, int(reach / fastest))
-            finishing = False
-    n = np.clip(np.where(inside, n, 0), 0, most).astype(int)
-    held = blind & (need >= 0.5) & (n == 0)
-    return RoundPlan(n, finishing, held)
+            cap = np.minimum(cap, int(reach / fastest))
+    passes, finish = split(np.where(inside, go, 0.0), np.where(inside, cap, 0.0),
+                           speed if learnt and speed > 1 else 1.0)
+    if not (learnt and speed > 1):
+        finish = np.zeros_like(passes)
+    if learnt and sigma_mm is not None and measured.any():
+        asks = measured & ((passes > 0) | (finish > 0))
+        if asks.sum() < FEW_CELLS * measured.sum():
+            passes, finish = np.where(measured, 0.0, passes), np.where(measured, 0.0, finish)
+    held = blind & (need >= 0.5) & (passes == 0) & (finish == 0)
+    return RoundPlan(passes.astype(int), finish.astype(int), held)

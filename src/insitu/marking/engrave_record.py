@@ -52,8 +52,10 @@ class EngraveAsk(_Model):
 class RoundRecord(_Model):
     """One round: its job file, layers and paths, ``state`` (planned: sent or about to be;
     marked: every path done; cut: stopped early, its passes counted from the journal),
-    ``passes`` (ny, nx) planned per cell, the station's marking seconds and the
-    ``measure`` that followed (None: none yet)."""
+    ``passes`` (ny, nx) planned per cell with the material's pen, then ``finish`` (ny, nx)
+    finishing passes with ``finish_pen`` (its settings; each pass ``1 / finish_speed`` of
+    the pen's), ``finishing``: the round has finishing passes; the station's marking seconds
+    and the ``measure`` that followed (None: none yet)."""
 
     job: str
     layers: int
@@ -61,6 +63,9 @@ class RoundRecord(_Model):
     state: Literal["planned", "marked", "cut"] = "planned"
     finishing: bool = False
     passes: list[list[int]]
+    finish: list[list[int]] | None = None
+    finish_pen: dict[str, Any] | None = None
+    finish_speed: float = 1.0
     marking_s: float = 0.0
     measure: dict[str, Any] | None = None
 

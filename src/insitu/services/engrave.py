@@ -25,7 +25,7 @@ import threading
 import numpy as np
 
 from insitu.errors import ConfigError, FormatError, MeasurementError, SafetyError
-from insitu.marking.engrave_plan import CellHistory, plan_round
+from insitu.marking.engrave_plan import CellHistory, RoundPlan, plan_round
 from insitu.marking.engrave_record import EngraveRecord, read_record
 from insitu.services.common import Progress
 from insitu.services.engrave_request import (
@@ -70,16 +70,18 @@ def engrave(station: Station, req: EngraveRequest, cancel: threading.Event | Non
         state, sigma = dm.state, dm.sem
     if req.open_loop_passes is not None:
         passes = np.where(e.cells.inside, req.open_loop_passes, 0)
-        if e.mark_round(record, history, passes, True, cancel, progress):
+        plan = RoundPlan(passes, np.zeros_like(passes), np.zeros(passes.shape, bool))
+        if e.mark_round(record, history, plan, cancel, progress):
             record.state = "done"
             e.save(record, history)
         return EngraveOutcome(record, None)
     while len(record.rounds) < MAX_ROUNDS:
-        plan = plan_round(history, state, req.depth_mm, req.rescan_every, e.trusted_to, sigma)
+        plan = plan_round(history, state, req.depth_mm, req.rescan_every, e.trusted_to, sigma,
+                          e.speed)
         if plan.layers == 0:
             e.finish(record, history, plan.held, state)
             return EngraveOutcome(record, e.last)
-        if not e.mark_round(record, history, plan.passes, plan.finishing, cancel, progress):
+        if not e.mark_round(record, history, plan, cancel, progress):
             return EngraveOutcome(record, e.last)
         dm, learnt = e.measure(record, history, cancel, progress)
         if learnt.cells and learnt.rate_mm < 0.05 * e.nominal:

@@ -13,6 +13,7 @@ from insitu.devices.clock import StepTime, StepTimer
 from insitu.errors import ConfigError, FormatError, SafetyError
 from insitu.formats.pens import PenTable
 from insitu.marking import (
+    LaserOverride,
     Limits,
     check_targets,
     estimate_time,
@@ -20,12 +21,11 @@ from insitu.marking import (
     progress_path_for,
     read_job,
     read_journal,
-    with_pen,
     write_job,
 )
 from insitu.marking.engrave_depth import UNMEASURED, DepthMap, Outline, PocketCells
 from insitu.marking.engrave_layers import layer_paths, passes_given
-from insitu.marking.engrave_plan import CellHistory, Learnt, learn
+from insitu.marking.engrave_plan import CellHistory, Learnt, RoundPlan, finishing_pen, learn
 from insitu.marking.engrave_record import EngraveRecord, RoundRecord, write_record
 from insitu.marking.journal import journal_path_for
 from insitu.marking.surface import Surface
@@ -57,6 +57,7 @@ class EngraveSteps:
             raise ConfigError(f"material {req.material!r}: its pen stays below the ablation "
                               "threshold (nothing would be removed)", field="material")
         pen = self.material.pen
+        self.finish_pen, self.speed = finishing_pen(self.material, req.materials.laser)
         placement = replace(req.placement, hatch_mm=self.material.hatch_mm, pen=pen.name)
         plan = plan_mark(req.cloud, placement, station.driver,
                          pens=PenTable(default=pen.name, pens=(pen,)))
@@ -102,25 +103,42 @@ class EngraveSteps:
         record.history = history.to_dict()
         write_record(self.req.report_dir, record)
 
-    def mark_round(self, record: EngraveRecord, history: CellHistory, passes: np.ndarray,
-                   finishing: bool, cancel, progress) -> bool:
+    def round_job(self, record: EngraveRecord, history: CellHistory, plan: RoundPlan):
+        """The round's mark job: the pen's layers, then the finishing pen's, the focus on the
+        floor each begins at."""
+        top = self.top.sample
+        first = layer_paths(self.pattern.contours, self.cells, plan.passes,
+                            self.material.hatch_mm, lambda xy: top(xy).z, history.estimate,
+                            history.rate, record.layers)
+        fine = layer_paths(self.pattern.contours, self.cells, plan.finish,
+                           self.material.hatch_mm, lambda xy: top(xy).z,
+                           history.estimate + plan.passes * history.rate,
+                           history.rate / self.speed, record.layers + int(plan.passes.max()))
+        pts = [p for _, p in first] + [p for _, p in fine]
+        check_targets(np.vstack(pts), self.limits)
+        pen, fpen = LaserOverride.of_pen(self.material.pen), LaserOverride.of_pen(self.finish_pen)
+        job = make_job(pts, overrides={i: pen if i < len(first) else fpen
+                                       for i in range(len(pts))})
+        return job.model_copy(update={"rig": self.req.cloud.rig})
+
+    def mark_round(self, record: EngraveRecord, history: CellHistory, plan: RoundPlan,
+                   cancel, progress) -> bool:
         """Plan, write and mark one round; False when it was cancelled (recorded)."""
         k = len(record.rounds) + 1
-        paths = layer_paths(self.pattern.contours, self.cells, passes,
-                            self.material.hatch_mm, lambda xy: self.top.sample(xy).z,
-                            history.estimate, history.rate, record.layers)
-        pts = [p for _, p in paths]
-        check_targets(np.vstack(pts), self.limits)
-        pen = self.material.pen
-        job = with_pen(make_job(pts).model_copy(update={"rig": self.req.cloud.rig}), pen)
+        job = self.round_job(record, history, plan)
         name = f"round-{k:02d}.json"
         job_path = self.req.report_dir / name
         write_job(job_path, job)
-        rnd = RoundRecord(job=name, layers=int(passes.max()), paths=len(pts),
-                          finishing=finishing, passes=passes.astype(int).tolist())
+        rnd = RoundRecord(job=name, layers=plan.layers, paths=len(job.paths),
+                          finishing=plan.finishing, passes=plan.passes.tolist())
+        if plan.finishing:
+            rnd.finish, rnd.finish_speed = plan.finish.tolist(), self.speed
+            rnd.finish_pen = self.finish_pen.model_dump(mode="json")
         record.rounds.append(rnd)
         self.save(record, history)
-        self.notify(f"round {k}: {rnd.layers} layers, {len(pts)} paths, "
+        fine = (f" ({int(plan.finish.max())} finishing: {self.finish_pen.name}, "
+                f"{self.finish_pen.summary()})" if plan.finishing else "")
+        self.notify(f"round {k}: {rnd.layers} layers{fine}, {len(job.paths)} paths, "
                     f"{estimate_time(job).total_s:.1f} s of marking")
         timer = StepTimer(self.station.clock)
         try:
@@ -135,7 +153,7 @@ class EngraveSteps:
         if result.state != "done":
             self.cut_short(record, history, "cancelled", timer.elapsed())
             return False
-        history.given(passes)
+        history.given(plan.equivalent(self.speed))
         record.layers += rnd.layers
         rnd.state, rnd.marking_s = "marked", _seconds(timer.elapsed())
         self.save(record, history)
@@ -152,8 +170,14 @@ class EngraveSteps:
         done = np.zeros(len(job.paths), bool)
         if s is not None:
             done[sorted(s.done)] = True
-        given = passes_given([p.points for p in job.paths], done, self.cells,
+        fine = np.array([p.laser is not None and p.laser.pen == rnd.finish_pen["name"]
+                         if rnd.finish_pen else False for p in job.paths], bool)
+        pts = [p.points for p in job.paths]
+        given = passes_given([p for p, f in zip(pts, fine) if not f], done[~fine], self.cells,
                              np.asarray(rnd.passes, float))
+        if rnd.finish is not None:
+            given += passes_given([p for p, f in zip(pts, fine) if f], done[fine], self.cells,
+                                  np.asarray(rnd.finish, float)) / rnd.finish_speed
         history.given(given)
         record.layers += rnd.layers
         rnd.state = "cut"
