@@ -41,10 +41,14 @@ def icp_flat(src: np.ndarray, targets: np.ndarray, normals: np.ndarray, tree: cK
     """Refine ``pose`` mapping ``src`` (N, 3) onto the surface sampled by ``targets`` (M, 3)
     with unit ``normals`` (M, 3) (``tree``: their KD-tree): Gauss-Newton on the point-to-plane
     distances of the pairs closer than each ``reach_mm`` in turn (coarse to fine), Huber
-    weights at ``inlier_mm``. Returns the fit scored at ``inlier_mm``."""
+    weights at ``inlier_mm``. Returns the fit scored at ``inlier_mm``. A fit that comes
+    back to where it was two steps before at the same reach (its pairs flip between two
+    sets) would only alternate to the end of that reach's iterations: it takes the pose
+    they would end on at once."""
     angle, t = float(pose[0]), np.asarray(pose[1], np.float64).copy()
     for reach in reach_mm:
-        for _ in range(iterations):
+        back: list[Pose4] = []                 # the poses one and two steps back
+        for k in range(iterations):
             p = src @ rot_z(angle).T + t
             found, idx, r = residuals(p, tree, normals, targets, reach)
             if found.sum() < 10:
@@ -58,10 +62,19 @@ def icp_flat(src: np.ndarray, targets: np.ndarray, normals: np.ndarray, tree: cK
             x = np.linalg.solve(A, -J.T @ (w * r))
             d, dt = x[0], x[1:]
             Rd = rot_z(d)
+            back = [(angle, t), *back[:1]]
             angle, t = angle + d, Rd @ (t - c) + c + dt
             if abs(d) < 1e-7 and np.linalg.norm(dt) < 1e-5:
                 break
+            if len(back) == 2 and _same(back[1], (angle, t)):    # a cycle of two poses
+                angle, t = back[0] if (iterations - k - 1) % 2 else (angle, t)
+                break
     return score((angle, t), src, targets, normals, tree, inlier_mm)
+
+
+def _same(a: Pose4, b: Pose4) -> bool:
+    """Whether two poses agree to rounding (1e-12 rad, 1e-9 mm)."""
+    return abs(a[0] - b[0]) < 1e-12 and bool(np.abs(a[1] - b[1]).max() < 1e-9)
 
 
 def score(pose: Pose4, src: np.ndarray, targets: np.ndarray, normals: np.ndarray,

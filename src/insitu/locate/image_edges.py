@@ -167,24 +167,26 @@ class ImageFit:
     note: str = ""
 
 
-def align_image(image: np.ndarray, camera: CameraModel, heights: HeightImage,
+def align_image(image: np.ndarray | Frame, camera: CameraModel, heights: HeightImage,
                 edges: Outline, T_world_part: np.ndarray,
                 max_spread_mm: float = MAX_SPREAD_MM,
                 bias_px: float = FRAME_BIAS_PX, search_px: float = SEARCH_PX,
                 reference_mm: float = 0.0) -> ImageFit | str:
     """The pose that puts ``edges`` (the reference's, :func:`outline`; ``heights`` its height
-    image) on the edges of ``image`` (H, W) grey, a frame of ``camera`` under the room light
-    with the part as the scan found it, starting from ``T_world_part`` (4, 4; a turn about
+    image) on the edges of ``image`` (H, W) grey (or its :func:`frame_of`), a frame of
+    ``camera`` under the room light with the part as the scan found it, starting from ``T_world_part`` (4, 4; a turn about
     z and a shift). Why not, as a sentence, when the frame is not the camera's, too few
     outline points are in view or show an edge, the edges found scatter about the fit, or
     the fit does not settle (``max_spread_mm``: at most this robust 1σ about the fit).
     ``search_px``: how far from the outline's image each edge is looked for;
     ``reference_mm``: 1σ of the outline's own edges, for the covariance (``edges.sigma_mm``
     where given)."""
-    if image.shape[:2] != (camera.height, camera.width):
-        return (f"the frame is {image.shape[1]}×{image.shape[0]} px, the camera "
+    frame = image if isinstance(image, Frame) else None
+    shape = frame.coef.shape if frame is not None else image.shape[:2]
+    if shape != (camera.height, camera.width):
+        return (f"the frame is {shape[1]}×{shape[0]} px, the camera "
                 f"{camera.width}×{camera.height}")
-    frame = frame_of(image)
+    frame = frame if frame is not None else frame_of(image)
     angle = float(np.arctan2(T_world_part[1, 0], T_world_part[0, 0]))
     t = np.asarray(T_world_part[:3, 3], np.float64)
     width = wall_px(edges, camera, angle, t)
@@ -331,12 +333,16 @@ def visible(heights: HeightImage, edges: Outline, camera: CameraModel, angle: fl
              t: np.ndarray) -> np.ndarray:
     """(K,) bool: the outline points the part does not hide from ``camera`` at the pose
     (turn ``angle`` rad, shift ``t`` (3,)): the height image lies below the ray from each
-    point to the camera, looked at every 0.2 mm (in x, y) up to 40 mm."""
+    point to the camera, looked at every 0.2 mm (in x, y) up to 40 mm or to where every
+    ray has risen above the highest height (nothing further can hide a point)."""
     R = rot_z(angle)
     c = R.T @ (camera.centre_world - t)              # the camera in the part's frame
     d = c - edges.points
     d /= np.linalg.norm(d[:, :2], axis=1, keepdims=True)   # per mm in x, y
     h = np.arange(0.2, 40.0, 0.2)
+    if (d[:, 2] > 0).all():
+        reach = (float(heights.z.max()) - 0.05 - edges.points[:, 2]) / d[:, 2]
+        h = h[: int(np.searchsorted(h, reach.max(), side="right")) + 1]
     q = edges.points[:, None, :] + h[None, :, None] * d[:, None, :]
     z = sample([heights.z], *heights.pixel(q.reshape(-1, 3)))[0].reshape(q.shape[:2])
     return ~(z > q[..., 2] + 0.05).any(axis=1)

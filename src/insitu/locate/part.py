@@ -2,9 +2,10 @@
 and a shift), or a refusal naming why — never a doubtful pose.
 
 1. The table is taken away (:func:`~insitu.locate.reference.find_table`).
-2. Global step (:mod:`insitu.locate.search`): FPFH + RANSAC starts (up to
-   :data:`RANSAC_RUNS` runs) and a search over turns, each refined by a flat ICP; the
-   distinct solutions scored by ``fitness``, ``coverage`` and the inliers' RMSE.
+2. Global step (:mod:`insitu.locate.search`): a search over turns, and FPFH + RANSAC
+   starts (:data:`RANSAC_RUNS` runs) where its best would be refused, each refined by a
+   flat ICP; the distinct solutions scored by ``fitness``, ``coverage`` and the inliers'
+   RMSE.
 3. x, y and the turn from the edges the scan lines cross (:mod:`insitu.locate.edge_align`).
 4. The best is refused when it fits poorly, is only partly in the scan, or a second distinct
    solution scores within ``ambiguity`` of it unless ``prefer_angle`` picks one of them.
@@ -33,7 +34,7 @@ from insitu.geometry.camera import CameraModel
 from insitu.geometry.pose import apply, matrix, rot_z
 from insitu.locate.edge_align import align_edges, edge_samples
 from insitu.locate.flat_icp import score
-from insitu.locate.image_edges import SEARCH_PX, align_image
+from insitu.locate.image_edges import SEARCH_PX, align_image, frame_of
 from insitu.locate.reference import PartReference, above_table, find_table, thin
 from insitu.locate.search import (
     Solution,
@@ -63,10 +64,12 @@ ICP's along the direction they left free: a few tenths of a mm, 0.64 at a step b
 along the lines); they are first looked for ``WIDE`` times further out."""
 MAX_FINE_POINTS = 40_000
 RANSAC_RUNS = 4
-"""FPFH + RANSAC starts, each seeded anew, when the first run's best would be refused: Open3D's
-RANSAC is not repeatable whatever its seed, and one run finds the independent recording's half
-block (whose centroid the turn search cannot use) 17 times in 20 (0.3 s a run at 200 k
-points, one core: a run, not four, where the part is found)."""
+"""FPFH + RANSAC starts, each seeded anew, when the turn search's best would be refused (too
+few of the scan's points fit, or too little of the top is covered: the independent
+recording's half block, whose centroid the turn search cannot use): Open3D's RANSAC is not
+repeatable whatever its seed, and one run finds that block 17 times in 20. A run takes
+0.25–0.35 s of a produce part's 1.5 s locate (one core); where the turn search finds the
+part, none is made."""
 
 
 class LocateRefused(MeasurementError):
@@ -181,7 +184,7 @@ def locate_part(reference: PartReference, points: np.ndarray,
     fits = global_fits(reference, part, s, z0)
     sols = refine(reference, fine, fits, s)
     if not sols or sols[0].fitness < s.min_fitness or sols[0].coverage < s.min_coverage:
-        fits += global_fits(reference, part, s, z0, range(1, RANSAC_RUNS), turns=False)
+        fits += global_fits(reference, part, s, z0, range(RANSAC_RUNS), turns=False)
         sols = refine(reference, fine, fits, s)
     sols = _aligned(reference, pts, None if lines is None else np.asarray(lines), ~up, fine,
                     sols, s, camera)
@@ -201,12 +204,13 @@ def _imaged(ref: PartReference, best: Solution, image: np.ndarray, camera: Camer
     not (``image_note``; ``image_conflict``: the two disagree where the scan held it)."""
     scan = best.rim_sigma_mm
     start = best.T_world_part
+    frame = frame_of(image) if image.shape[:2] == (camera.height, camera.width) else image
     if not SIGMAS * scan <= s.tolerance_mm:     # the scan's pose may lie tenths of a mm off
-        wide = align_image(image, camera, ref.heights, ref.outline, start,
+        wide = align_image(frame, camera, ref.heights, ref.outline, start,
                            search_px=WIDE * SEARCH_PX, reference_mm=ref.outline_sigma_mm)
         start = start if isinstance(wide, str) else matrix(
             (wide.angle_rad, np.array([*wide.xy_mm, best.z_mm])))
-    fit = align_image(image, camera, ref.heights, ref.outline, start,
+    fit = align_image(frame, camera, ref.heights, ref.outline, start,
                       reference_mm=ref.outline_sigma_mm)
     if isinstance(fit, str):
         return replace(best, image_note=f"not used: {fit}")

@@ -1,9 +1,10 @@
 """The global step of locating a part (:mod:`insitu.locate.part`): where on the table, turned
 how far, from coarse starts refined by a flat ICP — the distinct solutions, scored.
 
-Starts come two ways, on a ``voxel_mm`` grid: FPFH features matched by RANSAC
-(``open3d.pipelines.registration``, seeded anew for each run) and a search over turns about z
-(every ``turn_step_deg``, x, y from the tops' centroids) for parts with few features; each is
+Starts come two ways, on a ``voxel_mm`` grid: a search over turns about z (every
+``turn_step_deg``, x, y from the tops' centroids) and FPFH features matched by RANSAC
+(``open3d.pipelines.registration``, seeded anew for each run; :mod:`insitu.locate.part`
+asks for them where the turn search's best would be refused); each is
 refined by a coarse flat ICP, then by point-to-plane ICP of the scan (thinned) onto the dense
 reference (:mod:`insitu.locate.flat_icp`). Each distinct solution is scored: ``fitness``
 (the scan's points within ``inlier_mm`` of the reference's surface), ``coverage`` (the
@@ -90,13 +91,19 @@ def subsample(points: np.ndarray, n: int) -> np.ndarray:
 
 
 def global_fits(ref: PartReference, part: np.ndarray, s, z0: float,
-            seeds: range = range(1), turns: bool = True) -> list[Fit]:
+            seeds: range = range(0), turns: bool = True) -> list[Fit]:
     """Coarse fits (world → part) from the turn search (with ``turns``) and from FPFH +
-    RANSAC, a run for each of ``seeds``."""
+    RANSAC, a run for each of ``seeds`` (the scan's features computed only for them)."""
+    import open3d as o3d
+
     v = s.voxel_mm
     rp, rn, rf = ref.coarse(v)
     rtree = ref.__dict__.setdefault("_coarse_tree", {}).setdefault(v, cKDTree(rp))
-    cp, _, cf = coarse_features(part, None, v)
+    if seeds:
+        cp, _, cf = coarse_features(part, None, v)
+    else:                                   # the same points, without normals and features
+        cp = np.asarray(o3d.geometry.PointCloud(o3d.utility.Vector3dVector(
+            np.ascontiguousarray(part))).voxel_down_sample(v).points)
     starts = _turn_search(rp, rtree, cp, ref.top_centroid, z0, s) if turns else []
     starts += [p for seed in seeds if (p := _fpfh_start(cp, cf, rp, rf, v, seed))]
     return [icp_flat(cp, rp, rn, rtree, p, (4 * v, 2 * v, v), iterations=10, inlier_mm=v)
