@@ -144,3 +144,35 @@ def test_a_frame_edge_the_scans_top_runs_across_is_left_out():
     assert continued(side, part) < 0.05
     assert continued(shadow, part) > 1.5 * CONTINUED
     assert where_the_top_ends(found, part) == [side]
+
+
+def test_a_top_the_camera_sees_at_a_grazing_angle_is_not_checked_by_the_lines():
+    """The simulated arc's cylindrical top (width 40, sagitta 5: 28° at its ends) seen by the
+    rig's camera, 25° off the vertical on the −x side: its far end's top (+x) at about 53°,
+    counted as not checked however many lines cross it (its frame edge and its few lines'
+    ends lay 0.05–0.07 mm out together); its near end and a flat top checked."""
+    from dataclasses import replace
+
+    from insitu.locate.outline_fit import GRAZING_DEG, checked, view_deg
+    from insitu.locate.pieces import Piece
+    from insitu.sim.rig import default_rig
+
+    camera = default_rig(binning=8).operator.camera
+    px = 0.1
+    x, y = np.meshgrid(np.arange(-25.0, 25.0, px), np.arange(-25.0, 25.0, px))
+    radius = (20.0 ** 2 + 5.0 ** 2) / 10.0
+    z = np.where((np.abs(x) <= 20) & (np.abs(y) <= 20),
+                 11.5 - radius + np.sqrt(np.maximum(radius ** 2 - x ** 2, 0.0)), 0.0)
+    heights = HeightImage(z.astype(np.float32), -25.0, -25.0, px)
+    flat = HeightImage(np.where(z > 0, 8.0, 0.0).astype(np.float32), -25.0, -25.0, px)
+
+    def end(sign: float) -> Piece:
+        return Piece("line", np.array([20.0 * sign, 0.0]), np.array([0.0, 1.0]), np.inf,
+                     -sign, (-18.0, 18.0), 36.0, 0.02, 360, 6.5, scan=60, directions=1,
+                     offset_mm=0.01)
+    far, near = end(1.0), end(-1.0)
+    angles = [view_deg(h, q, camera) for h, q in ((heights, far), (heights, near), (flat, far))]
+    assert angles[0] > GRAZING_DEG > 35.0 > angles[2] and angles[1] < 15.0, angles
+    assert [checked(replace(q, view_deg=a)) for q, a in zip((far, near, far), angles)] == [
+        False, True, True]
+    assert not checked(replace(near, view_deg=angles[1], scan=2))

@@ -49,6 +49,12 @@ SEARCH_PX = 6.0
 """How far from the splat's rough edge the frame's is looked for (its edges lie up to a few
 tenths of a mm off)."""
 MIN_CHECK = 3
+GRAZING_DEG = 45.0
+"""A piece whose top the camera sees this obliquely or more (:func:`view_deg`) counts as
+not checked by the scan's lines: the arc's far end, its top falling 28° away from a camera
+25° off the vertical (53°), lies 0.052–0.067 mm out in its frame and so do the few lines'
+ends that cross it there (6–9 on 39 mm); its near end (3°) +0.016, the flat tops' (25°)
+within 0.03."""
 DEEP_MM = (0.3, 1.2)
 """A top is carried to its edges from this band inside them (:func:`top_heights`,
 :func:`scan_heights`): a splat's last few tenths of a mm lie low (the lines end short of an
@@ -121,6 +127,7 @@ def fit_outline(heights: HeightImage, image: np.ndarray, camera: CameraModel,
     if scan is not None and len(scan):
         pieces, inset = _anchored(pieces, scan)
         pieces += _from_scan(pieces, rough, scan, inset)
+    pieces = [replace(q, view_deg=view_deg(heights, q, camera)) for q in pieces]
     if not pieces:
         return (f"no straight or round edge fitted to the {found} edge points the frame "
                 f"shows of the outline's {len(rough.points)}"
@@ -169,11 +176,32 @@ def _sampled(heights: HeightImage, pieces: list[Piece], tops) -> Outline:
     pts, nrm = (np.concatenate(a) for a in zip(*(q.sample(SPACING_MM) for q in pieces)))
     below = edge_heights(heights, pts, nrm)[1]
     count = [len(q.sample(SPACING_MM)[0]) for q in pieces]
-    floor = [reference_floor(q.rms_mm, q.scan >= MIN_CHECK and np.isfinite(q.offset_mm))
-             for q in pieces]
+    floor = [reference_floor(q.rms_mm, checked(q)) for q in pieces]
     sigma = np.repeat([np.hypot(f[0], q.sigma_mm) for f, q in zip(floor, pieces)], count)
     tilt = np.repeat([np.hypot(f[1], q.tilt_mm) for f, q in zip(floor, pieces)], count)
     return Outline(np.column_stack([pts, tops(pts, nrm)]), nrm, below, sigma, tilt)
+
+
+def checked(piece: Piece) -> bool:
+    """Whether the crossed scan's lines check ``piece``: its offset measured from at least
+    ``MIN_CHECK`` samples, and its top seen less obliquely than ``GRAZING_DEG``."""
+    return bool(piece.scan >= MIN_CHECK and np.isfinite(piece.offset_mm)
+                and piece.view_deg < GRAZING_DEG)
+
+
+def view_deg(heights: HeightImage, piece: Piece, camera: CameraModel) -> float:
+    """How obliquely, degrees, ``camera`` sees the top ``DEEP_MM[1]`` inside ``piece`` (the
+    median angle between the top's normal, from ``heights``' slope, and the ray to the
+    camera)."""
+    pts, nrm = piece.sample(SPACING_MM)
+    inner = pts - DEEP_MM[1] * nrm
+    (gx, gy), z = heights.slope, heights.z
+    sx, sy, sz = sample([gx, gy, z], *heights.pixel(inner))
+    normal = np.column_stack([-sx, -sy, np.ones(len(inner))])
+    ray = camera.centre_world - np.column_stack([inner, sz])
+    cos = np.einsum("ij,ij->i", normal, ray) / (np.linalg.norm(normal, axis=1)
+                                                * np.linalg.norm(ray, axis=1))
+    return float(np.degrees(np.arccos(np.clip(np.median(cos), -1.0, 1.0))))
 
 
 def _tops(heights: HeightImage, part: np.ndarray | None):

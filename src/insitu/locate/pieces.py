@@ -52,7 +52,9 @@ class Piece:
     ``source`` "frame" or, where it showed none, the "scan"; ``sigma_mm``: 1σ of its offset
     across it and ``tilt_mm``: of its turn, ± at its ends, from its fit; ``scan``: the
     scan's edge samples crossing it, from ``directions`` line directions (2: crossed), and
-    ``offset_mm`` how far outward of where they put its edge it lies (nan: not measured)."""
+    ``offset_mm`` how far outward of where they put its edge it lies (nan: not measured);
+    ``view_deg``: how obliquely the camera sees the top just inside it (the angle between
+    the top's normal and the ray to the camera)."""
 
     kind: str
     centre: np.ndarray
@@ -70,6 +72,7 @@ class Piece:
     scan: int = 0
     directions: int = 0
     offset_mm: float = float("nan")
+    view_deg: float = 0.0
 
     def sample(self, spacing_mm: float) -> tuple[np.ndarray, np.ndarray]:
         """(points (K, 2), outward normals (K, 2)) every ``spacing_mm`` along it."""

@@ -58,13 +58,15 @@ CAD): the insert's side 0.3° off a pixel row turned 0.5 px end to end read bili
 px through a cubic spline; sides that cross 10–60 rows, 0.03 px."""
 
 
-CHECKED_MM = 0.015
+CHECKED_MM = 0.008
 """1σ across a scan reference's piece its crossed scan's lines cross (at least
-``outline_fit.MIN_CHECK`` of them, its offset from them measured), clearly lit: fitted
-robustly and cut at the scan's heights, the pieces so checked lay −0.019 … +0.035 mm (mean;
-+0.012 common to all) from the CAD outline on the simulated corpus' references (step block,
-arc, insert, four lights), the arc's far end 0.067 mm (its points scatter 0.037 mm rms), the
-unchecked ones up to 0.09 mm."""
+``outline_fit.MIN_CHECK`` of them, its offset from them measured, its top not seen at a
+grazing angle), clearly lit, about the offset all its pieces share: fitted robustly and cut at the
+scan's heights, the pieces so checked lay +0.012 mm (mean) from the CAD outline on the
+simulated corpus' references (step block, arc, insert, four lights), each within 0.005–0.016
+(1σ by light) of that mean. The shared part is the frame's grey step read as every later
+frame's is read: it moves the reference's edges and a later part's alike and cancels in the
+pose, whose own frame's per-edge bias (:data:`FRAME_BIAS_PX`) is counted there."""
 
 
 @dataclass(frozen=True)

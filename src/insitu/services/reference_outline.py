@@ -10,6 +10,7 @@ from pathlib import Path
 import numpy as np
 
 from insitu.errors import ConfigError
+from insitu.locate.outline_fit import GRAZING_DEG
 from insitu.locate.part import SIGMAS
 from insitu.locate.reference import PartReference
 from insitu.locate.uncertainty import outline_hold
@@ -56,7 +57,7 @@ def outline_findings(ref: PartReference, tolerance: tuple[float, float] = (0.05,
            ("info", "fit", f"edge points within {worst.rms_mm:.3f} mm (rms, worst edge) of "
             f"their line or circle; each edge placed to 1σ {sigma.min():.3f}–{sigma.max():.3f} "
             "mm (its fit, its light's bias; more where the crossed scan's lines do not check "
-            "it)"),
+            "it or the camera sees its top at a grazing angle)"),
            ("info", "lines", f"{crossed:.0%} of it crossed from two directions; the frame's "
             "edges " + (f"within {max(offsets):.3f} mm of where the lines end" if offsets
                         else "not crossed by the lines"))]
@@ -65,6 +66,12 @@ def outline_findings(ref: PartReference, tolerance: tuple[float, float] = (0.05,
         out.append(("warning", "coverage", f"the frame shows only {fit.covered:.0%} of the "
                     "outline (walls seen edge-on, tops alike): light the part so its edges "
                     "stand out, or use a CAD mesh"))
+    grazing = [p for p in fit.pieces if p.view_deg >= GRAZING_DEG]
+    if grazing:
+        out.append(("info", "grazing", f"{len(grazing)} edge(s) whose top the camera sees at "
+                    f"{min(p.view_deg for p in grazing):.0f}° or more from its normal (a top "
+                    "falling away from it): placed to 1σ 0.1 mm or more, their lines' ends not "
+                    "trusted"))
     if crossed < 0.5:
         out.append(("warning", "crossed", "scan the reference crossed (insitu scan --cross): "
                     "its lines cross too little of the outline from two directions"))
