@@ -38,6 +38,12 @@ def insert():
     return reference_from_mesh(w.vertices, w.triangles, "insert")
 
 
+@pytest.fixture(scope="module")
+def posed(rig):
+    """The room-light frame of the insert at ``POSE``."""
+    return _frame(sim_world("insert", rig=rig, pose=POSE))
+
+
 def _frame(world):
     with simulated(world) as station:
         return station_room_light(station).image
@@ -48,8 +54,9 @@ def _errors(angle_deg, xy, pose):
             abs((angle_deg - pose[2] + 60.0) % 120.0 - 60.0))
 
 
-def test_the_frames_edges_turn_the_insert_within_four_hundredths_of_a_degree(rig, insert):
-    image = _frame(sim_world("insert", rig=rig, pose=POSE))
+def test_the_frames_edges_turn_the_insert_within_four_hundredths_of_a_degree(rig, insert,
+                                                                           posed):
+    image = posed
     start = pose_matrix(POSE[0] + 0.04, POSE[1] - 0.03, POSE[2] + 0.12)
     fit = align_image(image, rig.camera, insert.heights, insert.outline, start)
     assert not isinstance(fit, str), fit
@@ -58,6 +65,30 @@ def test_the_frames_edges_turn_the_insert_within_four_hundredths_of_a_degree(rig
     # its σ counts a bias per side (0.1 px) and a tilt (0.03 px; its sides cross 11 pixel
     # rows and more): the turn within 3σ, and 3σ within the 0.1° a pose is given at
     assert fit.edges > 0.8 * fit.visible and turn < 3 * fit.sigma_deg < 0.1
+
+
+def test_a_wide_search_for_a_start_stops_near_and_takes_a_ready_frame(rig, insert, posed,
+                                                                    monkeypatch):
+    from insitu.locate import image_edges
+
+    image = posed
+    start = pose_matrix(POSE[0] + 0.3, POSE[1] - 0.2, POSE[2] + 0.3)
+    steps = []
+    edge_points = image_edges.edge_points
+    monkeypatch.setattr(image_edges, "edge_points", lambda *a: steps.append(1) or edge_points(*a))
+    full = align_image(image, rig.camera, insert.heights, insert.outline, start, search_px=12.0)
+    n_full, steps[:] = len(steps), []
+    near = align_image(image_edges.frame_of(image), rig.camera, insert.heights,
+                       insert.outline, start, search_px=12.0, near_mm=0.01)
+    assert not isinstance(full, str) and not isinstance(near, str), (full, near)
+    assert len(steps) < n_full                       # its last, smallest step left out
+    assert np.hypot(*(near.xy_mm - full.xy_mm)) < 0.01
+    assert abs(near.angle_rad - full.angle_rad) < 0.01 / 50
+    again = align_image(image_edges.frame_of(image), rig.camera, insert.heights,
+                        insert.outline, start, search_px=12.0)
+    # the same fit as from the image, to its own stop (0.001 mm, 0.001°)
+    assert np.hypot(*(again.xy_mm - full.xy_mm)) < 1e-3
+    assert abs(again.angle_rad - full.angle_rad) < 2e-5
 
 
 def test_a_frame_without_the_part_or_of_another_camera_is_not_used(rig, insert):

@@ -171,7 +171,7 @@ def align_image(image: np.ndarray | Frame, camera: CameraModel, heights: HeightI
                 edges: Outline, T_world_part: np.ndarray,
                 max_spread_mm: float = MAX_SPREAD_MM,
                 bias_px: float = FRAME_BIAS_PX, search_px: float = SEARCH_PX,
-                reference_mm: float = 0.0) -> ImageFit | str:
+                reference_mm: float = 0.0, near_mm: float = 0.0) -> ImageFit | str:
     """The pose that puts ``edges`` (the reference's, :func:`outline`; ``heights`` its height
     image) on the edges of ``image`` (H, W) grey (or its :func:`frame_of`), a frame of
     ``camera`` under the room light with the part as the scan found it, starting from ``T_world_part`` (4, 4; a turn about
@@ -180,7 +180,9 @@ def align_image(image: np.ndarray | Frame, camera: CameraModel, heights: HeightI
     the fit does not settle (``max_spread_mm``: at most this robust 1σ about the fit).
     ``search_px``: how far from the outline's image each edge is looked for;
     ``reference_mm``: 1σ of the outline's own edges, for the covariance (``edges.sigma_mm``
-    where given)."""
+    where given); ``near_mm``: a fit that only brings the outline near its edges (a start
+    for a narrower search) stops once a step moves it less than this (and turns it less
+    than this over 50 mm)."""
     frame = image if isinstance(image, Frame) else None
     shape = frame.coef.shape if frame is not None else image.shape[:2]
     if shape != (camera.height, camera.width):
@@ -221,7 +223,8 @@ def align_image(image: np.ndarray | Frame, camera: CameraModel, heights: HeightI
             return "the frame's edges do not hold the turn and the shift"
         t[:2] += x[1:]
         angle += x[0]
-        if abs(x[0]) < 2e-5 and np.linalg.norm(x[1:]) < 1e-3:   # 0.001°, 0.001 mm
+        if (abs(x[0]) < max(2e-5, near_mm / 50)                  # 0.001°, 0.001 mm
+                and np.linalg.norm(x[1:]) < max(1e-3, near_mm)):
             break
     if mad > max_spread_mm:
         return (f"the frame's edges scatter {mad:.3f} mm about the outline (at most "
@@ -233,8 +236,8 @@ def align_image(image: np.ndarray | Frame, camera: CameraModel, heights: HeightI
                      None if own is None else own[found],
                      None if edges.tilt_mm is None else edges.tilt_mm[seen][found])
     cov = covariance(terms, bias_px, reference_mm=reference_mm)
-    if (abs(x[0]) > max(np.sqrt(cov[0, 0]), SETTLE_RAD)
-            or np.linalg.norm(x[1:]) > max(np.sqrt(np.trace(cov[1:, 1:])), SETTLE_MM)):
+    if (abs(x[0]) > max(np.sqrt(cov[0, 0]), SETTLE_RAD, near_mm / 50)
+            or np.linalg.norm(x[1:]) > max(np.sqrt(np.trace(cov[1:, 1:])), SETTLE_MM, near_mm)):
         return (f"the fit to the frame's edges did not settle in {ITERATIONS} steps (the last "
                 f"{np.degrees(x[0]):+.4f}°, {np.linalg.norm(x[1:]):.4f} mm)")
     return ImageFit(angle, t[:2].copy(), int(found.sum()), len(p),

@@ -62,6 +62,9 @@ WIDE = 3
 """How far the room-light frame's edges may move a pose the scan's edges did not hold (the
 ICP's along the direction they left free: a few tenths of a mm, 0.64 at a step block lying
 along the lines); they are first looked for ``WIDE`` times further out."""
+NEAR_MM = 0.01
+"""The wide search stops once a step moves the part less than this: a start for the
+narrower search, which then settles it to 0.001 mm."""
 MAX_FINE_POINTS = 40_000
 RANSAC_RUNS = 4
 """FPFH + RANSAC starts, each seeded anew, when the turn search's best would be refused (too
@@ -207,7 +210,8 @@ def _imaged(ref: PartReference, best: Solution, image: np.ndarray, camera: Camer
     frame = frame_of(image) if image.shape[:2] == (camera.height, camera.width) else image
     if not SIGMAS * scan <= s.tolerance_mm:     # the scan's pose may lie tenths of a mm off
         wide = align_image(frame, camera, ref.heights, ref.outline, start,
-                           search_px=WIDE * SEARCH_PX, reference_mm=ref.outline_sigma_mm)
+                           search_px=WIDE * SEARCH_PX, reference_mm=ref.outline_sigma_mm,
+                           near_mm=NEAR_MM)
         start = start if isinstance(wide, str) else matrix(
             (wide.angle_rad, np.array([*wide.xy_mm, best.z_mm])))
     fit = align_image(frame, camera, ref.heights, ref.outline, start,
