@@ -96,15 +96,18 @@ CENTRE_METHODS: dict[str, CentreMethod] = {
 }
 
 
-GAPS = 0.95
-"""A photograph's stripe with centres on fewer of the scan lines between its ends has its
-gaps filled from the laser's colour (:func:`~insitu.vision.course.fill_gaps`)."""
 COURSE = 0.06
 """Half the span of scan lines, of the frame's shorter side, over which a photograph's stripe
 is taken as straight (:func:`~insitu.vision.course.on_course`): a stretch of centres slid
 onto the rim of a dark dot or the edge of a square is shorter."""
 PHOTO_RUN = 20
 """Least columns (or rows) of a stripe in anyone's photograph (:func:`photo_centres`)."""
+CLIPPED = 0.98
+"""The fraction of full scale from which a photograph's pixel counts as clipped
+(:func:`line_centres`' ``clipped``): JPEG rings the inside of a clipped area a few gray values
+below full scale (quality 75–95: the 1st percentile of a clipped stripe's pixels at 249–252 of
+255, median over stripes), and a clipped core whose pixels count as unclipped has its
+flanks fitted across the noisy plateau, which puts the centre off its middle."""
 FRINGE_MARGIN = 1.0
 """Least laser colour of a photograph's line over the colour fringes at its edges
 (:func:`photo_centres`): on the real sets of benchmarks/real_lines.py the lines measured
@@ -173,7 +176,7 @@ def _centres_in(li: LaserImage, method, direction, band, clipped, kw,
     if colour:
         c = on_course(in_frame(c, img.shape), direction == "rows", COURSE * min(img.shape))
     scan = c.u if direction == "rows" else c.v
-    if colour and li.bgr is not None and 1 < len(c) < GAPS * (np.ptp(scan) + 1):
+    if colour and li.bgr is not None and 1 < len(c) < np.ptp(scan) + 1:        # gaps
         c = fill_gaps(c, _in_excess(li, c, fn, direction, scaled), direction == "rows")
     return c
 
@@ -303,7 +306,8 @@ def photo_centres(image: np.ndarray, method: str = "steger", direction: str | No
     _check(method, direction)
     kw = dict(CENTRE_METHODS[method].defaults)
     li = laser_image(image, channel, laser_off, pixel_bits)
-    c = _centres_in(li, method, direction, None, 1.0, dict(kw, min_run=PHOTO_RUN, ridge=True),
+    c = _centres_in(li, method, direction, None, CLIPPED,
+                    dict(kw, min_run=PHOTO_RUN, ridge=True),
                     colour=True)
     margin = colour_margin(li, c.u, c.v) if laser_off is None else np.inf
     if margin < FRINGE_MARGIN:

@@ -114,7 +114,7 @@ def on_course(c: LineCentres, along_rows: bool, half: float) -> LineCentres:
            + np.take_along_axis(win, (n // 2)[:, None], 1)[:, 0]) / 2
     first = np.r_[0, np.flatnonzero(np.diff(cut)) + 1]
     short = (s[np.r_[first[1:], len(s)] - 1] - s[first] < h)[cut]
-    on = np.where(short, _between_neighbours(s, x, cut, h), np.abs(flat - mid) <= FILL_PX)
+    on = _between_neighbours(s, x, cut, h, np.abs(flat - mid) <= FILL_PX, short)
     keep = np.zeros(len(s), bool)
     keep[order] = on
     if keep.all():
@@ -122,24 +122,43 @@ def on_course(c: LineCentres, along_rows: bool, half: float) -> LineCentres:
     return kept(c, keep)
 
 
-def _between_neighbours(s, x, cut, h) -> np.ndarray:
-    """(n,) bool: False on the pieces (labels ``cut``, (n,)) of fewer than ``h`` scan lines
-    that lie more than :data:`FILL_PX` off the straight line fitted through the other
-    pieces' centres within ``h`` scan lines before and after them, where those lie on it
-    (median residual ≤ FILL_PX / 4) on both sides. s, x: (n,) scan line and cross
-    coordinate, sorted by s."""
-    keep = np.ones(len(s), bool)
+def _between_neighbours(s, x, cut, h, median, short) -> np.ndarray:
+    """(n,) bool: ``median`` (the running median's verdict) on the long pieces (labels
+    ``cut``, (n,); ``short``: (n,) bool, the centres on pieces of fewer than ``h`` scan
+    lines); False on the short pieces that lie more than :data:`FILL_PX` off the straight
+    line fitted through the other pieces' centres within ``h`` scan lines before and after
+    them, where those lie on it (median residual ≤ FILL_PX / 4) on both sides. Repeated
+    without the pieces found off until no more is: a piece off the course is no neighbour to
+    judge another by (stretches slid onto the rims of the same dark mark, one beside the
+    other); a piece left with fewer than 3 neighbours on a side that way gets ``median``'s
+    verdict. s, x: (n,) scan line and cross coordinate, sorted by s."""
+    keep = median | short
+    alive = np.ones(len(s), bool)                   # not on a short piece found off
     first = np.r_[0, np.flatnonzero(np.diff(cut)) + 1]
     last = np.r_[first[1:], len(s)] - 1
-    for a, b in zip(first, last):
-        if s[b] - s[a] >= h:
-            continue                                      # a long piece: judged elsewhere
-        side = (cut != cut[a]) & (np.abs(s - (s[a] + s[b]) / 2) <= (s[b] - s[a]) / 2 + h)
-        before, after = side & (s < s[a]), side & (s > s[b])
-        if before.sum() < 3 or after.sum() < 3:
-            continue
-        fit = np.polyfit(s[side], x[side], 1)
-        if np.median(np.abs(np.polyval(fit, s[side]) - x[side])) > FILL_PX / 4:
-            continue
-        keep[a:b + 1] = np.abs(np.median(x[a:b + 1] - np.polyval(fit, s[a:b + 1]))) <= FILL_PX
+    pieces = [(a, b) for a, b in zip(first, last) if short[a]]
+    dropped = True
+    while dropped:
+        dropped, left = False, []
+        for a, b in pieces:
+            side, both = _sides(s, cut, a, b, h, alive)
+            if not both:
+                if not alive.all() and _sides(s, cut, a, b, h, np.ones(len(s), bool))[1]:
+                    keep[a:b + 1] = median[a:b + 1]
+                continue
+            fit = np.polyfit(s[side], x[side], 1)
+            if (np.median(np.abs(np.polyval(fit, s[side]) - x[side])) <= FILL_PX / 4 and
+                    np.abs(np.median(x[a:b + 1] - np.polyval(fit, s[a:b + 1]))) > FILL_PX):
+                keep[a:b + 1] = alive[a:b + 1] = False
+                dropped = True
+            else:
+                left.append((a, b))
+        pieces = left
     return keep
+
+
+def _sides(s, cut, a, b, h, alive):
+    """The centres ``alive`` ((n,) bool) of other pieces than the piece of centres a … b
+    within ``h`` scan lines of it ((n,) bool), and whether at least 3 lie on each side."""
+    side = alive & (cut != cut[a]) & (np.abs(s - (s[a] + s[b]) / 2) <= (s[b] - s[a]) / 2 + h)
+    return side, bool((side & (s < s[a])).sum() >= 3 and (side & (s > s[b])).sum() >= 3)
