@@ -17,8 +17,8 @@ delays and jumps.
 ``--survey 4``: the recipe's ``scan.survey_mm``, a first pass of lines 4 mm apart bounds the
 part (:mod:`insitu.services.survey`), the dense lines sweep its outline only. The located
 pose against the truth the feeder put the part at (the worst of the parts, mm and degrees)
-checks that the clipped scan locates as well. Pose seeds: 1 tuned on; 2 spent; 3 and 4 held
-out (fixed before the survey's results were seen).
+checks that the clipped scan locates as well. Pose seeds: 1 tuned on; 2 spent; 3–8 held out
+(fixed before the survey's results were seen), each run once and spent.
 
 Run: nice taskset -c 0 .venv/bin/python benchmarks/produce_clock.py [--parts 3]
 [--seed 1] [--spacing 0.5,0.7] [--per-frame 1,auto] [--survey none,4]
