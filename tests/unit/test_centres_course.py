@@ -72,6 +72,23 @@ def test_between_the_stripes_ends_no_other_track_stands_in_for_it():
     assert valid[:120].all() and valid[160:].all() and (chosen_row[valid] == 100).all()
 
 
+def test_past_the_stripes_end_its_reflection_stands_not_in_for_it():
+    """The stripe (row 100, columns 0–259, lost past them on dark squares) and its reflection
+    in a glossy floor (row 490, columns 60–279): the reflection runs mostly beside the stripe,
+    so the columns past the stripe's end get no centre from it; a piece of the stripe past
+    its end on another track (row 140, columns 280–299: a wall beside the board) stays."""
+    W = 300
+    cols = np.arange(W)
+    row = np.zeros((3, W))
+    ok = np.zeros((3, W), bool)
+    row[0], ok[0] = 100.0, cols < 260
+    row[1], ok[1] = 490.0, (cols >= 60) & (cols < 280)
+    row[2], ok[2] = 140.0, cols >= 280
+    chosen_row, *_, valid, _run, _amb = on_longest_track(fields(row, ok), 4.0)
+    assert (chosen_row[valid] != 490).all()
+    assert valid[:260].all() and not valid[260:280].any() and valid[280:].all()
+
+
 def test_a_track_whose_end_slid_still_bridges_by_its_course():
     """A piece whose last 10 columns slide 8 px off (onto an edge) still joins the piece
     that resumes on its course 20 columns later: its course, not its end row, is carried

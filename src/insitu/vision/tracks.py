@@ -130,12 +130,12 @@ def on_longest_track(fields, max_jump: float):
     """Per column, the valid candidate on the longest track (:func:`track_length`; of two on
     equally long tracks the one of higher contrast): ``fields`` (row, gmax, bg, contrast,
     ok, run), each (k, W), as :func:`candidates` gives them. Returns the same six (W,)
-    and ambiguous (W,) bool: the column had more than one valid candidate. Between the
-    first and the last column of the longest track (the stripe), a column it has no
-    candidate in gets none from a track that runs mostly beside the stripe (more than half
-    its candidates in columns the stripe has one in): that is something else (a reflection of it, the edge of a
-    square it runs along). A track only in the stripe's gaps (the stripe on a step's top)
-    stays."""
+    and ambiguous (W,) bool: the column had more than one valid candidate. A column the
+    longest track (the stripe) has no candidate in gets none from a track that runs mostly
+    beside the stripe (more than half its candidates in columns the stripe has one in),
+    between the stripe's ends or past them: that is something else (a reflection of it in a
+    glossy floor, the edge of a square it runs along). A track only in the stripe's gaps or
+    past its ends (the stripe on a step's top, on a wall beside the board) stays."""
     row, ok, contrast = fields[0], fields[4], fields[3]
     length, track = _tracks(row, ok, max_jump, None)
     score = np.where(ok, length + contrast / (1.0 + np.abs(contrast).max(initial=0.0)), -1.0)
@@ -144,11 +144,8 @@ def on_longest_track(fields, max_jump: float):
     chosen[4] = ok.any(axis=0)
     if ok.any():
         stripe = (track == track.ravel()[np.argmax(length)]).any(axis=0)
-        inside = np.zeros(len(stripe), bool)
-        cols = np.flatnonzero(stripe)
-        inside[cols[0]:cols[-1] + 1] = True
         m = int(track.max()) + 1
         beside = (np.bincount(track[ok], stripe[np.nonzero(ok)[1]], minlength=m)
                   > 0.5 * np.bincount(track[ok], minlength=m))
-        chosen[4] &= stripe | ~inside | ~beside[np.take_along_axis(track, pick, axis=0)[0]]
+        chosen[4] &= stripe | ~beside[np.take_along_axis(track, pick, axis=0)[0]]
     return (*chosen, ok.sum(axis=0) > 1)
