@@ -50,6 +50,7 @@ from insitu.marking import Placement, estimate_time, read_job  # noqa: E402
 from insitu.services import production  # noqa: E402
 from insitu.services.height import scan_camera  # noqa: E402
 from insitu.services.locate import recipe_locator  # noqa: E402
+from insitu.services.part_reading import read_part  # noqa: E402
 from insitu.services.station import connect  # noqa: E402
 from insitu.sim.workpieces import make_workpiece  # noqa: E402
 
@@ -88,7 +89,7 @@ def run(folder: Path, per_frame, parts: int, seed: int, binning: int,
             return T
 
         job = production.Production(recipe, station, folder / "run.jsonl", parts, locate,
-                                    production.read_part, present, height_cal=height)
+                                    read_part, present, height_cal=height)
         production.produce(job)
     log = read_log(folder / "run.jsonl")
     jobs = [folder / f"part-{r.part:04d}.job.json" for r in log if r.outcome == "marked"]

@@ -46,6 +46,7 @@ from insitu.services import calibrate_height, production
 from insitu.services.field import calibrate_field
 from insitu.services.height import scan_camera
 from insitu.services.locate import recipe_locator
+from insitu.services.part_reading import read_part
 from insitu.services.record import record_height_calibration, record_marked_field_calibration
 from insitu.services.serials import render_placement
 from insitu.services.station import connect, simulated
@@ -121,7 +122,7 @@ def run(args, folder: Path, field: Path, height) -> tuple[list, dict, dict]:
                               f"{rec.error or ''}", highlight=False)
 
             job = production.Production(recipe, station, log, args.count, locate,
-                                        production.read_part, put, height_cal=height,
+                                        read_part, put, height_cal=height,
                                         on_record=seen, on_stage=stage)
             try:
                 production.produce(job, resume=attempt == "resumed")

@@ -155,6 +155,7 @@ def test_produce_logs_station_and_cpu_seconds_per_step(tmp_path):
     from insitu.marking import Placement
     from insitu.services import production
     from insitu.services.locate import Located
+    from insitu.services.part_reading import read_part
 
     with connect(None, "step-block", 0, 4) as station:
         write_ply(tmp_path / "ref.ply", scan_live(station, 1.0).cloud)
@@ -163,7 +164,7 @@ def test_produce_logs_station_and_cpu_seconds_per_step(tmp_path):
                 margin_mm=4.0, spacing_mm=1.0), workpiece="step-block")
         where = lambda cloud, room_light=None: Located(np.eye(4), 1.0, 0.0)  # noqa: E731
         run = production.Production(recipe, station, tmp_path / "run.jsonl", 1, where,
-                                    production.read_part)
+                                    read_part)
         production.produce(run)
     rec = read_log(tmp_path / "run.jsonl")[0]
     assert rec.outcome == "marked"

@@ -38,7 +38,8 @@ def cancel_on_signals(cancel: threading.Event):
 
 def part_line(rec) -> Text:
     """One line per part: outcome, serial, pose, fit, read-back, time."""
-    style = {"marked": "green", "refused": "yellow"}.get(rec.outcome, "bold red")
+    style = {"marked": "yellow" if rec.error else "green",
+             "refused": "yellow"}.get(rec.outcome, "bold red")
     bits = [f"serial {rec.serial}" if rec.serial is not None else "no serial"]
     if rec.x_mm is not None:
         bits.append(f"at ({rec.x_mm:.2f}, {rec.y_mm:.2f}) mm, {rec.angle_deg:.2f}°, fitness "
@@ -102,6 +103,7 @@ def produce(recipe: RecipeFile, rig: Rig = None, field: Field = None, count: Cou
     from insitu.services import production
     from insitu.services.height import scan_camera
     from insitu.services.locate import recipe_locator
+    from insitu.services.part_reading import read_part
     from insitu.services.station import connect
 
     r = read(recipe)
@@ -125,7 +127,7 @@ def produce(recipe: RecipeFile, rig: Rig = None, field: Field = None, count: Cou
 
             locate = recipe_locator(r, scan_camera(station.rig.camera, cal))
             run = production.Production(r, station, log, count, locate,
-                                        production.read_part, present, start, cancel,
+                                        read_part, present, start, cancel,
                                         cal, on_record)
             before = len(read_log(log))
             try:

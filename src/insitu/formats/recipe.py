@@ -17,6 +17,7 @@
      "locate": {"prefer_angle_deg": null,          # which of a symmetric part's turns
                 "tolerance_mm": 0.05, "turn_bound_deg": 0.1,   # 2σ at its rim, 3σ of its turn
                 "turn_tolerance_deg": 0.05},       # 2σ of its turn (absent: 0.05)
+     "read": {"offset_tolerance_mm": 0.1},         # a mark read back farther: part failed
      "serial": {"counter": "serial.counter.json", "start": 1, "fields": {}}}
 
 Paths are relative to the recipe's folder. The reference defines the part's frame: a mesh in
@@ -24,7 +25,9 @@ it, or the cloud of a first scan (its world frame is then the part's) with, opti
 room-light frame that scan took (its outline is fitted there). ``locate.tolerance_mm``,
 ``turn_bound_deg``: a part is marked only when its pose is known to 2σ within the first at
 its rim and its turn to 3σ within the second (absent: 0.05 mm, 0.1°), and to 2σ within
-``turn_tolerance_deg`` (absent: 0.05°; the marks' angle on a small part). ``scan.region`` null:
+``turn_tolerance_deg`` (absent: 0.05°; the marks' angle on a small part).
+``read.offset_tolerance_mm``: a marked part whose marks are read back farther than this from
+their planned place is logged with that reason (absent: 0.1 mm). ``scan.region`` null:
 where the part lies, grown by ``margin_mm`` (the simulated rig knows where; a real rig needs
 the region). ``scan.cross``: a second, crossed pass (lines at 45° to x, ``cross_spacing_mm``
 apart, null: ``spacing_mm``), so every edge of the part is crossed by some line whatever its
@@ -111,6 +114,10 @@ class _Locate(_Strict):
     turn_tolerance_deg: within("turn_bound_deg") = 0.05
 
 
+class _Read(_Strict):
+    offset_tolerance_mm: within("tolerance_mm") = 0.1
+
+
 class _Serial(_Strict):
     counter: str = COUNTER
     start: Serial | None = None
@@ -127,6 +134,7 @@ class _Recipe(_Strict):
     laser: _Laser = _Laser()
     scan: _Scan = _Scan()
     locate: _Locate = _Locate()
+    read: _Read = _Read()
     serial: _Serial = _Serial()
 
 
@@ -165,7 +173,8 @@ class Recipe:
     texts' own fields; ``workpiece``: the simulated rig's part (None: its default);
     ``reference_room_light``: a cloud reference's room-light frame, its outline fitted there
     (None: none); ``tolerance``: (mm, degrees) a located pose's 2σ at the part's rim and 3σ
-    of its turn must lie within."""
+    of its turn must lie within; ``read_tolerance_mm``: how far from its planned place a
+    mark may be read back before the part is failed."""
 
     reference: Path
     reference_kind: str
@@ -180,6 +189,7 @@ class Recipe:
     reference_room_light: Path | None = None
     tolerance: tuple[float, float] = (0.05, 0.1)
     turn_tolerance_deg: float = 0.05
+    read_tolerance_mm: float = 0.1
 
 
 def reference_kind(path: str | Path) -> str:
@@ -216,6 +226,7 @@ def recipe_json(recipe: Recipe, path: Path) -> str:
         locate=_Locate(prefer_angle_deg=recipe.prefer_angle_deg,
                        tolerance_mm=recipe.tolerance[0], turn_bound_deg=recipe.tolerance[1],
                        turn_tolerance_deg=recipe.turn_tolerance_deg),
+        read=_Read(offset_tolerance_mm=recipe.read_tolerance_mm),
         serial=_Serial(counter=_rel(counter, folder), start=recipe.serial_start,
                        fields=dict(recipe.fields)))
     out = data.model_dump(mode="json")
@@ -266,4 +277,5 @@ def read_recipe(path: str | Path, placement: Callable[..., Any],
         reference_room_light=(None if d.reference.room_light is None else _abs(
             d.reference.room_light, folder, "reference.room_light", path)),
         tolerance=(d.locate.tolerance_mm, d.locate.turn_bound_deg),
-        turn_tolerance_deg=d.locate.turn_tolerance_deg)
+        turn_tolerance_deg=d.locate.turn_tolerance_deg,
+        read_tolerance_mm=d.read.offset_tolerance_mm)

@@ -8,7 +8,9 @@ is aborted keeps the one it was issued (logged with it). ``resume`` finishes tha
 its own job — its journal decides what is marked again (the paths not done, the cut path
 again whole) — and carries on with the next part number. A device fault or an abort ends the
 run (the laser off, the record written, the error raised); a refusal sets the part aside and
-the run goes on. A scan along y whose lines leave the part's pose unheld (its edges along
+the run goes on. A part whose read-back fails (a mark not the plan, or farther from its
+planned place than the recipe's ``read.offset_tolerance_mm``) is logged "marked" with the
+reason as its error (:func:`~insitu.services.part_reading.reading_fault`). A scan along y whose lines leave the part's pose unheld (its edges along
 them) gets a second look: the part scanned again, crossed, where it lies (:func:`_locate`).
 """
 
@@ -20,8 +22,6 @@ from dataclasses import dataclass, field
 from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any, Protocol
-
-import numpy as np
 
 from insitu.devices.clock import StepTimer
 from insitu.errors import DeviceError, FormatError, InsituError
@@ -36,6 +36,7 @@ from insitu.services import serials
 from insitu.services.height import crossed_model
 from insitu.services.locate import Located, Locator
 from insitu.services.mark_job import JobRequest, WrittenJob, write_mark_job
+from insitu.services.part_reading import ReadBackFn, reading_fault
 from insitu.services.scan import Cancelled, ScanResult, scan_live
 from insitu.services.station import Station
 from insitu.services.survey import scan_found
@@ -55,39 +56,6 @@ class NoWait:
     def wait(self, part: int, cancel: threading.Event) -> None:
         if cancel.is_set():
             raise Cancelled(f"production stopped before part {part}")
-
-
-@dataclass(frozen=True)
-class PartReading:
-    """What the camera read of the marked part, one value for the log: ``decoded`` texts
-    (" | " between codes; None: no code read), whether every mark is what was planned
-    (``ok``), the worst code's print ``grade`` (A … F) and the largest ``offset_mm`` of a
-    mark from its planned place."""
-
-    decoded: str | None = None
-    ok: bool | None = None
-    grade: str | None = None
-    offset_mm: float | None = None
-
-
-ReadBackFn = Callable[[Station, list, PointCloud, Path], PartReading]
-
-
-def read_part(station: Station, plans: list, cloud: PointCloud, picture: Path) -> PartReading:
-    """Read the part's marks back (:func:`insitu.services.inspect.read_back`: the camera's
-    frame rectified onto the measured surface, each code decoded and graded) and write the
-    read-back picture to ``picture`` (the raw frame beside it)."""
-    from insitu.services.inspect import read_back, save_read_back
-    from insitu.vision.dpm_grade import letter
-
-    got = read_back(station, plans, cloud)
-    save_read_back(picture, got)
-    texts = [r.decoded for r in got.readings if r.text is not None and r.decoded is not None]
-    grades = [r.grades.overall for r in got.readings if r.grades is not None]
-    offsets = [float(np.hypot(*r.offset_mm)) for r in got.readings if r.offset_mm is not None]
-    return PartReading(" | ".join(texts) if texts else None, got.ok,
-                       letter(min(grades)) if grades else None,
-                       max(offsets) if offsets else None)
 
 
 @dataclass
@@ -364,7 +332,8 @@ def _read(run: Production, part: _Part, outcomes, cloud: PointCloud,
     plans = [o.plan for o in outcomes]
     got = _stage(run, part, "read", lambda: run.read_back(
         run.station, plans, cloud, run.log.parent / f"part-{part.number:04d}.readback.png"))
-    return part.record("marked", decoded=got.decoded, decode_ok=got.ok, grade=got.grade,
+    return part.record("marked", reading_fault(got, run.recipe.read_tolerance_mm),
+                       decoded=got.decoded, decode_ok=got.ok, grade=got.grade,
                        offset_mm=None if got.offset_mm is None else round(got.offset_mm, 4),
                        resumed=resumed)
 

@@ -145,6 +145,7 @@ class ProductionPanel(QWidget):
         from insitu.services import production
         from insitu.services.height import scan_camera
         from insitu.services.locate import recipe_locator
+        from insitu.services.part_reading import read_part
 
         station, r = self.window_.station, self.recipe
         if r is None or station is None:
@@ -165,7 +166,7 @@ class ProductionPanel(QWidget):
             locate = recipe_locator(r, scan_camera(station.rig.camera, cal))
             self._reference = locate.reference
             run = production.Production(
-                r, station, log, count, locate, production.read_part, present,
+                r, station, log, count, locate, read_part, present,
                 cancel=cancel, height_cal=cal,
                 on_record=bridge.record.emit, on_stage=bridge.stage.emit)
             return production.produce(run, resume)
