@@ -22,6 +22,8 @@ read back), "refused" (not located or not planned: no serial taken, the part set
 "fault" (a device failed: the laser is off, the run stopped) or "aborted" (the operator
 stopped the run). A part's last record is its outcome; a fault or an abort after its serial
 was issued keeps that serial in the record, and ``--resume`` finishes the same part with it.
+A "marked" part whose read-back fails (a mark not the plan, or ``offset_mm`` beyond the
+recipe's ``read.offset_tolerance_mm``) carries the reason in ``error``.
 """
 
 from __future__ import annotations
