@@ -10,7 +10,8 @@ import cv2
 import numpy as np
 import pytest
 
-from insitu.vision.centres import CENTRE_METHODS, photo_centres
+from insitu.vision import tracks
+from insitu.vision.centres import CENTRE_METHODS, UncertainLine, photo_centres
 from insitu.vision.tracks import track_length
 
 H, W = 360, 720
@@ -72,3 +73,34 @@ def test_a_track_goes_on_across_a_gap_where_it_keeps_its_course():
     row[0, 120:] += 30
     length = track_length(row, ok, 4.0)
     assert (length[0, :80] == 80).all() and (length[0, 120:] == 80).all()
+
+
+def mirrored_photo(seed: int = 0):
+    """(photo (H, W, 3) uint8 BGR, JPEG-decoded; the stripe's row (W,)): a red stripe on a
+    board, lost on five dark squares (340 of its 640 columns lit), and its dimmer reflection
+    in a glossy floor below, unbroken over 460 columns: the longer track."""
+    rng = np.random.default_rng(seed)
+    yy, xx = np.mgrid[0:H, 0:W].astype(np.float32)
+    true = 150 + 0.02 * (np.arange(W) - W / 2)
+    lit = (xx >= 40) & (xx < 680) & ~((xx >= 120) & (xx < 660) & ((xx - 120) % 120 < 60))
+    stripe = np.exp(-0.5 * ((yy - true[None, :]) / 1.6) ** 2) * 900 * lit
+    mirror = np.exp(-0.5 * ((yy - (460 - true[None, :])) / 2.0) ** 2) * 110 \
+        * ((xx >= 100) & (xx < 560))
+    room = np.where(yy < 230, 150, 30).astype(np.float32)
+    laser = stripe + mirror
+    bgr = [room + 0.08 * laser, room + 0.1 * laser, room + laser]
+    bgr = [np.clip(c + rng.normal(0, 1.5, c.shape) + 0.5, 0, 255).astype(np.uint8) for c in bgr]
+    ok, jpg = cv2.imencode(".jpg", cv2.merge(bgr), [cv2.IMWRITE_JPEG_QUALITY, 92])
+    return cv2.imdecode(jpg, cv2.IMREAD_COLOR), true
+
+
+def test_a_longer_reflection_beside_a_broken_stripe_is_refused(monkeypatch):
+    """The reflection is the longest track; the stripe's pieces beside it span more columns
+    than it holds: which is the stripe cannot be told, and photo_centres says so rather than
+    give the reflection's centres (which it gives when any rival is let pass)."""
+    bgr, true = mirrored_photo()
+    with pytest.raises(UncertainLine, match=r"rows 3\d\d–3\d\d and 1\d\d–1\d\d.*--background"):
+        photo_centres(bgr, "steger")
+    monkeypatch.setattr(tracks, "RIVAL", np.inf)
+    c = photo_centres(bgr, "steger")
+    assert np.median(c.v - true[np.round(c.u).astype(int)]) > 100

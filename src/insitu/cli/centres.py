@@ -102,7 +102,8 @@ def centres(
     colour; a thin ridge across at least 20 columns (or rows) is a line, a glint, a lamp or
     the edge of a bright object is not. An image without a line gives no rows and is
     reported; so is one whose line carries no more laser colour than the colour fringes at
-    its edges (it could be any edge: give --background)."""
+    its edges (it could be any edge: give --background), and one where lines run side by
+    side that could each be the stripe (a reflection in a glossy floor)."""
     _check_options(method, direction, channel, pixel_bits)
     check_output(out, ".csv")
     if preview_dir is not None and preview_dir.exists() and not preview_dir.is_dir():

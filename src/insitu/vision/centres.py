@@ -41,6 +41,7 @@ from insitu.vision.profile import (
     saturation_level,
 )
 from insitu.vision.steger import gaussian_peak, steger
+from insitu.vision.tracks import AmbiguousStripe
 
 __all__ = ["CENTRE_METHODS", "CHANNELS", "CentreMethod", "ImageInputError", "LineCentres",
            "as_gray", "gaussian_peak", "gray_centroid", "line_centres", "line_direction",
@@ -249,7 +250,8 @@ def _in_sum(li: LaserImage, direction, band, allow, kw, scaled) -> bool:
     keywords; on every second scan line when no band is given), so that every method
     measures in the same image."""
     probe = dict(CENTRE_METHODS["gray"].defaults,
-                 **{k: v for k, v in kw.items() if k in _DETECTION})
+                 **{k: bool(v) if k == "ridge" else v for k, v in kw.items()
+                    if k in _DETECTION})
     every = (slice(None), slice(None, None, 2)) if direction == "rows" else \
         (slice(None, None, 2), slice(None))
     if band is not None:
@@ -284,6 +286,22 @@ def _stripe_length(c: LineCentres, direction: str) -> int:
 
 
 def _along(fn, img, direction, band, allow, kw) -> LineCentres:
+    """``fn``'s centres of the line in ``img`` running ``direction``, in image coordinates;
+    UncertainLine naming both where tracks rival the stripe (``ridge="alone"``,
+    :class:`~insitu.vision.tracks.AmbiguousStripe`)."""
+    try:
+        return _transposed(fn, img, direction, band, allow, kw)
+    except AmbiguousStripe as e:
+        scan, cross = ("columns", "rows") if direction == "rows" else ("rows", "columns")
+        (a, b), (c, d) = e.rows
+        raise UncertainLine(
+            f"two laser lines, at {cross} {a}–{b} and {c}–{d}, run side by side in {scan} "
+            f"{e.scan[0]}–{e.scan[1]} (a reflection of the stripe?): which one "
+            "is the stripe cannot be told (give a laser-off photograph, --background, or "
+            "crop the image to the board)") from None
+
+
+def _transposed(fn, img, direction, band, allow, kw) -> LineCentres:
     """``fn``'s centres of the line in ``img`` running ``direction``, in image coordinates."""
     if direction == "rows":
         return fn(img, band=band, allow=allow, **kw)
@@ -307,7 +325,7 @@ def photo_centres(image: np.ndarray, method: str = "steger", direction: str | No
     kw = dict(CENTRE_METHODS[method].defaults)
     li = laser_image(image, channel, laser_off, pixel_bits)
     c = _centres_in(li, method, direction, None, CLIPPED,
-                    dict(kw, min_run=PHOTO_RUN, ridge=True),
+                    dict(kw, min_run=PHOTO_RUN, ridge="alone"),
                     colour=True)
     margin = colour_margin(li, c.u, c.v) if laser_off is None else np.inf
     if margin < FRINGE_MARGIN:

@@ -39,7 +39,8 @@ pre-filter, peak row per column, validity test, choice between two separated pea
   over its own sides (the least of 3 px just beyond its half maximum), not over the band's
   ends: a line on a black square beside a white one is a ridge, though the white square is
   brighter. Of a column's candidates the one on the longest track across the columns is kept
-  (:mod:`insitu.vision.tracks`; photographs; False: the brightest pixel and ``continuity``).
+  (:mod:`insitu.vision.tracks`; photographs; False: the brightest pixel and ``continuity``);
+  "alone": that track, or AmbiguousStripe where tracks beside it rival it.
 * noise: the frame's noise sigma, gray values, when the image is a crop of a frame
   (:func:`~insitu.vision.profile.frame_noise`), so that a crop is measured with the frame's thresholds; None: the
   image's own.
@@ -200,7 +201,7 @@ def detect(image, median=3, band=None, window=12, min_peak=40.0, min_contrast=20
 
     if ridge:
         row, gmax, bg, contrast, ok, run, ambiguous = on_longest_track(
-            candidates(search, fill, w, candidate), max_jump)
+            candidates(search, fill, w, candidate), max_jump, ridge == "alone")
         locked = ambiguous
     else:
         j1 = peak_rows(search, lo, fill, top)

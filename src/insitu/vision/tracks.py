@@ -22,6 +22,23 @@ BRIDGE, BRIDGE_SHARE = 80, 0.125
 the scan lines of a larger frame (a stripe lost along the edge of a dark square)."""
 LINK = 2
 """Scan lines apart that two candidates may be linked across (a missing line or one)."""
+RIVAL, PIECE = 1.0, 0.25
+"""Least span of the tracks running mostly beside the longest one on one side of it, as a
+share of its length, from which they rival it (:class:`AmbiguousStripe`): a stripe lost on a
+board's dark squares or broken in two, beside its reflection in a glossy floor, spans as many
+scan lines as the reflection holds. Only tracks of at least PIECE of its length count. On
+benchmarks/clipped_white.py's tune and spent seeds the rivals of a stripe measured right span
+less than 0.9–1.0 of it, those of a reflection taken for the stripe 1.1–1.4 of it."""
+
+
+class AmbiguousStripe(ValueError):
+    """Tracks beside the longest that span as many scan lines as it holds (:data:`RIVAL`):
+    which is the stripe cannot be told. ``rows``: ((lo, hi), (lo, hi)) the longest's and its rival's cross
+    coordinates (px); ``scan``: (first, last) the scan lines both hold a candidate in."""
+
+    def __init__(self, rows, scan):
+        super().__init__(f"two tracks at rows {rows[0]} and {rows[1]} in columns {scan}")
+        self.rows, self.scan = rows, scan
 
 
 def candidates(search: np.ndarray, fill, w: int, stats, k: int = CANDIDATES):
@@ -126,7 +143,7 @@ def track_length(row: np.ndarray, ok: np.ndarray, max_jump: float,
     return _tracks(row, ok, max_jump, bridge)[0]
 
 
-def on_longest_track(fields, max_jump: float):
+def on_longest_track(fields, max_jump: float, alone: bool = False):
     """Per column, the valid candidate on the longest track (:func:`track_length`; of two on
     equally long tracks the one of higher contrast): ``fields`` (row, gmax, bg, contrast,
     ok, run), each (k, W), as :func:`candidates` gives them. Returns the same six (W,)
@@ -135,7 +152,8 @@ def on_longest_track(fields, max_jump: float):
     beside the stripe (more than half its candidates in columns the stripe has one in),
     between the stripe's ends or past them: that is something else (a reflection of it in a
     glossy floor, the edge of a square it runs along). A track only in the stripe's gaps or
-    past its ends (the stripe on a step's top, on a wall beside the board) stays."""
+    past its ends (the stripe on a step's top, on a wall beside the board) stays.
+    alone: AmbiguousStripe where tracks beside it rival it (:func:`_no_rival`)."""
     row, ok, contrast = fields[0], fields[4], fields[3]
     length, track = _tracks(row, ok, max_jump, None)
     score = np.where(ok, length + contrast / (1.0 + np.abs(contrast).max(initial=0.0)), -1.0)
@@ -143,9 +161,39 @@ def on_longest_track(fields, max_jump: float):
     chosen = [np.take_along_axis(f, pick, axis=0)[0] for f in fields]
     chosen[4] = ok.any(axis=0)
     if ok.any():
-        stripe = (track == track.ravel()[np.argmax(length)]).any(axis=0)
+        longest = track.ravel()[np.argmax(length)]
+        stripe = (track == longest).any(axis=0)
         m = int(track.max()) + 1
         beside = (np.bincount(track[ok], stripe[np.nonzero(ok)[1]], minlength=m)
                   > 0.5 * np.bincount(track[ok], minlength=m))
+        if alone:
+            _no_rival(track, length, row, beside, longest)
         chosen[4] &= stripe | ~beside[np.take_along_axis(track, pick, axis=0)[0]]
     return (*chosen, ok.sum(axis=0) > 1)
+
+
+def _no_rival(track, length, row, beside, longest) -> None:
+    """AmbiguousStripe if the tracks lying ``beside`` the ``longest`` (m,) bool on one side of
+    it, each at least :data:`PIECE` of its length, span (first to last scan line) at least
+    :data:`RIVAL` of its length: pieces of one line as long as it once its gaps are bridged.
+    track, length, row: (k, W) as :func:`_tracks` and :func:`candidates` give them."""
+    ok = track >= 0
+    size = np.zeros(len(beside), np.int64)
+    size[track[ok]] = length[ok]
+    on = track == longest
+    at = on.any(axis=0)
+    mid = np.where(on, row, 0).sum(axis=0) / np.maximum(on.sum(axis=0), 1)    # (W,)
+    keep = beside & (size >= PIECE * size[longest])
+    keep[longest] = False
+    k, c = np.nonzero(ok & keep[np.maximum(track, 0)] & at[None, :])
+    side = np.sign(np.bincount(track[k, c], row[k, c] - mid[c], minlength=len(keep)))
+    col = np.broadcast_to(np.arange(track.shape[1]), track.shape)
+    for s in (-1, 1):
+        group = ok & (keep & (side == s))[np.maximum(track, 0)]
+        if not group.any():
+            continue
+        first, last = int(col[group].min()), int(col[group].max())
+        if last - first + 1 >= RIVAL * size[longest]:
+            span = np.flatnonzero(at)
+            rows = tuple((int(row[a].min()), int(row[a].max())) for a in (on, group))
+            raise AmbiguousStripe(rows, (max(first, int(span[0])), min(last, int(span[-1]))))
