@@ -164,7 +164,8 @@ def report(args) -> None:
         tab.add_row(str(r.part), str(r.serial), r.outcome + (" (resumed)" if r.resumed else ""),
                     f"{tx:.2f}, {ty:.2f}, {ta:.1f}", err,
                     f"{offsets[r.part]:.3f}" if r.outcome == "marked" else "-",
-                    "-" if r.decoded is None else f"{r.decoded} ({'=' if r.decode_ok else '≠'} plan)",
+                    "-" if r.decoded is None
+                    else f"{r.decoded} ({'=' if r.decode_ok else '≠'} plan)",
                     r.grade or "-", "-" if r.offset_mm is None else f"{r.offset_mm:.3f}", times)
     console.print(tab)
     marked = [r for r in last.values() if r.outcome == "marked"]

@@ -109,10 +109,11 @@ def _rig(folder: Path):
 
 def _height(folder: Path):
     path = folder / "height.json"
-    save_json_model(path, HeightCalibration(camera=CAMERA, centres=CentreSettings().to_dict(), sheet={
-        "pivot_height_mm": 350.0, "exponents": [[0, 0, 0], [1, 0, 0], [0, 1, 0]],
-        "coefficients_mm": [0.0, 1.0, 0.5], "scale_mm": [100.0, 100.0, 50.0],
-        "x_range_mm": [-50.0, 50.0], "z_range_mm": [-20.0, 20.0]}))
+    sheet = {"pivot_height_mm": 350.0, "exponents": [[0, 0, 0], [1, 0, 0], [0, 1, 0]],
+             "coefficients_mm": [0.0, 1.0, 0.5], "scale_mm": [100.0, 100.0, 50.0],
+             "x_range_mm": [-50.0, 50.0], "z_range_mm": [-20.0, 20.0]}
+    save_json_model(path, HeightCalibration(camera=CAMERA, centres=CentreSettings().to_dict(),
+                                            sheet=sheet))
 
     def read(p):
         camera, model = height_model(load_json_model(p, HeightCalibration))

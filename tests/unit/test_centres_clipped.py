@@ -133,8 +133,8 @@ def test_the_red_channel_alone_loses_it(photo):
 
 def test_a_white_run_counts_only_with_laser_colour_on_both_sides_and_when_short():
     """laser_image._flanked on one row, reach 2: a 3 px white run with laser colour 2 px
-    before it and 3 px after it (within reach + 1) counts; one with it on one side only, or 9 px long (> 4
-    reach: a lamp), does not."""
+    before it and 3 px after it (within reach + 1) counts; one with it on one side only, or 9 px
+    long (> 4 reach: a lamp), does not."""
     from insitu.vision.laser_image import _flanked
 
     laser = np.zeros((3, 30), bool)

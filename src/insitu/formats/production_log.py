@@ -16,14 +16,14 @@ frames, the head, marking; null on a real rig, whose time is the wall clock's, a
 stage that drives no device) and ``<stage>_cpu_s`` the computer's processing
 (``time.process_time``; on the simulated rig the simulator's drawing is left out).
 
-``image_edges``: the room-light frame's edge points that gave x, y and the turn (0: the scan
-lines' edges did). ``rescan_s``: the second look's crossed scan (null: none). ``outcome``: "marked" (marked and
-read back), "refused" (not located or not planned: no serial taken, the part set aside),
-"fault" (a device failed: the laser is off, the run stopped) or "aborted" (the operator
-stopped the run). A part's last record is its outcome; a fault or an abort after its serial
-was issued keeps that serial in the record, and ``--resume`` finishes the same part with it.
-A "marked" part whose read-back fails (a mark not the plan, or ``offset_mm`` beyond the
-recipe's ``read.offset_tolerance_mm``) carries the reason in ``error``.
+``image_edges``: the room-light frame's edge points that gave x, y and the turn (0: the scan lines'
+edges did). ``rescan_s``: the second look's crossed scan (null: none). ``outcome``: "marked" (marked
+and read back), "refused" (not located or not planned: no serial taken, the part set aside), "fault"
+(a device failed: the laser is off, the run stopped) or "aborted" (the operator stopped the run). A
+part's last record is its outcome; a fault or an abort after its serial was issued keeps that serial
+in the record, and ``--resume`` finishes the same part with it. A "marked" part whose read-back
+fails (a mark not the plan, or ``offset_mm`` beyond the recipe's ``read.offset_tolerance_mm``)
+carries the reason in ``error``.
 """
 
 from __future__ import annotations

@@ -173,16 +173,15 @@ def align_image(image: np.ndarray | Frame, camera: CameraModel, heights: HeightI
                 bias_px: float = FRAME_BIAS_PX, search_px: float = SEARCH_PX,
                 reference_mm: float = 0.0, near_mm: float = 0.0) -> ImageFit | str:
     """The pose that puts ``edges`` (the reference's, :func:`outline`; ``heights`` its height
-    image) on the edges of ``image`` (H, W) grey (or its :func:`frame_of`), a frame of
-    ``camera`` under the room light with the part as the scan found it, starting from ``T_world_part`` (4, 4; a turn about
-    z and a shift). Why not, as a sentence, when the frame is not the camera's, too few
-    outline points are in view or show an edge, the edges found scatter about the fit, or
-    the fit does not settle (``max_spread_mm``: at most this robust 1σ about the fit).
-    ``search_px``: how far from the outline's image each edge is looked for;
-    ``reference_mm``: 1σ of the outline's own edges, for the covariance (``edges.sigma_mm``
-    where given); ``near_mm``: a fit that only brings the outline near its edges (a start
-    for a narrower search) stops once a step moves it less than this (and turns it less
-    than this over 50 mm)."""
+    image) on the edges of ``image`` (H, W) grey (or its :func:`frame_of`), a frame of ``camera``
+    under the room light with the part as the scan found it, starting from ``T_world_part`` (4, 4; a
+    turn about z and a shift). Why not, as a sentence, when the frame is not the camera's, too few
+    outline points are in view or show an edge, the edges found scatter about the fit, or the fit
+    does not settle (``max_spread_mm``: at most this robust 1σ about the fit). ``search_px``: how
+    far from the outline's image each edge is looked for; ``reference_mm``: 1σ of the outline's own
+    edges, for the covariance (``edges.sigma_mm`` where given); ``near_mm``: a fit that only brings
+    the outline near its edges (a start for a narrower search) stops once a step moves it less than
+    this (and turns it less than this over 50 mm)."""
     frame = image if isinstance(image, Frame) else None
     shape = frame.coef.shape if frame is not None else image.shape[:2]
     if shape != (camera.height, camera.width):
@@ -271,7 +270,8 @@ def grid_note(tilt: np.ndarray) -> str:
             f"± {worst:.2f} px): the part turned a few degrees is held better")
 
 
-def edge_points(frame: Frame, camera: CameraModel, pw: np.ndarray, nw: np.ndarray, offs: np.ndarray, reach: np.ndarray | None = None
+def edge_points(frame: Frame, camera: CameraModel, pw: np.ndarray, nw: np.ndarray,
+                offs: np.ndarray, reach: np.ndarray | None = None
                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(found (K,) bool, the edge in x, y (K, 2) world, mm, mm a pixel across the edge
     (K,)) for outline points ``pw`` (K, 3) world with normals ``nw`` (K, 2): along the

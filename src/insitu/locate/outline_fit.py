@@ -144,11 +144,11 @@ def _frame_pieces(heights: HeightImage, frame, camera: CameraModel, rough: Outli
                   tops=None, part: np.ndarray | None = None
                   ) -> tuple[list[Piece], int, int, int]:
     """(the pieces fitted to the frame's edges found within ``SEARCH_PX`` of the ``rough``
-    outline's points (those in view, not on a wall seen edge-on) that run along it, how many
-    edge points were found, of how many in view, how many pieces were left out). ``tops``: the top's heights at edge points
-    (:func:`_tops`), at which each edge point's ray is cut again (twice: its height where
-    it was found); None: cut at the rough outline's heights. ``part`` (N, 3): the scan's
-    points on the part; a piece the top runs on beyond is left out (:func:`continued`)."""
+    outline's points (those in view, not on a wall seen edge-on) that run along it, how many edge
+    points were found, of how many in view, how many pieces were left out). ``tops``: the top's
+    heights at edge points (:func:`_tops`), at which each edge point's ray is cut again (twice: its
+    height where it was found); None: cut at the rough outline's heights. ``part`` (N, 3): the
+    scan's points on the part; a piece the top runs on beyond is left out (:func:`continued`)."""
     width = wall_px(rough, camera, 0.0, np.zeros(3))
     seen = visible(heights, rough, camera, 0.0, np.zeros(3)) & ~((width > 0) & (width < WALL_PX))
     if seen.sum() < 50:

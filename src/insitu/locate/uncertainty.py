@@ -177,11 +177,11 @@ def segments_of(xy: np.ndarray, edges: np.ndarray, length_mm: float) -> np.ndarr
 def covariance(t: FitTerms, bias_mm: float, segment_mm: float = SEGMENT_MM,
                reference_mm: float = 0.0) -> np.ndarray:
     """(p, p) covariance of the fit's unknowns (:class:`FitTerms`' columns): the larger (by
-    trace) of the independent points' (spread² · A⁻¹) and the cluster-robust one over
-    segments, plus a random bias per edge of 1σ ``bias_mm`` and one that changes linearly
-    along it, ± ``bias_mm`` at its ends (an edge turned: its bias grows with the distance to
-    the camera, the light falls off along it; ± ``t.tilt`` where given); ``reference_mm``: the same, across the edge,
-    for the reference's own outline (a scan's: :data:`SCAN_REFERENCE_MM`)."""
+    trace) of the independent points' (spread² · A⁻¹) and the cluster-robust one over segments, plus
+    a random bias per edge of 1σ ``bias_mm`` and one that changes linearly along it, ± ``bias_mm``
+    at its ends (an edge turned: its bias grows with the distance to the camera, the light falls off
+    along it; ± ``t.tilt`` where given); ``reference_mm``: the same, across the edge, for the
+    reference's own outline (a scan's: :data:`SCAN_REFERENCE_MM`)."""
     J, w, r = t.J, t.w, t.r
     p = J.shape[1]
     A = J.T @ (J * w[:, None])

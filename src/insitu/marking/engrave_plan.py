@@ -19,25 +19,25 @@ the scan's shared error over the passes of the deepest measurement). Until the
 first such measurement, a round stops where the deepest-trusted cell would leave its zone (at
 :data:`RATE_MARGIN` × the rate), so that a narrow pocket is measured while its floor can be.
 
-Each round's passes: the depth still missing over the cell's rate, at most ``rescan_every``;
-before a measurement, :data:`APPROACH` of what the table's rate says. Once the rate is learnt,
-the joined estimate: the passes that reach the target at the cell's rate plus
-:data:`AIM_SIGMAS` σ of it (short of the target by that many σ of what the passes to go add:
-their count times the rate's σ, the extrapolation's error, large while the floor is far,
-small near it; a rate known poorly gives short steps, never none), as whole passes of the pen and the fraction left as
-finishing passes (:func:`finishing_pen`: the pen faster, each pass a fraction of one), so a
-round ends within a finishing pass of where it aims. A round whose measured cells asking for
-passes are fewer than :data:`FEW_CELLS` of them is not worth its marking and scan: they are
-left (a trickle of rounds, each re-measuring the pocket for a few cells' noise, gains
-nothing the 95 % band shows). A cell at its depth gets no more energy, and the stop rule speaks for the measurement's uncertainty: a measured cell
-gets more passes only while the depth it misses exceeds :data:`STOP_SIGMAS` σ of its
-measured depth (the last map's standard error, with the estimate's), and never more than
-reach the depth plus one pass at the slowest rate the pocket's cells likely have (what the
-model predicts bounds what one measurement can ask for: an error the scans repeat cannot
-pull a cell down). A cell the camera cannot see (a wall hides it) gets passes only while its
-passes at its highest likely rate (:data:`RATE_MARGIN` × its rate, or its rate plus three
-times the σ of the cells' spread and of the rate's estimate, whichever is higher) stay short
-of the target: it is never over-burnt, and is reported when that leaves it short.
+Each round's passes: the depth still missing over the cell's rate, at most ``rescan_every``; before
+a measurement, :data:`APPROACH` of what the table's rate says. Once the rate is learnt, the joined
+estimate: the passes that reach the target at the cell's rate plus :data:`AIM_SIGMAS` σ of it (short
+of the target by that many σ of what the passes to go add: their count times the rate's σ, the
+extrapolation's error, large while the floor is far, small near it; a rate known poorly gives short
+steps, never none), as whole passes of the pen and the fraction left as finishing passes
+(:func:`finishing_pen`: the pen faster, each pass a fraction of one), so a round ends within a
+finishing pass of where it aims. A round whose measured cells asking for passes are fewer than
+:data:`FEW_CELLS` of them is not worth its marking and scan: they are left (a trickle of rounds,
+each re-measuring the pocket for a few cells' noise, gains nothing the 95 % band shows). A cell at
+its depth gets no more energy, and the stop rule speaks for the measurement's uncertainty: a
+measured cell gets more passes only while the depth it misses exceeds :data:`STOP_SIGMAS` σ of its
+measured depth (the last map's standard error, with the estimate's), and never more than reach the
+depth plus one pass at the slowest rate the pocket's cells likely have (what the model predicts
+bounds what one measurement can ask for: an error the scans repeat cannot pull a cell down). A cell
+the camera cannot see (a wall hides it) gets passes only while its passes at its highest likely rate
+(:data:`RATE_MARGIN` × its rate, or its rate plus three times the σ of the cells' spread and of the
+rate's estimate, whichever is higher) stay short of the target: it is never over-burnt, and is
+reported when that leaves it short.
 """
 
 from __future__ import annotations

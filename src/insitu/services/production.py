@@ -2,16 +2,17 @@
 recipe's placements where the part lies, mark them as one job, read the mark back and log one
 record (:mod:`insitu.formats.production_log`).
 
-Serials: the job of a part is written by :func:`insitu.services.mark_job.write_mark_job`, so
-a part refused while locating or planning takes no serial, and a part whose marking faults or
-is aborted keeps the one it was issued (logged with it). ``resume`` finishes that part with
-its own job — its journal decides what is marked again (the paths not done, the cut path
-again whole) — and carries on with the next part number. A device fault or an abort ends the
-run (the laser off, the record written, the error raised); a refusal sets the part aside and
-the run goes on. A part whose read-back fails (a mark not the plan, or farther from its
-planned place than the recipe's ``read.offset_tolerance_mm``) is logged "marked" with the
-reason as its error (:func:`~insitu.services.part_reading.reading_fault`). A scan along y whose lines leave the part's pose unheld (its edges along
-them) gets a second look: the part scanned again, crossed, where it lies (:func:`_locate`).
+Serials: the job of a part is written by :func:`insitu.services.mark_job.write_mark_job`, so a part
+refused while locating or planning takes no serial, and a part whose marking faults or is aborted
+keeps the one it was issued (logged with it). ``resume`` finishes that part with its own job — its
+journal decides what is marked again (the paths not done, the cut path again whole) — and carries on
+with the next part number. A device fault or an abort ends the run (the laser off, the record
+written, the error raised); a refusal sets the part aside and the run goes on. A part whose
+read-back fails (a mark not the plan, or farther from its planned place than the recipe's
+``read.offset_tolerance_mm``) is logged "marked" with the reason as its error
+(:func:`~insitu.services.part_reading.reading_fault`). A scan along y whose lines leave the part's
+pose unheld (its edges along them) gets a second look: the part scanned again, crossed, where it
+lies (:func:`_locate`).
 """
 
 from __future__ import annotations

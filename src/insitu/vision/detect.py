@@ -42,8 +42,8 @@ pre-filter, peak row per column, validity test, choice between two separated pea
   (:mod:`insitu.vision.tracks`; photographs; False: the brightest pixel and ``continuity``);
   "alone": that track, or AmbiguousStripe where tracks beside it rival it.
 * noise: the frame's noise sigma, gray values, when the image is a crop of a frame
-  (:func:`~insitu.vision.profile.frame_noise`), so that a crop is measured with the frame's thresholds; None: the
-  image's own.
+  (:func:`~insitu.vision.profile.frame_noise`), so that a crop is measured with the frame's
+  thresholds; None: the image's own.
 * white: (H, W) bool, where a colour frame measured in the sum of its channels is clipped
   white in all three: a peak there needs min_contrast / 3 (≥ snr · noise): a halo clipping
   two channels leaves a white core standing out in the third only.

@@ -262,7 +262,8 @@ def steger(image: np.ndarray, sigma: float | None = None, min_peak: float = 40.0
            snr: float = 6.0, continuity: bool = True, saturation: float | None = None,
            min_curvature: float | None = None, extend_ends: bool = True,
            upper: int = 0, scale: float | None = None, allow=None,
-           min_run: int = 0, ridge: bool = False, noise: float | None = None, white=None) -> LineCentres:
+           min_run: int = 0, ridge: bool = False, noise: float | None = None,
+           white=None) -> LineCentres:
     """Steger centres of a line running along the rows of ``image`` (tilts to ≈ 60° work).
 
     Per column: Gaussian derivatives at the 7 rows around the detected peak; the Hessian's

@@ -33,8 +33,8 @@ less than 0.9–1.0 of it, those of a reflection taken for the stripe 1.1–1.4 
 
 class AmbiguousStripe(ValueError):
     """Tracks beside the longest that span as many scan lines as it holds (:data:`RIVAL`):
-    which is the stripe cannot be told. ``rows``: ((lo, hi), (lo, hi)) the longest's and its rival's cross
-    coordinates (px); ``scan``: (first, last) the scan lines both hold a candidate in."""
+    which is the stripe cannot be told. ``rows``: ((lo, hi), (lo, hi)) the longest's and its rival's
+    cross coordinates (px); ``scan``: (first, last) the scan lines both hold a candidate in."""
 
     def __init__(self, rows, scan):
         super().__init__(f"two tracks at rows {rows[0]} and {rows[1]} in columns {scan}")
@@ -114,9 +114,10 @@ def _bridged(label, col, row, bridge: int, max_jump: float) -> np.ndarray:
 
 def _tracks(row: np.ndarray, ok: np.ndarray, max_jump: float, bridge: int | None):
     """(k, W) int: the scan lines (columns) of the track each candidate lies on, 0 where it is
-    not valid, and (k, W) each candidate's track (−1: not valid). row, ok: (k, W) the candidates' rows (px) and validity. A track links valid
-    candidates of columns up to :data:`LINK` apart whose rows differ by at most ``max_jump``
-    px per column, and goes on across gaps of up to ``bridge`` columns (:func:`_bridged`)."""
+    not valid, and (k, W) each candidate's track (−1: not valid). row, ok: (k, W) the candidates'
+    rows (px) and validity. A track links valid candidates of columns up to :data:`LINK` apart whose
+    rows differ by at most ``max_jump`` px per column, and goes on across gaps of up to ``bridge``
+    columns (:func:`_bridged`)."""
     k, W = row.shape
     bridge = max(BRIDGE, round(BRIDGE_SHARE * W)) if bridge is None else bridge
     node = np.arange(k * W).reshape(k, W)
