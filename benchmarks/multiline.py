@@ -249,8 +249,9 @@ def off_surface(part, pts: np.ndarray, tol: float = 1.5) -> int:
 
 def summed(src: Path, out: Path, gap_mm: float = 8.0, most: int = Packing().most_lines) -> Path:
     """``src``'s frames summed (clipped to the camera's range) into frames of at most
-    ``most`` lines ≥ ``gap_mm`` apart (as ``auto`` packs), after survey frames of lines as far apart as the head's focus range
-    needs (:func:`insitu.reconstruct.bands.survey`): a recording of `lines` frames."""
+    ``most`` lines ≥ ``gap_mm`` apart (as ``auto`` packs), after survey frames of lines as far apart
+    as the head's focus range needs (:func:`insitu.reconstruct.bands.survey`): a recording of
+    `lines` frames."""
     seq = Sequence.open(src)
     frames = seq.frames
     xs = [f.line.start[0] for f in frames]

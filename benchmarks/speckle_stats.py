@@ -1,11 +1,11 @@
 """Laser-line statistics of real photographs beside our simulator's frames.
 
-For each set of real images (the image paths given, grouped by folder) and for simulated line
-frames on a metal part (step block) and a matte one (calibration plate), at 5 ms (unsaturated), prints the medians
-over the images of: along-line coefficient of variation (integrated cross-profile), its 1/e
+For each set of real images (the image paths given, grouped by folder) and for simulated line frames
+on a metal part (step block) and a matte one (calibration plate), at 5 ms (unsaturated), prints the
+medians over the images of: along-line coefficient of variation (integrated cross-profile), its 1/e
 autocorrelation length in px and mm, the gamma shape k, line σ, saturation, background level,
-texture and shading, and secondary peaks within ±60 px (:mod:`insitu.sim.linestats`).
-Real images' mm scale: from a checkerboard in view (``--pattern``, ``--square-mm``), if found.
+texture and shading, and secondary peaks within ±60 px (:mod:`insitu.sim.linestats`). Real images'
+mm scale: from a checkerboard in view (``--pattern``, ``--square-mm``), if found.
 
 Run: .venv/bin/python benchmarks/speckle_stats.py [IMAGE|FOLDER ...] [--binning 2] [--frames 4]
 """

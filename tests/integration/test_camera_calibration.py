@@ -193,7 +193,7 @@ def test_cli_bad_input_one_line_error_and_no_file(rec, tmp_path, case, message):
     assert res.exit_code == 1, res.output
     lines = [ln for ln in res.output.splitlines() if ln.strip() and not PROGRESS.fullmatch(ln)]
     assert len(lines) == 1 and message in lines[0], res.output
-    assert isinstance(res.exception, SystemExit), res.exception                # not an uncaught error
+    assert isinstance(res.exception, SystemExit), res.exception    # not an uncaught error
     assert not out.exists() and not list(tmp_path.glob(".*camera*"))
 
 

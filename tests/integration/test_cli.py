@@ -64,7 +64,7 @@ def test_bad_input_one_line_error_and_no_file(tmp_path, args, message):
     res = runner.invoke(app, args)
     assert res.exit_code != 0
     assert message in res.output
-    assert isinstance(res.exception, SystemExit), res.exception                # not an uncaught error
+    assert isinstance(res.exception, SystemExit), res.exception    # not an uncaught error
     assert not (tmp_path / "c.ply").exists() and not list(tmp_path.glob(".*"))
 
 

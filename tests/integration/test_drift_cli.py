@@ -57,7 +57,7 @@ def test_a_shifted_field_fails_naming_the_worst_point(field, tmp_path):
     rec = _spots(shifted, tmp_path / "shifted")
     res = _run("galvo", "check", fc, rec)
     assert res.exit_code == 1, res.output
-    assert isinstance(res.exception, SystemExit), res.exception                # not an uncaught error
+    assert isinstance(res.exception, SystemExit), res.exception    # not an uncaught error
     lines = [ln for ln in res.stderr.splitlines() if ln.strip()]
     errors = [ln for ln in lines                                                # not progress
               if not re.fullmatch(r"drift check: \d+ of 9 points", ln)]

@@ -40,7 +40,7 @@ def _one_line_error(res, message):
     assert res.exit_code == 1, res.output
     lines = [ln for ln in res.output.splitlines() if ln.strip() and not PROGRESS.fullmatch(ln)]
     assert len(lines) == 1 and message in lines[0], res.output
-    assert isinstance(res.exception, SystemExit), res.exception                # not an uncaught error
+    assert isinstance(res.exception, SystemExit), res.exception    # not an uncaught error
 
 
 def _grid(n, half):

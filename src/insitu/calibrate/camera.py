@@ -1,19 +1,19 @@
 """Camera intrinsics from views of a checkerboard (or a ChArUco board).
 
-Detection: both OpenCV chessboard detectors on a copy reduced to ≤ 1400 px wide — the
-sector-based ``findChessboardCornersSB`` (exhaustive, normalised) and the classic
-``findChessboardCorners`` (adaptive threshold, normalised) — each refined by ``cornerSubPix``
-on the full frame with a window of ~0.2 × the smallest corner spacing of the view, clear of
-the board's edge beyond its outer corners (a fixed 23 × 23 px window, OpenCV's tutorial's,
-reaches it on foreshortened views: on OpenCV's ``left*.jpg`` it moves those corners by up to
-6 px and doubles the RMS; OpenCV's own ``samples/python/calibrate.py`` uses 11 × 11);
-of two results the one whose grid is smoother (cubic fit of pixel over grid index) is kept,
-numbered as SB numbers it. On OpenCV's 13 ``left*.jpg`` photos SB alone finds 11 (exhaustive
-13), classic 13; refined, both give the same corners. ChArUco boards through ``cv2.aruco.CharucoDetector`` (partial views
-allowed). Calibration: ``cv2.calibrateCameraExtended`` with OpenCV's 5-term distortion
-``[k1, k2, p1, p2, k3]``; views whose RMS reprojection error is > ``outlier_factor`` × the
-median are dropped and the camera recalibrated, until none is. The parameter uncertainties are
-OpenCV's ``stdDeviationsIntrinsics`` (σ from the final residuals, Gauss–Newton covariance).
+Detection: both OpenCV chessboard detectors on a copy reduced to ≤ 1400 px wide — the sector-based
+``findChessboardCornersSB`` (exhaustive, normalised) and the classic ``findChessboardCorners``
+(adaptive threshold, normalised) — each refined by ``cornerSubPix`` on the full frame with a window
+of ~0.2 × the smallest corner spacing of the view, clear of the board's edge beyond its outer
+corners (a fixed 23 × 23 px window, OpenCV's tutorial's, reaches it on foreshortened views: on
+OpenCV's ``left*.jpg`` it moves those corners by up to 6 px and doubles the RMS; OpenCV's own
+``samples/python/calibrate.py`` uses 11 × 11); of two results the one whose grid is smoother (cubic
+fit of pixel over grid index) is kept, numbered as SB numbers it. On OpenCV's 13 ``left*.jpg``
+photos SB alone finds 11 (exhaustive 13), classic 13; refined, both give the same corners. ChArUco
+boards through ``cv2.aruco.CharucoDetector`` (partial views allowed). Calibration:
+``cv2.calibrateCameraExtended`` with OpenCV's 5-term distortion ``[k1, k2, p1, p2, k3]``; views
+whose RMS reprojection error is > ``outlier_factor`` × the median are dropped and the camera
+recalibrated, until none is. The parameter uncertainties are OpenCV's ``stdDeviationsIntrinsics`` (σ
+from the final residuals, Gauss–Newton covariance).
 
 Board frame: z = 0 on the board. Chessboard: origin at the first inner corner, x along
 ``cols`` (OpenCV's corner order). ChArUco: OpenCV's board frame (origin at the outer corner).

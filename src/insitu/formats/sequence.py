@@ -2,9 +2,10 @@
 and ``frames/%05d.png``.
 
 :class:`Sequence` reads one (validated, frames streamed one at a time);
-:class:`~insitu.formats.sequence_writer.SequenceWriter` records one atomically. Models keep fields they don't know (other tools may add some).
-The optional ``ambient`` (docs/formats.md): a scan may hold one laser-off frame under the
-room light, ``ambient.png``, named by the top-level ``"ambient": {"file", "exposure_ms"}``.
+:class:`~insitu.formats.sequence_writer.SequenceWriter` records one atomically. Models keep fields
+they don't know (other tools may add some). The optional ``ambient`` (docs/formats.md): a scan may
+hold one laser-off frame under the room light, ``ambient.png``, named by the top-level ``"ambient":
+{"file", "exposure_ms"}``.
 """
 
 from __future__ import annotations

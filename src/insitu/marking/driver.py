@@ -8,10 +8,11 @@ Each 3-D target becomes mirror angles and a focus shift with the two-mirror kine
     [set_wobble]  laser_on  laser_on_delay  mark_abs_3d …(polygon_delay at corners)…
     laser_off_delay  laser_off  mark_delay
 
-and for each further pass ``jump_abs_3d jump_delay laser_on … mark_delay`` again (a path's
-passes are one list: a cut path marked again repeats them all). Settings are sent only when
-they change; ``set_wobble`` in every list whose path wobbles (it holds for its list only). The whole job is compiled, and checked against the
-field and the focus range, before the first command is sent (:mod:`.run` executes it).
+and for each further pass ``jump_abs_3d jump_delay laser_on … mark_delay`` again (a path's passes
+are one list: a cut path marked again repeats them all). Settings are sent only when they change;
+``set_wobble`` in every list whose path wobbles (it holds for its list only). The whole job is
+compiled, and checked against the field and the focus range, before the first command is sent
+(:mod:`.run` executes it).
 """
 
 from __future__ import annotations

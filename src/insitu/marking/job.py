@@ -1,11 +1,12 @@
 """The mark job (docs/formats.md, mark job): 3-D paths on the workpiece with laser parameters.
 
-Each path: jump (laser off) to its first point, then mark (laser on) through the rest. Points:
-(N, 3) float64 arrays, world frame, mm, stored to 1 nm. A path's own ``laser`` overrides the
-job's, field by field. ``timing`` (an addition of ours; optional) holds the scan-head delays,
-µs. A path's ``laser`` may also carry (our additions, optional): ``pen`` (the pen's name),
-``passes``, ``delays_us`` and ``wobble`` (:mod:`insitu.formats.pens`) — a job without them
-marks each path once with the job's timing and no wobble. Written atomically; read back with validation (one-line FormatError naming the field).
+Each path: jump (laser off) to its first point, then mark (laser on) through the rest. Points: (N,
+3) float64 arrays, world frame, mm, stored to 1 nm. A path's own ``laser`` overrides the job's,
+field by field. ``timing`` (an addition of ours; optional) holds the scan-head delays, µs. A path's
+``laser`` may also carry (our additions, optional): ``pen`` (the pen's name), ``passes``,
+``delays_us`` and ``wobble`` (:mod:`insitu.formats.pens`) — a job without them marks each path once
+with the job's timing and no wobble. Written atomically; read back with validation (one-line
+FormatError naming the field).
 """
 
 from __future__ import annotations

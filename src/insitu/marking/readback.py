@@ -35,12 +35,11 @@ IN_PLACE_MM = 0.5          # a drawing read back within this of its plan is "in 
 @dataclass(frozen=True)
 class MarkReading:
     """One mark read back. ``name``: the pattern; ``text``: what its code should read (None:
-    not a code); ``decoded``: what the reader read (None: nothing); ``offset_mm``: (u, v) of
-    the mark against the plan along the pattern's axes, mm on the surface (None: not found);
-    ``grades`` of a code's print quality (None: no code, or not found); ``picture`` (H, W)
-    float32 rectified grey values (NaN: not seen); ``frame`` its geometry; ``plan`` the
-    pattern's outlines and open paths as planned, (N, 2) u, v mm each; ``seen``: share of the mark's frame the
-    camera sees."""
+    not a code); ``decoded``: what the reader read (None: nothing); ``offset_mm``: (u, v) of the
+    mark against the plan along the pattern's axes, mm on the surface (None: not found); ``grades``
+    of a code's print quality (None: no code, or not found); ``picture`` (H, W) float32 rectified
+    grey values (NaN: not seen); ``frame`` its geometry; ``plan`` the pattern's outlines and open
+    paths as planned, (N, 2) u, v mm each; ``seen``: share of the mark's frame the camera sees."""
 
     name: str
     text: str | None

@@ -1,24 +1,23 @@
 """DXF files (ezdxf) → :class:`Pattern` in mm, y up: what a CAD program shows, fills where the
 file has fills.
 
-What is drawn: model space with blocks and dimensions exploded, entities on layers that are
-off, frozen or not plotted left out (:mod:`insitu.patterns.dxf_walk`). HATCH, MPOLYGON,
-SOLID, TRACE, wide (LW)POLYLINEs (banded as ezdxf draws them: each segment's start and end
-width) and text (TEXT, ATTRIB, an ATTDEF's tag, MTEXT: the glyphs ezdxf's drawing add-on fills, with
-the file's styles, fonts and MTEXT layout) are fills: the contours of the region. A hatch with a pattern
-(ANSI31, honeycomb, …) is its pattern's lines, as ezdxf's hatching draws them. The
-boundary of an associative solid hatch is not marked again, nor a closed outline that runs
-along a fill's edge. Lines with a dashed linetype (the entity's, its layer's or its block's,
-scaled by $LTSCALE and its own ltscale) are marked as their dashes. Other closed shapes, and
-chains of open pieces whose ends meet within ``join_mm``, are outlines — closed lines, marked
-but not filled — unless ``fill="all"`` (then filled, even-odd: a circle inside a frame is a
-hole); ``fill="none"`` marks every fill's edge as an outline instead. A WIPEOUT masks what was
-drawn before it (as ezdxf's drawing add-on paints it in the background colour). Units from a
-``$INSUNITS`` the file's header holds (``units=`` overrides; none: mm, with ``$MEASUREMENT``
-and a warning when the drawing is only a few units across, as a plan in metres is), said in
-``notes``. An entity that cannot be drawn (malformed) is skipped and named in a warning;
-IMAGEs are named in a warning (not marked); a file of 3-D meshes only is refused saying so. A
-file that ezdxf cannot read is read again through ``ezdxf.recover``.
+What is drawn: model space with blocks and dimensions exploded, entities on layers that are off,
+frozen or not plotted left out (:mod:`insitu.patterns.dxf_walk`). HATCH, MPOLYGON, SOLID, TRACE,
+wide (LW)POLYLINEs (banded as ezdxf draws them: each segment's start and end width) and text (TEXT,
+ATTRIB, an ATTDEF's tag, MTEXT: the glyphs ezdxf's drawing add-on fills, with the file's styles,
+fonts and MTEXT layout) are fills: the contours of the region. A hatch with a pattern (ANSI31,
+honeycomb, …) is its pattern's lines, as ezdxf's hatching draws them. The boundary of an associative
+solid hatch is not marked again, nor a closed outline that runs along a fill's edge. Lines with a
+dashed linetype (the entity's, its layer's or its block's, scaled by $LTSCALE and its own ltscale)
+are marked as their dashes. Other closed shapes, and chains of open pieces whose ends meet within
+``join_mm``, are outlines — closed lines, marked but not filled — unless ``fill="all"`` (then
+filled, even-odd: a circle inside a frame is a hole); ``fill="none"`` marks every fill's edge as an
+outline instead. A WIPEOUT masks what was drawn before it (as ezdxf's drawing add-on paints it in
+the background colour). Units from a ``$INSUNITS`` the file's header holds (``units=`` overrides;
+none: mm, with ``$MEASUREMENT`` and a warning when the drawing is only a few units across, as a plan
+in metres is), said in ``notes``. An entity that cannot be drawn (malformed) is skipped and named in
+a warning; IMAGEs are named in a warning (not marked); a file of 3-D meshes only is refused saying
+so. A file that ezdxf cannot read is read again through ``ezdxf.recover``.
 """
 
 from __future__ import annotations

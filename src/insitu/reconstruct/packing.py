@@ -1,14 +1,14 @@
 """The frames of a scan: one line each, or several lines per exposure packed so that their
 bands never share a pixel (:mod:`insitu.reconstruct.bands`).
 
-Packed frames need the heights the surface can have: narrower than the head's focus range,
-or the bands of lines a few millimetres apart overlap. First *survey* frames measure them:
-the region's first and last lines and lines every third of the focus-range stride between
-(:func:`~insitu.reconstruct.bands.survey`), those of one frame as far apart as the whole
-focus range's bands need, so they tell their lines apart with no height range; the heights
-they measured, widened by :attr:`~insitu.reconstruct.bands.Packing.height_mm`, then bound
-every other frame's bands. Their lines are measured again in the packed frames (a survey
-gives heights only). A height range known beforehand (a recipe's part, the operator's) takes its place.
+Packed frames need the heights the surface can have: narrower than the head's focus range, or the
+bands of lines a few millimetres apart overlap. First *survey* frames measure them: the region's
+first and last lines and lines every third of the focus-range stride between
+(:func:`~insitu.reconstruct.bands.survey`), those of one frame as far apart as the whole focus
+range's bands need, so they tell their lines apart with no height range; the heights they measured,
+widened by :attr:`~insitu.reconstruct.bands.Packing.height_mm`, then bound every other frame's
+bands. Their lines are measured again in the packed frames (a survey gives heights only). A height
+range known beforehand (a recipe's part, the operator's) takes its place.
 
 ``lines_per_frame``: None or 1, one line a frame (no survey); an int K, the lines of each pass
 dealt into ⌈N / K⌉ frames of lines ⌈N / K⌉ lines apart (where their bands still overlap, those

@@ -247,12 +247,12 @@ def record(station: Station, kind: str, out: Path, *, spacing: float = 0.5, regi
            alignment: bool = True, progress: Progress | None = None,
            lines_per_frame: int | str | None = None) -> Path:
     """A sequence of ``kind`` (one of :data:`KINDS`) with the options that kind takes:
-    a scan (``spacing``, ``region``, ``lines_per_frame``), the height calibration, the field calibration
-    (``grid`` spots per side at ``heights``, or ``marked`` circles), the camera calibration
-    (``views`` brought by ``next_view``, then with ``alignment`` the board flat on the plate
-    and the head's axis lines on it, which give the camera's pose in the scan-head frame;
-    ``truth``: added to the station's). ``cross``: a scan's crossed pass (default off), the
-    height calibration's crossed lines (default on)."""
+    a scan (``spacing``, ``region``, ``lines_per_frame``), the height calibration, the field
+    calibration (``grid`` spots per side at ``heights``, or ``marked`` circles), the camera
+    calibration (``views`` brought by ``next_view``, then with ``alignment`` the board flat on the
+    plate and the head's axis lines on it, which give the camera's pose in the scan-head frame;
+    ``truth``: added to the station's). ``cross``: a scan's crossed pass (default off), the height
+    calibration's crossed lines (default on)."""
     if kind == "scan":
         return record_scan(station, out, spacing, region, cross=bool(cross), progress=progress,
                            lines_per_frame=lines_per_frame)

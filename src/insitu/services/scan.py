@@ -264,16 +264,15 @@ def _scan(camera: Camera, head: ScanHead, plan, rec: ScanReconstructor, t0: Step
           roi: tuple[int, int, int, int] | None = None,
           excess: dict[int, np.ndarray] | None = None) -> ScanResult:
     """The scan loop: ``room_light()`` (the laser-off frame, or None) first — a camera that
-    gives none (a trigger only the head sends) leaves the points without grey values, said in
-    the summary's ``ambient`` — then the ``plan``'s survey frames (their heights bound the
-    packed frames), then its frames: drawn and taken on a thread of their own
-    (:class:`~insitu.services.scan_frames.Stream`) while the last ones are reconstructed
-    here, so a scan takes the slower of the two (before them a frame with the laser off for
-    each exposure of several lines, :func:`~insitu.services.scan_frames.laser_off_frames`,
-    (K − 1)/K of it subtracted from those frames; ``excess``: those given, K → the excess,
-    a recording's); the laser off at the end,
-    on a cancel (:class:`Cancelled`) or a device fault (:class:`ScanInterrupted`), each keeping what was
-    measured. The camera reads ``roi`` only during the lines, and each frame of lines only
+    gives none (a trigger only the head sends) leaves the points without grey values, said in the
+    summary's ``ambient`` — then the ``plan``'s survey frames (their heights bound the packed
+    frames), then its frames: drawn and taken on a thread of their own
+    (:class:`~insitu.services.scan_frames.Stream`) while the last ones are reconstructed here, so a
+    scan takes the slower of the two (before them a frame with the laser off for each exposure of
+    several lines, :func:`~insitu.services.scan_frames.laser_off_frames`, (K − 1)/K of it subtracted
+    from those frames; ``excess``: those given, K → the excess, a recording's); the laser off at the
+    end, on a cancel (:class:`Cancelled`) or a device fault (:class:`ScanInterrupted`), each keeping
+    what was measured. The camera reads ``roi`` only during the lines, and each frame of lines only
     in its own window of one size (:func:`~insitu.services.scan_frames.moving_window`)."""
     ambient, room, taken, packing = "none", None, 0, "one line a frame"
     shot = Shots(camera, head, roi)

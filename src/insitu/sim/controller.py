@@ -1,5 +1,5 @@
-"""The simulated galvo controller: it executes command lists on a :class:`~insitu.sim.world.SimWorld`
-and its marks burn into the workpiece.
+"""The simulated galvo controller: it executes command lists on a
+:class:`~insitu.sim.world.SimWorld` and its marks burn into the workpiece.
 
 Mirror angles are what the driver computed with the operator's *nominal* kinematics; the head
 then does what the *true* head does with them: the angles become a command on z = 0 through
@@ -13,12 +13,12 @@ amplitude as it moves: the burn is wider by twice the amplitude. Each pass of a 
 again: a burn along the last one's samples counts as its next pass (``Burn.passes``), which
 the inspection camera sees darker.
 
-Burns are kept on the world (``SimWorld.burns``), so a resumed job on a new controller adds to
-the same marks and :class:`~insitu.sim.devices.SimInspectionCamera` sees them all. On a part of an ablation
-material (the blanks, :mod:`insitu.sim.ablation`) a burn removes material instead: each
-sample carries the pulses fired while the spot crossed it (frequency × time at the mark
-speed) and the height of the focus on its beam, and the world's surface goes down under them
-(an engraving is seen by its shape, not by a darker colour).
+Burns are kept on the world (``SimWorld.burns``), so a resumed job on a new controller adds to the
+same marks and :class:`~insitu.sim.devices.SimInspectionCamera` sees them all. On a part of an
+ablation material (the blanks, :mod:`insitu.sim.ablation`) a burn removes material instead: each
+sample carries the pulses fired while the spot crossed it (frequency × time at the mark speed) and
+the height of the focus on its beam, and the world's surface goes down under them (an engraving is
+seen by its shape, not by a darker colour).
 
 Test instrumentation: when ``INSITU_SIM_MARK_LOG`` names a file, the controller appends what it
 executes there — ``L digest n`` when a list of n commands starts, ``J i`` / ``M i x0 y0 z0 x1

@@ -1,12 +1,12 @@
 """The Engrave dock: the selected pattern's pocket — its depth map from the scanned cloud
-against the top around it (Depth map) or from a scan of its own on the rig, as an engraving
-measures between rounds (Measure pocket, :mod:`insitu.services.pocket`), and Engrave… to a target depth in a material, armed
-as Mark is (what will be engraved, confirmed in the same dialog; the laser never fires
-without it), run on the station off the GUI thread (:func:`insitu.services.engrave.engrave`:
-rounds of passes, each followed by a scan of the pocket), each re-measure's depth map shown
-as it comes, ABORT (the Laser menu's, Esc, Space) stopping it with the laser off, and how it
-ended in words. The map: a picture with a colour bar in mm, the hidden cells hatched, the
-ones not measured grey, their counts and the mean depth and 95 % band in words."""
+against the top around it (Depth map) or from a scan of its own on the rig, as an engraving measures
+between rounds (Measure pocket, :mod:`insitu.services.pocket`), and Engrave… to a target depth in a
+material, armed as Mark is (what will be engraved, confirmed in the same dialog; the laser never
+fires without it), run on the station off the GUI thread (:func:`insitu.services.engrave.engrave`:
+rounds of passes, each followed by a scan of the pocket), each re-measure's depth map shown as it
+comes, ABORT (the Laser menu's, Esc, Space) stopping it with the laser off, and how it ended in
+words. The map: a picture with a colour bar in mm, the hidden cells hatched, the ones not measured
+grey, their counts and the mean depth and 95 % band in words."""
 
 from __future__ import annotations
 
