@@ -2,10 +2,11 @@
 around it from the same lines, per point and as a map over the pocket's cells.
 
 The top: the scan's points outside the pocket, farther than ``wall_band_mm`` from its outline
-and within ``ring_mm`` of it, fit a quadratic surface z(x, y) plus an offset per line, shrunk
-towards 0 by the evidence the line's own top points give (a line's height error is shared by
-its floor points, so the floor is referred to the top of the same lines). A floor point's
-depth is top(x, y) + offset(line) − z.
+and within ``ring_mm`` of it, fit a plane z(x, y) (a quadratic only where the top is curved:
+:mod:`insitu.marking.engrave_top`) plus an offset per line, shrunk towards 0 by the evidence
+the line's own top points give (a line's height error is shared by its floor points, so the
+floor is referred to the top of the same lines). A floor point's depth is top(x, y) +
+offset(line) − z.
 
 The wall's neighbourhood: a point within ``wall_band_mm`` of the outline is neither floor nor
 top. There the line (as wide as the beam) straddles the edge, the centre detector's kernel
@@ -13,9 +14,10 @@ carries the step along the line, and the camera loses the floor behind the wall 
 Deeper, the floor beside the wall the camera faces reads short (its image merges with the lit
 wall's): a floor point counts only beyond ``wall_band_mm + bias_per_depth ×`` its depth from
 the outline (the simulator: 37 µm short 0.2 mm from it at 0.2 mm deep, 85 µm at 0.1 mm and
-0.5 mm deep, within 10 µm beyond 0.3 mm). A floor point's error is shared along its line (the
-speckle of the floor it crosses, about 0.01 mm): a floor crossed by fewer than ``min_lines``
-lines with trusted points is not measured at all.
+0.5 mm deep, within 10 µm beyond 0.3 mm); the depth that sets a point's zone is the median
+of its neighbours' (within ``kernel_mm``), not its own noisy one. A floor point's error is
+shared along its line (the speckle of the floor it crosses, about 0.01 mm): a floor crossed
+by fewer than ``min_lines`` lines with trusted points is not measured at all.
 
 The lines: a line's floor points also share an error its top points do not see (the floor
 it crosses); each line's share, estimated from its points' residuals against the other lines'
@@ -43,6 +45,7 @@ from scipy.ndimage import distance_transform_edt
 from scipy.spatial import cKDTree
 
 from insitu.errors import MeasurementError
+from insitu.marking.engrave_top import top_model
 
 STATES = ("measured", "wall", "hidden", "unmeasured")
 MEASURED, WALL, HIDDEN, UNMEASURED = range(4)
@@ -143,7 +146,9 @@ class DepthMap:
     error ``sem`` mm, effective ``points`` and ``state`` (an index of :data:`STATES`,
     :data:`OUTSIDE` off the pocket); ``floor`` (M, 3): each floor point's x, y and depth;
     ``top_rms``: the top model's residual rms, ``point_sigma``: a floor point's depth
-    scatter (robust), mm."""
+    scatter (robust), ``mean_sem``: the standard error of :meth:`mean_depth` (the floor's
+    lines as independent samples, the top's own error beside it; NaN: from ``point_sigma``),
+    ``floor_lines``: the scan lines the floor's points lie on, mm."""
 
     cells: PocketCells
     depth: np.ndarray
@@ -153,6 +158,8 @@ class DepthMap:
     floor: np.ndarray
     top_rms: float
     point_sigma: float
+    mean_sem: float = float("nan")
+    floor_lines: int = 0
 
     def mean_depth(self) -> tuple[float, float]:
         """The floor's mean depth and its standard error, mm (points beyond 4σ left out)."""
@@ -161,7 +168,22 @@ class DepthMap:
             return float("nan"), float("nan")
         med = np.median(d)
         keep = np.abs(d - med) <= 4 * max(self.point_sigma, 1e-6)
-        return float(d[keep].mean()), float(self.point_sigma / np.sqrt(max(keep.sum(), 1)))
+        sem = self.mean_sem if np.isfinite(self.mean_sem) else (
+            self.point_sigma / np.sqrt(max(keep.sum(), 1)))
+        return float(d[keep].mean()), float(sem)
+
+    def pocket_depth(self, tolerance_mm: float, min_lines: int = 8) -> tuple[float, float]:
+        """:meth:`mean_depth`, or MeasurementError when it is not known to ``tolerance_mm``
+        (2 standard errors) or its floor beyond the walls' bias zones holds fewer than
+        ``min_lines`` scan lines."""
+        mean, sem = self.mean_depth()
+        if self.floor_lines < min_lines or not 2 * sem <= tolerance_mm:
+            raise MeasurementError(
+                f"the pocket's depth is known to ±{2e3 * sem:.1f} µm (2σ) from "
+                f"{self.floor_lines} scan lines on its floor clear of the walls, not to the "
+                f"±{tolerance_mm * 1e3:.1f} µm asked: scan its lines closer, with a longer "
+                "exposure, or a wider pocket")
+        return mean, sem
 
     def count(self, state: int) -> int:
         return int((self.state == state).sum())
@@ -188,11 +210,13 @@ def measure_depth(points: np.ndarray, line: np.ndarray, region, settings: DepthS
                                "pocket: scan beyond its outline")
     if floor.sum() < 5:
         raise MeasurementError(f"the scan has {int(floor.sum())} points on the pocket's floor")
-    top_at, top_rms = _top_model(points[top], line[top])
-    d = top_at(points[floor], line[floor]) - points[floor, 2]
-    trusted = dist[floor] >= s.wall_band_mm + s.bias_per_depth * np.maximum(d, 0.0)
+    top_fit = top_model(points[top], line[top])
+    d = top_fit.at(points[floor], line[floor]) - points[floor, 2]
+    zone_d = _local_median(points[floor, :2], d, s.kernel_mm)
+    trusted = dist[floor] >= s.wall_band_mm + s.bias_per_depth * np.maximum(zone_d, 0.0)
     fx, fy, d = points[floor, 0][trusted], points[floor, 1][trusted], d[trusted]
     fline = np.unique(line[floor][trusted], return_inverse=True)[1]
+    raw = d
     d, line_var = _line_terms(fx, fy, d, fline, s.kernel_mm)
     depth, sem, neff, sigma, keep = _cell_means(cells, fx, fy, d, s.kernel_mm, fline,
                                                 line_var)
@@ -211,42 +235,29 @@ def measure_depth(points: np.ndarray, line: np.ndarray, region, settings: DepthS
         state[(state == WALL) & blocked] = HIDDEN
     depth = np.where(state == OUTSIDE, np.nan, np.where(neff > 0, depth, np.nan))
     floor_pts = np.column_stack([fx, fy, d])[keep]
-    return DepthMap(cells, depth, sem, neff, state, floor_pts, top_rms, sigma)
+    mean_sem = _line_sem(raw[keep], fline[keep], top_fit.sem(floor_pts))
+    return DepthMap(cells, depth, sem, neff, state, floor_pts, top_fit.rms, sigma, mean_sem,
+                    int(np.unique(fline[keep]).size))
 
 
-def _top_model(p: np.ndarray, line: np.ndarray):
-    """Fit the top: a quadratic surface plus per-line offsets shrunk by their evidence
-    (a random effect). Returns (f(points, lines) → top z, residual rms)."""
-    c0, scale = p[:, :2].mean(0), np.maximum(p[:, :2].std(0), 1e-6)
-
-    def basis(q):
-        u, v = ((q[:, :2] - c0) / scale).T
-        return np.column_stack([np.ones(len(q)), u, v, u * u, u * v, v * v])
-
-    A, z = basis(p), p[:, 2]
-    keep = np.ones(len(z), bool)
-    offset = np.zeros(len(z))
+def _line_sem(d: np.ndarray, line: np.ndarray, top_sem: float) -> float:
+    """The standard error (mm) of the mean of ``d`` (N,) whose points share an error along
+    their ``line`` (N,) (lines independent: the clustered estimate, L/(L−1) corrected), with
+    the top's own standard error ``top_sem`` mm beside it."""
     lines, inv = np.unique(line, return_inverse=True)
-    b = np.zeros(len(lines))
-    for _ in range(3):
-        coef = np.linalg.lstsq(A[keep], (z - offset)[keep], rcond=None)[0]
-        r = z - A @ coef
-        n = np.bincount(inv[keep], minlength=len(lines)).astype(float)
-        mean = np.bincount(inv[keep], r[keep], minlength=len(lines)) / np.maximum(n, 1)
-        within = np.median(np.abs(r[keep] - mean[inv[keep]])) * 1.4826
-        noise = within ** 2 / np.maximum(n, 1)
-        between = max(np.var(mean[n > 0]) - np.mean(noise[n > 0]), 0.0)
-        b = np.where(n > 0, mean * between / (between + noise), 0.0)
-        offset = b[inv]
-        res = z - A @ coef - offset
-        keep = np.abs(res) <= 4 * max(np.median(np.abs(res)) * 1.4826, 1e-6)
-    rms = float(np.sqrt(np.mean(res[keep] ** 2)))
-    known = dict(zip(lines.tolist(), b))
+    if len(lines) < 2:
+        return float("inf")
+    sums = np.bincount(inv, d - d.mean())
+    var = len(lines) / (len(lines) - 1) * (sums ** 2).sum() / len(d) ** 2
+    return float(np.sqrt(var + top_sem ** 2))
 
-    def top_at(q: np.ndarray, q_line: np.ndarray) -> np.ndarray:
-        off = np.array([known.get(k, 0.0) for k in q_line.tolist()])
-        return basis(q) @ coef + off
-    return top_at, rms
+
+def _local_median(xy: np.ndarray, d: np.ndarray, radius_mm: float) -> np.ndarray:
+    """(N,) the median of ``d`` over the points within ``radius_mm`` of each (``xy`` (N, 2)):
+    the depth a point's bias zone is set by, not its own noisy one (which would keep the
+    shallow-reading points near a wall and drop the deep-reading ones)."""
+    near = cKDTree(xy).query_ball_point(xy, radius_mm)
+    return np.array([np.median(d[i]) for i in near])
 
 
 def _line_terms(x, y, d, line, kernel_mm: float) -> tuple[np.ndarray, np.ndarray]:
