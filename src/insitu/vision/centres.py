@@ -12,6 +12,7 @@ columns, found from the image's structure when not given (:func:`line_direction`
 
 from __future__ import annotations
 
+import inspect
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field, replace
 
@@ -40,6 +41,7 @@ from insitu.vision.profile import (
     gather,
     saturation_level,
 )
+from insitu.vision.rims import cut_cores
 from insitu.vision.steger import gaussian_peak, steger
 from insitu.vision.tracks import AmbiguousStripe
 
@@ -93,7 +95,8 @@ CENTRE_METHODS: dict[str, CentreMethod] = {
     "gaussian": CentreMethod(gaussian_peak, ("extend_ends",),
                              "3-point Gaussian peak fit per column"),
     "steger": CentreMethod(steger, ("extend_ends",),
-                           "Steger's Hessian ridge detector (ours, the default)"),
+                           "Steger's Hessian ridge detector (ours, the default)",
+                           {"across": True}),
 }
 
 
@@ -154,8 +157,10 @@ def _check(method: str, direction: str | None) -> None:
 
 def _centres_in(li: LaserImage, method, direction, band, clipped, kw,
                 colour: bool = False) -> LineCentres:
-    """:func:`line_centres` in the laser's light ``li``; colour: the gaps of the stripe
-    filled from the laser channel's excess over the others
+    """:func:`line_centres` in the laser's light ``li``; colour (a photograph): the centres
+    kept on the stripe's course (:mod:`insitu.vision.course`), those of clipped cores cut by a
+    dark mark's edge moved to the line (:func:`~insitu.vision.rims.cut_cores`), and the gaps
+    of the stripe filled from the laser channel's excess over the others
     (:func:`~insitu.vision.course.fill_gaps`)."""
     fn = CENTRE_METHODS[method].find
     img, allow = li.gray, li.allow
@@ -165,10 +170,12 @@ def _centres_in(li: LaserImage, method, direction, band, clipped, kw,
         return dict(kw, scale=fs, **({"saturation": clipped * fs} if clipped < 1 else {}))
 
     in_sum = li.total is not None and _in_sum(li, direction, band, allow, kw, scaled)
-    white = {"white": li.bgr.min(axis=2) >= WHITE * li.full_scale} if in_sum and \
+    masks = {"white": li.bgr.min(axis=2) >= WHITE * li.full_scale} if in_sum and \
         li.bgr is not None else {}
+    if masks and method in _FLAT_TOPS:
+        masks["clip"] = li.bgr.max(axis=2) >= clipped * li.full_scale
     c = _along(fn, li.total if in_sum else img, direction, band, allow,
-               scaled((3 if in_sum else 1) * li.full_scale) | white)
+               scaled((3 if in_sum else 1) * li.full_scale) | masks)
     if in_sum:
         c = replace(c, peak=c.peak / 3, contrast=c.contrast / 3, full_scale=li.full_scale)
     if colour and li.bgr is not None:
@@ -176,6 +183,8 @@ def _centres_in(li: LaserImage, method, direction, band, clipped, kw,
                      direction == "rows", colour_reach(img.shape)[0])
     if colour:
         c = on_course(in_frame(c, img.shape), direction == "rows", COURSE * min(img.shape))
+        c = cut_cores(c, li.total if in_sum else img, clipped * (3 if in_sum else 1)
+                      * li.full_scale, direction == "rows")
     scan = c.u if direction == "rows" else c.v
     if colour and li.bgr is not None and 1 < len(c) < np.ptp(scan) + 1:        # gaps
         c = fill_gaps(c, _in_excess(li, c, fn, direction, scaled), direction == "rows")
@@ -239,6 +248,14 @@ def _joined(starts: np.ndarray, ends: np.ndarray) -> list[tuple[int, int]]:
     return [(a, b) for a, b in out]
 
 
+_FLAT_TOPS = ("gaussian",)
+"""Methods given a colour frame's pixels clipped in some channel (``clip``) when it is measured
+in the sum of its channels (:func:`~insitu.vision.steger.gaussian_peak`): a 3-point fit on
+the flat top that leaves in the sum jumps between its noisy maxima (up to ≈ 2 px; spent seed
+8008 of benchmarks/clipped_white.py). Steger's smoothing and the gray centroid's sum are
+not moved by it."""
+
+
 _DETECTION = ("band", "min_peak", "min_contrast", "snr", "continuity", "extend_ends", "upper",
               "min_run", "ridge", "noise", "median", "window")
 
@@ -258,14 +275,23 @@ def _in_sum(li: LaserImage, direction, band, allow, kw, scaled) -> bool:
         every = (slice(None), slice(None))
     allow = None if allow is None else allow[every]
     c = _along(gray_centroid, li.gray[every], direction, band, allow,
-               scaled(li.full_scale) | probe)
+               _gray(scaled(li.full_scale)) | probe)
     if len(c) and np.mean(c.saturated) > 0.5:
         return True
     t = _along(gray_centroid, li.total[every], direction, band, allow,
-               scaled(3 * li.full_scale) | probe)
+               _gray(scaled(3 * li.full_scale)) | probe)
     if len(t) and np.mean(_clipped_at(li.gray[every], t, scaled(li.full_scale))) > 0.5:
         return True
     return _stripe_length(t, direction) > _stripe_length(c, direction)
+
+
+def _gray(kw: dict) -> dict:
+    """The keywords of ``kw`` that :func:`gray_centroid` takes (a method's own, such as
+    Steger's ``across``, left out)."""
+    return {k: v for k, v in kw.items() if k in _GRAY_KEYS}
+
+
+_GRAY_KEYS = frozenset(inspect.signature(gray_centroid).parameters)
 
 
 def _clipped_at(img: np.ndarray, c: LineCentres, kw) -> np.ndarray:
@@ -305,7 +331,7 @@ def _transposed(fn, img, direction, band, allow, kw) -> LineCentres:
     """``fn``'s centres of the line in ``img`` running ``direction``, in image coordinates."""
     if direction == "rows":
         return fn(img, band=band, allow=allow, **kw)
-    kw = dict(kw, white=kw["white"].T) if "white" in kw else kw
+    kw = dict(kw, **{k: kw[k].T for k in ("white", "clip") if k in kw})
     t = fn(cv2.transpose(img), band=band, allow=None if allow is None else allow.T, **kw)
     return LineCentres(t.v, t.u, t.peak, t.width, t.contrast, t.saturated, t.ambiguous,
                        t.full_scale)

@@ -36,6 +36,11 @@ from insitu.vision.profile import (
     saturation_level,
 )
 
+FLAT_PX = 2.5
+"""Farthest (px) a flat top's centre (``clip``) may lie from the 3-point fit on it: the fit
+jumps between the top's noisy maxima, up to ≈ 2.2 px on a top 6 px long (spent seed 8008);
+a centre farther is not the top's own (the halo's clipped edge of a bright square beside
+the stripe, spent seed 5003), and the fit is kept."""
 _M = 3          # candidate rows: the detected peak ± _M
 _T_MAX = 0.6    # |t·n| ≤ 0.5 px, plus room for the Taylor step's overshoot near pixel borders
 
@@ -132,12 +137,17 @@ def gaussian_peak(image: np.ndarray, min_peak: float = 40.0, window: int = 12, m
                   continuity: bool = True, saturation: float | None = None,
                   extend_ends: bool = True, upper: int = 0, scale: float | None = None,
                   allow=None, min_run: int = 0, ridge: bool = False,
-                  noise: float | None = None, white=None) -> LineCentres:
+                  noise: float | None = None, white=None, clip=None) -> LineCentres:
     """Per-column Gaussian peak: 3-point log-parabola through the raw maximum and its two
     neighbours (background subtracted). Saturated or degenerate columns: the plateau's centre
     from a log-parabola fitted to its unsaturated flanks, else the centroid of the pixels above
     half the maximum. Detection on the median-filtered image; the fit on the raw ``image``.
-    Arguments as :func:`gray_centroid`; width: FWHM px.
+    clip: (H, W) bool, pixels counted saturated besides those at ``saturation``, in a column
+    with none at it where their run through the maximum ends inside the band (a colour frame
+    measured in the sum of its channels: where one channel is clipped, the sum is flat topped
+    below its own full scale; a halo clipped wider than the band is left to the fit); the
+    3-point fit is kept where that centre lies more than :data:`FLAT_PX` from it. Other
+    arguments as :func:`gray_centroid`; width: FWHM px.
     """
     img = as_image(image)
     det = detect(img, median, band, window, min_peak, min_contrast, snr, continuity,
@@ -151,21 +161,28 @@ def gaussian_peak(image: np.ndarray, min_peak: float = 40.0, window: int = 12, m
     j = w - 2 + np.argmax(g[w - 2:w + 3], axis=0)
     a, b, d = (np.take_along_axis(g, (j + s)[None, :], 0)[0] for s in (-1, 0, 1))
     peak = np.take_along_axis(raw, j[None, :], 0)[0]
-    saturated = peak >= sat
+    saturated, flat = peak >= sat, raw >= sat
+    if clip is not None:          # a flat top below full scale, both its flanks in the band
+        top = _segment(gather(clip, r[None, :] + x, c)[0] > 0, j)
+        flat = flat | (top & ~(top[0] | top[-1] | flat.any(axis=0)))
+    on_top = np.take_along_axis(flat, j[None, :], 0)[0] & ~saturated
     la, lb, ld = (np.log(np.maximum(t, 0.5 * unit)) for t in (a, b, d))
     den = la - 2 * lb + ld
     with np.errstate(divide="ignore", invalid="ignore"):
         delta = 0.5 * (la - ld) / den
         width = np.nan_to_num(FWHM_PER_SIGMA * np.sqrt(-1.0 / den))
-    fit = ~saturated & (den < 0) & (np.abs(delta) <= 1)
-    v = r + (j - w) + np.where(fit, delta, 0.0)
-    rest = ~fit
+    fit = (den < 0) & (np.abs(delta) <= 1)
+    v = r + (j - w) + np.where(fit & ~saturated, delta, 0.0)
+    rest = ~fit | saturated | on_top
     if rest.any():
         gs, ins = g[:, rest], inside[:, rest]
-        v[rest] = r[rest] + _plateau_centre(raw[:, rest], ins, x, raw[:, rest] >= sat,
-                                            det.noise, unit)
         top = gs.max(axis=0)
-        width[rest] = fwhm(gs, ins, top - det.contrast[rest], top)
+        flank = r[rest] + _plateau_centre(raw[:, rest], ins, x, flat[:, rest], det.noise, unit)
+        own = (fit & on_top)[rest] & ~(np.abs(flank - v[rest]) <= FLAT_PX)
+        v[rest] = np.where(own, v[rest], flank)
+        width[rest] = np.where(own, width[rest], fwhm(gs, ins, top - det.contrast[rest], top))
+        on_top[rest] &= ~own
+    saturated = saturated | on_top
     return LineCentres(c.astype(np.float64), v.astype(np.float64), peak.astype(np.float64),
                        width.astype(np.float64), det.contrast.astype(np.float64), saturated,
                        det.ambiguous, det.full_scale)
@@ -257,13 +274,28 @@ def _normals(Iuu, Ivv, Iuv):
     return lam, half + root, np.where(flat, 0.0, nu / norm), np.where(flat, 1.0, nv / norm)
 
 
+def _down_column(Iv, Ivv, ok, min_curvature, k, found, bu, bv, bt):
+    """:func:`steger`'s ``across``: for the columns not ``found``, the strongest row (n, 2M+1)
+    whose second derivative down the column is ≤ −min_curvature and whose Taylor step t =
+    −Iv / Ivv stays within the pixel; k, found, the normal (bu, bv) and t per column (n,)."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t1 = -Iv / Ivv
+        ok1 = (Ivv <= -min_curvature) & (np.abs(t1) <= _T_MAX)
+    ok1[:, [0, -1]] = False
+    lost = ~found & ok1.any(axis=1)
+    k1 = np.argmax(np.where(ok1, -Ivv, -np.inf), axis=1)
+    each = np.arange(len(k))
+    return (np.where(lost, k1, k), found | lost, np.where(lost, 0.0, bu),
+            np.where(lost, 1.0, bv), np.where(lost, t1[each, k1], bt))
+
+
 def steger(image: np.ndarray, sigma: float | None = None, min_peak: float = 40.0,
            window: int = 12, median: int = 3, *, band=None, min_contrast: float = 20.0,
            snr: float = 6.0, continuity: bool = True, saturation: float | None = None,
            min_curvature: float | None = None, extend_ends: bool = True,
            upper: int = 0, scale: float | None = None, allow=None,
            min_run: int = 0, ridge: bool = False, noise: float | None = None,
-           white=None) -> LineCentres:
+           white=None, across: bool = False) -> LineCentres:
     """Steger centres of a line running along the rows of ``image`` (tilts to ≈ 60° work).
 
     Per column: Gaussian derivatives at the 7 rows around the detected peak; the Hessian's
@@ -276,7 +308,10 @@ def steger(image: np.ndarray, sigma: float | None = None, min_peak: float = 40.0
     image: (H, W) uint8/uint16/float32. sigma: Gaussian scale, px (None: σ = max(1, FWHM/2√3)
     from the median FWHM, Steger's σ ≥ w/√3 for a bar of half-width w). min_curvature: least
     -λ, gray values/px² (None: 0.1 · min_contrast / σ², min_contrast of full scale as
-    detect takes it). Other keywords as gray_centroid.
+    detect takes it). across: a column with no line pixel by the Hessian's test (an albedo
+    edge across the line, where the derivatives along u outweigh those across) is measured
+    down the column alone (n = (0, 1)), where its pixel passes that test in one dimension.
+    Other keywords as gray_centroid.
     width: FWHM px of the filtered column. Within ≈ 3.5σ of the frame's border the clipped
     patch biases the centre.
     """
@@ -308,6 +343,8 @@ def steger(image: np.ndarray, sigma: float | None = None, min_peak: float = 40.0
         return a[each, kk]
 
     bu, bv, bt = at(nu, k), at(nv, k), at(t, k)
+    if across:
+        k, found, bu, bv, bt = _down_column(Iv, Ivv, ok, min_curvature, k, found, bu, bv, bt)
     gcol = bu[:, None] * Iu + bv[:, None] * Iv                    # n·∇I down the column
     dcol = bu[:, None] * Iuv + bv[:, None] * Ivv                  # its v-derivative
     (y0, d0), (yn, dn), (yp, dp) = ((at(gcol, k + i), at(dcol, k + i)) for i in (0, 1, -1))
