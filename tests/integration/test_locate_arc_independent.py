@@ -76,3 +76,37 @@ def test_the_posed_arc_is_located_honestly_or_refused(posed_arc, framed, opened)
     err = rim_moved(cad.rim, pose_matrix(b.x_mm, b.y_mm, b.angle_deg), pose_matrix(*truth))
     turn = abs((b.angle_deg - truth[2] + 180.0) % 360.0 - 180.0)
     assert err <= 3 * b.rim_sigma_mm and err < 0.10 and turn < 0.10, (err, b.rim_sigma_mm)
+
+
+def test_its_own_scan_and_frame_make_a_reference(posed_arc):
+    """The recording's own scan (lines 1 mm apart) and room-light frame as a reference: the
+    frame shows the two sides whose walls the camera sees, each fitted along more than 30 mm
+    within 0.03 mm of the true outline and checked by the lines; the two whose walls face
+    away (the top against the table, alike in grey) give none. The scan located against it
+    (the identity) is accepted within 3σ, or refused naming what would pin it down."""
+    from scipy.spatial import cKDTree
+
+    from insitu.locate.image_edges import outline
+    from insitu.locate.outline_fit import checked
+    from insitu.locate.reference import reference_from_cloud
+
+    cloud, cad, camera, frame, truth = posed_arc
+    ref = reference_from_cloud(cloud.points, "scan", image=frame, camera=camera,
+                               lines=cloud.attributes["line"])
+    T = pose_matrix(*truth)
+    true_xy = outline(cad.heights).points[:, :2] @ T[:2, :2].T + T[:2, 3]
+    tree = cKDTree(true_xy)
+    long = [q for q in ref.fitted.pieces if q.length_mm > 30.0]
+    assert len(long) == 2 and all(checked(q) for q in long), ref.fitted.pieces
+    assert abs(long[0].axis @ long[1].axis) < 0.02                 # two sides at a corner
+    for q in long:                          # outward of the true outline, on average
+        pts, nrm = q.sample(0.5)
+        assert abs(np.einsum("ij,ij->i", pts - true_xy[tree.query(pts)[1]], nrm).mean()) < 0.03
+    try:
+        b = locate_part(ref, cloud.points, LocateSettings(), (-90, 90),
+                        cloud.attributes["line"], camera, frame).best
+    except LocateRefused as e:
+        assert "what would pin it down" in str(e), str(e)
+        return
+    err = rim_moved(ref.rim, pose_matrix(b.x_mm, b.y_mm, b.angle_deg), np.eye(4))
+    assert err <= 3 * b.rim_sigma_mm and err < 0.05, (err, b.rim_sigma_mm)

@@ -4,16 +4,13 @@ room-light frame, fitted with straight lines and circles, checked against the cr
 A first scan of the part as its reference gives a height image whose edges are where its
 lines ended (a little inside, along each line) smoothed by the splat: good enough to find the
 part, not to place it to 0.05 mm. Its room-light frame (the same camera, laser off) shows the
-same edges whole. So: the splat's rough outline (:func:`insitu.locate.image_edges.outline`) is
-projected into the frame (the reference's frame is the scan's world frame); along each
-point's normal the steepest grey step within ``SEARCH_PX`` is its edge, cut at the point's
-height (as :func:`insitu.locate.image_edges.align_image` finds a later part's). The edge
-points, chained (:data:`LINK_MM` apart, their normals within :data:`TURN_DEG`), are fitted
-piece by piece with a line or else a circle (least squares, Kåsa's algebraic circle), a chain
-neither fits within :data:`FIT_MM` being split where it leaves its chord furthest (a corner);
-pieces shorter than :data:`MIN_PIECE_MM` (rounded corners) are left out. The pieces, sampled
-every ``SPACING_MM``, are the reference's outline; :func:`stamp` redraws the height image's
-edges on them, so the scan lines' edge step (:mod:`insitu.locate.edge_align`) finds them there.
+same edges whole. So the frame's edges about the splat's rough outline
+(:func:`insitu.locate.image_edges.outline`, projected into the frame: the reference's frame is
+the scan's world frame) are fitted piece by piece with lines and circles
+(:mod:`insitu.locate.pieces`), looked for again along each
+(:mod:`insitu.locate.frame_pieces`). The pieces, sampled every ``SPACING_MM``, are the
+reference's outline; :func:`stamp` redraws the height image's edges on them, so the scan
+lines' edge step (:mod:`insitu.locate.edge_align`) finds them there.
 
 The crossed scan checks each piece: the scan's edge samples by it (lines crossing it) and how
 far inside it they end along their lines (the inset, about the same for every edge when the
@@ -29,25 +26,12 @@ from scipy.spatial import cKDTree
 
 from insitu.geometry.camera import CameraModel
 from insitu.locate.edge_align import MIN_COS, EdgeSamples
+from insitu.locate.frame_pieces import frame_pieces
 from insitu.locate.height_image import HeightImage, sample
-from insitu.locate.image_edges import (
-    SPACING_MM,
-    STEP_PX,
-    WALL_PX,
-    Outline,
-    edge_heights,
-    edge_points,
-    frame_of,
-    outline,
-    visible,
-    wall_px,
-)
+from insitu.locate.image_edges import SPACING_MM, Outline, edge_heights, frame_of, outline
 from insitu.locate.pieces import Piece, fitted
 from insitu.locate.uncertainty import reference_floor
 
-SEARCH_PX = 6.0
-"""How far from the splat's rough edge the frame's is looked for (its edges lie up to a few
-tenths of a mm off)."""
 MIN_CHECK = 3
 GRAZING_DEG = 45.0
 """A piece whose top the camera sees this obliquely or more (:func:`view_deg`) counts as
@@ -63,24 +47,10 @@ at too low a height lies outward along the camera's ray (0.46 mm a mm of height 
 25° view)."""
 NEAREST_MM = 0.15
 """A scan point within this of a place inside an edge gives the top's height there."""
-ROUGH_MM = 0.5
-"""A frame's piece must run this close to the splat's rough outline (whose edges lie up to
-0.3 mm out: the table beside a wall is in shadow)."""
 NEAR_MM = 0.5
 """Scan edge samples this close to a piece (across it) check it."""
 SCAN_SPACING_MM = 0.5
 """About how far apart along an edge a crossed scan's lines end on it."""
-BESIDE_MM = (0.3, 1.2)
-"""A frame's piece is an edge only where the scan's top ends at it: of the scan's points on
-the part this far beside it, those outward lie beyond the top (the table, left out of the
-part's points) or a step below it (more than ``STEP_MM``). Where the top runs on across a
-piece, its grey step is a texture's, a shadow's or a slope's (the independent renderer's arc:
-two such pieces 1.5–1.9 mm off its edge, fitted to 0.04–0.08 mm rms); 0.3 mm is 3σ of a piece
-the scan does not check (:data:`insitu.locate.uncertainty.SCAN_REFERENCE_MM`)."""
-STEP_MM = 1.0
-CONTINUED = 0.5
-"""A piece is left out where the scan's points on the top beyond it number more than this
-share of those inside it."""
 
 
 @dataclass(frozen=True)
@@ -118,8 +88,8 @@ def fit_outline(heights: HeightImage, image: np.ndarray, camera: CameraModel,
     tops = _tops(heights, part)
     rough = replace(rough, points=np.column_stack([rough.points[:, :2], top_heights(
         heights, rough.points[:, :2], rough.normals)]))
-    pieces, found, seen, left_out = _frame_pieces(heights, frame_of(image), camera, rough,
-                                                  None if part is None else tops, part)
+    pieces, found, seen, left_out = frame_pieces(heights, frame_of(image), camera, rough,
+                                                 tops, part is not None, part)
     if seen < 50:
         return f"{seen} of the outline's {len(rough.points)} points in the camera's view"
     covered = found / len(rough.points)
@@ -138,34 +108,6 @@ def fit_outline(heights: HeightImage, image: np.ndarray, camera: CameraModel,
     return OutlineFit(_sampled(heights, pieces, tops), tuple(pieces), float(covered), inset,
                       _sampled(heights, [q.moved(-q.offset_mm if np.isfinite(q.offset_mm)
                                                  else -shift) for q in pieces], tops))
-
-
-def _frame_pieces(heights: HeightImage, frame, camera: CameraModel, rough: Outline,
-                  tops=None, part: np.ndarray | None = None
-                  ) -> tuple[list[Piece], int, int, int]:
-    """(the pieces fitted to the frame's edges found within ``SEARCH_PX`` of the ``rough``
-    outline's points (those in view, not on a wall seen edge-on) that run along it, how many edge
-    points were found, of how many in view, how many pieces were left out). ``tops``: the top's
-    heights at edge points (:func:`_tops`), at which each edge point's ray is cut again (twice: its
-    height where it was found); None: cut at the rough outline's heights. ``part`` (N, 3): the
-    scan's points on the part; a piece the top runs on beyond is left out (:func:`continued`)."""
-    width = wall_px(rough, camera, 0.0, np.zeros(3))
-    seen = visible(heights, rough, camera, 0.0, np.zeros(3)) & ~((width > 0) & (width < WALL_PX))
-    if seen.sum() < 50:
-        return [], 0, int(seen.sum()), 0
-    p, n = rough.points[seen], rough.normals[seen]
-    offs = np.arange(-SEARCH_PX, SEARCH_PX + 1e-9, STEP_PX)
-    found, e, _ = edge_points(frame, camera, p, n, offs,
-                              np.where(width[seen] > 0, width[seen] / 2, np.inf))
-    e, n, z = e[found], n[found], p[found, 2]
-    if tops is not None and len(e):
-        o, dirs = camera.rays(camera.project(np.column_stack([e, z])))
-        for _ in range(2):
-            z = tops(e, n)
-            e = o[:2] + dirs[:, :2] * ((z - o[2]) / dirs[:, 2])[:, None]
-    pieces = [q for q in fitted(e, n, z, SPACING_MM) if _near_rough(q, rough)]
-    kept = pieces if part is None else where_the_top_ends(pieces, part)
-    return kept, int(found.sum()), int(seen.sum()), len(pieces) - len(kept)
 
 
 def _sampled(heights: HeightImage, pieces: list[Piece], tops) -> Outline:
@@ -254,32 +196,6 @@ def top_heights(heights: HeightImage, edge: np.ndarray, n: np.ndarray) -> np.nda
     return z_mean - slope * d_mean
 
 
-def where_the_top_ends(pieces: list[Piece], part: np.ndarray) -> list[Piece]:
-    """The frame's ``pieces`` at which the scan's top, its points on the part (N, 3), ends:
-    :func:`continued` at most ``CONTINUED``."""
-    return [q for q in pieces if continued(q, part) <= CONTINUED]
-
-
-def continued(piece: Piece, part: np.ndarray) -> float:
-    """How many of the scan's points on the part (N, 3) lie ``BESIDE_MM`` outward of
-    ``piece`` less than ``STEP_MM`` below its height, over how many lie as far inside it
-    (0: the top ends at it; about 1: it runs on across it)."""
-    pts, nrm = piece.sample(SPACING_MM)
-    tree = cKDTree(part[:, :2])
-    mid, half = np.mean(BESIDE_MM), np.ptp(BESIDE_MM) / 2
-    near = [np.unique(np.concatenate(tree.query_ball_point(pts + side * mid * nrm, half))
-                      .astype(np.int64)) for side in (-1.0, 1.0)]
-    inside, outside = near[0], near[1][part[near[1], 2] > piece.z_mm - STEP_MM]
-    return len(outside) / max(len(inside), 1)
-
-
-def _near_rough(piece: Piece, rough: Outline) -> bool:
-    """Whether ``piece`` runs along the rough outline (within ``ROUGH_MM``, median): not the
-    foot of a wall the camera sees, or a shadow's edge."""
-    pts, _ = piece.sample(SPACING_MM)
-    return bool(np.median(cKDTree(rough.points[:, :2]).query(pts)[0]) < ROUGH_MM)
-
-
 def _from_scan(pieces: list[Piece], rough: Outline, scan: EdgeSamples,
                inset_mm: float) -> list[Piece]:
     """Pieces where the frame showed none (a wall the camera sees edge-on, two tops alike):
@@ -295,11 +211,6 @@ def _from_scan(pieces: list[Piece], rough: Outline, scan: EdgeSamples,
     return [replace(q, offset_mm=0.0) for q in
             fitted(xy[keep], rough.normals[k][keep], scan.points[keep, 2], SCAN_SPACING_MM,
                     "scan")]
-
-
-
-
-
 
 
 def _anchored(pieces: list[Piece], scan: EdgeSamples) -> tuple[list[Piece], float]:

@@ -33,6 +33,11 @@ MERGE_DEG = 2.0
 CUT_SHARE = 0.1
 """A chain fits a line or circle when its biweight cuts at most this share of its points (a
 corner's other side would be half of them)."""
+LOOSE = (0.25, 0.15)
+"""(share cut, rms mm) within which a chain gives a piece to look along again: edge points
+found about a rough outline scatter more than those found about a fitted edge (a scan's lines
+1 mm apart: the rough outline 1.1 mm in to 0.4 mm out, 14–19 % of a side's points 0.25–0.7
+mm off, from the wall's foot or the top's texture)."""
 TUKEY = 4.685
 """Tukey's biweight cut, in robust σ of the residuals (95 % efficient on normal scatter)."""
 ROBUST_STEPS = 8
@@ -100,11 +105,13 @@ class Piece:
 
 
 def fitted(xy: np.ndarray, normals: np.ndarray, z: np.ndarray, spacing_mm: float,
-           source: str = "frame") -> list[Piece]:
+           source: str = "frame", loose: bool = False) -> list[Piece]:
     """The pieces fitted to edge points ``xy`` (K, 2) (outward ``normals`` (K, 2), heights
-    ``z`` (K,)) found about ``spacing_mm`` apart along their edges."""
+    ``z`` (K,)) found about ``spacing_mm`` apart along their edges; ``loose``: within
+    :data:`LOOSE` (where to look again for an edge, not the edge)."""
     return merged([piece for chain in chains(xy, normals, z) for piece in
-                   pieces(xy[chain], normals[chain], z[chain], spacing_mm, source)])
+                   pieces(xy[chain], normals[chain], z[chain], spacing_mm, source,
+                          loose=loose)])
 
 
 def chains(xy: np.ndarray, normals: np.ndarray, z: np.ndarray) -> list[np.ndarray]:
@@ -122,11 +129,11 @@ def chains(xy: np.ndarray, normals: np.ndarray, z: np.ndarray) -> list[np.ndarra
 
 
 def pieces(xy: np.ndarray, normals: np.ndarray, z: np.ndarray, spacing_mm: float,
-           source: str, depth: int = 0) -> list[Piece]:
+           source: str, depth: int = 0, loose: bool = False) -> list[Piece]:
     """A line, else a circle fitted robustly to a chain's points ``xy`` (K, 2) (outward
     ``normals`` (K, 2), heights ``z`` (K,), found ``spacing_mm`` apart along it); split at
-    its corner when neither fits. None from a chain shorter than ``MIN_PIECE_MM`` or with
-    fewer points than ``DENSE`` of its length's."""
+    its corner when neither fits (``loose``: within :data:`LOOSE`). None from a chain
+    shorter than ``MIN_PIECE_MM`` or with fewer points than ``DENSE`` of its length's."""
     if len(xy) < 5:
         return []
     m, axis, r_line, w = robust_line(xy)
@@ -134,7 +141,7 @@ def pieces(xy: np.ndarray, normals: np.ndarray, z: np.ndarray, spacing_mm: float
     if np.ptp(t) < MIN_PIECE_MM or len(xy) < DENSE * np.ptp(t) / spacing_mm:
         return []
     left = np.array([-axis[1], axis[0]])
-    if fits(r_line, w):
+    if fits(r_line, w, loose):
         sign = 1.0 if np.mean(normals @ left) > 0 else -1.0
         length = float(np.ptp(t[w > 0])) if (w > 0).sum() > 1 else float(np.ptp(t))
         sigma, tilt = piece_sigma(r_line, w, length)
@@ -142,7 +149,7 @@ def pieces(xy: np.ndarray, normals: np.ndarray, z: np.ndarray, spacing_mm: float
                       float(np.ptp(t)), rms(r_line[w > 0]), len(xy), float(np.median(z)), source,
                       sigma, tilt)]
     c, radius, r_circle, wc = robust_circle(xy)
-    if np.isfinite(radius) and fits(r_circle, wc):
+    if np.isfinite(radius) and fits(r_circle, wc, loose):
         radial = (xy - c) / np.maximum(np.linalg.norm(xy - c, axis=1, keepdims=True), 1e-12)
         ang = np.unwrap(np.arctan2(radial[:, 1], radial[:, 0])[np.argsort(t)])
         span = (float(ang.min()), float(ang.max()))
@@ -158,8 +165,8 @@ def pieces(xy: np.ndarray, normals: np.ndarray, z: np.ndarray, spacing_mm: float
     corner = np.argmax(np.abs(r_line - np.interp(t, [t.min(), t.max()],
                                                  [r_line[np.argmin(t)], r_line[np.argmax(t)]])))
     cut = t <= t[corner]
-    return (pieces(xy[cut], normals[cut], z[cut], spacing_mm, source, depth + 1)
-            + pieces(xy[~cut], normals[~cut], z[~cut], spacing_mm, source, depth + 1))
+    return (pieces(xy[cut], normals[cut], z[cut], spacing_mm, source, depth + 1, loose)
+            + pieces(xy[~cut], normals[~cut], z[~cut], spacing_mm, source, depth + 1, loose))
 
 
 def robust_line(xy: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -247,11 +254,13 @@ def _pooled(a: float, b: float) -> float:
     return float(1.0 / np.sqrt(1.0 / max(a, 1e-9) ** 2 + 1.0 / max(b, 1e-9) ** 2))
 
 
-def fits(r: np.ndarray, w: np.ndarray) -> bool:
+def fits(r: np.ndarray, w: np.ndarray, loose: bool = False) -> bool:
     """Whether a line or circle fits points with residuals ``r`` (K,) and biweights ``w``
-    (K,): at most ``CUT_SHARE`` of them cut, the rest within ``FIT_MM`` (rms)."""
+    (K,): at most ``CUT_SHARE`` of them cut, the rest within ``FIT_MM`` (rms); ``loose``:
+    within :data:`LOOSE`."""
     kept = w > 0
-    return bool(kept.mean() >= 1 - CUT_SHARE and rms(r[kept]) <= FIT_MM)
+    cut, fit = LOOSE if loose else (CUT_SHARE, FIT_MM)
+    return bool(kept.mean() >= 1 - cut and rms(r[kept]) <= fit)
 
 
 def rms(r: np.ndarray) -> float:

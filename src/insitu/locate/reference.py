@@ -204,7 +204,7 @@ def reference_from_cloud(points: np.ndarray, source: str, band_mm: float = 0.5,
     pcd.orient_normals_to_align_with_direction([0.0, 0.0, 1.0])
     spacing = float(np.median(cKDTree(part).query(part[::max(1, len(part) // 2000)], k=2)[0][:, 1]))
     base = float(table) if table is not None else float(part[:, 2].min())
-    heights, fit = splat_image(pts, part, base), None
+    heights, fit = splat_image(pts, part, base, lines=lines), None
     if image is not None and camera is not None:
         scan = (None if lines is None else
                 edge_samples(pts, np.asarray(lines), ~above_table(pts, table, band_mm), camera))
