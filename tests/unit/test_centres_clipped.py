@@ -183,3 +183,27 @@ def test_a_wide_white_core_under_jpeg_is_centred_on_its_plateau(method):
     ok, jpg = cv2.imencode(".jpg", cv2.merge(raw), [cv2.IMWRITE_JPEG_QUALITY, 90])
     err = errors(photo_centres(cv2.imdecode(jpg, cv2.IMREAD_COLOR), method), true)[100:860]
     assert np.isfinite(err).mean() >= 0.85 and np.nanmax(np.abs(err)) <= 2.0
+
+
+@pytest.mark.parametrize("method", list(CENTRE_METHODS))
+def test_a_core_standing_out_in_blue_alone_above_a_halo_clipping_red_and_green(method):
+    """A red stripe with a strong 17 px halo on a bright board: red is clipped some 20 px
+    either side of the line, green over the core and its flanks, and the core (white) stands
+    some 40 gray values over its sides in blue alone. Two clipped channels carry no noise, so
+    in the sum the core is held to blue's noise floor (detect's ``quiet``); held to the three
+    channels' floor, it is found on a third of the columns."""
+    rng = np.random.default_rng(2)
+    yy, xx = np.mgrid[0:H, 0:W].astype(np.float32)
+    room = np.where((xx > 100) & (xx < 860) & (yy > 60) & (yy < 480), 200.0, 120.0)
+    true = 300.0 + 0.1 * (np.arange(W) - 480)
+    d = yy - true[None, :]
+    light = (3700 * np.exp(-0.5 * (d / 1.9) ** 2) + 400 * np.exp(-0.5 * (d / 17) ** 2)) \
+        * room / 200
+    raw = []
+    for c in (0.86 * room + 0.11 * light, 0.93 * room + 0.18 * light, room + light):  # B, G, R
+        noisy = c + rng.normal(0, 1.5, c.shape) * np.sqrt(np.maximum(c, 0) / 6 + 2)
+        raw.append(np.clip(noisy + 0.5, 0, 255).astype(np.uint8))
+    ok, jpg = cv2.imencode(".jpg", cv2.merge(raw), [cv2.IMWRITE_JPEG_QUALITY, 90])
+    err = errors(photo_centres(cv2.imdecode(jpg, cv2.IMREAD_COLOR), method), true)[110:850]
+    right = np.abs(np.nan_to_num(err, nan=99)) <= 5
+    assert right.mean() >= 0.9 and (np.isfinite(err) & ~right).mean() <= 0.01

@@ -32,6 +32,7 @@ from insitu.vision.laser_image import (
     colour_reach,
     excess,
     laser_image,
+    noise_sigma,
     ridges,
     shrink,
 )
@@ -133,8 +134,9 @@ def line_centres(image: np.ndarray, method: str = "gray", direction: str | None 
     channel "auto" is measured in its laser's channel, or in the sum of its channels when the
     laser's channel is clipped at most of the stripe's peaks (a halo clips it; the core clips
     white, the halo does not) or the sum holds the longer stripe (where it is clipped white, a
-    peak needs a third of the contrast: detect's ``white``); peak and contrast are then
-    the channels' mean, on the frame's scale. direction: "rows" (one
+    peak needs a third of the contrast, and where two channels are clipped the sum's noise
+    is the third's: detect's ``white``, ``quiet``); peak and contrast are then the channels'
+    mean, on the frame's scale. direction: "rows" (one
     point per column), "cols" (one per row: the frame is transposed and u, v swapped back) or
     None (auto, :func:`line_direction`). band: (lo, hi) allowed range of the cross coordinate
     per scan line (v per column, or u per row for "cols"). clipped: the fraction of full
@@ -170,10 +172,13 @@ def _centres_in(li: LaserImage, method, direction, band, clipped, kw,
         return dict(kw, scale=fs, **({"saturation": clipped * fs} if clipped < 1 else {}))
 
     in_sum = li.total is not None and _in_sum(li, direction, band, allow, kw, scaled)
-    masks = {"white": li.bgr.min(axis=2) >= WHITE * li.full_scale} if in_sum and \
-        li.bgr is not None else {}
+    masks = {}
+    if in_sum and li.bgr is not None:
+        b, g, r = cv2.split(li.bgr)
+        masks = {"white": cv2.min(cv2.min(b, g), r) >= WHITE * li.full_scale,
+                 "quiet": _quiet(li.bgr, li.total, clipped * li.full_scale)}
     if masks and method in _FLAT_TOPS:
-        masks["clip"] = li.bgr.max(axis=2) >= clipped * li.full_scale
+        masks["clip"] = cv2.max(cv2.max(b, g), r) >= clipped * li.full_scale
     c = _along(fn, li.total if in_sum else img, direction, band, allow,
                scaled((3 if in_sum else 1) * li.full_scale) | masks)
     if in_sum:
@@ -246,6 +251,24 @@ def _joined(starts: np.ndarray, ends: np.ndarray) -> list[tuple[int, int]]:
         else:
             out.append([a, b])
     return [(a, b) for a, b in out]
+
+
+def _quiet(bgr: np.ndarray, total: np.ndarray, level: float) -> np.ndarray:
+    """(H, W) float32: the noise of ``total``, the sum of ``bgr``'s channels, as a fraction
+    of its noise over the frame: where two channels are clipped (≥ ``level``), the third's
+    noise over the sum's (a clipped channel carries none), 1 elsewhere (detect's ``quiet``;
+    each sigma measured on the whole frame)."""
+    ch = cv2.split(bgr)
+    share = [min(noise_sigma(c) / max(noise_sigma(total), 1e-6), 1.0) for c in ch]
+    code = np.zeros(total.shape, np.uint8)                  # bit k: channel k clipped
+    for k, c in enumerate(ch):
+        cv2.bitwise_or(code, cv2.bitwise_and(cv2.compare(c, level, cv2.CMP_GE), 1 << k), dst=code)
+    lut = np.ones(256, np.float32)
+    for k in range(3):
+        for i in range(8):
+            if i | (1 << k) == 7:                         # the two others clipped
+                lut[i] = min(lut[i], share[k])
+    return cv2.LUT(code, lut)
 
 
 _FLAT_TOPS = ("gaussian",)
@@ -331,7 +354,7 @@ def _transposed(fn, img, direction, band, allow, kw) -> LineCentres:
     """``fn``'s centres of the line in ``img`` running ``direction``, in image coordinates."""
     if direction == "rows":
         return fn(img, band=band, allow=allow, **kw)
-    kw = dict(kw, **{k: kw[k].T for k in ("white", "clip") if k in kw})
+    kw = dict(kw, **{k: kw[k].T for k in ("white", "quiet", "clip") if k in kw})
     t = fn(cv2.transpose(img), band=band, allow=None if allow is None else allow.T, **kw)
     return LineCentres(t.v, t.u, t.peak, t.width, t.contrast, t.saturated, t.ambiguous,
                        t.full_scale)

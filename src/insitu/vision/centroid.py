@@ -18,7 +18,7 @@ def gray_centroid(image: np.ndarray, k: float = 0.5, min_peak: float = 40.0,
                   background: bool = False, extend_ends: bool = True,
                   upper: int = 0, scale: float | None = None, allow=None,
                   min_run: int = 0, ridge: bool = False,
-                  noise: float | None = None, white=None) -> LineCentres:
+                  noise: float | None = None, white=None, quiet=None) -> LineCentres:
     """Gray-centroid centres of a line running along the rows: Li et al.'s (§2.3, Eq. 7), or
     above the local background.
 
@@ -39,7 +39,7 @@ def gray_centroid(image: np.ndarray, k: float = 0.5, min_peak: float = 40.0,
     img = as_image(image)
     det = detect(img, median, band, window, min_peak, min_contrast, snr, continuity,
                  extend_ends=extend_ends, upper=upper, scale=scale, allow=allow,
-                 min_run=min_run, ridge=ridge, noise=noise, white=white)
+                 min_run=min_run, ridge=ridge, noise=noise, white=white, quiet=quiet)
     c, r, gmax = det.cols, det.row, det.gmax
     level = saturation_level(img, saturation, scale)
     if background and window is not None:

@@ -47,6 +47,10 @@ pre-filter, peak row per column, validity test, choice between two separated pea
 * white: (H, W) bool, where a colour frame measured in the sum of its channels is clipped
   white in all three: a peak there needs min_contrast / 3 (≥ snr · noise): a halo clipping
   two channels leaves a white core standing out in the third only.
+* quiet: (H, W) float32, within ``white``: the sum's noise as a fraction of ``noise``
+  (≤ 1): where two of its channels are clipped they carry none, and it is the third's own. A
+  halo that clips the laser's channel and lifts a second to full scale leaves the core's peak
+  in the third only, over a sum as noisy as that channel, not as the three.
 
 A stripe's clipped core is a plateau: its row is the plateau's middle, its background is
 taken beyond the plateau, and the band the methods work in (``Detection.window``) grows by
@@ -167,7 +171,7 @@ def _half_width(pre, row, gmax, w, cols) -> np.ndarray:
 def detect(image, median=3, band=None, window=12, min_peak=40.0, min_contrast=20.0,
            snr=6.0, continuity=True, max_jump=4.0, decisive=1.25,
            extend_ends=True, upper=0, *, scale=None, allow=None,
-           min_run=0, ridge=False, noise=None, white=None) -> Detection:
+           min_run=0, ridge=False, noise=None, white=None, quiet=None) -> Detection:
     """Peak row per valid column of a line running along the rows (module docstring)."""
     img = as_image(image)
     fs = float(scale) if scale is not None else full_scale(img.dtype)
@@ -179,7 +183,7 @@ def detect(image, median=3, band=None, window=12, min_peak=40.0, min_contrast=20
     fill = np.iinfo(pre.dtype).min if pre.dtype.kind == "u" else -np.inf
     thr = max(min_contrast, snr * noise)
     least = thr if white is None else cv2.transpose(        # (W, H), as search is laid out
-        np.where(white, max(min_contrast / 3, snr * noise), thr).astype(np.float32))
+        np.where(white, _white_floor(min_contrast, snr, noise, quiet), thr).astype(np.float32))
     search, lo, span, searched, top = search_rows(pre, band, allow, fill, w if ridge else 0, least)
     def at(j, cols):                                 # the least contrast of peaks j, cols
         return least if white is None else least[cols, j]
@@ -235,6 +239,14 @@ def detect(image, median=3, band=None, window=12, min_peak=40.0, min_contrast=20
     wide = max(_percentile90(run[cols]) - 2, 0) // 2 if len(cols) else 0
     return Detection(cols, row[ok], gmax[ok], bg[ok], contrast[ok], ambiguous[ok], pre, noise,
                      carried[ok], w + wide, fs)
+
+
+def _white_floor(min_contrast, snr, noise, quiet):
+    """The least contrast of a peak where the frame is white: a third of min_contrast, not
+    below snr times the noise, a share of it where ``quiet`` gives one (detect's keywords)."""
+    if quiet is None:
+        return max(min_contrast / 3, snr * noise)
+    return np.maximum(min_contrast / 3, snr * noise * quiet)
 
 
 def raw_saturated(img, det: Detection, sat: float) -> np.ndarray:

@@ -137,7 +137,7 @@ def gaussian_peak(image: np.ndarray, min_peak: float = 40.0, window: int = 12, m
                   continuity: bool = True, saturation: float | None = None,
                   extend_ends: bool = True, upper: int = 0, scale: float | None = None,
                   allow=None, min_run: int = 0, ridge: bool = False,
-                  noise: float | None = None, white=None, clip=None) -> LineCentres:
+                  noise: float | None = None, white=None, quiet=None, clip=None) -> LineCentres:
     """Per-column Gaussian peak: 3-point log-parabola through the raw maximum and its two
     neighbours (background subtracted). Saturated or degenerate columns: the plateau's centre
     from a log-parabola fitted to its unsaturated flanks, else the centroid of the pixels above
@@ -152,7 +152,7 @@ def gaussian_peak(image: np.ndarray, min_peak: float = 40.0, window: int = 12, m
     img = as_image(image)
     det = detect(img, median, band, window, min_peak, min_contrast, snr, continuity,
                  extend_ends=extend_ends, upper=upper, scale=scale, allow=allow,
-                 min_run=min_run, ridge=ridge, noise=noise, white=white)
+                 min_run=min_run, ridge=ridge, noise=noise, white=white, quiet=quiet)
     c, r, bg, w, unit = det.cols, det.row, det.bg, det.window, det.full_scale / 255
     sat = saturation_level(img, saturation, scale)
     x = np.arange(-w, w + 1)[:, None]
@@ -295,7 +295,7 @@ def steger(image: np.ndarray, sigma: float | None = None, min_peak: float = 40.0
            min_curvature: float | None = None, extend_ends: bool = True,
            upper: int = 0, scale: float | None = None, allow=None,
            min_run: int = 0, ridge: bool = False, noise: float | None = None,
-           white=None, across: bool = False) -> LineCentres:
+           white=None, quiet=None, across: bool = False) -> LineCentres:
     """Steger centres of a line running along the rows of ``image`` (tilts to ≈ 60° work).
 
     Per column: Gaussian derivatives at the 7 rows around the detected peak; the Hessian's
@@ -318,7 +318,7 @@ def steger(image: np.ndarray, sigma: float | None = None, min_peak: float = 40.0
     img = as_image(image)
     det = detect(img, median, band, window, min_peak, min_contrast, snr, continuity,
                  extend_ends=extend_ends, upper=upper, scale=scale, allow=allow,
-                 min_run=min_run, ridge=ridge, noise=noise, white=white)
+                 min_run=min_run, ridge=ridge, noise=noise, white=white, quiet=quiet)
     c, r, n, w, unit = det.cols, det.row, len(det.cols), det.window, det.full_scale / 255
     x = np.arange(-w, w + 1)[:, None]
     g, inside = gather(det.pre, r[None, :] + x, c)
