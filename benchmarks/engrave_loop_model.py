@@ -2,8 +2,8 @@
 half hour of a simulated closed loop, to see what its settings do to the re-measures and the
 cells' spread.
 
-The pocket: 24 × 24 cells of 0.25 mm (6 × 6 mm) to 0.2 mm, the table's rate 10.57 µm a pass
-(beech's), the true one 1.33 × it within ±10 % per seed, ±12 % bands 1.5 mm apart (a
+The pocket: 24 × 24 cells of 0.25 mm (6 × 6 mm) to 0.2 mm, the table's rate for beech (5.3 µm
+a pass), the true one 1.33 × it within ±10 % per seed, ±12 % bands 1.5 mm apart (a
 wood's rings), 3 % of a pass's removal as its own noise per cell. A measurement of a cell:
 the truth plus an error that stays with the cell from scan to scan (5 µm σ), a fresh one
 (6 µm σ) and one the scan shares over the pocket (3 µm σ), its σ claimed as 7.7 µm (what the
@@ -21,10 +21,12 @@ import numpy as np
 from rich.console import Console
 from rich.table import Table
 
+from insitu.formats.materials import DEFAULT_MATERIALS
 from insitu.marking import engrave_plan as plan
 from insitu.marking.engrave_depth import MEASURED, DepthMap, PocketCells
 
-TARGET, NOMINAL, N = 0.2, 0.01057, 24
+TARGET, N = 0.2, 24
+NOMINAL = DEFAULT_MATERIALS.material("beech").depth_per_pass_mm(DEFAULT_MATERIALS.laser)
 
 
 def run(seed: int, speed: float) -> tuple[int, float, float]:

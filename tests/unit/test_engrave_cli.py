@@ -86,18 +86,19 @@ def test_the_summary_names_the_finishing_rounds_and_their_pen(tmp_path):
     from insitu.marking.engrave_record import EngraveAsk, EngraveRecord, RoundRecord
     from insitu.services.engrave import EngraveOutcome
 
-    pen, speed = finishing_pen(DEFAULT_MATERIALS.material("beech"), DEFAULT_MATERIALS.laser)
+    pen, speed = finishing_pen(DEFAULT_MATERIALS.material("stainless-steel"),
+                               DEFAULT_MATERIALS.laser)
     rounds = [RoundRecord(job=f"round-0{k}.json", layers=2, paths=9, passes=[[1]],
                           state="marked", finishing=fine,
                           finish=[[1]] if fine else None, finish_speed=speed,
                           finish_pen=pen.model_dump(mode="json") if fine else None)
               for k, fine in ((1, False), (2, True), (3, True))]
     ask = EngraveAsk(pattern="sq.svg", at_mm=(0, 0), depth_mm=0.2, rescan_every=10,
-                     material="beech")
+                     material="stainless-steel")
     rec = EngraveRecord(state="done", request=ask, material={}, nominal_rate_mm=0.01,
                         cells={}, history={}, rounds=rounds)
     with console.capture() as out:
         _summary(EngraveOutcome(rec, None), tmp_path)
     text = " ".join(out.get().split())
-    assert ("finishing passes in rounds 2, 3: engrave-wood-finish, 25 %, 40 kHz, 2000 mm/s"
+    assert ("finishing passes in rounds 2, 3: engrave-steel-finish, 80 %, 40 kHz, 1600 mm/s"
             in text)

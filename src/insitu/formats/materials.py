@@ -127,7 +127,7 @@ DEFAULT_MATERIALS = MaterialTable(materials=(
     Material(name="beech", description="beech, a hardwood, across the grain",
              threshold_j_cm2=0.7, penetration_um=1.6, hatch_mm=0.025,
              pen=Pen(name="engrave-wood", colour="#c08040", power_pct=25.0,
-                     frequency_khz=40.0, mark_speed_mm_s=1000.0),
+                     frequency_khz=40.0, mark_speed_mm_s=2000.0),
              source=_NS_FIBRE + "ablation rates of wood with Nd:YAG pulses (Panzner et al., "
              "Appl. Surf. Sci. 127–129 (1998) 787)"),
 ))

@@ -13,9 +13,10 @@ measurement moves a cell's estimate only by what it is worth, and passes never c
 Only a measured cell's depth (:data:`~insitu.marking.engrave_depth.MEASURED`: enough floor
 points beyond the walls' bias zone at its depth) is learnt from: a cell the measurement cannot
 vouch for (the wall band, too few trusted points, the bias zone of a wall close for the depth)
-follows the model: never more passes than reach the depth at its rate or the pocket's
-(the higher) plus :data:`UNTRUSTED_SIGMAS` σ of the rate (the pocket rate's σ holds at least
-the scan's shared error over the passes of the deepest measurement). Until the
+follows the model: never more passes than reach the depth at the highest rate of its own and
+of the measured cells around it (:data:`NEAR_CELLS`; the pocket's where none is) plus
+:data:`UNTRUSTED_SIGMAS` σ of that rate (the pocket rate's σ holds at least the scan's shared
+error over the passes of the deepest measurement). Until the
 first such measurement, a round stops where the deepest-trusted cell would leave its zone (at
 :data:`RATE_MARGIN` × the rate), so that a narrow pocket is measured while its floor can be.
 
@@ -45,7 +46,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.ndimage import distance_transform_edt
+from scipy.ndimage import distance_transform_edt, maximum_filter
 
 from insitu.formats.materials import LaserSource, Material
 from insitu.formats.pens import Pen
@@ -63,6 +64,7 @@ FEW_CELLS = 0.02        # fewer measured cells than this share short: not worth 
 FINISH_SPEED = 2.0      # a finishing pass: the pen this many times faster (fewer pulses per area)
 RATE_MARGIN = 1.15      # a cell not seen is planned as if it ablated this much faster
 UNTRUSTED_SIGMAS = 2.0  # a cell not measured is planned at its rate + this many σ of its rate
+NEAR_CELLS = 2          # ... or its measured neighbours' this many cells around (the highest)
 STOP_SIGMAS = 1.0       # a measured cell gets more passes only when this many σ short
 SCAN_ERROR_MM = 0.004   # a depth scan's error shared by the pocket's cells (the floor's speckle
                         # changes pass to pass; benchmarks/engrave.py measure: 1 … 7 µm)
@@ -166,6 +168,23 @@ def _stopped(history: CellHistory, need: np.ndarray, rate: np.ndarray, target_mm
     return np.minimum(need, most)
 
 
+def _untrusted_rate(history: CellHistory, rate: np.ndarray, inside: np.ndarray,
+                    measured: np.ndarray) -> np.ndarray:
+    """(ny, nx) the rate a cell the measurement cannot vouch for is planned at: the highest of
+    its own (once it was measured) and the measured cells' within :data:`NEAR_CELLS` around
+    it, each plus :data:`UNTRUSTED_SIGMAS` σ of it (the rate varies over millimetres: a wood's
+    rings, a layer's thickness); with no measured cell around, the higher of its rate and the
+    pocket's median plus that many σ of the cells' spread."""
+    up = rate + UNTRUSTED_SIGMAS * np.sqrt(history.rate_var)
+    pocket = float(np.median(rate[inside])) if inside.any() else 0.0
+    alone = np.maximum(rate, pocket) + UNTRUSTED_SIGMAS * np.sqrt(history.rate_var)
+    size = 2 * NEAR_CELLS + 1
+    near = maximum_filter(np.where(measured, up, -np.inf), size=size, mode="constant",
+                          cval=-np.inf)
+    own = np.where(history.sp2 > 0, up, -np.inf)
+    return np.where(np.isfinite(near), np.maximum(near, own), alone)
+
+
 def finishing_pen(material: Material, laser: LaserSource) -> tuple[Pen, float]:
     """The pen of the finishing passes and their speed over the material's pen's: its pen
     moved :data:`FINISH_SPEED` times faster (the same pulses, so each pass removes that many
@@ -245,9 +264,10 @@ def plan_round(history: CellHistory, state: np.ndarray, target_mm: float,
     rate_hi = np.maximum(RATE_MARGIN * rate, rate + 3.0 * np.sqrt(history.rate_var))
     cap = np.where(blind, np.minimum(cap, target_mm / rate_hi - history.passes), cap)
     untrusted = inside & ~measured & ~blind
-    pocket = float(np.median(rate[inside])) if inside.any() else 0.0
-    rate_up = np.maximum(rate, pocket) + UNTRUSTED_SIGMAS * np.sqrt(history.rate_var)
-    cap = np.where(untrusted, np.minimum(cap, target_mm / rate_up - history.passes), cap)
+    allowance = target_mm / _untrusted_rate(history, rate, inside, measured) - history.passes
+    cap = np.where(untrusted, np.minimum(cap, allowance), cap)
+    if learnt:
+        go = np.where(untrusted, allowance, go)     # no measurement will say it is short
     if trusted_to_mm is not None and not learnt and inside.any():
         reach = float(trusted_to_mm[inside].max())
         fastest = RATE_MARGIN * float(rate[inside].max())
