@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from insitu.vision.course import FILL_PX, in_frame, on_course, on_laser
+from insitu.vision.course import FILL_PX, fill_gaps, in_frame, on_course, on_laser
 from insitu.vision.detect import LineCentres
 from insitu.vision.tracks import on_longest_track, track_length
 
@@ -139,3 +139,20 @@ def test_a_centre_outside_the_frame_is_dropped():
     u2[0] = -0.6
     kept = in_frame(centres(u2, v), (120, 100))
     assert len(kept) == 98 and kept.v.max() < 120 and kept.u.min() >= 0
+
+
+def test_a_gap_is_not_filled_from_the_flank_of_a_core_clipped_white():
+    """A stripe at row 42 up to column 39 (on the wall) and at row 50 from column 60 (on a
+    board in front of it), its core clipped white (rows 48–52) over the gap between: the
+    laser's excess has a hole there, and the candidates found in it lie on the halo's flank,
+    row 43, on columns 40–49 (near the course interpolated across the gap) and amid the white
+    core, row 50.5, on columns 52–59: only the latter fill the gap."""
+    u = np.r_[np.arange(40.0), np.arange(60.0, 100.0)]
+    c = centres(u, np.where(u < 40, 42.0, 50.0))
+    e = centres(np.r_[np.arange(40.0, 50.0), np.arange(52.0, 60.0)],
+                np.r_[np.full(10, 43.0), np.full(8, 50.5)])
+    white = np.zeros((100, 100), bool)
+    white[48:53, 40:] = True
+    filled = fill_gaps(c, e, True, white, 8)
+    assert filled.u[(filled.u >= 40) & (filled.u < 60)].tolist() == list(range(52, 60))
+    assert len(fill_gaps(c, e, True, np.zeros_like(white), 8)) == len(c) + 18

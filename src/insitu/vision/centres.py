@@ -192,7 +192,10 @@ def _centres_in(li: LaserImage, method, direction, band, clipped, kw,
                       * li.full_scale, direction == "rows")
     scan = c.u if direction == "rows" else c.v
     if colour and li.bgr is not None and 1 < len(c) < np.ptp(scan) + 1:        # gaps
-        c = fill_gaps(c, _in_excess(li, c, fn, direction, scaled), direction == "rows")
+        b, g, r = cv2.split(li.bgr)
+        c = fill_gaps(c, _in_excess(li, c, fn, direction, scaled), direction == "rows",
+                      cv2.min(cv2.min(b, g), r) >= WHITE * li.full_scale,
+                      colour_reach(img.shape)[0])
     return c
 
 

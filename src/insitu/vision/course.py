@@ -66,23 +66,43 @@ def on_laser(c: LineCentres, bgr: np.ndarray, channel: int, white: float, along_
     return kept(c, keep)
 
 
-def fill_gaps(c: LineCentres, e: LineCentres, along_rows: bool) -> LineCentres:
+def fill_gaps(c: LineCentres, e: LineCentres, along_rows: bool, white: np.ndarray,
+              reach: int) -> LineCentres:
     """``c`` with the centres of ``e`` added on the scan lines ``c`` has none, between its
     ends, where they lie within :data:`FILL_PX` of ``c``'s course there (interpolated
-    between its neighbours). ``e``: the centres in the laser channel's excess over the
-    others, where a neutral board's pattern cancels and a stripe running along a dark
-    square's edge (a step in the channel, no peak) is a ridge."""
+    between its neighbours) and, where pixels of ``white`` ((H, W) bool: all three channels
+    clipped) lie within ±``reach`` px across on their scan line, within FILL_PX of their
+    middle. ``e``: the centres in the laser channel's excess over the others, where a neutral
+    board's pattern cancels and a stripe running along a dark square's edge (a step in the
+    channel, no peak) is a ridge; a core clipped white is a hole in that excess: a centre
+    amid it is the hole's middle, one beside it its halo's flank (clipped_white spent seed
+    10004: 49 columns filled 8.5 px off the line)."""
     key = (lambda x: x.u) if along_rows else (lambda x: x.v)
     cross = (lambda x: x.v) if along_rows else (lambda x: x.u)
     sc, se = np.round(key(c)).astype(np.int64), np.round(key(e)).astype(np.int64)
     order = np.argsort(sc)
     course = np.interp(se, sc[order], cross(c)[order])
     add = ((se > sc.min()) & (se < sc.max()) & ~np.isin(se, sc)
-           & (np.abs(cross(e) - course) <= FILL_PX))
+           & (np.abs(cross(e) - course) <= FILL_PX)
+           & ~(np.abs(_white_middle(e, white, reach, along_rows) - cross(e)) > FILL_PX))
     if not add.any():
         return c
     keep = np.argsort(np.r_[sc, se[add]], kind="stable")
     return replace(c, **{f: np.r_[getattr(c, f), getattr(e, f)[add]][keep] for f in FIELDS})
+
+
+def _white_middle(c: LineCentres, white: np.ndarray, reach: int,
+                  along_rows: bool) -> np.ndarray:
+    """(n,) px across the line: the middle of the pixels of ``white`` (H, W) within
+    ±``reach`` px of each centre of ``c`` on its scan line (NaN where there is none)."""
+    g = white if along_rows else white.T
+    s = np.clip(np.round(c.u if along_rows else c.v).astype(np.int64), 0, g.shape[1] - 1)
+    x = np.round(c.v if along_rows else c.u).astype(np.int64)
+    across = np.clip(x[None, :] + np.arange(-reach, reach + 1)[:, None], 0, g.shape[0] - 1)
+    w = g[across, s[None, :]]
+    lo = np.where(w, across, np.iinfo(np.int64).max).min(axis=0)
+    hi = np.where(w, across, -1).max(axis=0)
+    return np.where(w.any(axis=0), (lo + hi) / 2, np.nan)
 
 
 def on_course(c: LineCentres, along_rows: bool, half: float) -> LineCentres:
