@@ -12,8 +12,8 @@ and its reflection in a glossy floor, glints, noise, JPEG quality.
 
 Hold-out: the seeds are split before any is looked at: :data:`TUNE` (0–23) to tune on,
 :data:`HELD_OUT` (12000–12011) reported only at the end. :data:`SPENT` (1000–1011,
-3000–3011 … 11000–11011, twelve seeds a thousand) were held out for earlier versions of the centres and have been looked at: they count as tuning
-data.
+3000–3011 … 11000–11011, twelve seeds a thousand) were held out for earlier versions of the
+centres and have been looked at: they count as tuning data.
 
 Scores per seed and method: found = board columns with a centre within 5 px of the truth;
 wrong = board columns with a centre farther; ratio = the method's RMS over the naive centre of
