@@ -127,8 +127,8 @@ def main() -> None:
     ap.add_argument("--seed", type=int, help="only this seed of the half")
     ap.add_argument("--only", action="append", help="only the runs of this name")
     args = ap.parse_args()
-    t = Table(title="measured pocket depth − truth ± its 1σ, µm; ✗: not stated to ±5 µm (2σ) "
-              "(insitu's simulator, one scan a plate)")
+    t = Table(title="measured pocket depth − truth ± its 1σ, µm; ✗: not stated to ±5 µm "
+              "(2σ) (insitu's simulator, one scan a plate)")
     for col in ("settings", "blank", "seed", *(f"{d:g} mm" for d in DEPTHS)):
         t.add_column(col, justify="right")
     rows = []

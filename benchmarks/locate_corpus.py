@@ -5,7 +5,8 @@ under four lights (:data:`LIGHTS`), and each part once more near the origin, sca
 (0.25 mm both ways) with its frames: the scan reference a user would make. Two halves of
 poses drawn from different seeds: "tune" (the σ model and thresholds were chosen on it),
 "hold", "hold2", "hold3" and "hold4" (each reported once, spent) and "hold5" (split off
-before any result on it was seen, not run yet). Everything is cached in ``cache`` (a few hundred MB).
+before any result on it was seen, not run yet). Everything is cached in ``cache`` (a few
+hundred MB).
 
 Run alone to fill the cache: .venv/bin/python benchmarks/locate_corpus.py [--half tune]
 """
