@@ -172,11 +172,12 @@ def _centres_in(li: LaserImage, method, direction, band, clipped, kw,
         return dict(kw, scale=fs, **({"saturation": clipped * fs} if clipped < 1 else {}))
 
     in_sum = li.total is not None and _in_sum(li, direction, band, allow, kw, scaled)
-    masks = {}
-    if in_sum and li.bgr is not None:
+    masks, white = {}, None
+    if (in_sum or colour) and li.bgr is not None:
         b, g, r = cv2.split(li.bgr)
-        masks = {"white": cv2.min(cv2.min(b, g), r) >= WHITE * li.full_scale,
-                 "quiet": _quiet(li.bgr, li.total, clipped * li.full_scale)}
+        white = cv2.min(cv2.min(b, g), r) >= WHITE * li.full_scale
+    if in_sum and white is not None:
+        masks = {"white": white, "quiet": _quiet(li.bgr, li.total, clipped * li.full_scale)}
     if masks and method in _FLAT_TOPS:
         masks["clip"] = cv2.max(cv2.max(b, g), r) >= clipped * li.full_scale
     c = _along(fn, li.total if in_sum else img, direction, band, allow,
@@ -191,10 +192,8 @@ def _centres_in(li: LaserImage, method, direction, band, clipped, kw,
         c = cut_cores(c, li.total if in_sum else img, clipped * (3 if in_sum else 1)
                       * li.full_scale, direction == "rows")
     scan = c.u if direction == "rows" else c.v
-    if colour and li.bgr is not None and 1 < len(c) < np.ptp(scan) + 1:        # gaps
-        b, g, r = cv2.split(li.bgr)
-        c = fill_gaps(c, _in_excess(li, c, fn, direction, scaled), direction == "rows",
-                      cv2.min(cv2.min(b, g), r) >= WHITE * li.full_scale,
+    if colour and white is not None and 1 < len(c) < np.ptp(scan) + 1:        # gaps
+        c = fill_gaps(c, _in_excess(li, c, fn, direction, scaled), direction == "rows", white,
                       colour_reach(img.shape)[0])
     return c
 
