@@ -49,6 +49,25 @@ def test_a_short_piece_between_two_that_run_on_straight_goes_unless_on_their_lin
     assert len(on_course(centres(tail, w), True, 60.0)) == 120
 
 
+
+def test_the_first_piece_past_a_step_stays_when_it_runs_on_into_its_own_side():
+    """A wall (columns 0–299) and a board 8 px lower (columns 300–359, a dark mark at
+    360–417 with one stray centre 10 px off at its rim, then columns 418–800), all on a line
+    of slope −0.05; half span 64: the board's first piece, short, continues the board's
+    centres past the mark and stays (a line fitted through the wall and the few board
+    columns within 64 of the piece runs along the wall); the stray centre goes. The same
+    piece 8 px off the board's line on either side goes."""
+    u = np.r_[np.arange(361.0), np.arange(418.0, 801.0)]
+    v = 400 - 0.05 * u + 8 * (u >= 300)
+    v[360] -= 10
+    kept = on_course(centres(u, v), True, 64.0)
+    assert len(kept) == len(u) - 1 and 360 not in kept.u
+    assert len(on_course(centres(v, u), False, 64.0)) == len(u) - 1
+    w = v.copy()
+    w[300:360] += 8
+    kept = on_course(centres(u, w), True, 64.0)
+    assert len(kept) >= len(u) - 61 and not ((kept.u >= 300) & (kept.u < 360)).any()
+
 def fields(row, ok):
     k, W = row.shape
     contrast = np.where(ok, 50.0, 0.0)

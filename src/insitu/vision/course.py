@@ -110,8 +110,8 @@ def on_course(c: LineCentres, along_rows: bool, half: float) -> LineCentres:
     running median of all centres over ±``half`` scan lines (a median keeps a step in depth),
     their median slope taken out first; a piece shorter than ``half`` (pieces part where the
     stripe, its slope taken out, jumps more than FILL_PX plus a tenth of the scan lines
-    between) is judged by its neighbours instead
-    (:func:`_between_neighbours`). A stripe is straight over that span; a stretch of centres
+    between) is judged by its neighbours instead (:func:`_between_neighbours`), or by those
+    on one side alone at a step. A stripe is straight over that span; a stretch of centres
     slid onto the rim of a dark mark or onto a bright square's edge beside it is off it."""
     s = np.round(c.u if along_rows else c.v).astype(np.int64)
     x = c.v if along_rows else c.u
@@ -147,7 +147,8 @@ def _between_neighbours(s, x, cut, h, median, short) -> np.ndarray:
     ``cut``, (n,); ``short``: (n,) bool, the centres on pieces of fewer than ``h`` scan
     lines); False on the short pieces that lie more than :data:`FILL_PX` off the straight
     line fitted through the other pieces' centres within ``h`` scan lines before and after
-    them, where those lie on it (median residual ≤ FILL_PX / 4) on both sides. Repeated
+    them, where those lie on it (median residual ≤ FILL_PX / 4) on both sides, unless they
+    continue the centres kept on one side alone across a step (:func:`_one_side`). Repeated
     without the pieces found off until no more is: a piece off the course is no neighbour to
     judge another by (stretches slid onto the rims of the same dark mark, one beside the
     other); a piece left with fewer than 3 neighbours on a side that way gets ``median``'s
@@ -168,13 +169,35 @@ def _between_neighbours(s, x, cut, h, median, short) -> np.ndarray:
                 continue
             fit = np.polyfit(s[side], x[side], 1)
             if (np.median(np.abs(np.polyval(fit, s[side]) - x[side])) <= FILL_PX / 4 and
-                    np.abs(np.median(x[a:b + 1] - np.polyval(fit, s[a:b + 1]))) > FILL_PX):
+                    np.abs(np.median(x[a:b + 1] - np.polyval(fit, s[a:b + 1]))) > FILL_PX
+                    and not _one_side(s, x, keep & (cut != cut[a]), a, b, 2 * h)):
                 keep[a:b + 1] = alive[a:b + 1] = False
                 dropped = True
             else:
                 left.append((a, b))
         pieces = left
     return keep
+
+
+def _one_side(s, x, others, a, b, reach) -> bool:
+    """Whether the piece of centres a … b continues alone the centres of ``others`` ((n,)
+    bool) within ``reach`` scan lines before it or those after it, where these two sides
+    step apart: two parallel lines fitted, one through each side's centres (3/4 of them
+    within FILL_PX / 2 of it: no step within a side, where a piece off the stripe could lie
+    on some level), lie more than :data:`FILL_PX` apart, and the piece's median within
+    FILL_PX of one. A line fitted across a step follows the side with more centres: at a
+    board's edge in front of a wall the board's first piece, short before the first dark
+    mark, lay on the wall's line (clipped_white spent seed 10004: 50 right columns dropped).
+    s, x: (n,) scan line and cross coordinate."""
+    before = others & (s < s[a]) & (s >= s[a] - reach)
+    side = before | (others & (s > s[b]) & (s <= s[b] + reach))
+    (k, c0, c1), *_ = np.linalg.lstsq(
+        np.c_[s[side] - s[a], before[side], ~before[side]], x[side], rcond=None)
+    res = np.abs(x[side] - k * (s[side] - s[a]) - np.where(before[side], c0, c1))
+    if max(np.quantile(res[m], 0.75) for m in (before[side], ~before[side])) > FILL_PX / 2:
+        return False
+    piece = np.median(x[a:b + 1] - k * (s[a:b + 1] - s[a]))
+    return bool(abs(c0 - c1) > FILL_PX and min(abs(piece - c0), abs(piece - c1)) <= FILL_PX)
 
 
 def _sides(s, cut, a, b, h, alive):
