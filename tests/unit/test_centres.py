@@ -23,7 +23,8 @@ from insitu.vision.centres import (
     line_centres,
     line_direction,
 )
-from insitu.vision.steger import _T_MAX, gaussian_kernels, steger
+from insitu.vision.steger import gaussian_kernels, steger
+from insitu.vision.steger_kernel import _T_MAX
 
 METHODS = {"gray": gray_centroid, "gaussian": gaussian_peak, "steger": steger}
 H, W = 256, 640

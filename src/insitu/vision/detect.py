@@ -64,10 +64,11 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from insitu.vision.chains import carry_ends, junction, leading, median3, short_ridges
+from insitu.vision.chains import carry_ends, junction, leading, short_ridges
 from insitu.vision.chains import continuity as chain_support
+from insitu.vision.detect_kernel import band_peaks, column_stats
 from insitu.vision.laser_image import full_scale, noise_sigma
-from insitu.vision.peak_rows import peak_rows, search_rows, second_rows
+from insitu.vision.peak_rows import band_rows, peak_rows, search_rows, second_rows
 from insitu.vision.profile import as_image, gather
 from insitu.vision.tracks import candidates, on_longest_track
 
@@ -129,14 +130,13 @@ class Detection:
     full_scale: float
 
 
-def _stats(pre, row, w, near=False, cols=None):
-    """Plateau-centred rows, peak, background, contrast and plateau length of the columns
-    ``cols`` (None: all) with their peaks at ``row`` (one per column).
-    Background: the mean of the medians of 3 px at each end of the band ±w rows about it,
-    widened by half of a plateau longer than 2 px (near: of the least of the 3 px 1 to 3 px
-    beyond the line's half maximum, its own sides); contrast: peak minus the brighter side's
-    (an edge of a bright region is no line)."""
-    cols = np.arange(pre.shape[1]) if cols is None else cols
+def _stats(pre, row, w, cols):
+    """Plateau-centred rows, peak, background, contrast and plateau length of the ridge
+    candidates in columns ``cols`` (n,) with their peaks at ``row`` (n,) (the frame searched
+    in its band alone: :func:`~insitu.vision.detect_kernel.column_stats`, whose background is
+    the band's ends instead). Background: the mean of the least of the 3 px 1 to 3 px beyond
+    each side's half maximum (its own sides); contrast: peak minus the brighter side's (an
+    edge of a bright region is no line)."""
     below, inside = gather(pre, row[None, :] + np.arange(0, w + 1)[:, None], cols)
     gmax = below[0]
     same = (below == gmax) & inside
@@ -148,14 +148,11 @@ def _stats(pre, row, w, near=False, cols=None):
         same = (far == gmax[long]) & inside
         run[long] = np.where(same.all(axis=0), 4 * w + 1, np.argmin(same, axis=0))
     row = row + (run - 1) // 2
-    if near:
-        wide = w + min(int(run.max(initial=0)) // 2, w)
-        reach, pick = _half_width(pre, row, gmax, wide, cols) + 1, lambda a: a.min(axis=0)
-    else:
-        reach, pick = w + np.maximum(run - 2, 0) // 2, lambda a: median3(*a)
+    wide = w + min(int(run.max(initial=0)) // 2, w)
+    reach = _half_width(pre, row, gmax, wide, cols) + 1
     above, _ = gather(pre, row[None, :] - reach[None, :] + np.arange(3)[:, None], cols)
     below, _ = gather(pre, row[None, :] + reach[None, :] - np.arange(3)[:, None], cols)
-    top, bot = pick(above), pick(below)
+    top, bot = above.min(axis=0), below.min(axis=0)
     return row, gmax, (top + bot) / 2, gmax - np.maximum(top, bot), run
 
 
@@ -184,7 +181,12 @@ def detect(image, median=3, band=None, window=12, min_peak=40.0, min_contrast=20
     thr = max(min_contrast, snr * noise)
     least = thr if white is None else cv2.transpose(        # (W, H), as search is laid out
         np.where(white, _white_floor(min_contrast, snr, noise, quiet), thr).astype(np.float32))
-    search, lo, span, searched, top = search_rows(pre, band, allow, fill, w if ridge else 0, least)
+    compiled = allow is None and not ridge            # the band alone: compiled passes
+    if compiled:
+        lo, hi, searched, span = band_rows(pre.shape, band)
+    else:
+        search, lo, span, searched = search_rows(pre, band, allow, fill, w if ridge else 0,
+                                                 least)
     def at(j, cols):                                 # the least contrast of peaks j, cols
         return least if white is None else least[cols, j]
 
@@ -192,14 +194,10 @@ def detect(image, median=3, band=None, window=12, min_peak=40.0, min_contrast=20
         """Stats of the peaks at rows j of the columns ``cols`` (the tracks' candidates), or
         (None) of each column's peak j (W,), worked out only where that peak can pass."""
         if cols is not None:
-            row, gmax, bg, contrast, run = _stats(pre, j, w, ridge, cols)
+            row, gmax, bg, contrast, run = _stats(pre, j, w, cols)
             ok = searched[cols] & (gmax >= min_peak) & (contrast >= at(j, cols))
             return row, gmax, bg, contrast, ok, run
-        out = [j.copy(), *np.zeros((3, W), np.float32), np.ones(W, np.int64)]
-        cols = np.flatnonzero(searched & (pre.reshape(-1)[j * W + np.arange(W)] >= min_peak))
-        for a, b in zip(out, _stats(pre, j[cols], w, ridge, cols)):
-            a[cols] = b
-        row, gmax, bg, contrast, run = out
+        row, run, gmax, bg, contrast = column_stats(pre, j, w, searched, min_peak)
         ok = searched & (gmax >= min_peak) & (contrast >= at(j, np.arange(W)))
         return row, gmax, bg, contrast, ok, run
 
@@ -208,11 +206,16 @@ def detect(image, median=3, band=None, window=12, min_peak=40.0, min_contrast=20
             candidates(search, fill, w, candidate), max_jump, ridge == "alone")
         locked = ambiguous
     else:
-        j1 = peak_rows(search, lo, fill, top)
+        if compiled:
+            j1, second_peaks = band_peaks(pre, lo, hi, searched, fill)
+        else:
+            j1 = peak_rows(search, lo, fill)
         row, gmax, bg, contrast, ok, run = candidate(j1)
         ambiguous, locked = np.zeros(W, bool), np.zeros(W, bool)
     if not ridge and continuity and W > 2 and span > 2 * w + 1:
-        j2, found = second_rows(search, j1, lo, fill, top, w, gmax >= min_peak, min_peak)
+        live = gmax >= min_peak
+        j2, found = (second_peaks(j1, w, live, min_peak) if compiled else
+                     second_rows(search, j1, lo, fill, w, live, min_peak))
         row2, gmax2, bg2, contrast2, ok2, run2 = candidate(j2)
         ok2 &= found
         ambiguous = ok & ok2

@@ -1,6 +1,7 @@
-"""Each column's candidate rows for the detection stage (:mod:`insitu.vision.detect`): the
-frame laid out column by column, blanked outside the band, where not allowed and off the
-ridges, and the row of each column's greatest and second greatest candidate."""
+"""Each column's candidate rows for the detection stage (:mod:`insitu.vision.detect`) of a
+frame with an ``allow`` map or ridges: the frame laid out column by column, blanked outside
+the band, where not allowed and off the ridges, and the row of each column's greatest and
+second greatest candidate; and the band's rows, which every frame's search starts from."""
 
 from __future__ import annotations
 
@@ -8,54 +9,55 @@ import cv2
 import numpy as np
 
 
+def band_rows(shape, band):
+    """The first and last row (W,) int64 of each column's band in a frame of ``shape``
+    (H, W) (all rows without a band; −1 last where a column is not searched), the searched
+    columns (W,) bool and the most rows a band has."""
+    H, W = shape
+    if band is None:
+        return np.zeros(W, np.int64), np.full(W, H - 1, np.int64), np.ones(W, bool), H
+    blo, bhi = (np.broadcast_to(np.asarray(b, np.float64), (W,)) for b in band)
+    with np.errstate(invalid="ignore"):
+        flo, fhi = np.ceil(blo), np.floor(bhi)
+        searched = (np.isfinite(flo) & np.isfinite(fhi) & (flo <= fhi) & (flo <= H - 1)
+                    & (fhi >= 0))
+    lo = np.where(searched, np.clip(flo, 0, H - 1), 0).astype(np.int64)
+    hi = np.where(searched, np.clip(fhi, 0, H - 1), -1).astype(np.int64)
+    return lo, hi, searched, max(int((hi - lo).max()) if W else 0, 0) + 1
+
+
 def search_rows(pre, band, allow, fill, ridge, thr):
-    """The (W, n) array of each column's candidate values at rows top … top + n − 1 (a
-    copy, ours to overwrite): ``pre`` transposed, ``fill`` outside the column's band, where
-    not allowed and (ridge > 0) where the column's white top-hat over 2·ridge + 1 rows stays
-    below ``thr`` (or its (W, H) map); the first row of each column's band (W,), the most
-    rows a band has, the searched columns (W,) bool, and top (the rows all bands span; 0,
-    all rows, with allow or ridge)."""
-    H, W = pre.shape
-    lo, hi, searched, span = np.zeros(W, np.int64), None, np.ones(W, bool), H
-    if band is not None:
-        blo, bhi = (np.broadcast_to(np.asarray(b, np.float64), (W,)) for b in band)
-        with np.errstate(invalid="ignore"):
-            flo, fhi = np.ceil(blo), np.floor(bhi)
-            searched = (np.isfinite(flo) & np.isfinite(fhi) & (flo <= fhi) & (flo <= H - 1)
-                        & (fhi >= 0))
-        lo = np.where(searched, np.clip(flo, 0, H - 1), 0).astype(np.int64)
-        hi = np.where(searched, np.clip(fhi, 0, H - 1), -1).astype(np.int64)
-        span = max(int((hi - lo).max()) if W else 0, 0) + 1
-    top, bottom = 0, H
-    if hi is not None and allow is None and not ridge and searched.any():
-        top, bottom = int(lo[searched].min()), int(hi[searched].max()) + 1
-    search = cv2.transpose(pre[top:bottom])
+    """The (W, H) array of each column's candidate values (a copy, ours to overwrite), for
+    a frame with an ``allow`` map (H, W) bool or ridges (ridge > 0; a frame with neither is
+    searched in its band by :mod:`insitu.vision.detect_kernel`): ``pre`` transposed,
+    ``fill`` outside the column's band, where not allowed and (ridge > 0) where the column's
+    white top-hat over 2·ridge + 1 rows stays below ``thr`` (or its (W, H) map); the first
+    row of each column's band (W,), the most rows a band has and the searched columns (W,)
+    bool."""
+    lo, hi, searched, span = band_rows(pre.shape, band)
+    search = cv2.transpose(pre)
     blocked = None if allow is None else ~cv2.transpose(allow.astype(np.uint8)).astype(bool)
     if ridge:
         hat = cv2.morphologyEx(search, cv2.MORPH_TOPHAT, np.ones((1, 2 * ridge + 1), np.uint8),
                                borderType=cv2.BORDER_REPLICATE)
         blocked = hat < thr if blocked is None else blocked | (hat < thr)
-    if hi is not None:
-        dt = np.int16 if H < 2**15 else np.int64                 # the compares' speed
-        rows = np.arange(top, bottom, dtype=dt)
+    if band is not None:
+        dt = np.int16 if pre.shape[0] < 2**15 else np.int64      # the compares' speed
+        rows = np.arange(pre.shape[0], dtype=dt)
         inside = (rows >= lo.astype(dt)[:, None]) & (rows <= hi.astype(dt)[:, None])
-        if blocked is None and fill == 0:
-            np.multiply(search, inside, out=search, casting="unsafe")
-        else:
-            blocked = ~inside if blocked is None else blocked | ~inside
-    if blocked is not None:
-        np.putmask(search, blocked, fill)
-    return search, lo, span, searched, top
+        blocked = ~inside if blocked is None else blocked | ~inside
+    np.putmask(search, blocked, fill)
+    return search, lo, span, searched
 
 
-def peak_rows(search, lo, fill, top):
+def peak_rows(search, lo, fill):
     """Each column's row of its greatest candidate (the first of equals), or the first row of
-    its band where it has none (all ``fill``); ``search``'s first row is ``top``."""
+    its band where it has none (all ``fill``)."""
     j = np.argmax(search, axis=1)
-    return np.where(search[np.arange(len(j)), j] == fill, lo, j + top)
+    return np.where(search[np.arange(len(j)), j] == fill, lo, j)
 
 
-def second_rows(search, j1, lo, fill, top, w, live, min_peak):
+def second_rows(search, j1, lo, fill, w, live, min_peak):
     """:func:`peak_rows` of ``search`` with each column's ±w rows about its first peak j1
     (W,) set to ``fill``, worked out only in the ``live`` columns (W,) bool (those whose first
     peak can pass) whose greatest value left reaches ``min_peak``; the first row of its band
@@ -64,10 +66,10 @@ def second_rows(search, j1, lo, fill, top, w, live, min_peak):
     n = search.shape[1]
     out, cols = lo.copy(), np.flatnonzero(live)
     part = search[cols]
-    guard = np.clip((j1[cols] - top)[:, None] + np.arange(-w, w + 1), 0, n - 1)
+    guard = np.clip(j1[cols][:, None] + np.arange(-w, w + 1), 0, n - 1)
     part.reshape(-1)[guard + (np.arange(len(cols)) * n)[:, None]] = fill
     keep = part.max(axis=1, initial=fill) >= min_peak
-    out[cols[keep]] = peak_rows(part[keep], lo[cols[keep]], fill, top)
+    out[cols[keep]] = peak_rows(part[keep], lo[cols[keep]], fill)
     found = np.zeros(len(lo), bool)
     found[cols[keep]] = True
     return out, found

@@ -22,7 +22,6 @@ from __future__ import annotations
 from functools import lru_cache
 
 import numpy as np
-from numpy.lib.stride_tricks import sliding_window_view
 from scipy.special import ndtr
 
 from insitu.vision.chains import leading, median_of
@@ -35,6 +34,7 @@ from insitu.vision.profile import (
     gather,
     saturation_level,
 )
+from insitu.vision.steger_kernel import steger_columns
 
 FLAT_PX = 2.5
 """Farthest (px) a flat top's centre (``clip``) may lie from the 3-point fit on it: the fit
@@ -42,7 +42,6 @@ jumps between the top's noisy maxima, up to ≈ 2.2 px on a top 6 px long (spent
 a centre farther is not the top's own (the halo's clipped edge of a bright square beside
 the stripe, spent seed 5003), and the fit is kept."""
 _M = 3          # candidate rows: the detected peak ± _M
-_T_MAX = 0.6    # |t·n| ≤ 0.5 px, plus room for the Taylor step's overshoot near pixel borders
 
 
 def _flank_fit(g, inside, x, sat_mask, floor, unit=1.0):
@@ -206,87 +205,11 @@ def gaussian_kernels(sigma: float, radius: int):
     return h0.astype(np.float32), h1.astype(np.float32), h2.astype(np.float32)
 
 
-def _hermite_root(y0, d0, y1, d1):
-    """Root s in [0, 1] of the cubic Hermite interpolant of (y0, d0) at 0 and (y1, d1) at 1:
-    Newton from the linear estimate, 4 steps."""
-    s = np.clip(y0 / np.where(y0 != y1, y0 - y1, 1.0), 0.0, 1.0)
-    a2 = 3 * (y1 - y0) - 2 * d0 - d1                   # the cubic y0 + d0 s + a2 s² + a3 s³
-    a3 = 2 * (y0 - y1) + d0 + d1
-    for _ in range(4):
-        p = y0 + s * (d0 + s * (a2 + s * a3))
-        dp = d0 + s * (2 * a2 + s * (3 * a3))
-        s = np.clip(s - p / np.where(np.abs(dp) > 1e-12, dp, 1e-12), 0.0, 1.0)
-    return s
-
-
-def _derivatives(img, r, c, sigma):
-    """Gaussian derivatives Iu, Iv, Iuu, Ivv, Iuv, each (n, 2M+1), at rows r-M..r+M of columns
-    c (M = _M + 1): a (n, 2M+2R+1, 2R+1) patch per column (borders clipped), filtered along u
-    by the three kernels at once, then along v as products with their banded (Toeplitz)
-    matrices — five matrix products in all."""
-    H, W = img.shape
-    R, M = int(np.ceil(3.5 * sigma)), _M + 1
-    L, K, n = 2 * M + 2 * R + 1, 2 * R + 1, len(r)
-    kernels, v0, v1, v2 = _filters(float(sigma), R, M)
-    if n and r.min() >= M + R and r.max() < H - M - R and c.min() >= R and c.max() < W - R:
-        P = sliding_window_view(img, (L, K))[r - M - R, c - R]
-    else:
-        rows = np.clip(r[:, None, None] + np.arange(-M - R, M + R + 1)[None, :, None], 0, H - 1)
-        P = img[rows, np.clip(c[:, None, None] + np.arange(-R, R + 1)[None, None, :], 0, W - 1)]
-    A = (P.reshape(n * L, K).astype(np.float32) @ kernels).reshape(n, L, 3)
-    k = 2 * M + 1
-    a0 = np.ascontiguousarray(A[:, :, 0]) @ v0
-    a1 = np.ascontiguousarray(A[:, :, 1]) @ v1
-    a2 = np.ascontiguousarray(A[:, :, 2]) @ v2
-    return a1[:, :k], a0[:, :k], a2, a0[:, k:], a1[:, k:]
-
-
 @lru_cache(maxsize=16)
-def _filters(sigma: float, R: int, M: int):
-    """:func:`_derivatives`' filters for σ, R, M: the three kernels (2R+1, 3) float32 along u,
-    and the banded matrices along v that the u-filtered smoothed, first- and second-derivative
-    patches are multiplied by: [T1 T2], [T0 T1], T0 (:func:`_banded`)."""
-    kernels = gaussian_kernels(sigma, R)
-    T0, T1, T2 = (_banded(h, 2 * M + 1, 2 * M + 2 * R + 1) for h in kernels)
-    return np.stack(kernels, 1), np.hstack([T1, T2]), np.hstack([T0, T1]), T0
-
-
-def _banded(h, rows, length):
-    """(length, rows) float32: column i holds kernel ``h`` at i … i + len(h) − 1, so that a
-    product with it correlates each row of an (n, length) array with h at ``rows`` places."""
-    T = np.zeros((length, rows), np.float32)
-    for i in range(rows):
-        T[i:i + len(h), i] = h
-    return T
-
-
-def _normals(Iuu, Ivv, Iuv):
-    """Most negative Hessian eigenvalue λ and its unit eigenvector (nu, nv); all (n, k)."""
-    half = (Iuu + Ivv) / 2
-    root = np.sqrt(((Iuu - Ivv) / 2) ** 2 + Iuv**2)
-    lam = half - root
-    e1u, e1v, e2u, e2v = Iuv, lam - Iuu, lam - Ivv, Iuv
-    first = e1u**2 + e1v**2 >= e2u**2 + e2v**2
-    nu, nv = np.where(first, e1u, e2u), np.where(first, e1v, e2v)
-    norm = np.hypot(nu, nv)
-    flat = norm < 1e-12                                           # isotropic: take (0, 1)
-    norm = np.where(flat, 1.0, norm)
-    return lam, half + root, np.where(flat, 0.0, nu / norm), np.where(flat, 1.0, nv / norm)
-
-
-def _down_column(Iv, Ivv, ok, min_curvature, k, found, bu, bv, bt):
-    """:func:`steger`'s ``across``: for the columns not ``found``, the strongest row (n, 2M+1)
-    whose second derivative down the column is ≤ −min_curvature and whose Taylor step t =
-    −Iv / Ivv stays within the pixel; k, found, the normal (bu, bv) and t per column (n,)."""
-    with np.errstate(divide="ignore", invalid="ignore"):
-        t1 = -Iv / Ivv
-        ok1 = (Ivv <= -min_curvature) & (np.abs(t1) <= _T_MAX)
-    ok1[:, [0, -1]] = False
-    lost = ~found & ok1.any(axis=1)
-    k1 = np.argmax(np.where(ok1, -Ivv, -np.inf), axis=1)
-    each = np.arange(len(k))
-    return (np.where(lost, k1, k), found | lost, np.where(lost, 0.0, bu),
-            np.where(lost, 1.0, bv), np.where(lost, t1[each, k1], bt))
+def _kernels(sigma: float, radius: int) -> np.ndarray:
+    """(3, 2·radius + 1) float32: :func:`gaussian_kernels` stacked, as the compiled pass
+    takes them."""
+    return np.stack(gaussian_kernels(sigma, radius))
 
 
 def steger(image: np.ndarray, sigma: float | None = None, min_peak: float = 40.0,
@@ -328,34 +251,9 @@ def steger(image: np.ndarray, sigma: float | None = None, min_peak: float = 40.0
         sigma = max(1.0, median_of(own) / (2 * np.sqrt(3))) if n else 1.0
     if min_curvature is None:
         min_curvature = 0.1 * min_contrast * unit / sigma**2
-    Iu, Iv, Iuu, Ivv, Iuv = _derivatives(img, r, c, sigma)
-    lam, other, nu, nv = _normals(Iuu, Ivv, Iuv)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        t = -(nu * Iu + nv * Iv) / lam
-        ok = ((lam <= -min_curvature) & (-lam >= np.abs(other))
-              & (np.abs(t * nu) <= _T_MAX) & (np.abs(t * nv) <= _T_MAX))
-    ok[:, [0, -1]] = False                                        # outer rows: neighbours only
-    k = np.argmax(np.where(ok, -lam, -np.inf), axis=1)            # strongest line pixel
-    each = np.arange(n)
-    found = ok[each, k]
-
-    def at(a, kk):
-        return a[each, kk]
-
-    bu, bv, bt = at(nu, k), at(nv, k), at(t, k)
-    if across:
-        k, found, bu, bv, bt = _down_column(Iv, Ivv, ok, min_curvature, k, found, bu, bv, bt)
-    gcol = bu[:, None] * Iu + bv[:, None] * Iv                    # n·∇I down the column
-    dcol = bu[:, None] * Iuv + bv[:, None] * Ivv                  # its v-derivative
-    (y0, d0), (yn, dn), (yp, dp) = ((at(gcol, k + i), at(dcol, k + i)) for i in (0, 1, -1))
-    down = np.sign(y0) != np.sign(yn)
-    refined = down | (np.sign(yp) != np.sign(y0))
-    s = np.zeros(n)
-    s[refined] = _hermite_root(*(np.where(down, a, b)[refined] for a, b in
-                                 ((y0, yp), (d0, dp), (yn, y0), (dn, d0))))
-    s -= np.where(down, 0.0, 1.0)
-    u = np.where(refined, c, c + bt * bu)
-    v = r + (k - _M - 1) + np.where(refined, s, bt * bv)
+    h = _kernels(float(sigma), int(np.ceil(3.5 * sigma)))
+    u, v, found = steger_columns(img, r.astype(np.int64), c.astype(np.int64), h, _M + 1,
+                                 np.float32(min_curvature), bool(across))
     level = saturation_level(img, saturation, scale)
     sat = gather(img, r[None, :] + x[w - 2:w + 3], c)[0].max(axis=0) >= level
     if sat.any():                                 # clipped plateau: the flank fit instead

@@ -1,0 +1,120 @@
+"""The detection stage's per-column work (:mod:`insitu.vision.detect`) as compiled passes down
+each column of the filtered frame: each column's greatest and second greatest pixel in its
+band (a frame without an ``allow`` map or ridges; the others: :mod:`insitu.vision.peak_rows`),
+and the peak's plateau, background and contrast (every frame searched without ridges)."""
+
+from __future__ import annotations
+
+import cv2
+import numba
+import numpy as np
+
+compiled = numba.njit(cache=True, nogil=True, error_model="numpy")
+"""Compiled once per argument types, the machine code kept beside the module (__pycache__);
+divisions by zero give inf or NaN, as numpy's."""
+
+
+@compiled
+def _peak(line, lo, hi, skip_lo, skip_hi, fill):
+    """(row, value) of the first greatest of ``line``'s values lo … hi, those skip_lo …
+    skip_hi left out; (lo, fill) where none exceeds ``fill``."""
+    best, at = fill, lo
+    for y in range(lo, min(hi, skip_lo - 1) + 1):
+        if line[y] > best:
+            best, at = line[y], y
+    for y in range(max(lo, skip_hi + 1), hi + 1):
+        if line[y] > best:
+            best, at = line[y], y
+    return at, best
+
+
+def band_peaks(pre, lo, hi, searched, fill):
+    """Each column's row of its greatest pixel in rows lo … hi (W,) of ``pre`` (H, W), the
+    first of equals, lo where the band has none above ``fill``
+    (:func:`~insitu.vision.peak_rows.peak_rows` of the band's search); and ``second(j1, w,
+    live, min_peak)``: :func:`~insitu.vision.peak_rows.second_rows` of the same band, each
+    ``live`` column's greatest pixel more than ``w`` rows from its first peak ``j1`` (W,)
+    where that reaches ``min_peak``, lo elsewhere, and (W,) bool where it does. The rows all
+    bands span are transposed once, so that each column's band lies in memory in a row."""
+    top, bottom = (int(lo[searched].min()), int(hi[searched].max()) + 1) if searched.any() \
+        else (0, 0)
+    search = cv2.transpose(pre[top:bottom]) if bottom > top else np.zeros((len(lo), 0),
+                                                                           pre.dtype)
+    first, last = lo - top, hi - top
+
+    def second(j1, w, live, min_peak):
+        j2, found = _second_peaks(search, j1 - top, first, last, w, live, min_peak, fill)
+        return j2 + top, found
+
+    return _column_peaks(search, first, last, fill) + top, second
+
+
+@compiled
+def _column_peaks(search, lo, hi, fill):
+    out = np.empty(len(lo), np.int64)
+    for col in range(len(lo)):
+        out[col] = _peak(search[col], lo[col], hi[col], hi[col] + 1, hi[col], fill)[0]
+    return out
+
+
+@compiled
+def _second_peaks(search, j1, lo, hi, w, live, min_peak, fill):
+    out, found = lo.copy(), np.zeros(len(lo), np.bool_)
+    for col in range(len(lo)):
+        if live[col]:
+            at, best = _peak(search[col], lo[col], hi[col], j1[col] - w, j1[col] + w, fill)
+            if best >= min_peak:
+                out[col], found[col] = at, True
+    return out, found
+
+
+@compiled
+def _px(pre, y, col):
+    """pre[y, col] as float32, y clipped to the frame (the array form's gather)."""
+    return np.float32(pre[min(max(y, 0), pre.shape[0] - 1), col])
+
+
+@compiled
+def _median3(a, b, c):
+    return max(min(a, b), min(max(a, b), c))
+
+
+@compiled
+def column_stats(pre, j, w, searched, min_peak):
+    """Each column's peak at row j (W,) of ``pre`` (H, W), worked out where the column is
+    ``searched`` and its peak reaches ``min_peak``: row (the middle of the plateau of equal
+    pixels from j down, up to w + 1 rows, or 4w + 1 for a clipped core), run (its length),
+    gmax (the peak), bg (the mean of the medians of 3 px at each end of the band ±w rows
+    about the row, widened by half of a plateau longer than 2 px), contrast (gmax minus the
+    brighter end's: an edge of a bright region is no line), float32; elsewhere j, 1, 0, 0,
+    0."""
+    H, W = pre.shape
+    row, run = j.copy(), np.ones(W, np.int64)
+    gmax, bg, contrast = (np.zeros(W, np.float32), np.zeros(W, np.float32),
+                          np.zeros(W, np.float32))
+    for col in range(W):
+        y = j[col]
+        top_value = np.float32(pre[y, col])
+        if not searched[col] or top_value < min_peak:
+            continue
+        n = 0                                      # the plateau from the first maximum
+        for s in range(w + 1):
+            if y + s >= H or np.float32(pre[y + s, col]) != top_value:
+                break
+            n += 1
+        if n > w:                                  # a clipped core: its whole plateau
+            n = 0
+            for s in range(4 * w + 1):
+                if y + s >= H or np.float32(pre[y + s, col]) != top_value:
+                    break
+                n += 1
+        y = y + (n - 1) // 2
+        reach = w + max(n - 2, 0) // 2
+        up = _median3(_px(pre, y - reach, col), _px(pre, y - reach + 1, col),
+                      _px(pre, y - reach + 2, col))
+        dn = _median3(_px(pre, y + reach, col), _px(pre, y + reach - 1, col),
+                      _px(pre, y + reach - 2, col))
+        row[col], run[col], gmax[col] = y, n, top_value
+        bg[col] = (up + dn) / np.float32(2.0)
+        contrast[col] = top_value - max(up, dn)
+    return row, run, gmax, bg, contrast

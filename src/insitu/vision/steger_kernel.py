@@ -1,0 +1,140 @@
+"""Steger's per-column work (:func:`~insitu.vision.steger.steger`) as one compiled pass per
+column: the Gaussian derivatives at the 2M + 1 rows about the detected peak, the Hessian's
+normal, the strongest line pixel and its refinement to the column's crossing. The arithmetic
+is numpy's in the same float32 steps, so the centres are those of the array form (the
+derivatives' sums in another order: within float32 rounding)."""
+
+from __future__ import annotations
+
+import numba
+import numpy as np
+
+compiled = numba.njit(cache=True, nogil=True, error_model="numpy")
+"""Compiled once per argument types, the machine code kept beside the module (__pycache__);
+divisions by zero give inf or NaN, as numpy's."""
+
+_T_MAX = np.float32(0.6)   # |t·n| ≤ 0.5 px, plus room for the Taylor step's overshoot
+_TINY = np.float32(1e-12)
+_HALF, _TWO, _THREE = np.float32(0.5), np.float32(2.0), np.float32(3.0)
+
+
+@compiled
+def _hermite_root(y0, d0, y1, d1):
+    """Root s in [0, 1] (float32) of the cubic Hermite interpolant of (y0, d0) at 0 and
+    (y1, d1) at 1: Newton from the linear estimate, 4 steps."""
+    one, zero = np.float32(1.0), np.float32(0.0)
+    s = y0 / (y0 - y1 if y0 != y1 else one)
+    s = zero if s < zero else (one if s > one else s)
+    a2 = _THREE * (y1 - y0) - _TWO * d0 - d1
+    a3 = _TWO * (y0 - y1) + d0 + d1
+    for _ in range(4):
+        p = y0 + s * (d0 + s * (a2 + s * a3))
+        dp = d0 + s * (_TWO * a2 + s * (_THREE * a3))
+        s = s - p / (dp if abs(dp) > _TINY else _TINY)
+        s = zero if s < zero else (one if s > one else s)
+    return s
+
+
+@compiled
+def _sign(x):
+    return np.float32(1.0) if x > 0 else (np.float32(-1.0) if x < 0 else x)
+
+
+@compiled
+def _derivatives(img, r0, c0, h, D):
+    """Iu, Iv, Iuu, Ivv, Iuv (rows of ``D`` (5, k)) at the k rows from r0 + R of column
+    c0 + R of ``img`` (borders clipped), by the kernels ``h`` (3, 2R + 1): along u, then v."""
+    H, W = img.shape
+    K, k2 = h.shape[1], D.shape[1]
+    L = k2 + K - 1
+    A = np.empty((3, L), np.float32)
+    inside = r0 >= 0 and r0 + L <= H and c0 >= 0 and c0 + K <= W
+    for li in range(L):
+        row = r0 + li if inside else min(max(r0 + li, 0), H - 1)
+        a0 = a1 = a2 = np.float32(0.0)
+        for q in range(K):
+            col = c0 + q if inside else min(max(c0 + q, 0), W - 1)
+            p = np.float32(img[row, col])
+            a0 += p * h[0, q]
+            a1 += p * h[1, q]
+            a2 += p * h[2, q]
+        A[0, li], A[1, li], A[2, li] = a0, a1, a2
+    for j in range(k2):
+        s_iu = s_iv = s_iuu = s_ivv = s_iuv = np.float32(0.0)
+        for q in range(K):
+            s_iu += A[1, j + q] * h[0, q]
+            s_iv += A[0, j + q] * h[1, q]
+            s_iuu += A[2, j + q] * h[0, q]
+            s_ivv += A[0, j + q] * h[2, q]
+            s_iuv += A[1, j + q] * h[1, q]
+        D[0, j], D[1, j], D[2, j], D[3, j], D[4, j] = s_iu, s_iv, s_iuu, s_ivv, s_iuv
+
+
+@compiled
+def steger_columns(img, r, c, h, M, min_curvature, across):
+    """Steger's centres (u, v float64 (n,), found bool (n,)) of the columns ``c`` (n,) with
+    their detected peaks at rows ``r`` (n,) of ``img`` (H, W): derivatives by the kernels
+    ``h`` (3, 2R + 1) float32 (smoothing, first, second derivative) at rows r − M … r + M
+    (borders clipped), the line pixel by the Hessian's test with ``min_curvature`` (float32),
+    ``across``: a column without one measured down the column alone (steger's keywords)."""
+    H, W = img.shape
+    n, K = len(r), h.shape[1]
+    R = K // 2
+    k2 = 2 * M + 1
+    u, v, found = np.empty(n), np.empty(n), np.zeros(n, np.bool_)
+    D = np.empty((5, k2), np.float32)                      # Iu, Iv, Iuu, Ivv, Iuv
+    gcol, dcol = np.empty(k2, np.float32), np.empty(k2, np.float32)
+    lam, nu, nv, t = (np.empty(k2, np.float32), np.empty(k2, np.float32),
+                      np.empty(k2, np.float32), np.empty(k2, np.float32))
+    for i in range(n):
+        _derivatives(img, r[i] - M - R, c[i] - R, h, D)
+        best, k = -np.inf, 0
+        for j in range(k2):                                # the Hessian's normal
+            Iu, Iv, Iuu, Ivv, Iuv = D[0, j], D[1, j], D[2, j], D[3, j], D[4, j]
+            half = (Iuu + Ivv) / _TWO
+            d = (Iuu - Ivv) / _TWO
+            root = np.sqrt(d * d + Iuv * Iuv)
+            lj, other = half - root, half + root
+            e1v, e2u = lj - Iuu, lj - Ivv
+            if Iuv * Iuv + e1v * e1v >= e2u * e2u + Iuv * Iuv:
+                a, b = Iuv, e1v
+            else:
+                a, b = e2u, Iuv
+            norm = np.hypot(a, b)
+            if norm < _TINY:
+                a, b = np.float32(0.0), np.float32(1.0)
+            else:
+                a, b = a / norm, b / norm
+            tj = -(a * Iu + b * Iv) / lj
+            lam[j], nu[j], nv[j], t[j] = lj, a, b, tj
+            ok = (lj <= -min_curvature and -lj >= abs(other) and abs(tj * a) <= _T_MAX
+                  and abs(tj * b) <= _T_MAX and 0 < j < k2 - 1)
+            if ok and -lj > best:
+                best, k = -lj, j
+        hit = best > -np.inf
+        bu, bv, bt = nu[k], nv[k], t[k]
+        if across and not hit:                             # down the column alone
+            best1, k1 = -np.inf, -1
+            for j in range(1, k2 - 1):
+                Iv, Ivv = D[1, j], D[3, j]
+                t1 = -Iv / Ivv
+                if Ivv <= -min_curvature and abs(t1) <= _T_MAX and -Ivv > best1:
+                    best1, k1 = -Ivv, j
+            if k1 >= 0:
+                k, hit = k1, True
+                bu, bv, bt = np.float32(0.0), np.float32(1.0), -D[1, k1] / D[3, k1]
+        for j in range(k2):
+            gcol[j] = bu * D[0, j] + bv * D[1, j]          # n·∇I down the column
+            dcol[j] = bu * D[4, j] + bv * D[3, j]          # its v-derivative
+        kn, kp = (k + 1) % k2, (k - 1) % k2
+        y0, d0, yn, dn, yp, dp = gcol[k], dcol[k], gcol[kn], dcol[kn], gcol[kp], dcol[kp]
+        down = _sign(y0) != _sign(yn)
+        if down or _sign(yp) != _sign(y0):
+            s = (_hermite_root(y0, d0, yn, dn) if down else _hermite_root(yp, dp, y0, d0))
+            u[i] = c[i]
+            v[i] = r[i] + (k - M) + (np.float64(s) - (0.0 if down else 1.0))
+        else:
+            u[i] = c[i] + np.float64(bt * bu)
+            v[i] = r[i] + (k - M) + np.float64(bt * bv)
+        found[i] = hit
+    return u, v, found
