@@ -188,8 +188,8 @@ def test_a_part_square_to_the_lines_is_located_with_a_crossed_scan(crossed_cal):
 
     wp = make_workpiece("step-block")
     ref = reference_from_mesh(wp.vertices, wp.triangles, "step-block")
-    truth, coarse = (8.0, -6.0, 90.0), LocateSettings(tolerance_mm=0.2, turn_bound_deg=0.5,
-                                                      turn_tolerance_deg=0.5)
+    truth, coarse = (8.0, -6.0, 90.0), LocateSettings(tolerance_mm=0.2,
+                                                      turn_bound_deg=0.5)
     with simulated(sim_world("step-block", binning=4, pose=truth)) as station:
         cloud = scan_live(station, 0.5, height_cal=crossed_cal, cross=True).cloud
     # the lines along y alone: the scan without its crossed pass (which leaves them as they

@@ -64,7 +64,7 @@ def test_the_posed_arc_is_located_honestly_or_refused(posed_arc, framed, opened)
     it is given either way. Whatever is given lies within 3σ at the rim and 0.10 mm / 0.10°
     of the rig frame."""
     cloud, cad, camera, frame, truth = posed_arc
-    settings = (LocateSettings(tolerance_mm=1.0, turn_bound_deg=1.0, turn_tolerance_deg=1.0)
+    settings = (LocateSettings(tolerance_mm=1.0, turn_bound_deg=1.0)
                 if opened else LocateSettings())
     try:
         b = locate_part(cad, cloud.points, settings, (-90, 90), cloud.attributes["line"],

@@ -141,7 +141,7 @@ def test_a_symmetric_part_is_refused_without_a_breaker(refs, name, fold):
     # the window picks exactly one of the symmetric poses: the right one (the small
     # insert's turn is known to 0.09° (1σ): its bound lifted)
     from insitu.locate.part import LocateSettings
-    loose = LocateSettings(turn_bound_deg=0.5, turn_tolerance_deg=0.5)
+    loose = LocateSettings(turn_bound_deg=0.5)
     pose = locate_part(refs[name], pts, loose, lines=lines,
                        prefer_angle=(truth[2] - 40, truth[2] + 40))
     mm, deg = _err(pose, truth)
@@ -166,7 +166,7 @@ def test_a_first_scan_as_reference(refs):
     truth = (10.0, -5.0, 55.0)                  # 25° further and shifted
     pts, lines = synthetic_scan("step-block", truth)
     try:
-        pose = locate_part(ref, pts, LocateSettings(tolerance_mm=0.2, turn_bound_deg=0.5, turn_tolerance_deg=0.5), lines=lines)
+        pose = locate_part(ref, pts, LocateSettings(tolerance_mm=0.2, turn_bound_deg=0.5), lines=lines)
     except LocateRefused as e:
         assert e.reason in ("poor-fit", "ambiguous")
         assert "25." in str(e) or "24." in str(e) or "23." in str(e)   # it was close
@@ -239,7 +239,7 @@ def test_pose_of_a_small_simulated_scan(refs):
         cloud = scan_live(station).cloud
     with pytest.raises(LocateRefused, match="not pinned down .* what would pin it down: a crossed pass .*, the room-light frame"):
         locate_cloud(refs["step-block"], cloud)
-    pose = locate_cloud(refs["step-block"], cloud, LocateSettings(tolerance_mm=0.2, turn_bound_deg=0.5, turn_tolerance_deg=0.5))
+    pose = locate_cloud(refs["step-block"], cloud, LocateSettings(tolerance_mm=0.2, turn_bound_deg=0.5))
     mm, deg = _err(pose, truth)
     assert mm < 0.2 and deg < 0.15, (mm, deg)
     assert pose.best.edges > 50

@@ -1,7 +1,7 @@
 """What a located pose must reach to be given (:mod:`insitu.locate.part`): 2σ at the rim
-within the tolerance, 3σ of the turn within its bound and 2σ of it within the marks' angle
-tolerance; and what a scan reference's outline alone holds a part to
-(:func:`insitu.locate.uncertainty.outline_hold`)."""
+within the tolerance and 3σ of the turn within its bound (2σ of the turn within the marks'
+angle tolerance only when one is set); and what a scan reference's outline alone holds a part
+to (:func:`insitu.locate.uncertainty.outline_hold`)."""
 
 from dataclasses import replace
 
@@ -24,15 +24,24 @@ def _pinned_or_why(sol: Solution, settings: LocateSettings) -> str:
     return ""
 
 
-def test_a_turn_within_its_bound_but_not_within_the_angle_tolerance_is_refused():
-    """A small part's turn: 1σ 0.03° lies within the 0.1° bound at 3σ and moves its rim
-    only 0.005 mm, but 2σ of it is beyond the marks' 0.05°: refused, saying so."""
-    why = _pinned_or_why(POSE, LocateSettings())
+def test_a_small_part_is_given_when_its_rim_and_its_turn_bound_hold():
+    """The insert with CAD + frame, two sides seen: 1σ 0.01 mm at the rim and 0.03° (the
+    per-edge tilt floor), 3σ of the turn 0.09° within the 0.1° bound: given, though 2σ of its
+    turn (0.06°) exceeds 0.05° — unless a turn tolerance is asked for."""
+    assert _pinned_or_why(POSE, LocateSettings()) == ""
+    why = _pinned_or_why(POSE, LocateSettings(turn_tolerance_deg=0.05))
     assert "0.030°" in why and "0.05°" in why and "finer lines" in why, why
-    assert _pinned_or_why(POSE, LocateSettings(turn_tolerance_deg=0.06)) == ""
-    assert _pinned_or_why(replace(POSE, sigma_deg=0.024), LocateSettings()) == ""
-    assert "0.040°" in _pinned_or_why(replace(POSE, sigma_deg=0.04),
-                                       LocateSettings(turn_tolerance_deg=1.0))   # the bound
+
+
+def test_a_turn_whose_3_sigma_exceeds_its_bound_is_refused_whatever_the_rim():
+    """1σ 0.04°: 3σ 0.12° beyond the 0.1° bound — no pose given that may lie 0.1° off, even
+    where the rim (1σ 0.01 mm) holds; the refusal names both and what would pin it down."""
+    why = _pinned_or_why(replace(POSE, sigma_deg=0.04), LocateSettings())
+    assert "0.040°" in why and "0.1°" in why and "finer lines" in why, why
+    assert "0.05 mm" in why and "3σ of the turn" in why, why
+    assert _pinned_or_why(replace(POSE, sigma_deg=0.04), LocateSettings(turn_bound_deg=0.13)
+                          ) == ""
+    assert "0.030 mm" in _pinned_or_why(replace(POSE, sigma_rim_mm=0.03), LocateSettings())
 
 
 def _square(half=20.0, spacing=0.1):

@@ -224,3 +224,4 @@ def test_a_scan_references_room_light_frame_reads_back(tmp_path, reference):
     assert raw["locate"]["tolerance_mm"] == 0.03 and raw["locate"]["turn_bound_deg"] == 0.2
     back = read_recipe(path, Placement, PROJECTIONS)
     assert back.reference_room_light == frame and back.tolerance == (0.03, 0.2)
+    assert raw["locate"]["turn_tolerance_deg"] is None and back.turn_tolerance_deg is None

@@ -65,10 +65,10 @@ TurnBound = Annotated[float, typer.Option(
     "--turn-bound", metavar="DEG", callback=bounded("turn_bound_deg"),
     help="And only when 3σ of its turn lies within this, degrees (a small part's turn matters "
          "little at its rim, but is never far off).")]
-TurnTolerance = Annotated[float, typer.Option(
+TurnTolerance = Annotated[float | None, typer.Option(
     "--turn-tolerance", metavar="DEG", callback=bounded("turn_bound_deg"),
-    help="And only when 2σ of its turn lies within this, degrees (the marks' angle "
-         "tolerance).")]
+    help="And only when 2σ of its turn lies within this, degrees (the marks' own angle "
+         "tolerance). Default: none, the rim's tolerance and --turn-bound decide.")]
 
 
 @one_line_errors
@@ -79,7 +79,7 @@ def locate(reference: Reference, cloud: Cloud, out: Output, prefer_angle: Prefer
            reference_room_light: ReferenceRoomLight = None,
            tolerance: Tolerance = _D.tolerance_mm,
            turn_bound_deg: TurnBound = _D.turn_bound_deg,
-           turn_tolerance: TurnTolerance = _D.turn_tolerance_deg) -> None:
+           turn_tolerance: TurnTolerance = None) -> None:
     """Find the part of REFERENCE in CLOUD: the table taken away, a global registration
     (FPFH features + RANSAC, and a search over turns about z), point-to-plane ICP kept flat
     on the table, then x, y and the turn from the edges the scan lines cross (or, with
@@ -117,13 +117,14 @@ def locate(reference: Reference, cloud: Cloud, out: Output, prefer_angle: Prefer
 def _show(pose, out: Path, framed: bool) -> None:
     """The located pose as a table."""
     b, s = pose.best, pose.second
+    own = "" if pose.turn_tolerance_deg is None else f" and {pose.turn_tolerance_deg:g}°"
     table = Table(title=f"part pose → {out}", show_header=False)
     table.add_row("position, mm", f"x {b.x_mm:.3f}, y {b.y_mm:.3f}, z {b.z_mm:.3f}")
     table.add_row("turn about z", f"{b.angle_deg:.3f}°")
     table.add_row("uncertainty", f"1σ {b.rim_sigma_mm:.3f} mm at the part's rim, "
                                  f"{b.turn_sigma_deg:.3f}° (2σ within {pose.tolerance[0]:g} "
-                                 f"mm and {pose.turn_tolerance_deg:g}°, 3σ within "
-                                 f"{pose.tolerance[1]:g}°)")
+                                 f"mm{own}, 3σ of the turn "
+                                 f"within {pose.tolerance[1]:g}°)")
     table.add_row("fit", f"fitness {b.fitness:.1%}, coverage {b.coverage:.1%}, inlier RMSE "
                          f"{b.rmse_mm:.3f} mm")
     table.add_row("edges", f"{b.edges} samples, 1σ {b.sigma_mm:.3f} mm, {b.sigma_deg:.3f}°"

@@ -120,9 +120,10 @@ Tolerance = Annotated[float, typer.Option(
 TurnBound = Annotated[float, typer.Option(
     "--turn-bound", metavar="DEG", callback=bounded("turn_bound_deg"),
     help="And its turn to 3σ within this, degrees.")]
-TurnTolerance = Annotated[float, typer.Option(
+TurnTolerance = Annotated[float | None, typer.Option(
     "--turn-tolerance", metavar="DEG", callback=bounded("turn_bound_deg"),
-    help="And its turn to 2σ within this, degrees (the marks' angle on a small part).")]
+    help="And its turn to 2σ within this, degrees (the marks' own angle tolerance). "
+         "Default: none, the rim's tolerance and --turn-bound decide.")]
 
 LinesPerFrame = Annotated[str | None, typer.Option(
     "--lines-per-frame", metavar="auto|K",
@@ -142,7 +143,7 @@ def new(reference: Reference, pattern: Pattern, at: At, out: Output, width: Widt
         serial_start: SerialStart = None, fields: Fields = None,
         reference_room_light: ReferenceRoomLight = None, height_cal: HeightCal = None,
         tolerance: Tolerance = 0.05, turn_bound_deg: TurnBound = 0.1,
-        turn_tolerance: TurnTolerance = 0.05, lines_per_frame: LinesPerFrame = None) -> None:
+        turn_tolerance: TurnTolerance = None, lines_per_frame: LinesPerFrame = None) -> None:
     """Write a recipe: the part's REFERENCE and one pattern placed on it (add more with
     'insitu recipe add'). Positions and turns are in the reference's frame; each part of a
     run is located and the placements moved where it lies. A scan REFERENCE is checked
@@ -230,9 +231,10 @@ def show(recipe_path: RecipeArg) -> None:
     table.add_row("reference", f"{r.reference} ({r.reference_kind})" + (
         f", its room-light frame {r.reference_room_light}" if r.reference_room_light else ""))
     table.add_row("tolerance", f"a part is marked when its pose is known to 2σ within "
-                               f"{r.tolerance[0]:g} mm at its rim, its turn to 3σ within "
-                               f"{r.tolerance[1]:g}° and to 2σ within "
-                               f"{r.turn_tolerance_deg:g}°")
+                               f"{r.tolerance[0]:g} mm at its rim and its turn to 3σ "
+                               f"within {r.tolerance[1]:g}°" + (
+                                   "" if r.turn_tolerance_deg is None else
+                                   f", to 2σ within {r.turn_tolerance_deg:g}°"))
     if r.workpiece:
         table.add_row("simulated part", r.workpiece)
     for i, p in enumerate(r.placements, 1):

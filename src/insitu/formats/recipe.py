@@ -16,7 +16,7 @@
               "survey_mm": 4},                     # a first pass finds the part (absent: none)
      "locate": {"prefer_angle_deg": null,          # which of a symmetric part's turns
                 "tolerance_mm": 0.05, "turn_bound_deg": 0.1,   # 2σ at its rim, 3σ of its turn
-                "turn_tolerance_deg": 0.05},       # 2σ of its turn (absent: 0.05)
+                "turn_tolerance_deg": null},       # 2σ of its turn (absent, null: none)
      "read": {"offset_tolerance_mm": 0.1},         # a mark read back farther: part failed
      "serial": {"counter": "serial.counter.json", "start": 1, "fields": {}}}
 
@@ -24,8 +24,8 @@ Paths are relative to the recipe's folder. The reference defines the part's fram
 it, or the cloud of a first scan (its world frame is then the part's) with, optionally, the
 room-light frame that scan took (its outline is fitted there). ``locate.tolerance_mm``,
 ``turn_bound_deg``: a part is marked only when its pose is known to 2σ within the first at
-its rim and its turn to 3σ within the second (absent: 0.05 mm, 0.1°), and to 2σ within
-``turn_tolerance_deg`` (absent: 0.05°; the marks' angle on a small part).
+its rim and its turn to 3σ within the second (absent: 0.05 mm, 0.1°), and, when set, to 2σ
+within ``turn_tolerance_deg`` (the marks' own angle tolerance; absent or null: none).
 ``read.offset_tolerance_mm``: a marked part whose marks are read back farther than this from
 their planned place is logged with that reason (absent: 0.1 mm). ``scan.region`` null:
 where the part lies, grown by ``margin_mm`` (the simulated rig knows where; a real rig needs
@@ -111,7 +111,7 @@ class _Locate(_Strict):
     prefer_angle_deg: Annotated[tuple[float, float], each_within("angle_deg")] | None = None
     tolerance_mm: within("tolerance_mm") = 0.05
     turn_bound_deg: within("turn_bound_deg") = 0.1
-    turn_tolerance_deg: within("turn_bound_deg") = 0.05
+    turn_tolerance_deg: within("turn_bound_deg") | None = None
 
 
 class _Read(_Strict):
@@ -188,7 +188,7 @@ class Recipe:
     workpiece: str | None = None
     reference_room_light: Path | None = None
     tolerance: tuple[float, float] = (0.05, 0.1)
-    turn_tolerance_deg: float = 0.05
+    turn_tolerance_deg: float | None = None
     read_tolerance_mm: float = 0.1
 
 

@@ -17,7 +17,8 @@ and a shift), or a refusal naming why — never a doubtful pose.
 6. The pose is given only when its σ (:mod:`insitu.locate.uncertainty`: segments of each
    edge, a bias and a tilt per edge, the reference's own outline) puts it within the
    tolerance: :data:`SIGMAS` σ at the part's rim within ``tolerance_mm``, 3σ of the turn
-   within ``turn_bound_deg``; else refused, saying what would pin it down (a crossed pass,
+   within ``turn_bound_deg`` (and, when set, :data:`SIGMAS` σ of the turn within
+   ``turn_tolerance_deg``); else refused, saying what would pin it down (a crossed pass,
    the room-light frame, a CAD reference, finer lines).
 """
 
@@ -91,9 +92,11 @@ class LocateSettings:
     """Thresholds and grids of :func:`locate_part` (mm, degrees, fractions 0 … 1).
     ``table_z_mm``: the table's height when known (None: found in the scan);
     ``tolerance_mm``: a pose is given only when :data:`SIGMAS` × its 1σ at the part's rim
-    lies within it (the marking tolerance), 3σ of its turn within ``turn_bound_deg`` and
-    :data:`SIGMAS` σ of it within ``turn_tolerance_deg`` (a small part's turn, which matters
-    little at its rim, is still held to the marks' angle tolerance)."""
+    lies within it (the marking tolerance) and 3σ of its turn within ``turn_bound_deg`` (no
+    pose given 0.1° off, however small the part); ``turn_tolerance_deg``: when set, also
+    :data:`SIGMAS` σ of the turn within it (the marks' own angle tolerance; None: none, the
+    rim holds the marks' places: an insert's turn floor, 1σ 0.026–0.029° with two of its
+    sides seen, moves its rim 9.09 mm out 0.0044 mm)."""
 
     table_band_mm: float = 0.5
     table_z_mm: float | None = None
@@ -107,7 +110,7 @@ class LocateSettings:
     ambiguity: float = 0.05
     tolerance_mm: float = 0.05
     turn_bound_deg: float = 0.1
-    turn_tolerance_deg: float = 0.05
+    turn_tolerance_deg: float | None = None
     turn_step_deg: float = 5.0
     turn_candidates: int = 6
     agree_mm: float = 0.05   # + 3σ: how far the frame's pose may lie from the scan's (whose
@@ -126,7 +129,7 @@ class PartPose:
     points: int
     seconds: float
     tolerance: tuple[float, float] | None = None
-    turn_tolerance_deg: float = LocateSettings.turn_tolerance_deg
+    turn_tolerance_deg: float | None = None
 
     @property
     def T_world_part(self) -> np.ndarray:
@@ -261,7 +264,7 @@ def _margin(sol: Solution, s: LocateSettings) -> float:
     """How much of the tolerance and of the turn's bound a pose's σ takes (≤ 1: given)."""
     turn = sol.turn_sigma_deg
     return max(SIGMAS * sol.rim_sigma_mm / s.tolerance_mm, 3 * turn / s.turn_bound_deg,
-               SIGMAS * turn / s.turn_tolerance_deg)
+               0.0 if s.turn_tolerance_deg is None else SIGMAS * turn / s.turn_tolerance_deg)
 
 
 def _aligned(ref: PartReference, pts: np.ndarray, lines: np.ndarray | None,
@@ -384,13 +387,14 @@ def _pinned(best: Solution, s: LocateSettings, advice) -> None:
     if not np.isfinite(sigma):
         raise LocateRefused("poor-fit", f"x, y and the turn are not pinned down at "
                             f"{best.describe()}: {best.unheld}{frame}; {advice()}", best)
-    turn = best.turn_sigma_deg
+    turn, t = best.turn_sigma_deg, s.turn_tolerance_deg
+    own = "" if t is None else f" and {t:g}°"
     if not _margin(best, s) <= 1.0:
         by = (f"the room-light frame's edges ({best.image_edges} points)" if best.image_edges
               else f"the edges the scan lines cross ({best.edges} samples)")
         raise LocateRefused(
             "poor-fit", f"not pinned down to the tolerance at {best.describe()}: {by} hold it "
             f"to {sigma:.3f} mm at the part's rim and {turn:.3f}° (1σ; {SIGMAS:g}σ within "
-            f"{s.tolerance_mm:g} mm and {s.turn_tolerance_deg:g}°, 3σ within "
-            f"{s.turn_bound_deg:g}° needed){frame}; {advice()}", best)
+            f"{s.tolerance_mm:g} mm{own}, 3σ of the turn within {s.turn_bound_deg:g}° "
+            f"needed){frame}; {advice()}", best)
 
