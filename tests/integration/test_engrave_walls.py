@@ -14,9 +14,9 @@ from insitu.marking.engrave_depth import (
     DepthSettings,
     Outline,
     measure_depth,
-    viewpoints,
 )
 from insitu.marking.engrave_plan import CellHistory, learn, plan_round
+from insitu.marking.engrave_walls import viewpoints
 from insitu.services.engrave import NO_HEIGHT_CAL, EngraveRequest, engrave
 from insitu.services.engrave_report import depth_picture
 from insitu.services.pocket import DEPTH_CENTRES

@@ -7,7 +7,7 @@ import pytest
 import shapely
 
 from insitu.errors import MeasurementError
-from insitu.marking.engrave_depth import DepthSettings, measure_depth
+from insitu.marking.engrave_depth import MEASURED, DepthSettings, measure_depth
 from insitu.marking.engrave_top import top_model
 
 POCKET = shapely.box(-1.0, -1.0, 1.0, 1.0)
@@ -92,3 +92,25 @@ def test_the_pockets_depth_error_is_honest_and_refused_beyond_the_tolerance():
     quiet = measure_depth(*_scan(np.random.default_rng(4), 0.2, _heavy(0.005)), POCKET,
                           DepthSettings(ring_mm=1.5))
     assert quiet.pocket_depth(0.005)[0] == pytest.approx(0.2, abs=0.003)
+
+
+def test_a_wall_parallel_to_the_scan_lines_keeps_a_narrower_zone():
+    """A 2 × 2 mm pocket 0.2 mm deep whose floor within 0.2 mm of the walls the lines cross
+    reads 30 µm short: those points are left out, the cells 0.125 mm from a wall parallel to
+    the lines (not straddled by them) are measured, none 0.125 mm from a crossed wall; the
+    same scan turned a quarter (lines along x) swaps the walls' roles."""
+    rng = np.random.default_rng(5)
+    p, line = _scan(rng, 0.2, lambda rng, n: 0.003 * rng.standard_normal(n), spacing=0.05)
+    p[:, 2] += np.where((np.abs(p[:, 0]) < 1) & (np.abs(p[:, 1]) > 0.8) & (np.abs(p[:, 1]) < 1),
+                        0.03, 0.0)
+    s = DepthSettings(ring_mm=1.5)
+    for turned in (False, True):
+        q = p[:, [1, 0, 2]] if turned else p
+        dm = measure_depth(q, line, POCKET, s)
+        gx, gy = dm.cells.centres()
+        across, along = (gy, gx) if turned else (gx, gy)
+        measured = dm.state == MEASURED
+        beside_parallel = (np.abs(np.abs(across) - 0.875) < 0.01) & (np.abs(along) < 0.6)
+        beside_crossed = (np.abs(np.abs(along) - 0.875) < 0.01) & (np.abs(across) < 0.6)
+        assert measured[beside_parallel].all() and not measured[beside_crossed].any()
+        assert np.nanmax(np.abs(dm.depth[measured] - 0.2)) < 0.003

@@ -8,14 +8,10 @@ the line's own top points give (a line's height error is shared by its floor poi
 floor is referred to the top of the same lines). A floor point's depth is top(x, y) +
 offset(line) − z.
 
-The wall's neighbourhood: a point within ``wall_band_mm`` of the outline is neither floor nor
-top. There the line (as wide as the beam) straddles the edge, the centre detector's kernel
-carries the step along the line, and the camera loses the floor behind the wall on its side.
-Deeper, the floor beside the wall the camera faces reads short (its image merges with the lit
-wall's): a floor point counts only beyond ``wall_band_mm + bias_per_depth ×`` its depth from
-the outline (the simulator: 37 µm short 0.2 mm from it at 0.2 mm deep, 85 µm at 0.1 mm and
-0.5 mm deep, within 10 µm beyond 0.3 mm); the depth that sets a point's zone is the median
-of its neighbours' (within ``kernel_mm``), not its own noisy one. A floor point's error is
+The wall's neighbourhood: a point within ``wall_band_mm`` of the outline is not top; the
+floor counts only beyond the walls' bias zones, wider for the walls the scan lines cross than
+for those parallel to them, and growing with the depth
+(:mod:`insitu.marking.engrave_walls`). A floor point's error is
 shared along its line (the speckle of the floor it crosses, about 0.01 mm): a floor crossed
 by fewer than ``min_lines`` lines with trusted points is not measured at all.
 
@@ -28,7 +24,8 @@ The map: a cell's depth is the Gaussian-weighted mean of the floor points around
 (σ ``kernel_mm``), with its standard error; each cell of the pocket is
   measured   — enough trusted floor points around it (``min_points`` effective), its centre
                beyond the bias zone at its depth: the one state whose depth can be trusted;
-  wall       — its centre within the band: the value the kernel brings from the floor inside;
+  wall       — its centre within the band (``parallel_band_mm`` of a wall parallel to the
+               lines): the value the kernel brings from the floor inside;
   hidden     — the camera (or the beam) cannot reach it past the wall at the depth around it
                (a wall cell too: whatever the kernel brings it comes from the floor beside);
   unmeasured — too few trusted points or lines, or its centre within the bias zone at its
@@ -46,6 +43,7 @@ from scipy.spatial import cKDTree
 
 from insitu.errors import MeasurementError
 from insitu.marking.engrave_top import top_model
+from insitu.marking.engrave_walls import clear, line_direction, unreachable
 
 STATES = ("measured", "wall", "hidden", "unmeasured")
 MEASURED, WALL, HIDDEN, UNMEASURED = range(4)
@@ -60,10 +58,14 @@ class DepthSettings:
     ``kernel_mm``: σ of the weights that average floor points into a cell; ``min_points``:
     effective points for a cell to count as measured; ``bias_per_depth``: the band grows by
     this many mm per mm of depth for the floor's points and the measured cells' centres;
-    ``min_lines``: scan lines with trusted floor points for any cell to count as measured."""
+    ``parallel_band_mm``, ``parallel_per_depth``: the zone of a wall parallel to the scan
+    lines, the larger of the two (see the module docstring); ``min_lines``: scan lines with
+    trusted floor points for any cell to count as measured."""
 
     wall_band_mm: float = 0.2
     bias_per_depth: float = 0.25
+    parallel_band_mm: float = 0.1
+    parallel_per_depth: float = 0.55
     min_lines: int = 8
     ring_mm: float = 2.0
     cell_mm: float = 0.25
@@ -117,16 +119,37 @@ class Outline:
         inside = shapely.contains_xy(region, gx, gy)
         self._signed = (distance_transform_edt(inside) - distance_transform_edt(~inside)
                         ) * _RASTER_MM
+        self._walls: dict = {}
 
     def distance(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
         """(N,) signed distance (mm) of world points to the outline; −inf off the raster."""
-        ny, nx = self._signed.shape
+        return self._sample(self._signed, x, y, -np.inf)
+
+    def _sample(self, raster: np.ndarray, x, y, off: float) -> np.ndarray:
+        ny, nx = raster.shape
         col = np.round((np.asarray(x) - self.origin[0]) / _RASTER_MM).astype(int)
         row = np.round((np.asarray(y) - self.origin[1]) / _RASTER_MM).astype(int)
         ok = (col >= 0) & (col < nx) & (row >= 0) & (row < ny)
-        out = np.full(np.shape(x), -np.inf)
-        out[ok] = self._signed[row[ok], col[ok]]
+        out = np.full(np.shape(x), off)
+        out[ok] = raster[row[ok], col[ok]]
         return out
+
+    def wall_distances(self, x, y, along) -> tuple[np.ndarray, np.ndarray]:
+        """(distance to the walls the scan lines cross, to the walls parallel to them), mm,
+        of world points (``x``, ``y``) inside the pocket; ``along`` (2,): the lines'
+        direction. A wall is parallel when its normal lies within 45° of across the lines."""
+        key = (round(float(along[0]), 2), round(float(along[1]), 2))
+        if key not in self._walls:
+            outside = self._signed <= 0
+            edge = outside & (distance_transform_edt(outside) <= 1.5)
+            gy, gx = np.gradient(self._signed)
+            cos = np.abs(gx * along[0] + gy * along[1]) / np.maximum(np.hypot(gx, gy), 1e-12)
+            parallel = edge & (cos < np.sqrt(0.5))
+            self._walls[key] = tuple(distance_transform_edt(~w) * _RASTER_MM if w.any() else
+                                     np.full(w.shape, np.inf) for w in (edge & ~parallel,
+                                                                        parallel))
+        crossed, parallel = self._walls[key]
+        return self._sample(crossed, x, y, 0.0), self._sample(parallel, x, y, 0.0)
 
     def cells(self, cell_mm: float) -> PocketCells:
         """The cells over the region (its bounding box, one cell beyond)."""
@@ -204,7 +227,7 @@ def measure_depth(points: np.ndarray, line: np.ndarray, region, settings: DepthS
     cells = cells or outline.cells(s.cell_mm)
     dist = outline.distance(points[:, 0], points[:, 1])
     top = (dist <= -s.wall_band_mm) & (dist >= -s.ring_mm)
-    floor = dist >= s.wall_band_mm
+    floor = dist >= min(s.wall_band_mm, s.parallel_band_mm)
     if top.sum() < 20:
         raise MeasurementError(f"the scan has {int(top.sum())} points on the top around the "
                                "pocket: scan beyond its outline")
@@ -213,7 +236,9 @@ def measure_depth(points: np.ndarray, line: np.ndarray, region, settings: DepthS
     top_fit = top_model(points[top], line[top])
     d = top_fit.at(points[floor], line[floor]) - points[floor, 2]
     zone_d = _local_median(points[floor, :2], d, s.kernel_mm)
-    trusted = dist[floor] >= s.wall_band_mm + s.bias_per_depth * np.maximum(zone_d, 0.0)
+    along = line_direction(points[floor, :2], line[floor])
+    trusted = clear(outline.wall_distances(points[floor, 0], points[floor, 1], along),
+                    zone_d, s)
     fx, fy, d = points[floor, 0][trusted], points[floor, 1][trusted], d[trusted]
     fline = np.unique(line[floor][trusted], return_inverse=True)[1]
     raw = d
@@ -226,9 +251,9 @@ def measure_depth(points: np.ndarray, line: np.ndarray, region, settings: DepthS
     ok = cells.inside & (neff >= s.min_points) & enough
     near = _nearest_depth(depth, ok) if expected_mm is None else np.where(ok, depth,
                                                                           expected_mm)
-    zone = s.wall_band_mm + s.bias_per_depth * np.maximum(near, 0.0)
-    state[ok & (cells.edge_mm >= zone)] = MEASURED
-    state[cells.inside & (cells.edge_mm < s.wall_band_mm)] = WALL
+    walls = outline.wall_distances(*cells.centres(), along)
+    state[ok & clear(walls, near, s)] = MEASURED
+    state[cells.inside & ~clear(walls, 0.0, s)] = WALL
     if viewpoints is not None:
         blocked = unreachable(cells, near, outline, viewpoints)
         state[(state == UNMEASURED) & blocked] = HIDDEN
@@ -359,33 +384,3 @@ def _nearest_depth(depth: np.ndarray, ok: np.ndarray) -> np.ndarray:
         return np.zeros(depth.shape)
     _, (ri, ci) = distance_transform_edt(~ok, return_indices=True)
     return np.where(ok, depth, depth[ri, ci])
-
-
-def viewpoints(rig) -> np.ndarray:
-    """(2, 3) world mm: where a rig (``rig.camera``, ``rig.head``) sees a pocket from: the
-    camera's centre and the head's pivot, for :func:`unreachable`."""
-    return np.array([rig.camera.centre_world, [0.0, 0.0, rig.head.pivot_height_mm]])
-
-
-def unreachable(cells: PocketCells, depth: np.ndarray, outline: Outline,
-                viewpoints: np.ndarray) -> np.ndarray:
-    """(ny, nx) bool: cells of the pocket that a ray to one of ``viewpoints`` (K, 3) world mm
-    leaves through a wall: from the floor at ``depth`` (mm below the top) it must rise out of
-    the pocket before it passes the outline."""
-    gx, gy = cells.centres()
-    out = np.zeros(cells.shape, bool)
-    inside = cells.inside & (depth > 0)
-    if not inside.any():
-        return out
-    px, py, d = gx[inside], gy[inside], depth[inside]
-    blocked = np.zeros(len(px), bool)
-    for vp in np.asarray(viewpoints, float):
-        h = np.hypot(vp[0] - px, vp[1] - py)
-        rise = max(vp[2], 1.0)                       # the top is far below the viewpoint
-        reach = d * h / rise                         # horizontal run until the top's height
-        u = np.column_stack([vp[0] - px, vp[1] - py]) / np.maximum(h, 1e-9)[:, None]
-        for t in np.linspace(0.0, 1.0, 9)[1:]:
-            qx, qy = px + u[:, 0] * reach * t, py + u[:, 1] * reach * t
-            blocked |= outline.distance(qx, qy) <= 0
-    out[inside] = blocked
-    return out

@@ -13,10 +13,9 @@ measurement moves a cell's estimate only by what it is worth, and passes never c
 Only a measured cell's depth (:data:`~insitu.marking.engrave_depth.MEASURED`: enough floor
 points beyond the walls' bias zone at its depth) is learnt from: a cell the measurement cannot
 vouch for (the wall band, too few trusted points, the bias zone of a wall close for the depth)
-follows the model: never more passes than reach the depth at the highest rate of its own and
-of the measured cells around it (:data:`NEAR_CELLS`; the pocket's where none is) plus
-:data:`UNTRUSTED_SIGMAS` σ of that rate (the pocket rate's σ holds at least the scan's shared
-error over the passes of the deepest measurement). Until the
+follows the model: never more passes than reach the depth at the mean rate of the measured
+cells within one cell around it plus :data:`UNTRUSTED_SIGMAS` σ (how far a measured cell's
+rate strays from its neighbours' mean; :func:`_untrusted_rate`). Until the
 first such measurement, a round stops where the deepest-trusted cell would leave its zone (at
 :data:`RATE_MARGIN` × the rate), so that a narrow pocket is measured while its floor can be.
 
@@ -46,7 +45,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.ndimage import distance_transform_edt, maximum_filter
+from scipy.ndimage import distance_transform_edt, maximum_filter, uniform_filter
 
 from insitu.formats.materials import LaserSource, Material
 from insitu.formats.pens import Pen
@@ -64,7 +63,8 @@ FEW_CELLS = 0.02        # fewer measured cells than this share short: not worth 
 FINISH_SPEED = 2.0      # a finishing pass: the pen this many times faster (fewer pulses per area)
 RATE_MARGIN = 1.15      # a cell not seen is planned as if it ablated this much faster
 UNTRUSTED_SIGMAS = 2.0  # a cell not measured is planned at its rate + this many σ of its rate
-NEAR_CELLS = 2          # ... or its measured neighbours' this many cells around (the highest)
+NEAR_CELLS = 2          # the cells around (this many) whose rates say how far a rate strays
+MIN_PAIRS = 6           # ... when this many of them have measured neighbours (else the pocket's)
 STOP_SIGMAS = 1.0       # a measured cell gets more passes only when this many σ short
 SCAN_ERROR_MM = 0.004   # a depth scan's error shared by the pocket's cells (the floor's speckle
                         # changes pass to pass; benchmarks/engrave.py measure: 1 … 7 µm)
@@ -170,19 +170,36 @@ def _stopped(history: CellHistory, need: np.ndarray, rate: np.ndarray, target_mm
 
 def _untrusted_rate(history: CellHistory, rate: np.ndarray, inside: np.ndarray,
                     measured: np.ndarray) -> np.ndarray:
-    """(ny, nx) the rate a cell the measurement cannot vouch for is planned at: the highest of
-    its own (once it was measured) and the measured cells' within :data:`NEAR_CELLS` around
-    it, each plus :data:`UNTRUSTED_SIGMAS` σ of it (the rate varies over millimetres: a wood's
-    rings, a layer's thickness); with no measured cell around, the higher of its rate and the
-    pocket's median plus that many σ of the cells' spread."""
-    up = rate + UNTRUSTED_SIGMAS * np.sqrt(history.rate_var)
+    """(ny, nx) the rate a cell the measurement cannot vouch for is planned at: the mean rate
+    of the measured cells within one cell around it plus :data:`UNTRUSTED_SIGMAS` σ, σ how far
+    a measured cell's rate lies from the mean of its measured neighbours' (left out of it,
+    rms over the measured cells within :data:`NEAR_CELLS`, over the pocket where fewer than
+    :data:`MIN_PAIRS` are) with the error the pocket's rates share (the least of their σ);
+    never below its own rate + that many σ once it was measured. Where no measured cell is
+    within one (or no measured cell has a measured neighbour): the highest of its own and
+    the measured cells' within :data:`NEAR_CELLS`, each plus that many σ of it; with none
+    around, the higher of its rate and the pocket's median plus that many σ of it."""
+    sd = np.sqrt(history.rate_var)
+    up = rate + UNTRUSTED_SIGMAS * sd
     pocket = float(np.median(rate[inside])) if inside.any() else 0.0
-    alone = np.maximum(rate, pocket) + UNTRUSTED_SIGMAS * np.sqrt(history.rate_var)
-    size = 2 * NEAR_CELLS + 1
-    near = maximum_filter(np.where(measured, up, -np.inf), size=size, mode="constant",
-                          cval=-np.inf)
+    alone = np.maximum(rate, pocket) + UNTRUSTED_SIGMAS * sd
+    near = maximum_filter(np.where(measured, up, -np.inf), size=2 * NEAR_CELLS + 1,
+                          mode="constant", cval=-np.inf)
     own = np.where(history.sp2 > 0, up, -np.inf)
-    return np.where(np.isfinite(near), np.maximum(near, own), alone)
+    out = np.where(np.isfinite(near), np.maximum(near, own), alone)
+    n = np.rint(uniform_filter(measured.astype(float), 3, mode="constant") * 9)
+    total = uniform_filter(np.where(measured, rate, 0.0), 3, mode="constant") * 9
+    pair = measured & (n >= 2)
+    if pair.sum() < 3:
+        return out
+    r2 = np.where(pair, (rate - (total - rate) / np.maximum(n - 1, 1)) ** 2, 0.0)
+    size = 2 * NEAR_CELLS + 1
+    pairs = np.rint(uniform_filter(pair.astype(float), size, mode="constant") * size ** 2)
+    local = uniform_filter(r2, size, mode="constant") * size ** 2 / np.maximum(pairs, 1)
+    var = np.where(pairs >= MIN_PAIRS, local, r2[pair].mean())
+    sigma = np.sqrt(var + sd[measured].min() ** 2)
+    mean = total / np.maximum(n, 1) + UNTRUSTED_SIGMAS * sigma
+    return np.where(n > 0, np.maximum(mean, own), out)
 
 
 def finishing_pen(material: Material, laser: LaserSource) -> tuple[Pen, float]:

@@ -27,6 +27,7 @@ from insitu.marking.engrave_depth import UNMEASURED, DepthMap, Outline, PocketCe
 from insitu.marking.engrave_layers import layer_paths, passes_given
 from insitu.marking.engrave_plan import CellHistory, Learnt, RoundPlan, finishing_pen, learn
 from insitu.marking.engrave_record import EngraveRecord, RoundRecord, write_record
+from insitu.marking.engrave_walls import trusted_depth
 from insitu.marking.journal import journal_path_for
 from insitu.marking.surface import Surface
 from insitu.services.engrave_report import centres as _centres
@@ -35,7 +36,7 @@ from insitu.services.engrave_report import measure_summary as _summary
 from insitu.services.engrave_request import EngraveRequest, Measured, Notify
 from insitu.services.mark import mark
 from insitu.services.plan import plan_mark
-from insitu.services.pocket import measure_pocket
+from insitu.services.pocket import LINES_ALONG, measure_pocket
 from insitu.services.scan import Cancelled
 from insitu.services.station import Station
 
@@ -73,8 +74,8 @@ class EngraveSteps:
         self.cells: PocketCells = self.outline.cells(s.cell_mm)
         x0, y0, x1, y1 = region.bounds
         self.top = Surface(req.cloud, region=(x0 - 2, x1 + 2, y0 - 2, y1 + 2))
-        self.trusted_to = np.where(self.cells.inside, np.maximum(
-            self.cells.edge_mm - s.wall_band_mm, 0.0) / s.bias_per_depth, 0.0)
+        self.trusted_to = np.where(self.cells.inside, trusted_depth(
+            self.outline.wall_distances(*self.cells.centres(), LINES_ALONG), s), 0.0)
         self.last: DepthMap | None = None
 
     def _check_reach(self, req: EngraveRequest, targets: np.ndarray) -> None:

@@ -19,8 +19,8 @@ from insitu.marking.engrave_depth import (
     Outline,
     PocketCells,
     measure_depth,
-    viewpoints,
 )
+from insitu.marking.engrave_walls import viewpoints
 from insitu.services.common import Progress
 from insitu.services.height import centre_settings
 from insitu.services.scan import scan_live
@@ -30,6 +30,10 @@ from insitu.vision.extract import CentreSettings
 DEPTH_CENTRES = dict(method="gaussian", smooth_half_window=0, smooth_grains=0.0)
 """How a depth scan finds line centres: across the line only (a Gaussian per row), nothing
 smoothed along it, so a wall's step is not carried onto the floor beside it."""
+
+
+LINES_ALONG = np.array([0.0, 1.0])
+"""The direction a depth scan's lines run in (world x, y): along y, stepped across x."""
 
 
 @dataclass(frozen=True)

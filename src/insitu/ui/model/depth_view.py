@@ -22,8 +22,8 @@ from insitu.marking.engrave_depth import (
     DepthMap,
     DepthSettings,
     measure_depth,
-    viewpoints,
 )
+from insitu.marking.engrave_walls import viewpoints
 
 HIDDEN_COLOUR = "0.8"
 UNMEASURED_COLOUR = "0.55"

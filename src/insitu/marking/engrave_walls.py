@@ -1,0 +1,81 @@
+"""The walls' bias zones around a pocket's floor, and the cells its walls hide.
+
+The floor beside a wall the scan lines cross reads short: the line (as wide as the beam)
+straddles the edge and the centre detector's kernel carries the step along the line. The
+floor counts only beyond ``wall_band_mm + bias_per_depth ×`` its depth from such a wall (the
+simulator, beech 0.2 mm deep, tune seeds 0 and 2: 28–45 µm short within 0.1 mm, 10–35 µm at
+0.1–0.15 mm, 3–19 µm at 0.15–0.2 mm, within 8 µm beyond; 0.5 mm deep: 56–116 µm within
+0.1 mm). A wall parallel to the lines (its normal within 45° of across them) is not
+straddled: its zone is ``parallel_band_mm`` or ``parallel_per_depth ×`` the depth, the larger
+(the wall the camera faces, as wide in its image as the depth × tan 25°, merges with the
+floor's line: 0.5 mm deep, 62 µm short 0.2–0.25 mm from it, within 10 µm beyond 0.3 mm;
+0.2 mm deep, within −6 … +5 µm from 0.05 mm on, where the crossed walls' floor reads short).
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+if TYPE_CHECKING:
+    from insitu.marking.engrave_depth import DepthSettings, Outline, PocketCells
+
+
+def clear(walls: tuple[np.ndarray, np.ndarray], depth, s: DepthSettings) -> np.ndarray:
+    """Where points (or cells' centres) at ``depth`` mm lie beyond the walls' bias zones:
+    ``walls`` their distances to the crossed and the parallel walls
+    (:meth:`Outline.wall_distances`)."""
+    depth = np.maximum(depth, 0.0)
+    return ((walls[0] >= s.wall_band_mm + s.bias_per_depth * depth)
+            & (walls[1] >= np.maximum(s.parallel_band_mm, s.parallel_per_depth * depth)))
+
+
+def trusted_depth(walls: tuple[np.ndarray, np.ndarray], s: DepthSettings) -> np.ndarray:
+    """The depth (mm) down to which points at distances ``walls`` (as :func:`clear` takes
+    them) stay beyond the bias zones; 0 within a band."""
+    crossed = (walls[0] - s.wall_band_mm) / s.bias_per_depth
+    parallel = np.where(walls[1] >= s.parallel_band_mm, walls[1] / s.parallel_per_depth, 0.0)
+    return np.maximum(np.minimum(crossed, parallel), 0.0)
+
+
+def line_direction(xy: np.ndarray, line: np.ndarray) -> np.ndarray:
+    """(2,) unit direction of the scan lines: the principal axis of the points ``xy``
+    (N, 2) about their own line's mean (``line`` (N,)); (0, 1) with too few points."""
+    if len(xy) < 3:
+        return np.array([0.0, 1.0])
+    inv = np.unique(line, return_inverse=True)[1].ravel()
+    n = np.bincount(inv).astype(float)
+    c = xy - np.column_stack([np.bincount(inv, xy[:, k]) / n for k in (0, 1)])[inv]
+    v = np.linalg.eigh(c.T @ c)[1][:, -1]
+    return v * np.sign(v[1] if abs(v[1]) > 1e-9 else v[0])
+
+
+def viewpoints(rig) -> np.ndarray:
+    """(2, 3) world mm: where a rig (``rig.camera``, ``rig.head``) sees a pocket from: the
+    camera's centre and the head's pivot, for :func:`unreachable`."""
+    return np.array([rig.camera.centre_world, [0.0, 0.0, rig.head.pivot_height_mm]])
+
+
+def unreachable(cells: PocketCells, depth: np.ndarray, outline: Outline,
+                viewpoints: np.ndarray) -> np.ndarray:
+    """(ny, nx) bool: cells of the pocket that a ray to one of ``viewpoints`` (K, 3) world mm
+    leaves through a wall: from the floor at ``depth`` (mm below the top) it must rise out of
+    the pocket before it passes the outline."""
+    gx, gy = cells.centres()
+    out = np.zeros(cells.shape, bool)
+    inside = cells.inside & (depth > 0)
+    if not inside.any():
+        return out
+    px, py, d = gx[inside], gy[inside], depth[inside]
+    blocked = np.zeros(len(px), bool)
+    for vp in np.asarray(viewpoints, float):
+        h = np.hypot(vp[0] - px, vp[1] - py)
+        rise = max(vp[2], 1.0)                       # the top is far below the viewpoint
+        reach = d * h / rise                         # horizontal run until the top's height
+        u = np.column_stack([vp[0] - px, vp[1] - py]) / np.maximum(h, 1e-9)[:, None]
+        for t in np.linspace(0.0, 1.0, 9)[1:]:
+            qx, qy = px + u[:, 0] * reach * t, py + u[:, 1] * reach * t
+            blocked |= outline.distance(qx, qy) <= 0
+    out[inside] = blocked
+    return out
