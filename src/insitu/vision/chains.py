@@ -10,6 +10,8 @@ import numpy as np
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
+from insitu.vision.detect_kernel import carry
+
 OWN_COLUMNS = 8
 """Columns of its own (no second peak there) that make a chain a line, not a ghost's tail."""
 
@@ -101,49 +103,10 @@ def carry_ends(img: np.ndarray, ok: np.ndarray, row: np.ndarray, gmax: np.ndarra
     continuity of two peaks chose, a ghost beside the line does not take it back."""
     ok, row = ok.copy(), row.copy()
     gmax, bg = gmax.astype(np.float64), bg.astype(np.float64)
-    H, W = img.shape
-    cols = np.flatnonzero(ok)
-    if len(cols) < 2:
-        return ok, row, gmax, bg
-    near = np.diff(cols) == 1
-    slope = median_of(np.diff(row[cols])[near]) if near.any() else 0.0
-    gap = (np.diff(cols) > 1) | (np.abs(np.diff(row[cols]) - slope) > 2)  # or a step
-    first, last = cols[np.r_[True, gap]], cols[np.r_[gap, True]]
-    line = last - first + 1 >= RUN                     # a stray column or two is no line
-    locked = np.zeros(W, bool) if locked is None else locked
-    for ends, d in ((first[line], -1), (last[line], 1)):
-        _carry(img, ok, row, gmax, bg, ends, d, slope, min_peak, thr, searched, steps, upper,
-               locked)
+    locked = np.zeros(len(ok), bool) if locked is None else locked
+    carry(img, ok, row, gmax, bg, float(min_peak), float(thr), searched, steps, upper, locked,
+          RUN, SHARED)
     return ok, row, gmax, bg
-
-
-def _carry(img, ok, row, gmax, bg, ends, d, slope, min_peak, thr, searched, steps, upper,
-           locked) -> None:
-    """:func:`carry_ends` of the line ends ``ends`` (m,) in direction ``d`` (−1, +1), all at
-    once: the columns each end goes on to, step by step, until the first that fails; ok,
-    row, gmax and bg (W,) are updated in place. Ends of one direction cannot reach what
-    another carries, nor its end: between two of them lies a line of at least :data:`RUN`
-    valid columns, and an end goes on into at most :data:`SHARED` < RUN of those."""
-    H, W = img.shape
-    k = np.arange(1, steps + 1)
-    c = ends[:, None] + d * k                                      # (m, steps)
-    at = row[ends].astype(np.float64)[:, None] + slope * d * k
-    inside = (c >= 0) & (c < W)
-    cc = np.clip(c, 0, W - 1)
-    shared = ((k <= SHARED) & (upper * (row[cc] - at) < -2.0) & ~locked[cc])
-    rows = np.clip(np.rint(at).astype(np.int64)[..., None] + np.arange(-1, 2), 0, H - 1)
-    px = img[rows[..., None], np.clip(cc[..., None, None] + np.arange(-1, 2), 0, W - 1)]
-    px = px.astype(np.float64)
-    med = median3(px[..., 0], px[..., 1], px[..., 2])               # (m, steps, 3 rows)
-    best = np.argmax(med, axis=-1)
-    v = np.take_along_axis(med, best[..., None], -1)[..., 0]
-    base = bg[ends][:, None]
-    go = (inside & searched[cc] & (~ok[cc] | shared) & (v >= min_peak) & (v - base >= thr))
-    go = np.logical_and.accumulate(go, axis=1)
-    i, j = np.nonzero(go)
-    col = cc[i, j]
-    ok[col], row[col] = True, np.take_along_axis(rows, best[..., None], -1)[i, j, 0]
-    gmax[col], bg[col] = v[i, j], base[i, 0]
 
 
 def ridges_of(cols: np.ndarray, row: np.ndarray, bridge: int, max_jump: float) -> np.ndarray:

@@ -15,17 +15,46 @@ divisions by zero give inf or NaN, as numpy's."""
 
 
 @compiled
+def _greatest(line, lo, hi, fill):
+    """The greatest of line[lo … hi], at least ``fill`` (a reduction the compiler vectorises
+    for integer frames)."""
+    best = fill
+    for value in line[lo:max(hi + 1, lo)]:     # no index: nothing to wrap round
+        best = max(best, value)
+    return best
+
+
+@compiled
+def _holds(line, lo, n, value):
+    """Whether line[lo … lo + n − 1] holds ``value`` (a vectorised count)."""
+    count = 0
+    for v in line[lo:lo + n]:
+        count += v == value
+    return count > 0
+
+
+@compiled
+def _first(line, lo, value):
+    """The first index from ``lo`` where ``line`` holds ``value`` (there is one), 32 values
+    at a time."""
+    y = lo
+    while y + 32 <= len(line) and not _holds(line, y, 32, value):
+        y += 32
+    while line[y] != value:
+        y += 1
+    return y
+
+
+@compiled
 def _peak(line, lo, hi, skip_lo, skip_hi, fill):
     """(row, value) of the first greatest of ``line``'s values lo … hi, those skip_lo …
     skip_hi left out; (lo, fill) where none exceeds ``fill``."""
-    best, at = fill, lo
-    for y in range(lo, min(hi, skip_lo - 1) + 1):
-        if line[y] > best:
-            best, at = line[y], y
-    for y in range(max(lo, skip_hi + 1), hi + 1):
-        if line[y] > best:
-            best, at = line[y], y
-    return at, best
+    a, b = min(hi, skip_lo - 1), max(lo, skip_hi + 1)
+    before, after = _greatest(line, lo, a, fill), _greatest(line, b, hi, fill)
+    best = max(before, after)
+    if best == fill:
+        return lo, fill
+    return (_first(line, lo, best) if before == best else _first(line, b, best)), best
 
 
 def band_peaks(pre, lo, hi, searched, fill):
@@ -40,7 +69,7 @@ def band_peaks(pre, lo, hi, searched, fill):
         else (0, 0)
     search = cv2.transpose(pre[top:bottom]) if bottom > top else np.zeros((len(lo), 0),
                                                                            pre.dtype)
-    first, last = lo - top, hi - top
+    first, last, fill = lo - top, hi - top, pre.dtype.type(fill)
 
     def second(j1, w, live, min_peak):
         j2, found = _second_peaks(search, j1 - top, first, last, w, live, min_peak, fill)
@@ -75,7 +104,8 @@ def _px(pre, y, col):
 
 
 @compiled
-def _median3(a, b, c):
+def median_of_3(a, b, c):
+    """The median of three numbers."""
     return max(min(a, b), min(max(a, b), c))
 
 
@@ -110,11 +140,52 @@ def column_stats(pre, j, w, searched, min_peak):
                 n += 1
         y = y + (n - 1) // 2
         reach = w + max(n - 2, 0) // 2
-        up = _median3(_px(pre, y - reach, col), _px(pre, y - reach + 1, col),
+        up = median_of_3(_px(pre, y - reach, col), _px(pre, y - reach + 1, col),
                       _px(pre, y - reach + 2, col))
-        dn = _median3(_px(pre, y + reach, col), _px(pre, y + reach - 1, col),
+        dn = median_of_3(_px(pre, y + reach, col), _px(pre, y + reach - 1, col),
                       _px(pre, y + reach - 2, col))
         row[col], run[col], gmax[col] = y, n, top_value
         bg[col] = (up + dn) / np.float32(2.0)
         contrast[col] = top_value - max(up, dn)
     return row, run, gmax, bg, contrast
+
+
+@compiled
+def carry(img, ok, row, gmax, bg, min_peak, thr, searched, steps, upper, locked, run, shared):
+    """:func:`~insitu.vision.chains.carry_ends` in place on ok, row (W,) and gmax, bg (W,)
+    float64: the runs of at least ``run`` valid columns (cut where the row steps more than
+    2 px off the frame's slope) carried on; the ends of one direction all from the columns
+    as they were before that direction, as its array form."""
+    H, W = img.shape
+    cols = np.flatnonzero(ok)
+    if len(cols) < 2:
+        return
+    dc, dr = np.diff(cols), np.diff(row[cols])
+    slope = np.median(dr[dc == 1].astype(np.float64)) if (dc == 1).any() else 0.0
+    gap = (dc > 1) | (np.abs(dr - slope) > 2)
+    first = cols[np.concatenate((np.ones(1, np.bool_), gap))]
+    last = cols[np.concatenate((gap, np.ones(1, np.bool_)))]
+    line = last - first + 1 >= run
+    for d, ends in ((-1, first[line]), (1, last[line])):
+        ok0, row0, bg0 = ok.copy(), row.copy(), bg.copy()
+        for e in ends:
+            for k in range(1, steps + 1):
+                c = e + d * k
+                at = row0[e] + (slope * d) * k
+                if c < 0 or c >= W or not searched[c]:
+                    break
+                if ok0[c] and not (k <= shared and upper * (row0[c] - at) < -2.0
+                                   and not locked[c]):
+                    break
+                y0 = int(np.rint(at))
+                v, y = -np.inf, 0
+                for j in range(3):                 # the median along the row, best of 3 rows
+                    yy = min(max(y0 - 1 + j, 0), H - 1)
+                    med = median_of_3(np.float64(img[yy, max(c - 1, 0)]),
+                                      np.float64(img[yy, c]),
+                                      np.float64(img[yy, min(c + 1, W - 1)]))
+                    if med > v:
+                        v, y = med, yy
+                if v < min_peak or v - bg0[e] < thr:
+                    break
+                ok[c], row[c], gmax[c], bg[c] = True, y, v, bg0[e]

@@ -27,7 +27,7 @@ from insitu.vision.chains import median_of
 from insitu.vision.detect import LineCentres
 from insitu.vision.laser_image import check_bits
 from insitu.vision.profile import frame_noise
-from insitu.vision.steger import moment_solve
+from insitu.vision.smooth_kernel import local_quadratic
 
 
 @dataclass(frozen=True)
@@ -271,42 +271,13 @@ def _smooth(c: LineCentres, order: np.ndarray, edges: np.ndarray, half_window: i
     return replace(c, **fields)
 
 
-def _window_sums(grid: np.ndarray, centre: np.ndarray, h: int) -> np.ndarray:
-    """(n, 2h + 1): grid[centre + j] for j = −h … h (zero beyond the grid)."""
-    padded = np.concatenate([np.zeros(h), grid, np.zeros(h)])
-    return sliding_window_view(padded, 2 * h + 1)[centre]
-
-
 def _local_quadratic(col: np.ndarray, v: np.ndarray, h: int, jump_px: float) -> np.ndarray:
-    """v (n,) px smoothed as :func:`smooth_centres` says; col (n,) increasing columns. The
-    stretches are laid on one grid with ≥ 2h + 1 empty cells between them, so that the moment
-    sums Σ j^p and Σ v·j^p over each point's window (j = −h … h) are products of the
-    grid's windows with the powers of j (the 3 × 3 normal equations: :func:`moment_solve`)."""
+    """v (n,) px smoothed as :func:`smooth_centres` says; col (n,) increasing columns: cut
+    into stretches where the columns part by more than h + 1 or v jumps, each point's
+    quadratic over its stretch's window (:func:`~insitu.vision.smooth_kernel.local_quadratic`)."""
     n = len(v)
     if n < 2:
         return v.copy()
     cut = (np.diff(col) > h + 1) | _jumps(col, v, jump_px)
     first = np.r_[0, np.flatnonzero(cut) + 1]
-    last = np.r_[first[1:], n] - 1
-    span = col[last] - col[first]
-    base = np.r_[0, np.cumsum(span + 2 * h + 2)[:-1]]
-    which = np.repeat(np.arange(len(first)), last - first + 1)
-    pos = col - col[first][which] + base[which]
-    size = int(pos[-1]) + 1
-    lo, hi = base[which] + h, base[which] + span[which] - h
-    centre = np.where(hi >= lo, np.clip(pos, lo, np.maximum(lo, hi)),
-                      base[which] + span[which] // 2)
-    powers = np.arange(-h, h + 1, dtype=np.float64)[:, None] ** np.arange(5)   # (2h+1, 5)
-    m, t = (_window_sums(np.bincount(pos, w, size), centre, h) @ powers[:, :k]
-            for w, k in ((None, 5), (v, 3)))
-    m, t = m.T, t.T
-    det, a = moment_solve(m, t)
-    quad = (m[0] >= 5) & (np.abs(det) > 1e-9)
-    x = (pos - centre).astype(np.float64)
-    out = a[0] + a[1] * x + a[2] * x * x
-    det2 = m[0] * m[2] - m[1] ** 2
-    line = ~quad & (m[0] >= 2) & (np.abs(det2) > 1e-9)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        b1 = (m[0] * t[1] - m[1] * t[0]) / det2
-        b0 = (t[0] - b1 * m[1]) / m[0]
-    return np.where(quad, out, np.where(line, b0 + b1 * x, v))
+    return local_quadratic(col, np.asarray(v, np.float64), first, np.r_[first[1:], n] - 1, h)

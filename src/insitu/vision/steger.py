@@ -24,17 +24,16 @@ from functools import lru_cache
 import numpy as np
 from scipy.special import ndtr
 
-from insitu.vision.chains import leading, median_of
+from insitu.vision.chains import median_of
 from insitu.vision.detect import LineCentres, detect
 from insitu.vision.profile import (
     FWHM_PER_SIGMA,
     as_image,
-    band_background,
     fwhm,
     gather,
     saturation_level,
 )
-from insitu.vision.steger_kernel import steger_columns
+from insitu.vision.steger_kernel import plateau_centres, steger_columns
 
 FLAT_PX = 2.5
 """Farthest (px) a flat top's centre (``clip``) may lie from the 3-point fit on it: the fit
@@ -44,91 +43,11 @@ the stripe, spent seed 5003), and the fit is kept."""
 _M = 3          # candidate rows: the detected peak ± _M
 
 
-def _flank_fit(g, inside, x, sat_mask, floor, unit=1.0):
-    """Vertex of a log-parabola fitted (weights ∝ value) to the unsaturated flank pixels of a
-    saturated plateau: those at or above ``floor`` that fall away from it without a break (the
-    first pixel that rises again is the background's, not the line's). g: (k, n) values minus
-    background, x: (k, 1) offsets. NaN if degenerate."""
-    above = inside & (g >= floor)
-    use = above & ~sat_mask
-    k = len(x) // 2
-    falls = np.ones_like(above)                                    # contiguous with the peak
-    falls[:k] = g[:k] <= g[1:k + 1]
-    falls[k + 1:] = g[k + 1:] <= g[k:-1]
-    above &= falls | sat_mask
-    rows = np.arange(k + 1)[:, None]
-    use[:k] &= (rows < leading(above[k::-1]))[:0:-1]
-    use[k:] &= rows[:len(x) - k] < leading(above[k:])
-    wgt = np.where(use, g, 0.0).astype(np.float64)
-    ly = np.log(np.maximum(g, unit), where=use, out=np.zeros(g.shape)).astype(np.float64)
-    powers = x.astype(np.float64) ** np.arange(5)                  # (k, 5)
-    m = powers.T @ wgt                                             # moments (5, n)
-    det, coef = moment_solve(m, powers[:, :3].T @ (wgt * ly))
-    ok = (use[: k].any(axis=0) & use[k + 1:].any(axis=0) & (use.sum(axis=0) >= 3)
-          & (np.abs(det) > 1e-9 * np.maximum(m[0], 1) ** 3))
-    with np.errstate(divide="ignore", invalid="ignore"):
-        vertex = -coef[1] / (2 * coef[2])
-        ok &= (coef[2] < 0) & (np.abs(vertex) <= k)
-    return np.where(ok, vertex, np.nan)
-
-
-def moment_solve(m, t):
-    """The determinant (n,) of the normal equations of a quadratic fitted by moments,
-    [[m0, m1, m2], [m1, m2, m3], [m2, m3, m4]] · a = t (m: 5 arrays (n,), t: 3), and their
-    solution a (3 arrays (n,): constant, linear, quadratic), by cofactors (inf or NaN where
-    the determinant is 0)."""
-    cof = (m[2] * m[4] - m[3] ** 2, m[2] * m[3] - m[1] * m[4], m[1] * m[3] - m[2] ** 2,
-           m[0] * m[4] - m[2] ** 2, m[1] * m[2] - m[0] * m[3], m[0] * m[2] - m[1] ** 2)
-    det = m[0] * cof[0] + m[1] * cof[1] + m[2] * cof[2]
-    with np.errstate(divide="ignore", invalid="ignore"):       # A⁻¹ = its cofactors / det
-        a = [(cof[i] * t[0] + cof[j] * t[1] + cof[k] * t[2]) / det
-             for i, j, k in ((0, 1, 2), (1, 3, 4), (2, 4, 5))]
-    return det, a
-
-
 def _segment(mask, at):
     """(k, n) bool: the run of True rows of ``mask`` (k, n) holding row ``at`` (n,) of each
     column (none where that row is False)."""
     label, cols = np.cumsum(~mask, axis=0), np.arange(mask.shape[1])
     return mask & (label == label[at, cols]) & mask[at, cols]
-
-
-def _plateau_centre(raw, inside, x, sat_mask, noise, unit=1.0):
-    """Offsets (n,) of saturated plateaus' centres: flank fit, else the centroid of the pixels
-    joined to the plateau (the clipped run nearest the band's middle) that stand above half
-    its height over the band's sloping background — or, where that background changes across
-    the band by more than half the plateau's height (a bright area's edge at one end), above
-    half-way from the brighter of the plateau's own sides (3 px beyond its ends) to its top;
-    weights: value minus that level. raw: (k, n) band of the image centred on the peak; the
-    fit is made above its sloping background, with pixels more than 3 noise sigmas (at least
-    3 ``unit``: one gray value of the 8-bit scale) and the background's change across the
-    band above it."""
-    bg = band_background(raw)
-    g = np.where(inside, raw - bg, 0)
-    floor = np.maximum(max(3.0 * unit, 3.0 * noise), np.abs(bg[-1] - bg[0]))
-    vertex = _flank_fit(g, inside, x, sat_mask, floor, unit)
-    rest = np.flatnonzero(~np.isfinite(vertex))
-    if len(rest):
-        vertex[rest] = _run_centroid(raw[:, rest], inside[:, rest], x, sat_mask[:, rest],
-                                     bg[:, rest], g[:, rest])
-    return vertex
-
-
-def _run_centroid(raw, inside, x, sat_mask, bg, g):
-    """:func:`_plateau_centre`'s centroid of the pixels joined to each column's plateau, where
-    the flank fit failed; bg, g: the band's sloping background and raw − bg (k, n)."""
-    k, cols = len(raw) // 2, np.arange(raw.shape[1])
-    peak = k - 2 + np.argmax(raw[k - 2:k + 3], axis=0)         # the clipped pixel nearest
-    run = _segment(sat_mask, peak)
-    lo = np.clip(np.argmax(run, axis=0) - 3, 0, len(raw) - 1)
-    hi = np.clip(len(raw) - np.argmax(run[::-1], axis=0) + 2, 0, len(raw) - 1)
-    top = raw[peak, cols]
-    steep = np.abs(bg[-1] - bg[0]) > (top - np.maximum(bg[0], bg[-1])) / 2
-    level = np.where(steep, (top + np.maximum(raw[lo, cols], raw[hi, cols])) / 2,
-                     bg + g.max(axis=0) / 2)
-    near = _segment((inside & (raw > level)) | run, peak)
-    weight = np.where(near, raw - level, 0)
-    return (weight * x).sum(axis=0) / np.maximum(weight.sum(axis=0), 1e-9)
 
 
 def gaussian_peak(image: np.ndarray, min_peak: float = 40.0, window: int = 12, median: int = 3,
@@ -176,7 +95,7 @@ def gaussian_peak(image: np.ndarray, min_peak: float = 40.0, window: int = 12, m
     if rest.any():
         gs, ins = g[:, rest], inside[:, rest]
         top = gs.max(axis=0)
-        flank = r[rest] + _plateau_centre(raw[:, rest], ins, x, flat[:, rest], det.noise, unit)
+        flank = r[rest] + plateau_centres(raw[:, rest], ins, flat[:, rest], det.noise, unit)
         own = (fit & on_top)[rest] & ~(np.abs(flank - v[rest]) <= FLAT_PX)
         v[rest] = np.where(own, v[rest], flank)
         width[rest] = np.where(own, width[rest], fwhm(gs, ins, top - det.contrast[rest], top))
@@ -258,7 +177,7 @@ def steger(image: np.ndarray, sigma: float | None = None, min_peak: float = 40.0
     sat = gather(img, r[None, :] + x[w - 2:w + 3], c)[0].max(axis=0) >= level
     if sat.any():                                 # clipped plateau: the flank fit instead
         raw, _ = gather(img, r[None, sat] + x, c[sat])
-        v[sat] = r[sat] + _plateau_centre(raw, inside[:, sat], x, raw >= level, det.noise, unit)
+        v[sat] = r[sat] + plateau_centres(raw, inside[:, sat], raw >= level, det.noise, unit)
         u[sat], found[sat] = c[sat], True
     keep = found & np.isfinite(u) & np.isfinite(v)
     return LineCentres(u[keep].astype(np.float64), v[keep].astype(np.float64),

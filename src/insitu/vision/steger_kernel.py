@@ -6,12 +6,9 @@ derivatives' sums in another order: within float32 rounding)."""
 
 from __future__ import annotations
 
-import numba
 import numpy as np
 
-compiled = numba.njit(cache=True, nogil=True, error_model="numpy")
-"""Compiled once per argument types, the machine code kept beside the module (__pycache__);
-divisions by zero give inf or NaN, as numpy's."""
+from insitu.vision.detect_kernel import compiled, median_of_3
 
 _T_MAX = np.float32(0.6)   # |t·n| ≤ 0.5 px, plus room for the Taylor step's overshoot
 _TINY = np.float32(1e-12)
@@ -138,3 +135,126 @@ def steger_columns(img, r, c, h, M, min_curvature, across):
             v[i] = r[i] + (k - M) + np.float64(bt * bv)
         found[i] = hit
     return u, v, found
+
+
+@compiled
+def moment_fit(m0, m1, m2, m3, m4, t0, t1, t2):
+    """The quadratic fitted by moments: the normal equations [[m0, m1, m2], [m1, m2, m3],
+    [m2, m3, m4]] · a = (t0, t1, t2) solved by cofactors; their determinant and a (constant,
+    linear, quadratic; inf or NaN where the determinant is 0)."""
+    c0, c1, c2 = m2 * m4 - m3 ** 2, m2 * m3 - m1 * m4, m1 * m3 - m2 ** 2
+    c3, c4, c5 = m0 * m4 - m2 ** 2, m1 * m2 - m0 * m3, m0 * m2 - m1 ** 2
+    det = m0 * c0 + m1 * c1 + m2 * c2
+    return (det, (c0 * t0 + c1 * t1 + c2 * t2) / det, (c1 * t0 + c3 * t1 + c4 * t2) / det,
+            (c2 * t0 + c4 * t1 + c5 * t2) / det)
+
+
+@compiled
+def _moment_vertex(m0, m1, m2, m3, m4, t0, t1, t2, half):
+    """The vertex of the quadratic fitted by moments, NaN where its determinant is too small,
+    it opens upwards or lies beyond ±half."""
+    det, _, b, a = moment_fit(m0, m1, m2, m3, m4, t0, t1, t2)
+    vertex = -b / (2 * a)
+    if abs(det) > 1e-9 * max(m0, 1.0) ** 3 and a < 0 and abs(vertex) <= half:
+        return vertex
+    return np.nan
+
+
+@compiled
+def plateau_centres(raw, inside, sat, noise, unit):
+    """:func:`~insitu.vision.steger._plateau_centre` of each column of ``raw`` (k, n) float32
+    (the band of 2h + 1 rows centred on a clipped peak), ``inside`` and ``sat`` (k, n) bool:
+    offsets (n,) px from the band's middle."""
+    K, n = raw.shape
+    h = K // 2
+    out = np.empty(n)
+    g, bg = np.empty(K), np.empty(K)
+    above, use, run, near = (np.empty(K, np.bool_), np.empty(K, np.bool_),
+                             np.empty(K, np.bool_), np.empty(K, np.bool_))
+    for i in range(n):
+        top = median_of_3(raw[0, i], raw[1, i], raw[2, i])          # the sloping background
+        bot = median_of_3(raw[K - 3, i], raw[K - 2, i], raw[K - 1, i])
+        mid, slope = (top + bot) / _TWO, (bot - top) / np.float32(2 * h)
+        for y in range(K):
+            bg[y] = np.float64(mid) + np.float64(slope) * (y - h)
+            g[y] = np.float64(raw[y, i]) - bg[y] if inside[y, i] else 0.0
+        floor = max(max(3.0 * unit, 3.0 * noise), abs(bg[K - 1] - bg[0]))
+        for y in range(K):                     # at the floor, falling away from the middle
+            falls = (y == h or (y < h and g[y] <= g[y + 1]) or (y > h and g[y] <= g[y - 1]))
+            above[y] = inside[y, i] and g[y] >= floor and (falls or sat[y, i])
+            use[y] = inside[y, i] and g[y] >= floor and not sat[y, i]
+        for step in (-1, 1):                   # only the run of rows joined to the middle
+            joined = True
+            for y in range(h, -1 if step < 0 else K, step):
+                joined = joined and above[y]
+                use[y] = use[y] and joined
+        m = np.zeros(5)
+        t = np.zeros(3)
+        below = beyond = False
+        count = 0
+        for y in range(K):
+            if use[y]:
+                x, wgt = np.float64(y - h), g[y]
+                ly = np.log(max(g[y], unit))
+                p = 1.0
+                for q in range(5):
+                    m[q] += p * wgt
+                    if q < 3:
+                        t[q] += p * (wgt * ly)
+                    p *= x
+                below, beyond, count = below or y < h, beyond or y > h, count + 1
+        vertex = np.nan
+        if below and beyond and count >= 3:
+            vertex = _moment_vertex(m[0], m[1], m[2], m[3], m[4], t[0], t[1], t[2], h)
+        if not np.isfinite(vertex):
+            vertex = _run_centroid(raw[:, i], inside[:, i], sat[:, i], bg, g, run, near)
+        out[i] = vertex
+    return out
+
+
+@compiled
+def _segment(mask, at, out):
+    """``out`` (k,) bool: the run of True of ``mask`` (k,) holding ``at`` (none where
+    mask[at] is False)."""
+    out[:] = False
+    if mask[at]:
+        y = at
+        while y >= 0 and mask[y]:
+            out[y] = True
+            y -= 1
+        y = at + 1
+        while y < len(mask) and mask[y]:
+            out[y] = True
+            y += 1
+
+
+@compiled
+def _run_centroid(raw, inside, sat, bg, g, run, near):
+    """:func:`~insitu.vision.steger._run_centroid` of one column: raw, inside, sat (k,), its
+    background bg and g = raw − bg (k,); run, near: (k,) bool work space."""
+    K = len(raw)
+    h = K // 2
+    peak = h - 2
+    for y in range(h - 1, h + 3):
+        if raw[y] > raw[peak]:
+            peak = y
+    _segment(sat, peak, run)
+    first, last = 0, K - 1
+    if run.any():
+        first, last = np.argmax(run), K - 1 - np.argmax(run[::-1])
+    lo, hi = min(max(first - 3, 0), K - 1), min(max(last + 3, 0), K - 1)
+    top = raw[peak]
+    steep = abs(bg[K - 1] - bg[0]) > (top - max(bg[0], bg[K - 1])) / 2
+    gmax = g.max()
+    level = np.empty(K)
+    for y in range(K):
+        level[y] = (np.float64((top + max(raw[lo], raw[hi])) / _TWO) if steep
+                    else bg[y] + gmax / 2)
+        near[y] = (inside[y] and raw[y] > level[y]) or run[y]
+    _segment(near.copy(), peak, near)
+    total, moment = 0.0, 0.0
+    for y in range(K):
+        weight = np.float64(raw[y]) - level[y] if near[y] else 0.0
+        moment += weight * (y - h)
+        total += weight
+    return moment / max(total, 1e-9)
