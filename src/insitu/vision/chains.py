@@ -7,10 +7,8 @@ where one line ends and another begins (``junction``), carrying a line's dim end
 from __future__ import annotations
 
 import numpy as np
-from scipy.sparse import coo_matrix
-from scipy.sparse.csgraph import connected_components
 
-from insitu.vision.detect_kernel import carry
+from insitu.vision.detect_kernel import carry, chain_labels
 
 OWN_COLUMNS = 8
 """Columns of its own (no second peak there) that make a chain a line, not a ghost's tail."""
@@ -48,18 +46,8 @@ def continuity(v1, v2, ok1, ok2, weight1, weight2, max_jump):
     """
     W = len(v1)
     V, OK, Wt = np.r_[v1, v2].astype(np.float64), np.r_[ok1, ok2], np.r_[weight1, weight2]
-    src, dst = [], []
-    for d in (1, 2):
-        for s in (0, W):
-            for t in (0, W):
-                a, b = s + np.arange(W - d), t + np.arange(d, W)
-                m = OK[a] & OK[b] & (np.abs(V[a] - V[b]) <= max_jump * d)
-                src.append(a[m])
-                dst.append(b[m])
-    src, dst = np.concatenate(src), np.concatenate(dst)
-    graph = coo_matrix((np.ones(len(src)), (src, dst)), shape=(2 * W, 2 * W))
-    n, lab = connected_components(graph, directed=False)
-    support = np.bincount(lab[OK], weights=Wt[OK], minlength=n)
+    lab = chain_labels(V, OK, float(max_jump))
+    support = np.bincount(lab[OK], weights=Wt[OK], minlength=2 * W)
     return (np.where(ok1, support[lab[:W]], 0.0), np.where(ok2, support[lab[W:]], 0.0),
             lab[:W], lab[W:])
 

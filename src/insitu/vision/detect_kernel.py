@@ -189,3 +189,33 @@ def carry(img, ok, row, gmax, bg, min_peak, thr, searched, steps, upper, locked,
                 if v < min_peak or v - bg0[e] < thr:
                     break
                 ok[c], row[c], gmax[c], bg[c] = True, y, v, bg0[e]
+
+
+@compiled
+def _root(parent, a):
+    while parent[a] != a:
+        parent[a] = parent[parent[a]]
+        a = parent[a]
+    return a
+
+
+@compiled
+def chain_labels(V, OK, max_jump):
+    """(2W,) int64: the chain each of the 2W candidates (V (2W,) rows, OK (2W,) bool; the
+    first W a column's first peak, the next W its second) belongs to, as a representative
+    candidate's index: valid candidates of columns 1 or 2 apart whose rows differ by at most
+    max_jump px a column are linked (:func:`~insitu.vision.chains.continuity`)."""
+    n = len(V)
+    W = n // 2
+    parent = np.arange(n)
+    for d in (1, 2):
+        for s in (0, W):
+            for t in (0, W):
+                for i in range(W - d):
+                    a, b = s + i, t + i + d
+                    if OK[a] and OK[b] and abs(V[a] - V[b]) <= max_jump * d:
+                        ra, rb = _root(parent, a), _root(parent, b)
+                        parent[max(ra, rb)] = min(ra, rb)
+    for a in range(n):
+        parent[a] = _root(parent, a)
+    return parent
