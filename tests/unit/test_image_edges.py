@@ -58,8 +58,10 @@ def test_the_frames_edges_turn_the_insert_within_four_hundredths_of_a_degree(rig
                                                                            posed):
     image = posed
     start = pose_matrix(POSE[0] + 0.04, POSE[1] - 0.03, POSE[2] + 0.12)
+    given = start.copy()
     fit = align_image(image, rig.camera, insert.heights, insert.outline, start)
     assert not isinstance(fit, str), fit
+    assert np.array_equal(start, given)               # the start pose is the caller's, unmoved
     xy, turn = _errors(np.degrees(fit.angle_rad), fit.xy_mm, POSE)
     assert xy < 0.01 and turn < 0.04, (xy, turn)
     # its σ counts a bias per side (0.1 px) and a tilt (0.03 px; its sides cross 11 pixel

@@ -189,7 +189,7 @@ def align_image(image: np.ndarray | Frame, camera: CameraModel, heights: HeightI
                 f"{camera.width}×{camera.height}")
     frame = frame if frame is not None else frame_of(image)
     angle = float(np.arctan2(T_world_part[1, 0], T_world_part[0, 0]))
-    t = np.asarray(T_world_part[:3, 3], np.float64)
+    t = np.array(T_world_part[:3, 3], np.float64)     # a copy: the caller's pose stays
     width = wall_px(edges, camera, angle, t)
     seen = visible(heights, edges, camera, angle, t) & ~((width > 0) & (width < WALL_PX))
     if seen.sum() < MIN_POINTS:
