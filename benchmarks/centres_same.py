@@ -79,7 +79,8 @@ def main() -> None:
     for key in sorted(set(before) | set(now)):
         x, y = before.get(key), now.get(key)
         if x is None or y is None or x.shape != y.shape:
-            bad.append(f"{key}: {None if x is None else x.shape} → {None if y is None else y.shape}")
+            shapes = [None if z is None else z.shape for z in (x, y)]
+            bad.append(f"{key}: {shapes[0]} → {shapes[1]}")
             continue
         field = key.rsplit("|", 1)[1]
         d = float(np.max(np.abs(x.astype(float) - y.astype(float)), initial=0.0))

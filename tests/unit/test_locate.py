@@ -166,7 +166,8 @@ def test_a_first_scan_as_reference(refs):
     truth = (10.0, -5.0, 55.0)                  # 25° further and shifted
     pts, lines = synthetic_scan("step-block", truth)
     try:
-        pose = locate_part(ref, pts, LocateSettings(tolerance_mm=0.2, turn_bound_deg=0.5), lines=lines)
+        loose = LocateSettings(tolerance_mm=0.2, turn_bound_deg=0.5)
+        pose = locate_part(ref, pts, loose, lines=lines)
     except LocateRefused as e:
         assert e.reason in ("poor-fit", "ambiguous")
         assert "25." in str(e) or "24." in str(e) or "23." in str(e)   # it was close
@@ -237,9 +238,11 @@ def test_pose_of_a_small_simulated_scan(refs):
     truth = (8.0, -6.0, 140.0)
     with simulated(sim_world("step-block", binning=4, pose=truth)) as station:
         cloud = scan_live(station).cloud
-    with pytest.raises(LocateRefused, match="not pinned down .* what would pin it down: a crossed pass .*, the room-light frame"):
+    with pytest.raises(LocateRefused, match="not pinned down .* what would pin it down: "
+                                            "a crossed pass .*, the room-light frame"):
         locate_cloud(refs["step-block"], cloud)
-    pose = locate_cloud(refs["step-block"], cloud, LocateSettings(tolerance_mm=0.2, turn_bound_deg=0.5))
+    loose = LocateSettings(tolerance_mm=0.2, turn_bound_deg=0.5)
+    pose = locate_cloud(refs["step-block"], cloud, loose)
     mm, deg = _err(pose, truth)
     assert mm < 0.2 and deg < 0.15, (mm, deg)
     assert pose.best.edges > 50
