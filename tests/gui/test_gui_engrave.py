@@ -92,7 +92,9 @@ def test_the_depth_map_of_a_pocket_shows_the_measured_numbers_and_the_hidden_cel
     assert np.array_equal(dm.state, truth.state)
     assert summary == DepthSummary.of(truth)
     hidden, unmeasured = truth.count(HIDDEN), truth.count(UNMEASURED)
-    assert hidden > 0 and unmeasured > 0 and truth.count(MEASURED) > 50
+    # 1.5 mm deep: the walls the lines cross keep 0.575 mm, the walls along them 0.825 mm
+    # (0.55 × the depth); about 1.35 × 1.85 mm of the 3 mm floor is left to measure
+    assert hidden > 0 and unmeasured > 0 and truth.count(MEASURED) > 30
     mean = truth.mean_depth()[0]
     assert abs(mean - 1.5) < 0.002
     cells = truth.depth[truth.state == MEASURED]
