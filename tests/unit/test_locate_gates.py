@@ -1,4 +1,4 @@
-"""What a located pose must reach to be given (:mod:`insitu.locate.part`): 2σ at the rim
+"""What a located pose must reach to be given (:mod:`insitu.locate.refusal`): 2σ at the rim
 within the tolerance and 3σ of the turn within its bound (2σ of the turn within the marks'
 angle tolerance only when one is set); and what a scan reference's outline alone holds a part
 to (:func:`insitu.locate.uncertainty.outline_hold`)."""
@@ -8,7 +8,8 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from insitu.locate.part import LocateRefused, LocateSettings, _pinned
+from insitu.locate.part import LocateSettings
+from insitu.locate.refusal import LocateRefused, pinned
 from insitu.locate.search import Solution
 from insitu.locate.uncertainty import outline_hold
 
@@ -18,7 +19,7 @@ POSE = Solution(1.0, 2.0, 4.7, 30.0, 1.0, 1.0, 0.02, edges=900, sigma_mm=0.004,
 
 def _pinned_or_why(sol: Solution, settings: LocateSettings) -> str:
     try:
-        _pinned(sol, settings, lambda: "what would pin it down: finer lines")
+        pinned(sol, settings, lambda: "what would pin it down: finer lines")
     except LocateRefused as e:
         return str(e)
     return ""

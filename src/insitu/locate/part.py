@@ -8,7 +8,8 @@ and a shift), or a refusal naming why — never a doubtful pose.
    RMSE.
 3. x, y and the turn from the edges the scan lines cross (:mod:`insitu.locate.edge_align`).
 4. The best is refused when it fits poorly, is only partly in the scan, or a second distinct
-   solution scores within ``ambiguity`` of it unless ``prefer_angle`` picks one of them.
+   solution scores within ``ambiguity`` of it unless ``prefer_angle`` picks one of them
+   (:func:`insitu.locate.refusal.choose`).
 5. With a room-light frame of the camera the scan was measured through, x, y and the turn
    are taken from the top's edges in it (:mod:`insitu.locate.image_edges`) when they hold
    the pose better than the scan's edges and agree with them (3σ and ``agree_mm``;
@@ -19,7 +20,7 @@ and a shift), or a refusal naming why — never a doubtful pose.
    tolerance: :data:`SIGMAS` σ at the part's rim within ``tolerance_mm``, 3σ of the turn
    within ``turn_bound_deg`` (and, when set, :data:`SIGMAS` σ of the turn within
    ``turn_tolerance_deg``); else refused, saying what would pin it down (a crossed pass,
-   the room-light frame, a CAD reference, finer lines).
+   the room-light frame, a CAD reference, finer lines: :func:`insitu.locate.refusal.pinned`).
 """
 
 from __future__ import annotations
@@ -30,13 +31,13 @@ from dataclasses import dataclass, replace
 import numpy as np
 from scipy.spatial import cKDTree
 
-from insitu.errors import MeasurementError
 from insitu.geometry.camera import CameraModel
 from insitu.geometry.pose import apply, matrix, rot_z
 from insitu.locate.edge_align import align_edges, edge_samples
 from insitu.locate.flat_icp import score
 from insitu.locate.image_edges import SEARCH_PX, align_image, frame_of
 from insitu.locate.reference import PartReference, above_table, find_table, thin
+from insitu.locate.refusal import SIGMAS, LocateRefused, choose, margin, pinned
 from insitu.locate.search import (
     Solution,
     distinct,
@@ -48,11 +49,9 @@ from insitu.locate.search import (
     subsample,
 )
 from insitu.locate.uncertainty import rim_moved, rim_sigma
-from insitu.locate.unheld import direction_name, pin_advice, unheld_reason
+from insitu.locate.unheld import pin_advice, unheld_reason
 
 MIN_POINTS = 200
-SIGMAS = 2.0
-"""A pose is given when this many σ at the part's rim lie within the tolerance."""
 UNHELD_MM = 1.0
 CONSISTENT = 2.0
 """The scan's and the frame's poses further apart at the part's rim than this many σ of the
@@ -74,17 +73,7 @@ recording's half block, whose centroid the turn search cannot use): Open3D's RAN
 repeatable whatever its seed, and one run finds that block 17 times in 20. A run takes
 0.25–0.35 s of a produce part's 1.5 s locate (one core); where the turn search finds the
 part, none is made."""
-
-
-class LocateRefused(MeasurementError):
-    """The part's pose is not given: ``reason`` is "no-part", "poor-fit", "partial",
-    "ambiguous" or "not-preferred"; the message names the numbers; ``best``: the pose that
-    was refused as not pinned down (None otherwise), for scoring."""
-
-    def __init__(self, reason: str, message: str, best: Solution | None = None):
-        super().__init__(message)
-        self.reason = reason
-        self.best = best
+__all__ = ["SIGMAS", "LocateRefused", "LocateSettings", "PartPose", "locate_part"]
 
 
 @dataclass(frozen=True)
@@ -196,8 +185,8 @@ def locate_part(reference: PartReference, points: np.ndarray,
                     sols, s, camera)
     framed = (None if image is None or camera is None else
               lambda best: _imaged(reference, best, image, camera, s))
-    best, second = _choose(sols, len(part), where, s, prefer_angle, framed)
-    _pinned(best, s, lambda: pin_advice(reference.kind, lines, pts, image is not None))
+    best, second = choose(sols, len(part), where, s, prefer_angle, framed)
+    pinned(best, s, lambda: pin_advice(reference.kind, lines, pts, image is not None))
     return PartPose(best, second, table, len(part), time.perf_counter() - t0,
                     (s.tolerance_mm, s.turn_bound_deg), s.turn_tolerance_deg)
 
@@ -252,19 +241,12 @@ def _imaged(ref: PartReference, best: Solution, image: np.ndarray, camera: Camer
                                   f"the rim taken as {moved / 2:.3f} mm")
         best = replace(best, sigma_rim_mm=max(scan, floor), image_note=note)
         framed = replace(framed, image_sigma_rim_mm=max(sigma, floor), image_note=note)
-    if not _margin(framed, s) < _margin(best, s):
+    if not margin(framed, s) < margin(best, s):
         return joined_turn(ref, best if best.image_note else replace(best, image_note=(
             f"not used: its edges hold the pose to {sigma:.3f} mm at the part's rim and "
             f"{fit.sigma_deg:.3f}° (1σ), the scan's to {scan:.3f} mm and {best.sigma_deg:.3f}°")),
             angle, fit.sigma_deg)
     return joined_turn(ref, framed, best.angle_deg, best.sigma_deg)
-
-
-def _margin(sol: Solution, s: LocateSettings) -> float:
-    """How much of the tolerance and of the turn's bound a pose's σ takes (≤ 1: given)."""
-    turn = sol.turn_sigma_deg
-    return max(SIGMAS * sol.rim_sigma_mm / s.tolerance_mm, 3 * turn / s.turn_bound_deg,
-               0.0 if s.turn_tolerance_deg is None else SIGMAS * turn / s.turn_tolerance_deg)
 
 
 def _aligned(ref: PartReference, pts: np.ndarray, lines: np.ndarray | None,
@@ -308,93 +290,3 @@ def _aligned(ref: PartReference, pts: np.ndarray, lines: np.ndarray | None,
         if all(distinct(pose_of(sol), pose_of(k)) for k in kept):
             kept.append(sol)
     return kept
-
-
-def _slid(a: Solution, b: Solution) -> str | None:
-    """How two poses that fit alike differ by a shift alone (turned less than 2° apart):
-    the direction nothing holds, or None when they are turned apart (a symmetric part)."""
-    if abs((a.angle_deg - b.angle_deg + 180.0) % 360.0 - 180.0) >= 2.0:
-        return None
-    d = np.array([b.x_mm - a.x_mm, b.y_mm - a.y_mm])
-    name, _ = direction_name(d / max(float(np.linalg.norm(d)), 1e-12))
-    return (f"{a.describe()} and {b.describe()} fit nearly equally, "
-            f"{float(np.linalg.norm(d)):.2f} mm apart along {name}: nothing holds the part "
-            f"along {name}" + ("" if a.sigma_mm is not None else
-                               " (the cloud records no scan lines: no edge step)"))
-
-
-def _in_range(angle: float, lo: float, hi: float) -> bool:
-    return (angle - lo) % 360.0 <= (hi - lo) % 360.0 or (hi - lo) >= 360.0
-
-
-def _choose(sols: list[Solution], n: int, where: str, s: LocateSettings,
-            prefer: tuple[float, float] | None, framed=None
-            ) -> tuple[Solution, Solution | None]:
-    """(best, second) or LocateRefused. ``framed``: the best refined by the room-light
-    frame's edges (:func:`_imaged`; None: no frame) — which also place a part whose scan
-    edges left it too uncertain, when they agree with its pose."""
-    top = sols[0] if sols else None
-    if top is None or top.fitness < s.min_fitness * 0.6 or top.coverage < s.min_coverage / 2:
-        fit, cover = (top.fitness, top.coverage) if top else (0.0, 0.0)
-        raise LocateRefused("no-part", f"part not found: at best the reference fits "
-                                       f"{fit:.0%} of the {n:,} points above {where} and "
-                                       f"covers {cover:.0%} of its top")
-    if top.coverage < s.min_coverage:
-        raise LocateRefused("partial", f"only partly in the scan: {top.coverage:.0%} of the "
-                            f"reference's top measured (at least {s.min_coverage:.0%} needed) "
-                            f"at {top.describe()}")
-    near = [o for o in sols if o.score >= top.score - s.ambiguity]
-    if prefer is not None:
-        pick = [o for o in near if _in_range(o.angle_deg, *prefer)]
-        if not pick:
-            raise LocateRefused("not-preferred", "no well-fitting pose turned within "
-                                f"{prefer[0]:g} … {prefer[1]:g}°: found "
-                                + "; ".join(o.describe() for o in near))
-        near = pick
-    if len(near) > 1 and (slid := _slid(near[0], near[1])) is not None:
-        raise LocateRefused("poor-fit", f"x, y and the turn are not pinned down: {slid}",
-                            near[0])
-    if len(near) > 1:
-        raise LocateRefused("ambiguous", f"ambiguous: {near[0].describe()} and "
-                            f"{near[1].describe()} fit nearly equally (a symmetric part?): "
-                            "say which with a preferred angle range LO HI")
-    best = near[0]
-    second = next((o for o in sols if o is not best), None)
-    if best.fitness < s.min_fitness or best.rmse_mm > s.max_rmse_mm:
-        raise LocateRefused("poor-fit", f"fits poorly: {best.describe()}, inlier RMSE "
-                            f"{best.rmse_mm:.3f} mm (needed: fitness ≥ {s.min_fitness:.0%}, "
-                            f"RMSE ≤ {s.max_rmse_mm:g} mm)")
-    if framed is not None:
-        best = framed(best)
-    return best, second
-
-
-def _pinned(best: Solution, s: LocateSettings, advice) -> None:
-    """LocateRefused unless ``best``'s 1σ at the rim puts it within the tolerance
-    (:data:`SIGMAS` σ) and its scan and room-light frame do not disagree; ``advice()``: what
-    would pin it down."""
-    frame = f"; the room-light frame: {best.image_note}" if best.image_note else ""
-    if best.image_conflict:
-        raise LocateRefused("poor-fit", f"the scan's edges and the room-light frame's do not "
-                            f"agree at {best.describe()}: {best.image_note}; scan it again "
-                            "(did the part move?)", best)
-    sigma = best.rim_sigma_mm
-    if best.sigma_mm is None and not best.image_edges:
-        raise LocateRefused("poor-fit", f"x, y and the turn are not pinned down at "
-                            f"{best.describe()}: the cloud records no scan lines, so no edge "
-                            f"gives them (the ICP alone: a few tenths of a mm){frame}; {advice()}",
-                            best)
-    if not np.isfinite(sigma):
-        raise LocateRefused("poor-fit", f"x, y and the turn are not pinned down at "
-                            f"{best.describe()}: {best.unheld}{frame}; {advice()}", best)
-    turn, t = best.turn_sigma_deg, s.turn_tolerance_deg
-    own = "" if t is None else f" and {t:g}°"
-    if not _margin(best, s) <= 1.0:
-        by = (f"the room-light frame's edges ({best.image_edges} points)" if best.image_edges
-              else f"the edges the scan lines cross ({best.edges} samples)")
-        raise LocateRefused(
-            "poor-fit", f"not pinned down to the tolerance at {best.describe()}: {by} hold it "
-            f"to {sigma:.3f} mm at the part's rim and {turn:.3f}° (1σ; {SIGMAS:g}σ within "
-            f"{s.tolerance_mm:g} mm{own}, 3σ of the turn within {s.turn_bound_deg:g}° "
-            f"needed){frame}; {advice()}", best)
-
