@@ -38,6 +38,7 @@ from rich.table import Table
 
 from insitu.errors import MeasurementError
 from insitu.marking.engrave_depth import DepthSettings, measure_depth
+from insitu.marking.engrave_walls import viewpoints
 from insitu.services.pocket import DEPTH_CENTRES
 from insitu.services.scan import scan_live
 from insitu.services.station import simulated
@@ -108,7 +109,8 @@ def measure_plate(blank: str, seed: int, optics: dict, binning: int,
         for cx, depth in zip(CENTRES_X, DEPTHS):
             near = np.abs(pts[:, 0] - cx) <= HALF + s.ring_mm
             region = shapely.box(cx - HALF, -HALF, cx + HALF, HALF)
-            dm = measure_depth(pts[near], line[near], region, s)
+            dm = measure_depth(pts[near], line[near], region, s,
+                               viewpoints=viewpoints(st.rig))
             mean, sem = dm.mean_depth()
             try:
                 dm.pocket_depth(TOLERANCE)

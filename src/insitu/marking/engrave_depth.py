@@ -59,13 +59,16 @@ class DepthSettings:
     effective points for a cell to count as measured; ``bias_per_depth``: the band grows by
     this many mm per mm of depth for the floor's points and the measured cells' centres;
     ``parallel_band_mm``, ``parallel_per_depth``: the zone of a wall parallel to the scan
-    lines, the larger of the two (see the module docstring); ``min_lines``: scan lines with
-    trusted floor points for any cell to count as measured."""
+    lines, the larger of the two (see the module docstring); ``faced_band_mm``: the zone of
+    a parallel wall facing the camera (the floor's line mirrored in it pulls the lines
+    beside it short on a specular blank, :mod:`~insitu.marking.engrave_walls`);
+    ``min_lines``: scan lines with trusted floor points for any cell to count as measured."""
 
     wall_band_mm: float = 0.2
     bias_per_depth: float = 0.25
     parallel_band_mm: float = 0.1
     parallel_per_depth: float = 0.55
+    faced_band_mm: float = 0.4
     min_lines: int = 8
     ring_mm: float = 2.0
     cell_mm: float = 0.25
@@ -134,22 +137,32 @@ class Outline:
         out[ok] = raster[row[ok], col[ok]]
         return out
 
-    def wall_distances(self, x, y, along) -> tuple[np.ndarray, np.ndarray]:
-        """(distance to the walls the scan lines cross, to the walls parallel to them), mm,
-        of world points (``x``, ``y``) inside the pocket; ``along`` (2,): the lines'
-        direction. A wall is parallel when its normal lies within 45° of across the lines."""
-        key = (round(float(along[0]), 2), round(float(along[1]), 2))
+    def wall_distances(self, x, y, along, camera=None) -> tuple[np.ndarray, ...]:
+        """(distance to the walls the scan lines cross, to the walls parallel to them, to
+        the parallel walls facing ``camera``), mm, of world points (``x``, ``y``) inside the
+        pocket; ``along`` (2,): the lines' direction; ``camera`` (2,): the camera's world x, y
+        (None: no wall faces it). A wall is parallel when its normal lies within 45° of
+        across the lines; it faces the camera when its normal into the pocket points to the
+        camera's side."""
+        key = (round(float(along[0]), 2), round(float(along[1]), 2),
+               None if camera is None else (round(float(camera[0])), round(float(camera[1]))))
         if key not in self._walls:
             outside = self._signed <= 0
             edge = outside & (distance_transform_edt(outside) <= 1.5)
             gy, gx = np.gradient(self._signed)
-            cos = np.abs(gx * along[0] + gy * along[1]) / np.maximum(np.hypot(gx, gy), 1e-12)
-            parallel = edge & (cos < np.sqrt(0.5))
+            norm = np.maximum(np.hypot(gx, gy), 1e-12)
+            parallel = edge & (np.abs(gx * along[0] + gy * along[1]) / norm < np.sqrt(0.5))
+            faced = np.zeros_like(parallel)
+            if camera is not None:
+                cx = np.asarray(camera[0], float) - self.origin[0] - _RASTER_MM * np.arange(
+                    self._signed.shape[1])[None, :]
+                cy = np.asarray(camera[1], float) - self.origin[1] - _RASTER_MM * np.arange(
+                    self._signed.shape[0])[:, None]
+                faced = parallel & (gx * cx + gy * cy > 0)
             self._walls[key] = tuple(distance_transform_edt(~w) * _RASTER_MM if w.any() else
                                      np.full(w.shape, np.inf) for w in (edge & ~parallel,
-                                                                        parallel))
-        crossed, parallel = self._walls[key]
-        return self._sample(crossed, x, y, 0.0), self._sample(parallel, x, y, 0.0)
+                                                                        parallel, faced))
+        return tuple(self._sample(w, x, y, 0.0) for w in self._walls[key])
 
     def cells(self, cell_mm: float) -> PocketCells:
         """The cells over the region (its bounding box, one cell beyond)."""
@@ -237,7 +250,8 @@ def measure_depth(points: np.ndarray, line: np.ndarray, region, settings: DepthS
     d = top_fit.at(points[floor], line[floor]) - points[floor, 2]
     zone_d = _local_median(points[floor, :2], d, s.kernel_mm)
     along = line_direction(points[floor, :2], line[floor])
-    trusted = clear(outline.wall_distances(points[floor, 0], points[floor, 1], along),
+    camera = None if viewpoints is None else viewpoints[0][:2]
+    trusted = clear(outline.wall_distances(points[floor, 0], points[floor, 1], along, camera),
                     zone_d, s)
     fx, fy, d = points[floor, 0][trusted], points[floor, 1][trusted], d[trusted]
     fline = np.unique(line[floor][trusted], return_inverse=True)[1]
@@ -251,7 +265,7 @@ def measure_depth(points: np.ndarray, line: np.ndarray, region, settings: DepthS
     ok = cells.inside & (neff >= s.min_points) & enough
     near = _nearest_depth(depth, ok) if expected_mm is None else np.where(ok, depth,
                                                                           expected_mm)
-    walls = outline.wall_distances(*cells.centres(), along)
+    walls = outline.wall_distances(*cells.centres(), along, camera)
     state[ok & clear(walls, near, s)] = MEASURED
     state[cells.inside & ~clear(walls, 0.0, s)] = WALL
     if viewpoints is not None:

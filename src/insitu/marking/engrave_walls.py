@@ -10,6 +10,12 @@ straddled: its zone is ``parallel_band_mm`` or ``parallel_per_depth ×`` the dep
 (the wall the camera faces, as wide in its image as the depth × tan 25°, merges with the
 floor's line: 0.5 mm deep, 62 µm short 0.2–0.25 mm from it, within 10 µm beyond 0.3 mm;
 0.2 mm deep, within −6 … +5 µm from 0.05 mm on, where the crossed walls' floor reads short).
+A parallel wall facing the camera (its normal into the pocket towards the camera's side) also
+keeps ``faced_band_mm``: on a specular blank the camera sees the floor's line mirrored in it
+and the lines beside it read short (the simulator, stainless, seed 33, the mirrored light
+switched off against on: 8–27 µm short 0.1–0.4 mm from the wall 0.1 mm deep, 11–72 µm
+0.1–0.3 mm from it 0.2 mm deep, 34–99 µm 0.1–0.3 mm from it 0.5 mm deep; nothing beyond
+0.4 mm).
 """
 
 from __future__ import annotations
@@ -22,21 +28,23 @@ if TYPE_CHECKING:
     from insitu.marking.engrave_depth import DepthSettings, Outline, PocketCells
 
 
-def clear(walls: tuple[np.ndarray, np.ndarray], depth, s: DepthSettings) -> np.ndarray:
+def clear(walls: tuple[np.ndarray, ...], depth, s: DepthSettings) -> np.ndarray:
     """Where points (or cells' centres) at ``depth`` mm lie beyond the walls' bias zones:
-    ``walls`` their distances to the crossed and the parallel walls
+    ``walls`` their distances to the crossed, the parallel and the faced walls
     (:meth:`Outline.wall_distances`)."""
     depth = np.maximum(depth, 0.0)
-    return ((walls[0] >= s.wall_band_mm + s.bias_per_depth * depth)
-            & (walls[1] >= np.maximum(s.parallel_band_mm, s.parallel_per_depth * depth)))
+    ok = ((walls[0] >= s.wall_band_mm + s.bias_per_depth * depth)
+          & (walls[1] >= np.maximum(s.parallel_band_mm, s.parallel_per_depth * depth)))
+    return ok & (walls[2] >= s.faced_band_mm) if len(walls) > 2 else ok
 
 
-def trusted_depth(walls: tuple[np.ndarray, np.ndarray], s: DepthSettings) -> np.ndarray:
+def trusted_depth(walls: tuple[np.ndarray, ...], s: DepthSettings) -> np.ndarray:
     """The depth (mm) down to which points at distances ``walls`` (as :func:`clear` takes
     them) stay beyond the bias zones; 0 within a band."""
     crossed = (walls[0] - s.wall_band_mm) / s.bias_per_depth
     parallel = np.where(walls[1] >= s.parallel_band_mm, walls[1] / s.parallel_per_depth, 0.0)
-    return np.maximum(np.minimum(crossed, parallel), 0.0)
+    out = np.maximum(np.minimum(crossed, parallel), 0.0)
+    return np.where(walls[2] >= s.faced_band_mm, out, 0.0) if len(walls) > 2 else out
 
 
 def line_direction(xy: np.ndarray, line: np.ndarray) -> np.ndarray:
