@@ -4,9 +4,18 @@ between the ends of the stripe's track no other track's candidate is taken for i
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 
-from insitu.vision.course import FILL_PX, fill_gaps, in_frame, on_course, on_laser
+from insitu.vision.course import (
+    FILL_PX,
+    fill_gaps,
+    in_frame,
+    off_the_excess,
+    on_course,
+    on_laser,
+)
 from insitu.vision.detect import LineCentres
 from insitu.vision.tracks import on_longest_track, track_length
 
@@ -175,3 +184,28 @@ def test_a_gap_is_not_filled_from_the_flank_of_a_core_clipped_white():
     filled = fill_gaps(c, e, True, white, 8)
     assert filled.u[(filled.u >= 40) & (filled.u < 60)].tolist() == list(range(52, 60))
     assert len(fill_gaps(c, e, True, np.zeros_like(white), 8)) == len(c) + 18
+
+
+def test_a_long_stretch_beside_the_lasers_colour_goes_one_on_it_stays():
+    """A stripe v = 300 + 0.05 u over 600 columns whose centres on columns 200–289 (longer
+    than the course's half span, 60) lie 7 px beside it, on a bright square's edge lit by the
+    halo, while the laser's excess peaks on the line there: they are replaced by the excess's
+    centres. Where the excess's centres on those columns lie 7 px off too (the stripe on a
+    raised surface, the laser's colour there), the stretch stays; so do 10 columns
+    (450–459) beside the excess, fewer than a stripe's least run (20). Rows and columns."""
+    u = np.arange(600.0)
+    line = 300 + 0.05 * u
+    v = line + 7.0 * ((u >= 200) & (u < 290)) + 6.0 * ((u >= 450) & (u < 460))
+    white = np.zeros((800, 800), bool)
+    for rows in (True, False):
+        def flip(c, rows=rows):
+            return c if rows else centres(c.v, c.u)
+        for e_v, n_off in ((line, 10), (v, 100)):
+            fill = functools.partial(_fill, e=flip(centres(u, e_v)), rows=rows, white=white)
+            got = flip(off_the_excess(flip(centres(u, v)), rows, 60.0, 20, fill))
+            assert len(got) == 600
+            assert np.sum(np.abs(got.v - line) > FILL_PX) == n_off
+
+
+def _fill(c, e, rows, white):
+    return fill_gaps(c, e, rows, white, 8)

@@ -21,7 +21,14 @@ import numpy as np
 
 from insitu.vision.centroid import gray_centroid
 from insitu.vision.chains import longest_ridge
-from insitu.vision.course import fill_gaps, in_frame, kept, on_course, on_laser
+from insitu.vision.course import (
+    fill_gaps,
+    in_frame,
+    kept,
+    off_the_excess,
+    on_course,
+    on_laser,
+)
 from insitu.vision.detect import LineCentres
 from insitu.vision.laser_image import (
     CHANNELS,
@@ -191,10 +198,14 @@ def _centres_in(li: LaserImage, method, direction, band, clipped, kw,
         c = on_course(in_frame(c, img.shape), direction == "rows", COURSE * min(img.shape))
         c = cut_cores(c, li.total if in_sum else img, clipped * (3 if in_sum else 1)
                       * li.full_scale, direction == "rows")
-    scan = c.u if direction == "rows" else c.v
-    if colour and white is not None and 1 < len(c) < np.ptp(scan) + 1:        # gaps
-        c = fill_gaps(c, _in_excess(li, c, fn, direction, scaled), direction == "rows", white,
-                      colour_reach(img.shape)[0])
+    def fill(c):
+        scan = c.u if direction == "rows" else c.v
+        if not 1 < len(c) < np.ptp(scan) + 1:                              # no gaps
+            return c
+        return fill_gaps(c, _in_excess(li, c, fn, direction, scaled), direction == "rows",
+                         white, colour_reach(img.shape)[0])
+    if colour and white is not None:
+        c = off_the_excess(c, direction == "rows", COURSE * min(img.shape), PHOTO_RUN, fill)
     return c
 
 

@@ -119,19 +119,10 @@ def on_course(c: LineCentres, along_rows: bool, half: float) -> LineCentres:
         return c
     order = np.argsort(s, kind="stable")
     s, x = s[order], x[order]
-    ds, dx = np.diff(s), np.diff(x)
     h = max(int(half), 1)
-    slope = float(np.median(dx[ds == 1])) if (ds == 1).any() else 0.0
-    cut = np.r_[0, np.cumsum((np.abs(dx - slope * ds) > FILL_PX + 0.1 * ds) | (ds > h))]
+    slope, cut = _pieces(s, x, h)
     flat = x - slope * s
-    dense = np.full(int(s[-1] - s[0]) + 1 + 2 * h, np.inf)
-    dense[s - s[0] + h] = flat
-    step = max(1, h // 16)                               # ≤ 33 samples of each window
-    win = np.sort(np.lib.stride_tricks.sliding_window_view(dense, 2 * h + 1)[s - s[0], ::step],
-                  axis=1)
-    n = np.isfinite(win).sum(axis=1)
-    mid = (np.take_along_axis(win, ((n - 1) // 2)[:, None], 1)[:, 0]
-           + np.take_along_axis(win, (n // 2)[:, None], 1)[:, 0]) / 2
+    mid = _running_median(s, flat, h)
     first = np.r_[0, np.flatnonzero(np.diff(cut)) + 1]
     short = (s[np.r_[first[1:], len(s)] - 1] - s[first] < h)[cut]
     on = _between_neighbours(s, x, cut, h, np.abs(flat - mid) <= FILL_PX, short)
@@ -140,6 +131,78 @@ def on_course(c: LineCentres, along_rows: bool, half: float) -> LineCentres:
     if keep.all():
         return c
     return kept(c, keep)
+
+
+def _pieces(s: np.ndarray, x: np.ndarray, h: int) -> tuple[float, np.ndarray]:
+    """The centres' median slope and (n,) piece labels: pieces part where the centres (s, x:
+    (n,) scan line and cross coordinate, sorted by s), that slope taken out, jump more than
+    :data:`FILL_PX` plus a tenth of the scan lines between, or more than ``h`` scan lines
+    lie between."""
+    ds, dx = np.diff(s), np.diff(x)
+    slope = float(np.median(dx[ds == 1])) if (ds == 1).any() else 0.0
+    return slope, np.r_[0, np.cumsum((np.abs(dx - slope * ds) > FILL_PX + 0.1 * ds) | (ds > h))]
+
+
+def _running_median(s: np.ndarray, flat: np.ndarray, h: int) -> np.ndarray:
+    """(n,) the median of ``flat`` (n,) over the centres within ±``h`` scan lines of each
+    (``s`` (n,) sorted), from ≤ 33 samples of each window."""
+    dense = np.full(int(s[-1] - s[0]) + 1 + 2 * h, np.inf)
+    dense[s - s[0] + h] = flat
+    step = max(1, h // 16)
+    win = np.sort(np.lib.stride_tricks.sliding_window_view(dense, 2 * h + 1)[s - s[0], ::step],
+                  axis=1)
+    n = np.isfinite(win).sum(axis=1)
+    return (np.take_along_axis(win, ((n - 1) // 2)[:, None], 1)[:, 0]
+            + np.take_along_axis(win, (n // 2)[:, None], 1)[:, 0]) / 2
+
+
+def off_the_excess(c: LineCentres, along_rows: bool, half: float, run: int,
+                   fill) -> LineCentres:
+    """``fill(c)`` (``c`` with its gaps filled from the laser's excess, :func:`fill_gaps`),
+    with the excess's centres in place of the centres beside them: ``run`` or more centres
+    in a row (a stripe's least length in scan lines) that lie more than :data:`FILL_PX` / 2
+    off the stripe's course (the running median over ±2 × ``half`` scan lines, its median
+    slope taken out: longer than a board's square) are taken out, and where the excess's
+    centres then fill their scan lines more than FILL_PX from them, ``run`` or more in a
+    row, the laser's colour runs on along the course and the centres lie beside it on
+    something else (a bright square's edge lit by the halo, brighter than the stripe on the
+    dark square next to it: clipped_white spent seed 6005). A stripe on a raised surface is
+    the laser's colour there: it stays; so does a centre beside one scan line's excess peak
+    (a glint, a mark's rim)."""
+    s = np.round(c.u if along_rows else c.v).astype(np.int64)
+    x = c.v if along_rows else c.u
+    if len(s) < 3:
+        return fill(c)
+    order = np.argsort(s, kind="stable")
+    slope = _pieces(s[order], x[order], 1)[0]
+    off = np.zeros(len(s), bool)
+    off[order] = _runs(np.abs(x[order] - slope * s[order] - _running_median(
+        s[order], x[order] - slope * s[order], 2 * max(int(half), 1))) > FILL_PX / 2, run)
+    out = fill(c)
+    if not off.any():
+        return out
+    f = fill(kept(c, ~off))
+    fs = np.round(f.u if along_rows else f.v).astype(np.int64)
+    at = np.searchsorted(fs, s).clip(0, max(len(fs) - 1, 0))
+    beside = off & (fs[at] == s) & (np.abs((f.v if along_rows else f.u)[at] - x) > FILL_PX)
+    beside[order] = _runs(beside[order], run)
+    if not beside.any():
+        return out
+    o = np.round(out.u if along_rows else out.v).astype(np.int64)
+    on, at = np.isin(o, s[beside]), np.searchsorted(fs, o).clip(0, len(fs) - 1)
+    return replace(out, **{k: np.where(on, getattr(f, k)[at], getattr(out, k))
+                           for k in FIELDS})
+
+
+def _runs(a: np.ndarray, run: int) -> np.ndarray:
+    """(n,) bool: ``a`` (n,) bool where it is True at least ``run`` times in a row."""
+    edge = np.diff(np.r_[0, a.astype(np.int8), 0])
+    start, end = np.flatnonzero(edge == 1), np.flatnonzero(edge == -1)
+    long = end - start >= run
+    mark = np.zeros(len(a) + 1, np.int64)
+    np.add.at(mark, start[long], 1)
+    np.add.at(mark, end[long], -1)
+    return np.cumsum(mark)[:-1] > 0
 
 
 def _between_neighbours(s, x, cut, h, median, short) -> np.ndarray:
