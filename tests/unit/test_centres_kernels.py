@@ -1,15 +1,23 @@
-"""The compiled band search (vision.detect_kernel) finds the rows the array form
-(vision.peak_rows) finds: each column's first greatest pixel in its band, and the greatest
-more than w rows from it, on frames with bands that end inside the ±w rows."""
+"""The compiled passes give what the array forms they replace give: the band search
+(vision.detect_kernel; the array form vision.peak_rows: each column's first greatest pixel in
+its band, and the greatest more than w rows from it, on frames with bands that end inside the
+±w rows), the frame's noise, the wander's correlation length, each column's FWHM and
+clipping, the chains' junctions (their array forms here)."""
 
 from __future__ import annotations
 
 import cv2
 import numpy as np
 import pytest
+from numpy.lib.stride_tricks import sliding_window_view
+from scipy.signal import savgol_filter
 
+from insitu.vision.chains import OWN_COLUMNS, junction
 from insitu.vision.detect_kernel import band_peaks
+from insitu.vision.extract import _wander
 from insitu.vision.peak_rows import band_rows, peak_rows, second_rows
+from insitu.vision.profile import frame_noise, fwhm, gather
+from insitu.vision.steger_kernel import widths_and_clipping
 
 
 @pytest.mark.parametrize("dtype", [np.uint8, np.uint16, np.float32])
@@ -32,3 +40,102 @@ def test_band_search_equals_the_array_form(dtype):
     j2, found = second(j1, w, live, 40.0)
     j2_, found_ = second_rows(search, j1, first, fill, w, live, 40.0)
     assert found.any() and np.array_equal(found, found_) and np.array_equal(j2, j2_)
+
+
+def _noise_array_form(img):
+    """frame_noise's array form: the sampled rows' 3-row strips median-filtered by OpenCV,
+    their differences 8 rows apart at every second column, the median of their size."""
+    H = img.shape[0]
+    d = min(8, H - 1)
+    idx = np.arange(0, H - d, max(1, (H - d) // 32))
+    rows = np.r_[idx, idx + d]
+    strips = np.ascontiguousarray(img[np.clip(rows[:, None] + np.arange(-1, 2), 0, H - 1)
+                                      .ravel()])
+    pre = cv2.medianBlur(strips, 3)[1::3].astype(np.float64)
+    diff = np.abs(pre[:len(idx), ::2] - pre[len(idx):, ::2])
+    return float(1.4826 / np.sqrt(2.0) * np.median(diff))
+
+
+@pytest.mark.parametrize("dtype", [np.uint8, np.uint16, np.float32])
+def test_frame_noise_equals_the_array_form(dtype):
+    rng = np.random.default_rng(5)
+    for k in range(60):
+        H, W = int(rng.integers(2, 90)), int(rng.integers(1, 70))
+        top = int(rng.integers(2, 4096 if dtype != np.uint8 else 256))
+        img = rng.integers(0, top, (H, W) if k % 4 else (W, H)).astype(dtype)
+        img = img if k % 4 else img.T                              # a transposed view
+        assert frame_noise(img) == _noise_array_form(img), (k, img.shape)
+
+
+def _wander_array_form(v, edges, min_run=80, max_lag=24):
+    """_wander's array form: each long run's residual about scipy's Savitzky–Golay
+    quadratic, laid end to end with zeros between, correlated by one product."""
+    parts = [np.zeros(max_lag)]
+    for a, b in zip(edges[:-1], edges[1:]):
+        if b - a >= min_run:
+            r = v[a:b] - savgol_filter(v[a:b], 61 if b - a > 61 else min_run - 1, 2)
+            parts += [r - r.mean(), np.zeros(max_lag)]
+    if len(parts) == 1:
+        return 0.0
+    flat = np.concatenate(parts)
+    acf = sliding_window_view(flat, max_lag + 1).T @ flat[:len(flat) - max_lag]
+    rho = acf / acf[0]
+    end = np.argmax(rho[1:] <= 0) + 1 if (rho[1:] <= 0).any() else len(rho)
+    return float(1.0 + 2.0 * rho[1:end].sum())
+
+
+def test_wander_equals_the_array_form():
+    rng = np.random.default_rng(6)
+    for _ in range(80):
+        n = int(rng.integers(60, 1500))
+        v = np.cumsum(rng.normal(size=n)) * 0.05 + np.convolve(rng.normal(size=n + 4),
+                                                                np.ones(5) / 5, "valid")
+        edges = np.unique(np.r_[0, rng.integers(0, n, rng.integers(0, 8)), n])
+        assert abs(_wander(v, edges) - _wander_array_form(v, edges)) < 1e-9
+
+
+@pytest.mark.parametrize("dtype", [np.uint8, np.uint16, np.float32])
+def test_widths_and_clipping_equal_the_array_form(dtype):
+    rng = np.random.default_rng(7)
+    H, W, w = 60, 400, 9
+    img = rng.integers(0, 120, (H, W)).astype(dtype)
+    r = rng.integers(-3, H + 3, W)                       # peaks by the frame's edges too
+    c = np.arange(W)
+    img[np.clip(r, 0, H - 1), c] = np.where(c % 2, 255, 200)     # clipped in every 2nd
+    img[np.clip(r[::3] + 1, 0, H - 1), c[::3]] = 200
+    img[np.clip(r[::4] + 2, 0, H - 1), c[::4]] = 255              # clipped 2 rows below
+    pre = cv2.medianBlur(img, 3)
+    gmax = pre[np.clip(r, 0, H - 1), c].astype(np.float64)
+    half = (gmax - rng.uniform(0, 150, W) + gmax) / 2
+    width, sat = widths_and_clipping(pre, img, r, c, w, half, np.float32(250))
+    g, inside = gather(pre, r[None, :] + np.arange(-w, w + 1)[:, None], c)
+    assert np.array_equal(width, fwhm(g, inside, 2 * half - gmax, gmax))
+    near = gather(img, r[None, :] + np.arange(-2, 3)[:, None], c)[0].max(axis=0) >= 250
+    assert near.any() and not near.all() and np.array_equal(sat, near)
+
+
+def _junction_array_form(lab1, lab2, own1, own2):
+    W = len(lab1)
+    cols = np.arange(W)
+    lo, hi, n = np.full(2 * W, W), np.full(2 * W, -1), np.zeros(2 * W, int)
+    for lab, own in ((lab1, own1), (lab2, own2)):
+        np.minimum.at(lo, lab[own], cols[own])
+        np.maximum.at(hi, lab[own], cols[own])
+        np.add.at(n, lab[own], 1)
+    a, b = lab1, lab2
+    line = (n[a] >= OWN_COLUMNS) & (n[b] >= OWN_COLUMNS)
+    return line & (((hi[a] < cols) & (lo[b] > cols)) | ((hi[b] < cols) & (lo[a] > cols)))
+
+
+def test_junction_equals_the_array_form():
+    rng = np.random.default_rng(8)
+    hits = 0
+    for _ in range(40):
+        W = int(rng.integers(20, 300))
+        lab1 = np.sort(rng.integers(0, 6, W))                # chains along the columns
+        lab2 = np.sort(rng.integers(6, 12, W))[::-1].copy()
+        own1, own2 = rng.random(W) < 0.6, rng.random(W) < 0.6
+        want = _junction_array_form(lab1, lab2, own1, own2)
+        assert np.array_equal(junction(lab1, lab2, own1, own2), want)
+        hits += want.sum()
+    assert hits

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from insitu.vision.detect_kernel import carry, chain_labels
+from insitu.vision.detect_kernel import carry, chain_labels, junction_columns
 
 OWN_COLUMNS = 8
 """Columns of its own (no second peak there) that make a chain a line, not a ghost's tail."""
@@ -58,16 +58,7 @@ def junction(lab1, lab2, own1, own2) -> np.ndarray:
     before the column, and the other's as many, all after it — one line ends and the next
     begins there, as at a step. A ghost has few columns of its own, or lies within the real
     line's span, which then has own columns on both sides."""
-    W = len(lab1)
-    cols = np.arange(W)
-    lo, hi, n = np.full(2 * W, W), np.full(2 * W, -1), np.zeros(2 * W, int)
-    for lab, own in ((lab1, own1), (lab2, own2)):
-        np.minimum.at(lo, lab[own], cols[own])
-        np.maximum.at(hi, lab[own], cols[own])
-        np.add.at(n, lab[own], 1)
-    a, b = lab1, lab2
-    line = (n[a] >= OWN_COLUMNS) & (n[b] >= OWN_COLUMNS)
-    return line & (((hi[a] < cols) & (lo[b] > cols)) | ((hi[b] < cols) & (lo[a] > cols)))
+    return junction_columns(lab1, lab2, own1, own2, OWN_COLUMNS)
 
 
 RUN = 4

@@ -219,3 +219,23 @@ def chain_labels(V, OK, max_jump):
     for a in range(n):
         parent[a] = _root(parent, a)
     return parent
+
+
+@compiled
+def junction_columns(lab1, lab2, own1, own2, own_columns):
+    """:func:`~insitu.vision.chains.junction` (W,) bool of the chain labels lab1, lab2 (W,)
+    (in 0 … 2W − 1) and the columns own1, own2 (W,) bool each candidate has alone: each
+    chain's first and last own column and their count, then each column's test."""
+    W = len(lab1)
+    lo, hi, n = np.full(2 * W, W), np.full(2 * W, -1), np.zeros(2 * W, np.int64)
+    for lab, own in ((lab1, own1), (lab2, own2)):
+        for col in range(W):
+            if own[col]:
+                k = lab[col]
+                lo[k], hi[k], n[k] = min(lo[k], col), max(hi[k], col), n[k] + 1
+    out = np.zeros(W, np.bool_)
+    for col in range(W):
+        a, b = lab1[col], lab2[col]
+        if n[a] >= own_columns and n[b] >= own_columns:
+            out[col] = (hi[a] < col and lo[b] > col) or (hi[b] < col and lo[a] > col)
+    return out

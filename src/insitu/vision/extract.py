@@ -17,7 +17,6 @@ from dataclasses import asdict, dataclass, replace
 from functools import lru_cache
 
 import numpy as np
-from numpy.lib.stride_tricks import sliding_window_view
 from scipy.signal import savgol_coeffs
 
 from insitu.errors import ConfigError
@@ -27,7 +26,7 @@ from insitu.vision.chains import median_of
 from insitu.vision.detect import LineCentres
 from insitu.vision.laser_image import check_bits
 from insitu.vision.profile import frame_noise
-from insitu.vision.smooth_kernel import local_quadratic
+from insitu.vision.smooth_kernel import local_quadratic, wander_scale
 
 
 @dataclass(frozen=True)
@@ -178,35 +177,30 @@ def _pieces(c: LineCentres, jump_px: float) -> tuple[np.ndarray, np.ndarray]:
 
 def _wander(v: np.ndarray, edges: np.ndarray, min_run: int = 80, max_lag: int = 24) -> float:
     """:func:`wander_correlation_px` of the centres' v (n,) sorted by u, cut into runs at
-    ``edges``: the residuals of every long run laid end to end with ``max_lag`` zeros
-    between them, so that one product of lagged windows sums each run's autocorrelation."""
+    ``edges``: the autocorrelation of each run of at least ``min_run`` points about its
+    Savitzky–Golay quadratic trend (scipy's savgol_filter, mode "interp", over 61 points, or
+    ``min_run`` − 1 in a run of 61 or fewer), summed over the runs
+    (:func:`~insitu.vision.smooth_kernel.wander_scale`)."""
     start, stop = edges[:-1], edges[1:]
     long = stop - start >= min_run
     if not long.any():
         return 0.0
-    res = [np.zeros(max_lag)]
-    for a, b in zip(start[long], stop[long]):
-        r = v[a:b] - quadratic_trend(v[a:b], 61 if b - a > 61 else min_run - 1)
-        res += [r - r.mean(), np.zeros(max_lag)]
-    flat = np.concatenate(res)
-    acf = sliding_window_view(flat, max_lag + 1).T @ flat[:len(flat) - max_lag]
-    if acf[0] <= 0:
-        return 0.0
-    rho = acf / acf[0]
-    end = np.argmax(rho[1:] <= 0) + 1 if (rho[1:] <= 0).any() else len(rho)
-    return float(1.0 + 2.0 * rho[1:end].sum())
+    a, b = start[long], stop[long]
+    sizes = (61, min_run - 1)
+    coeffs, ends = _stacked_savgol(sizes)
+    return float(wander_scale(np.asarray(v, np.float64), a, b, (b - a <= 61).astype(np.int64),
+                              np.array(sizes), coeffs, ends, max_lag))
 
 
-def quadratic_trend(v: np.ndarray, window: int) -> np.ndarray:
-    """Savitzky–Golay quadratic of ``v`` (n,) over an odd ``window`` ≤ n (scipy's savgol_filter,
-    mode "interp": the ends from the quadratic fitted to the first and last window points),
-    as one convolution and two small products."""
-    coeffs, ends = _savgol_matrices(window)
-    h = window // 2
-    out = np.empty(len(v))
-    out[h:len(v) - h] = np.convolve(v, coeffs, mode="valid")
-    out[:h], out[len(v) - h:] = ends[:h] @ v[:window], ends[window - h:] @ v[-window:]
-    return out
+@lru_cache(maxsize=8)
+def _stacked_savgol(sizes: tuple[int, ...]) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`_savgol_matrices` of each window size, stacked and zero-padded:
+    (m, K) and (m, K, K), K the largest size."""
+    K = max(sizes)
+    coeffs, ends = np.zeros((len(sizes), K)), np.zeros((len(sizes), K, K))
+    for i, k in enumerate(sizes):
+        coeffs[i, :k], ends[i, :k, :k] = _savgol_matrices(k)
+    return coeffs, ends
 
 
 @lru_cache(maxsize=8)

@@ -3,9 +3,14 @@ as one compiled pass: each point's quadratic over the window of its stretch."""
 
 from __future__ import annotations
 
+import numba
 import numpy as np
 
 from insitu.vision.detect_kernel import compiled
+
+summed = numba.njit(cache=True, nogil=True, error_model="numpy", fastmath={"reassoc"})
+"""As ``compiled``, its sums taken in any order (vectorised): for a statistic whose last
+bits do not matter (the wander's correlation length, rounded up to whole columns)."""
 from insitu.vision.steger_kernel import moment_fit
 
 
@@ -50,3 +55,52 @@ def local_quadratic(col, v, first, last, h):
             else:
                 out[i] = v[i]
     return out
+
+
+@summed
+def _detrended(v, coeffs, ends, out):
+    """``out`` (n,): v (n,) less its Savitzky–Golay quadratic (the window's convolution
+    ``coeffs`` (k,) inside, the hat matrix ``ends`` (k, k) of the first and last k points at
+    the ends: scipy's savgol_filter, mode "interp"), less its mean."""
+    n, k = len(v), len(coeffs)
+    h = k // 2
+    for i in range(h, n - h):
+        s = 0.0
+        for q in range(k):
+            s += v[i - h + q] * coeffs[k - 1 - q]
+        out[i] = v[i] - s
+    for i in range(h):
+        s, e = 0.0, 0.0
+        for q in range(k):
+            s += ends[i, q] * v[q]
+            e += ends[k - h + i, q] * v[n - k + q]
+        out[i], out[n - h + i] = v[i] - s, v[n - h + i] - e
+    out -= out.mean()
+
+
+@summed
+def wander_scale(v, first, last, which, sizes, coeffs, ends, max_lag):
+    """The integral scale 1 + 2 Σ ρ_k (up to ρ's first zero, k ≤ ``max_lag``) of the
+    autocorrelation of the residuals of the runs v[first[i] … last[i] − 1] (v (n,) float64)
+    about each run's quadratic trend over sizes[which[i]] points (``coeffs`` (m, K) and
+    ``ends`` (m, K, K): :func:`~insitu.vision.extract._savgol_matrices` of each size,
+    zero-padded to K), the products summed over the runs; 0 when their variance is 0."""
+    acf = np.zeros(max_lag + 1)
+    for i in range(len(first)):
+        a, b, m = first[i], last[i], which[i]
+        k = sizes[m]
+        r = np.empty(b - a)
+        _detrended(v[a:b], coeffs[m, :k], ends[m, :k, :k], r)
+        for lag in range(max_lag + 1):
+            s = 0.0
+            for j in range(b - a - lag):
+                s += r[j + lag] * r[j]
+            acf[lag] += s
+    if acf[0] <= 0:
+        return 0.0
+    rho = 0.0
+    for lag in range(1, max_lag + 1):
+        if acf[lag] / acf[0] <= 0:
+            break
+        rho += acf[lag] / acf[0]
+    return 1.0 + 2.0 * rho

@@ -33,7 +33,7 @@ from insitu.vision.profile import (
     gather,
     saturation_level,
 )
-from insitu.vision.steger_kernel import plateau_centres, steger_columns
+from insitu.vision.steger_kernel import plateau_centres, steger_columns, widths_and_clipping
 
 FLAT_PX = 2.5
 """Farthest (px) a flat top's centre (``clip``) may lie from the 3-point fit on it: the fit
@@ -163,8 +163,10 @@ def steger(image: np.ndarray, sigma: float | None = None, min_peak: float = 40.0
                  min_run=min_run, ridge=ridge, noise=noise, white=white, quiet=quiet)
     c, r, n, w, unit = det.cols, det.row, len(det.cols), det.window, det.full_scale / 255
     x = np.arange(-w, w + 1)[:, None]
-    g, inside = gather(det.pre, r[None, :] + x, c)
-    width = fwhm(g, inside, det.gmax - det.contrast, det.gmax)
+    level = saturation_level(img, saturation, scale)
+    width, sat = widths_and_clipping(det.pre, img, r.astype(np.int64), c.astype(np.int64), w,
+                                     (det.gmax - det.contrast + det.gmax) / 2,
+                                     np.float32(level))
     if sigma is None:
         own = width if det.carried.all() else width[~det.carried]
         sigma = max(1.0, median_of(own) / (2 * np.sqrt(3))) if n else 1.0
@@ -173,11 +175,9 @@ def steger(image: np.ndarray, sigma: float | None = None, min_peak: float = 40.0
     h = _kernels(float(sigma), int(np.ceil(3.5 * sigma)))
     u, v, found = steger_columns(img, r.astype(np.int64), c.astype(np.int64), h, _M + 1,
                                  np.float32(min_curvature), bool(across))
-    level = saturation_level(img, saturation, scale)
-    sat = gather(img, r[None, :] + x[w - 2:w + 3], c)[0].max(axis=0) >= level
     if sat.any():                                 # clipped plateau: the flank fit instead
-        raw, _ = gather(img, r[None, sat] + x, c[sat])
-        v[sat] = r[sat] + plateau_centres(raw, inside[:, sat], raw >= level, det.noise, unit)
+        raw, inside = gather(img, r[None, sat] + x, c[sat])
+        v[sat] = r[sat] + plateau_centres(raw, inside, raw >= level, det.noise, unit)
         u[sat], found[sat] = c[sat], True
     keep = found & np.isfinite(u) & np.isfinite(v)
     return LineCentres(u[keep].astype(np.float64), v[keep].astype(np.float64),

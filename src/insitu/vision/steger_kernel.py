@@ -258,3 +258,30 @@ def _run_centroid(raw, inside, sat, bg, g, run, near):
         moment += weight * (y - h)
         total += weight
     return moment / max(total, 1e-9)
+
+
+@compiled
+def widths_and_clipping(pre, img, r, c, w, half, level):
+    """Each column's FWHM (float64 (n,), :func:`~insitu.vision.profile.fwhm`: the rows of
+    ``pre`` (H, W) within ±w of the peak row r (n,) of column c (n,) standing above
+    ``half`` (n,), joined to the peak's row) and whether ``img`` (H, W) reaches ``level``
+    (float32) within ±2 rows of it (rows clipped to the frame), (n,) bool."""
+    H = pre.shape[0]
+    n = len(r)
+    width, sat = np.empty(n), np.empty(n, np.bool_)
+    for i in range(n):
+        y, col, up, down = r[i], c[i], 0, 0
+        for s in range(w + 1):
+            if y - s < 0 or y - s >= H or not np.float32(pre[y - s, col]) > half[i]:
+                break
+            up += 1
+        for s in range(w + 1):
+            if y + s < 0 or y + s >= H or not np.float32(pre[y + s, col]) > half[i]:
+                break
+            down += 1
+        width[i] = max(up + down - 1, 0)
+        top = np.float32(img[min(max(y - 2, 0), H - 1), col])
+        for s in range(-1, 3):
+            top = max(top, np.float32(img[min(max(y + s, 0), H - 1), col]))
+        sat[i] = top >= level
+    return width, sat

@@ -1,0 +1,67 @@
+"""The frame's noise estimate (:func:`~insitu.vision.profile.frame_noise`) of an integer frame
+as one compiled pass: the 3 × 3 median of the sampled rows and their absolute differences,
+counted in a histogram whose middle is the median. Integer values throughout: the same
+number as the array form (medianBlur of the rows' strips, absdiff, calcHist)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from insitu.vision.detect_kernel import compiled
+
+
+@compiled
+def _median_at(lo, mid, hi, p, x, q):
+    """The 3 × 3 median about column x from its columns p, x, q sorted (lo, mid, hi): the
+    median of the greatest least, the middle middle and the least greatest."""
+    g = max(max(lo[p], lo[x]), lo[q])
+    a, b = min(mid[p], mid[x]), max(mid[p], mid[x])
+    m = max(a, min(b, mid[q]))
+    s = min(min(hi[p], hi[x]), hi[q])
+    a, b = min(g, m), max(g, m)
+    return max(a, min(b, s))
+
+
+@compiled
+def _median_row(img, y, lo, mid, hi, out):
+    """``out`` (W,): row y of the 3 × 3 median of ``img`` (H, W), the frame's edges
+    replicated (medianBlur's border): each column's three rows sorted (lo, mid, hi (W,) work
+    space), then the median of three columns' (a 3 × 3 median exactly)."""
+    H, W = img.shape
+    ra, rb, rc = img[max(y - 1, 0)], img[y], img[min(y + 1, H - 1)]
+    for x in range(W):
+        p, q, r = ra[x], rb[x], rc[x]
+        a, b = min(p, q), max(p, q)
+        lo[x], mid[x], hi[x] = min(a, r), max(a, min(b, r)), max(b, r)
+    for x in range(1, W - 1):
+        out[x] = _median_at(lo, mid, hi, x - 1, x, x + 1)
+    out[0] = _median_at(lo, mid, hi, 0, 0, min(1, W - 1))
+    out[W - 1] = _median_at(lo, mid, hi, max(W - 2, 0), W - 1, W - 1)
+
+
+@compiled
+def median_row_differences(img, rows_a, rows_b):
+    """The middle (float, the mean of the two middle order statistics) of |m(a, x) − m(b, x)|
+    over the row pairs (rows_a[i], rows_b[i]) and every second column x, m the 3 × 3 median
+    of the integer frame ``img`` (H, W) (any layout: a transposed view too)."""
+    H, W = img.shape
+    lo, mid, hi = (np.empty(W, img.dtype), np.empty(W, img.dtype), np.empty(W, img.dtype))
+    ma, mb = np.empty(W, img.dtype), np.empty(W, img.dtype)
+    counts = np.zeros(np.iinfo(img.dtype).max + 1, np.int64)
+    for i in range(len(rows_a)):
+        _median_row(img, rows_a[i], lo, mid, hi, ma)
+        _median_row(img, rows_b[i], lo, mid, hi, mb)
+        for x in range(0, W, 2):
+            d = ma[x] - mb[x] if ma[x] >= mb[x] else mb[x] - ma[x]
+            counts[d] += 1
+    m = len(rows_a) * ((W + 1) // 2)
+    k1, k2 = (m - 1) // 2, m // 2                  # the two middle order statistics
+    total, s1, s2 = 0, -1, -1
+    for value in range(len(counts)):
+        total += counts[value]
+        if s1 < 0 and total > k1:
+            s1 = value
+        if total > k2:
+            s2 = value
+            break
+    return (s1 + s2) / 2.0
