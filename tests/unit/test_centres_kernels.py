@@ -2,7 +2,8 @@
 (vision.detect_kernel; the array form vision.peak_rows: each column's first greatest pixel in
 its band, and the greatest more than w rows from it, on frames with bands that end inside the
 ±w rows), the frame's noise, the wander's correlation length, each column's FWHM and
-clipping, the chains' junctions (their array forms here)."""
+clipping, the chains' junctions, the smoothing's runs and kept points (their array forms
+here)."""
 
 from __future__ import annotations
 
@@ -14,9 +15,10 @@ from scipy.signal import savgol_filter
 
 from insitu.vision.chains import OWN_COLUMNS, junction
 from insitu.vision.detect_kernel import band_peaks
-from insitu.vision.extract import _wander
+from insitu.vision.extract import _run_edges, _wander
 from insitu.vision.peak_rows import band_rows, peak_rows, second_rows
 from insitu.vision.profile import frame_noise, fwhm, gather
+from insitu.vision.smooth_kernel import kept_and_smoothed, local_quadratic
 from insitu.vision.steger_kernel import widths_and_clipping
 
 
@@ -139,3 +141,51 @@ def test_junction_equals_the_array_form():
         assert np.array_equal(junction(lab1, lab2, own1, own2), want)
         hits += want.sum()
     assert hits
+
+
+def _jumps_array_form(u, v, jump_px):
+    du, dv = np.diff(u), np.diff(v)
+    near = (du > 0.5) & (du < 1.5)
+    slope = np.median(dv[near] / du[near]) if near.any() else 0.0
+    return np.abs(dv - slope * du) > jump_px
+
+
+def _smooth_array_form(u, v, peak, h, jump_px, end_fraction, drop_short=3):
+    """smooth_centres' array form on centres sorted by u: the runs, each run's kept points,
+    the stretches and each point's quadratic (local_quadratic, the kernel already held to
+    its array form by the smoothing's tests)."""
+    edges = np.r_[0, np.flatnonzero((np.diff(u) > 1.5) | _jumps_array_form(u, v, jump_px))
+                  + 1, len(u)]
+    level = 0.0
+    if end_fraction > 0:
+        level = np.repeat([end_fraction * np.median(peak[a:b]) for a, b in
+                           zip(edges[:-1], edges[1:])], np.diff(edges))
+    at = np.arange(len(u))
+    bright = peak >= level
+    first = np.minimum.reduceat(np.where(bright, at, len(u)), edges[:-1])
+    last = np.maximum.reduceat(np.where(bright, at, -1), edges[:-1])
+    piece = np.repeat(np.arange(len(first)), np.diff(edges))
+    keep = ((at >= first[piece]) & (at <= last[piece])
+            & (last - first + 1 >= drop_short)[piece])
+    col, kv = np.round(u[keep]).astype(np.int64), v[keep]
+    if len(kv) < 2:
+        return edges, keep, kv
+    cut = (np.diff(col) > h + 1) | _jumps_array_form(col, kv, jump_px)
+    a = np.r_[0, np.flatnonzero(cut) + 1]
+    return edges, keep, local_quadratic(col, kv, a, np.r_[a[1:], len(kv)] - 1, h)
+
+
+@pytest.mark.parametrize("end_fraction", [0.0, 0.5])
+def test_runs_and_smoothing_equal_the_array_form(end_fraction):
+    rng = np.random.default_rng(9)
+    for k in range(60):
+        n = int(rng.integers(1, 400))
+        u = np.cumsum(rng.choice([1.0, 1.0, 1.0, 2.0, 9.0], n)) + rng.normal(0, 0.05, n)
+        v = 0.3 * u + rng.normal(0, 0.4, n) + 6.0 * (rng.random(n) < 0.02).cumsum()
+        peak = rng.uniform(20, 255, n)
+        h = int(rng.integers(2, 12))
+        edges, keep, want = _smooth_array_form(u, v, peak, h, 1.0, end_fraction)
+        assert np.array_equal(_run_edges(u, v, 1.0), edges)
+        got_keep, got = kept_and_smoothed(np.round(u).astype(np.int64), v, peak, edges, h, 1.0,
+                                          end_fraction, 3)
+        assert np.array_equal(got_keep, keep) and np.array_equal(got, want), k

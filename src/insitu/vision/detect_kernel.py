@@ -12,6 +12,9 @@ import numpy as np
 compiled = numba.njit(cache=True, nogil=True, error_model="numpy")
 """Compiled once per argument types, the machine code kept beside the module (__pycache__);
 divisions by zero give inf or NaN, as numpy's."""
+summed = numba.njit(cache=True, nogil=True, error_model="numpy", fastmath={"reassoc"})
+"""As ``compiled``, its sums taken in any order (vectorised): for a statistic whose last
+bits do not matter (the wander's correlation length, rounded up to whole columns)."""
 
 
 @compiled

@@ -22,11 +22,10 @@ from scipy.signal import savgol_coeffs
 from insitu.errors import ConfigError
 from insitu.formats.validation import one_of
 from insitu.vision.centres import CENTRE_METHODS, line_centres
-from insitu.vision.chains import median_of
 from insitu.vision.detect import LineCentres
 from insitu.vision.laser_image import check_bits
 from insitu.vision.profile import frame_noise
-from insitu.vision.smooth_kernel import local_quadratic, wander_scale
+from insitu.vision.smooth_kernel import kept_and_smoothed, run_edges, wander_scale
 
 
 @dataclass(frozen=True)
@@ -130,32 +129,17 @@ def band_crop(shape: tuple[int, int], band, margin: int = CROP_MARGIN
 
 def runs(u: np.ndarray, v: np.ndarray, jump_px: float) -> list[slice]:
     """Slices of (u, v) (sorted by u) where columns follow each other and v does not jump
-    off the line's own slope (:func:`_jumps`)."""
+    off the line's own slope (:func:`~insitu.vision.smooth_kernel.jumps`)."""
     edges = _run_edges(u, v, jump_px)
     return [slice(a, b) for a, b in zip(edges[:-1], edges[1:]) if b > a]
 
 
 def _run_edges(u: np.ndarray, v: np.ndarray, jump_px: float) -> np.ndarray:
     """The :func:`runs` as (k + 1,) indices: run i is [edges[i], edges[i + 1]) (for u
-    non-empty; [0, 0] for none)."""
-    brk = np.flatnonzero((np.diff(u) > 1.5) | _jumps(u, v, jump_px)) + 1
-    return np.r_[0, brk, len(u)]
-
-
-def _jumps(u: np.ndarray, v: np.ndarray, jump_px: float) -> np.ndarray:
-    """Where v (n,) steps off the line between consecutive centres (n − 1,) bool: by more
-    than ``jump_px`` from what the line's slope in the frame (the median over its steps,
-    which the steps themselves do not move) gives over the columns between them. A line 40°
-    across the image (a crossed pass) climbs 0.85 px a column: its v alone would jump at
-    every wobble of speckle and leave pieces too short to keep, its last 7 columns on a top
-    among them. The frame's slope, not a local one, which would follow a ghost's streak at
-    another slope as readily as the line."""
-    du, dv = np.diff(u), np.diff(v)
-    if not len(du):
-        return np.zeros(0, bool)
-    near = (du > 0.5) & (du < 1.5)
-    slope = median_of(dv[near] / du[near]) if near.any() else 0.0
-    return np.abs(dv - slope * du) > jump_px
+    non-empty; [0, 0] for none; :func:`~insitu.vision.smooth_kernel.run_edges`)."""
+    if not len(u):
+        return np.zeros(2, np.int64)
+    return run_edges(np.asarray(u, np.float64), np.asarray(v, np.float64), float(jump_px))
 
 
 def wander_correlation_px(c: LineCentres, jump_px: float = 1.0, min_run: int = 80,
@@ -217,7 +201,8 @@ def smooth_centres(c: LineCentres, half_window: int = 7, jump_px: float = 1.0,
     stretch of the line that no discontinuity cuts.
 
     Pieces: columns that follow each other with v not stepping off the line by more than
-    ``jump_px`` (its slope in the frame allowed for: :func:`_jumps`). At each
+    ``jump_px`` (its slope in the frame allowed for:
+    :func:`~insitu.vision.smooth_kernel.jumps`). At each
     end of a piece, columns whose peak is below ``end_fraction`` of its median peak are
     dropped (0, the default: none; a version-1 height calibration drops them at 0.5 as
     the blurred tail beyond an edge). Speckle dims a line's last columns as often as blur
@@ -243,35 +228,14 @@ def smooth_centres(c: LineCentres, half_window: int = 7, jump_px: float = 1.0,
 def _smooth(c: LineCentres, order: np.ndarray, edges: np.ndarray, half_window: int,
             jump_px: float, end_fraction: float, drop_short: int = 3) -> LineCentres:
     """:func:`smooth_centres` of ``c`` (n ≥ 1), given the order sorting it by u and the
-    :func:`_run_edges` of the sorted centres."""
-    u, v = c.u[order], c.v[order]
-    peak = c.peak[order]
-    level = 0.0
-    if end_fraction > 0:
-        level = np.repeat([end_fraction * np.median(peak[a:b]) for a, b in
-                           zip(edges[:-1], edges[1:])], np.diff(edges))
-    at = np.arange(len(u))
-    bright = peak >= level
-    first = np.minimum.reduceat(np.where(bright, at, len(u)), edges[:-1])
-    last = np.maximum.reduceat(np.where(bright, at, -1), edges[:-1])
-    piece = np.repeat(np.arange(len(first)), np.diff(edges))
-    keep = ((at >= first[piece]) & (at <= last[piece])
-            & (last - first + 1 >= drop_short)[piece])
+    :func:`_run_edges` of the sorted centres
+    (:func:`~insitu.vision.smooth_kernel.kept_and_smoothed`)."""
+    u = c.u[order]
+    keep, v = kept_and_smoothed(np.round(u).astype(np.int64), np.asarray(c.v[order], np.float64),
+                                np.asarray(c.peak[order], np.float64), edges, int(half_window),
+                                float(jump_px), float(end_fraction), int(drop_short))
     idx = order[keep]
     fields = {f: getattr(c, f)[idx] for f in c.__dataclass_fields__
               if isinstance(getattr(c, f), np.ndarray) and len(getattr(c, f)) == len(c)}
-    fields["v"] = _local_quadratic(np.round(u[keep]).astype(np.int64), v[keep], half_window,
-                                   jump_px)
+    fields["v"] = v
     return replace(c, **fields)
-
-
-def _local_quadratic(col: np.ndarray, v: np.ndarray, h: int, jump_px: float) -> np.ndarray:
-    """v (n,) px smoothed as :func:`smooth_centres` says; col (n,) increasing columns: cut
-    into stretches where the columns part by more than h + 1 or v jumps, each point's
-    quadratic over its stretch's window (:func:`~insitu.vision.smooth_kernel.local_quadratic`)."""
-    n = len(v)
-    if n < 2:
-        return v.copy()
-    cut = (np.diff(col) > h + 1) | _jumps(col, v, jump_px)
-    first = np.r_[0, np.flatnonzero(cut) + 1]
-    return local_quadratic(col, np.asarray(v, np.float64), first, np.r_[first[1:], n] - 1, h)

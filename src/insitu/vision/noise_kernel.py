@@ -47,13 +47,22 @@ def median_row_differences(img, rows_a, rows_b):
     H, W = img.shape
     lo, mid, hi = (np.empty(W, img.dtype), np.empty(W, img.dtype), np.empty(W, img.dtype))
     ma, mb = np.empty(W, img.dtype), np.empty(W, img.dtype)
-    counts = np.zeros(np.iinfo(img.dtype).max + 1, np.int64)
+    top = 256                                      # the differences' bound: 8 bits
+    if img.itemsize > 1:                           # or the sampled rows' greatest value
+        top = 0
+        for rows in (rows_a, rows_b):
+            for y in rows:
+                for yy in range(max(y - 1, 0), min(y + 2, H)):
+                    top = max(top, int(img[yy].max()) + 1)
+    counts = np.zeros((4, top), np.int64)          # four tallies: no chain of increments
     for i in range(len(rows_a)):
         _median_row(img, rows_a[i], lo, mid, hi, ma)
         _median_row(img, rows_b[i], lo, mid, hi, mb)
+        for x in range(W):
+            ma[x] = max(ma[x], mb[x]) - min(ma[x], mb[x])
         for x in range(0, W, 2):
-            d = ma[x] - mb[x] if ma[x] >= mb[x] else mb[x] - ma[x]
-            counts[d] += 1
+            counts[(x >> 1) & 3, ma[x]] += 1
+    counts = counts.sum(axis=0)
     m = len(rows_a) * ((W + 1) // 2)
     k1, k2 = (m - 1) // 2, m // 2                  # the two middle order statistics
     total, s1, s2 = 0, -1, -1

@@ -3,14 +3,9 @@ as one compiled pass: each point's quadratic over the window of its stretch."""
 
 from __future__ import annotations
 
-import numba
 import numpy as np
 
-from insitu.vision.detect_kernel import compiled
-
-summed = numba.njit(cache=True, nogil=True, error_model="numpy", fastmath={"reassoc"})
-"""As ``compiled``, its sums taken in any order (vectorised): for a statistic whose last
-bits do not matter (the wander's correlation length, rounded up to whole columns)."""
+from insitu.vision.detect_kernel import compiled, summed
 from insitu.vision.steger_kernel import moment_fit
 
 
@@ -104,3 +99,71 @@ def wander_scale(v, first, last, which, sizes, coeffs, ends, max_lag):
             break
         rho += acf[lag] / acf[0]
     return 1.0 + 2.0 * rho
+
+
+@compiled
+def jumps(u, v, jump_px):
+    """Where v (n,) steps off the line between consecutive centres (n − 1,) bool (u (n,)
+    sorted): by more than ``jump_px`` from what the line's slope in the frame (the median
+    of dv/du over the steps of 0.5 < du < 1.5, which the steps themselves do not move; 0
+    without one) gives over the columns between them. A line 40° across the image (a
+    crossed pass) climbs 0.85 px a column: its v alone would jump at every wobble of speckle
+    and leave pieces too short to keep, its last 7 columns on a top among them. The frame's
+    slope, not a local one, which would follow a ghost's streak at another slope as readily
+    as the line."""
+    n = len(u)
+    out = np.zeros(max(n - 1, 0), np.bool_)
+    if n < 2:
+        return out
+    du, dv = u[1:] - u[:-1], v[1:] - v[:-1]
+    near = (du > 0.5) & (du < 1.5)
+    slope = np.median(dv[near] / du[near]) if near.any() else 0.0
+    for i in range(n - 1):
+        out[i] = abs(dv[i] - slope * du[i]) > jump_px
+    return out
+
+
+@compiled
+def run_edges(u, v, jump_px):
+    """(k + 1,) int64: the runs (:func:`~insitu.vision.extract.runs`) of u, v (n ≥ 1,) sorted by
+    u: the runs cut where u skips a column (> 1.5) or v jumps (:func:`jumps`)."""
+    cut = jumps(u, v, jump_px)
+    edges = [0]
+    for i in range(len(cut)):
+        if u[i + 1] - u[i] > 1.5 or cut[i]:
+            edges.append(i + 1)
+    edges.append(len(u))
+    return np.array(edges, np.int64)
+
+
+@compiled
+def kept_and_smoothed(col, v, peak, edges, h, jump_px, end_fraction, drop_short):
+    """:func:`~insitu.vision.extract._smooth` of points sorted by u (col (n,) int64 their
+    rounded u, v, peak (n,)) cut into runs at ``edges``: (n,) bool, the points kept (each
+    run's first to last point with peak ≥ end_fraction × the run's median peak, in runs of
+    at least ``drop_short`` such points), and the kept points' v smoothed (m,)
+    (:func:`local_quadratic` over the stretches the kept points form: cut where the columns
+    part by more than h + 1 or v jumps)."""
+    n = len(v)
+    keep = np.zeros(n, np.bool_)
+    for s in range(len(edges) - 1):
+        a, b = edges[s], edges[s + 1]
+        level = end_fraction * np.median(peak[a:b]) if end_fraction > 0 else 0.0
+        first, last = b, a - 1
+        for i in range(a, b):
+            if peak[i] >= level:
+                first, last = min(first, i), i
+        if last - first + 1 >= drop_short:
+            keep[first:last + 1] = True
+    kc, kv = col[keep], v[keep]
+    m = len(kv)
+    if m < 2:
+        return keep, kv.copy()
+    cut = jumps(kc.astype(np.float64), kv, jump_px)
+    first, last = [0], []
+    for i in range(m - 1):
+        if kc[i + 1] - kc[i] > h + 1 or cut[i]:
+            last.append(i)
+            first.append(i + 1)
+    last.append(m - 1)
+    return keep, local_quadratic(kc, kv, np.array(first), np.array(last), h)
