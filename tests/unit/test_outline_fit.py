@@ -109,6 +109,11 @@ def test_a_recorded_scans_frame_gives_the_blocks_sides():
     fit = found["fit"][1]
     lo, hi = ref.fitted.outline.sigma_mm.min(), ref.fitted.outline.sigma_mm.max()
     assert f"1σ {lo:.3f}–{hi:.3f} mm" in fit and 0.01 < lo <= hi, fit
+    # each edge's scatter and 1σ, the longest first
+    edges = found["edges"][1]
+    longest = max(ref.fitted.pieces, key=lambda p: p.length_mm)
+    assert edges.split(": ", 1)[1].count(" / ") == 2 * len(ref.fitted.pieces), edges
+    assert f"{longest.kind} {longest.length_mm:.0f} / {1000 * longest.rms_mm:.0f} / " in edges
     # what its outline pins: x, y and the turn each to a 1σ; a tolerance it cannot hold warned
     from insitu.locate.uncertainty import outline_hold
 

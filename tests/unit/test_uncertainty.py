@@ -5,6 +5,7 @@ counts them as such is too small, the one of segments and per-edge biases holds.
 from dataclasses import replace
 
 import numpy as np
+import pytest
 
 from insitu.geometry.pose import pose_matrix
 from insitu.locate.uncertainty import (
@@ -156,6 +157,18 @@ def test_a_reference_piece_left_unchecked_counts_more_than_a_checked_one():
     assert np.allclose(same, covariance(terms, 0.0, reference_mm=0.03))
     one = covariance(replace(terms, reference=np.where(edge == 0, 0.1, 0.03)), 0.0)
     assert one[1, 1] > 2 * same[1, 1] and np.isclose(one[2, 2], same[2, 2], rtol=0.2)
+
+
+def test_a_piece_fitted_to_line_ends_is_held_to_their_bias_not_to_their_scatter():
+    """A scan reference's piece fitted to its crossed scan's line ends (where its frame shows
+    no edge) scatters 0.08 mm rms by the lines' spacing: 1σ 0.03 mm across, 0.02 of its turn
+    (their bias on the corpus' references); a frame's piece scattering so (a weak grey step)
+    keeps its floor grown with the scatter, 0.4 mm."""
+    from insitu.locate.uncertainty import LINE_ENDS_MM, reference_floor
+
+    assert reference_floor(0.08, False, "scan") == LINE_ENDS_MM == (0.03, 0.02)
+    assert reference_floor(0.08, False) == pytest.approx((0.4, 0.4))
+    assert reference_floor(0.08, False, "frame")[0] > 10 * LINE_ENDS_MM[0]
 
 
 def test_two_independent_turns_are_joined_only_against_a_mesh_and_when_they_agree():

@@ -51,6 +51,10 @@ NEAR_MM = 0.5
 """Scan edge samples this close to a piece (across it) check it."""
 SCAN_SPACING_MM = 0.5
 """About how far apart along an edge a crossed scan's lines end on it."""
+LINE_ENDS_MIN = (10.0, 40)
+"""A piece fitted to the scan's line ends this long (mm) from this many of them at least is
+held to their bias (:data:`insitu.locate.uncertainty.LINE_ENDS_MM`, measured on pieces
+13–38 mm long from 61–274 line ends); a shorter one, like a frame's piece not checked."""
 
 
 @dataclass(frozen=True)
@@ -118,10 +122,18 @@ def _sampled(heights: HeightImage, pieces: list[Piece], tops) -> Outline:
     pts, nrm = (np.concatenate(a) for a in zip(*(q.sample(SPACING_MM) for q in pieces)))
     below = edge_heights(heights, pts, nrm)[1]
     count = [len(q.sample(SPACING_MM)[0]) for q in pieces]
-    floor = [reference_floor(q.rms_mm, checked(q)) for q in pieces]
+    floor = [floor_of(q) for q in pieces]
     sigma = np.repeat([np.hypot(f[0], q.sigma_mm) for f, q in zip(floor, pieces)], count)
     tilt = np.repeat([np.hypot(f[1], q.tilt_mm) for f, q in zip(floor, pieces)], count)
     return Outline(np.column_stack([pts, tops(pts, nrm)]), nrm, below, sigma, tilt)
+
+
+def floor_of(piece: Piece) -> tuple[float, float]:
+    """(1σ across, of the turn ± at its ends), mm, of ``piece`` beyond its fit's own
+    (:func:`insitu.locate.uncertainty.reference_floor`)."""
+    ends = (piece.source == "scan" and piece.length_mm >= LINE_ENDS_MIN[0]
+            and piece.points >= LINE_ENDS_MIN[1])
+    return reference_floor(piece.rms_mm, checked(piece), "scan" if ends else "frame")
 
 
 def checked(piece: Piece) -> bool:

@@ -102,15 +102,26 @@ CHECKED_TILT_MM = 0.01
 low-contrast light (their points scatter 0.024–0.028 mm rms there)."""
 CLEAR_RMS_MM = 0.02
 """A frame's edge points scatter this little (rms) about a clearly lit piece."""
+LINE_ENDS_MM = (0.03, 0.02)
+"""1σ across and of the turn (± at its ends) of a scan reference's piece fitted to its crossed
+scan's line ends where its frame shows no edge (a wall lit as bright as the top, two tops
+alike): on the simulated corpus' 12 references (three parts, four lights) its 11 such pieces
+lay +0.025 … +0.059 mm outward of the CAD outline (mean +0.045), turned ±0.034 … 0.100° on
+13–38 mm (±0.017 mm at their ends at most). The line ends scatter 0.06–0.08 mm rms about
+their piece, by the lines' own 1 mm spacing across it, not by a weak grey step: the frame's
+floor that grows with its points' scatter does not apply."""
 
 
-def reference_floor(rms_mm: float, checked: bool) -> tuple[float, float]:
+def reference_floor(rms_mm: float, checked: bool, source: str = "frame"
+                    ) -> tuple[float, float]:
     """(1σ, mm, of a scan reference's piece across it, of its turn ± at its ends) beyond
     what its own fit's scatter gives (:func:`insitu.locate.pieces.piece_sigma`): the grey
     step's bias, ``SCAN_REFERENCE_MM["checked"]`` (its turn :data:`CHECKED_TILT_MM`) when
     the crossed scan's lines check the piece, ``"fitted"`` otherwise, in proportion to its
     points' scatter ``rms_mm`` beyond :data:`CLEAR_RMS_MM` (a weak step, a textured or dim
-    edge)."""
+    edge); a piece fitted to the scan's line ends (``source`` "scan"): :data:`LINE_ENDS_MM`."""
+    if source == "scan":
+        return LINE_ENDS_MM
     scale = max(1.0, rms_mm / CLEAR_RMS_MM)
     if checked:
         return SCAN_REFERENCE_MM["checked"] * scale, CHECKED_TILT_MM * scale

@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 
 from insitu.errors import ConfigError
-from insitu.locate.outline_fit import GRAZING_DEG
+from insitu.locate.outline_fit import GRAZING_DEG, checked, floor_of
 from insitu.locate.part import SIGMAS
 from insitu.locate.reference import PartReference
 from insitu.locate.uncertainty import outline_hold
@@ -61,6 +61,7 @@ def outline_findings(ref: PartReference, tolerance: tuple[float, float] = (0.05,
            ("info", "lines", f"{crossed:.0%} of it crossed from two directions; the frame's "
             "edges " + (f"within {max(offsets):.3f} mm of where the lines end" if offsets
                         else "not crossed by the lines"))]
+    out.append(("info", "edges", _edges(fit.pieces)))
     out += _holds(ref, tolerance)
     if fit.covered < COVERED_BELOW:
         out.append(("warning", "coverage", f"the frame shows only {fit.covered:.0%} of the "
@@ -80,6 +81,18 @@ def outline_findings(ref: PartReference, tolerance: tuple[float, float] = (0.05,
                     f"{max(offsets):.3f} mm on an edge: its parts will be located less "
                     "precisely (or refused)"))
     return out
+
+
+def _edges(pieces) -> str:
+    """Each edge of a fitted outline: its length (mm), its points' scatter about it and its 1σ
+    across it (µm); * not checked by the crossed scan's lines, "ends": fitted to them."""
+    out = []
+    for p in sorted(pieces, key=lambda p: -p.length_mm):
+        sigma = math.hypot(floor_of(p)[0], p.sigma_mm)
+        out.append(f"{p.kind} {p.length_mm:.0f} / {1000 * p.rms_mm:.0f} / {1000 * sigma:.0f}"
+                   + ("*" if not checked(p) else "") + (" ends" if p.source == "scan" else ""))
+    return ("each edge, length mm / scatter / 1σ across µm (* not checked by the lines, "
+            "ends: fitted to the lines' ends): " + ", ".join(out))
 
 
 def _holds(ref: PartReference, tolerance: tuple[float, float]) -> list[tuple[str, str, str]]:
