@@ -182,26 +182,3 @@ def test_a_crown_meeting_its_wall_at_a_shallow_angle_is_counted_less_sure():
         side = (np.abs(o.normals[:, 0]) > 0.99) & (np.abs(o.points[:, 1]) < 15)
         end = (np.abs(o.normals[:, 1]) > 0.99) & (np.abs(o.points[:, 0]) < 15)
         assert np.median(got[side]) == sides and np.all(got[end] == 1.0)
-
-
-def test_beside_a_wall_seen_wide_the_tops_step_is_the_innermost_strong_one(rig):
-    """A top (grey 140) whose wall the camera sees 10 px wide, lit by a low lamp about as
-    bright as the top (+8 at the top's edge) and brighter toward its foot (+10 at 4 px out):
-    the steepest step is the wall's, 4 px (0.6 mm) outward; looked for as the innermost step
-    at least half as steep as the steepest (:data:`~insitu.locate.image_edges.FIRST`), the
-    top's edge is found where it is."""
-    from insitu.locate.image_edges import edge_points, frame_of
-
-    cam = rig.camera
-    pw, nw = np.array([[2.0, 1.0, 5.0]]), np.array([[1.0, 0.0]])
-    uv = cam.project(pw)[0]
-    d = cam.project(np.array([[2.05, 1.0, 5.0]]))[0] - uv
-    d /= np.linalg.norm(d)
-    v, u = np.mgrid[0:cam.height, 0:cam.width]
-    s = (u - uv[0]) * d[0] + (v - uv[1]) * d[1]          # px outward across the edge
-    image = (140.0 + 8.0 * (s > 0) - 3.0 * np.clip(s, 0, 3) / 3 + 10.0 * (s > 4)).astype(np.uint8)
-    frame, offs, reach = frame_of(image), np.arange(-6.0, 6.01, 0.25), np.array([5.0])
-    found, steepest, px_mm = edge_points(frame, cam, pw, nw, offs, reach)
-    assert found[0] and steepest[0, 0] - pw[0, 0] > 3 * px_mm[0], steepest
-    found, first, _ = edge_points(frame, cam, pw, nw, offs, reach, first=np.array([True]))
-    assert found[0] and abs(first[0, 0] - pw[0, 0]) < 0.5 * px_mm[0], first

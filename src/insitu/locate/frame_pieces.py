@@ -92,8 +92,7 @@ def _steps(heights: HeightImage, frame: Frame, camera: CameraModel, edges: Outli
         return np.zeros((0, 2)), np.zeros((0, 2)), np.zeros(0), 0, 0
     offs = np.arange(-SEARCH_PX, SEARCH_PX + 1e-9, STEP_PX)
     found, e, _ = edge_points(frame, camera, p, n, offs,
-                              np.where(width[seen] > 0, width[seen] / 2, np.inf),
-                              first=width[seen] >= WALL_PX)
+                              np.where(width[seen] > 0, width[seen] / 2, np.inf))
     e, n, z = e[found], n[found], p[found, 2]
     if tops is not None and len(e):
         o, dirs = camera.rays(camera.project(np.column_stack([e, z])))

@@ -78,11 +78,6 @@ CONTRAST = 2.5
 """An edge's step: its slope of grey this many times the median slope along the outline's
 profiles (what noise and the surfaces' texture give off the edges)."""
 WALL_PX = 3.0
-FIRST = 0.5
-"""Beside a wall the camera sees wide, the top's step is the innermost whose slope is at least
-this share of the steepest: the wall's foot beyond it may be the steeper (a wall lit by a low
-lamp brighter than the top: the arc's end under the low lamp, its steepest steps up to 1.6 mm
-out, 0.76 mm on its fitted end)."""
 SHOULDER_SLOPE = 0.7
 SHOULDER = 6.0
 """A top falling toward its edge steeper than 35° (:func:`shoulder`): its step's bias 1σ is
@@ -276,8 +271,7 @@ def grid_note(tilt: np.ndarray) -> str:
 
 
 def edge_points(frame: Frame, camera: CameraModel, pw: np.ndarray, nw: np.ndarray,
-                offs: np.ndarray, reach: np.ndarray | None = None,
-                first: np.ndarray | None = None
+                offs: np.ndarray, reach: np.ndarray | None = None
                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(found (K,) bool, the edge in x, y (K, 2) world, mm, mm a pixel across the edge
     (K,)) for outline points ``pw`` (K, 3) world with normals ``nw`` (K, 2): along the
@@ -285,8 +279,7 @@ def edge_points(frame: Frame, camera: CameraModel, pw: np.ndarray, nw: np.ndarra
     of the foot of a wall the camera sees, whose step beyond the top's may be the steeper),
     the steepest grey step of ``frame`` (its slope above ``CONTRAST`` times the median), cut
     at the point's height; none where a pixel on the way is at full scale (a step cut off
-    there has its steepest slope moved toward the dark side); where ``first`` (K,) bool, the
-    innermost step at least :data:`FIRST` times as steep as the steepest."""
+    there has its steepest slope moved toward the dark side)."""
     uv = camera.project(pw)
     step = camera.project(np.column_stack([pw[:, :2] + 0.05 * nw, pw[:, 2]])) - uv
     d = step / np.maximum(np.linalg.norm(step, axis=1, keepdims=True), 1e-12)
@@ -306,11 +299,6 @@ def edge_points(frame: Frame, camera: CameraModel, pw: np.ndarray, nw: np.ndarra
         slope = np.where(offs[None, :] <= reach[:, None], slope, 0.0)
     j = np.argmax(slope, axis=1)
     k = np.arange(len(pw))
-    if first is not None:
-        top = np.zeros_like(slope, bool)
-        top[:, 1:-1] = ((slope[:, 1:-1] >= slope[:, :-2]) & (slope[:, 1:-1] >= slope[:, 2:])
-                        & (slope[:, 1:-1] >= FIRST * slope[k, j][:, None]))
-        j = np.where(first & top.any(axis=1), np.argmax(top, axis=1), j)
     peak = (j > 0) & (j < len(offs) - 1) & (slope[k, j] > CONTRAST * max(noise, 1e-3))
     j = np.clip(j, 1, len(offs) - 2)
     y0, y1, y2 = slope[k, j - 1], slope[k, j], slope[k, j + 1]

@@ -102,14 +102,14 @@ CHECKED_TILT_MM = 0.01
 low-contrast light (their points scatter 0.024–0.028 mm rms there)."""
 CLEAR_RMS_MM = 0.02
 """A frame's edge points scatter this little (rms) about a clearly lit piece."""
-LINE_ENDS_MM = (0.03, 0.02)
+LINE_ENDS_MM = (0.04, 0.03)
 """1σ across and of the turn (± at its ends) of a scan reference's piece fitted to its crossed
 scan's line ends where its frame shows no edge (a wall lit as bright as the top, two tops
-alike): on the simulated corpus' 12 references (three parts, four lights) its 11 such pieces
-lay +0.025 … +0.059 mm outward of the CAD outline (mean +0.045), turned ±0.034 … 0.100° on
-13–38 mm (±0.017 mm at their ends at most). The line ends scatter 0.06–0.08 mm rms about
-their piece, by the lines' own 1 mm spacing across it, not by a weak grey step: the frame's
-floor that grows with its points' scatter does not apply."""
+alike): on the simulated corpus' 12 references (three parts, four lights) its 10 such pieces
+13–38 mm long lay +0.025 … +0.079 mm outward of the CAD outline, turned 0.045 … 0.143° (up to
+±0.048 mm at their ends: the arc's end under the low lamp). The line ends scatter 0.06–0.08
+mm rms about their piece, by the lines' own spacing across it, not by a weak grey step: the
+frame's floor that grows with its points' scatter does not apply."""
 
 
 def reference_floor(rms_mm: float, checked: bool, source: str = "frame"
