@@ -54,7 +54,8 @@ SCAN_SPACING_MM = 0.5
 LINE_ENDS_MIN = (10.0, 40)
 """A piece fitted to the scan's line ends this long (mm) from this many of them at least is
 held to their bias (:data:`insitu.locate.uncertainty.LINE_ENDS_MM`, measured on pieces
-13–38 mm long from 61–274 line ends); a shorter one, like a frame's piece not checked."""
+13–38 mm long from 58 line ends or more); a shorter one, like a frame's piece not
+checked."""
 
 
 @dataclass(frozen=True)
