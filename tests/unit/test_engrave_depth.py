@@ -2,6 +2,8 @@
 top is curved), the walls' bias zone set by the local depth, line offsets only where the
 lines show them, and the pocket's depth refused when it is not known to the tolerance."""
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 import shapely
@@ -9,6 +11,7 @@ import shapely
 from insitu.errors import MeasurementError
 from insitu.marking.engrave_depth import MEASURED, DepthSettings, measure_depth
 from insitu.marking.engrave_top import top_model
+from insitu.services.engrave_request import LOOP_DEPTH
 
 POCKET = shapely.box(-1.0, -1.0, 1.0, 1.0)
 
@@ -134,3 +137,17 @@ def test_the_wall_facing_the_camera_keeps_its_mirror_ghost_off_the_floor():
     measured = faced.state == MEASURED
     gx, _ = faced.cells.centres()
     assert not measured[gx > 0.6].any() and measured[np.abs(gx + 0.875) < 0.01].any()
+
+
+def test_the_engravings_maps_keep_the_cells_beside_the_faced_wall():
+    """The engraving's maps between rounds keep the faced wall's cells (leaving them out did
+    not help its tune seeds), where a pocket's depth leaves them out."""
+    p, line = _scan(np.random.default_rng(7), 0.1, lambda rng, n: 0.003 * rng.standard_normal(n),
+                    spacing=0.05)
+    vp = np.array([[-150, 0, 330], [0.0, 0.0, 350.0]])
+    loop = measure_depth(p, line, POCKET, replace(LOOP_DEPTH, ring_mm=1.5), viewpoints=vp)
+    depth = measure_depth(p, line, POCKET, DepthSettings(ring_mm=1.5), viewpoints=vp)
+    gx, _ = loop.cells.centres()
+    beside = np.abs(gx - 0.625) < 0.01
+    assert (loop.state[beside] == MEASURED).any()
+    assert not (depth.state[beside] == MEASURED).any()

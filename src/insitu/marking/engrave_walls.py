@@ -15,7 +15,7 @@ keeps ``faced_band_mm``: on a specular blank the camera sees the floor's line mi
 and the lines beside it read short (the simulator, stainless, seed 33, the mirrored light
 switched off against on: 8–27 µm short 0.1–0.4 mm from the wall 0.1 mm deep, 11–72 µm
 0.1–0.3 mm from it 0.2 mm deep, 34–99 µm 0.1–0.3 mm from it 0.5 mm deep; nothing beyond
-0.4 mm).
+0.4 mm). The engraving's maps keep that band (``services.engrave_request.LOOP_DEPTH``).
 """
 
 from __future__ import annotations
