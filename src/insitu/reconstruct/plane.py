@@ -3,6 +3,8 @@ scan head's geometry defines (pivot a = (0, 0, H) and the commanded segment b–
 
 from __future__ import annotations
 
+from functools import lru_cache
+
 import numpy as np
 
 from insitu.geometry.beams import light_plane
@@ -52,6 +54,20 @@ def expected_band(camera: CameraModel, start, end, pivot_height_mm: float,
     return lo, hi
 
 
+_S = np.linspace(-0.05, 1.05, 96)[:, None]
+_ALONG = (1 - _S, _S)
+"""The 96 points along the line, 5 % beyond each end, :func:`band_and_side` projects: the
+weights of its start and its end, (96, 1) each."""
+
+
+@lru_cache(maxsize=4)
+def _grid(n: int) -> np.ndarray:
+    """0 … n − 1 as float64 (read-only: shared by every frame of a camera)."""
+    g = np.arange(n, dtype=np.float64)
+    g.flags.writeable = False
+    return g
+
+
 def band_and_side(camera: CameraModel, start, end, pivot_height_mm: float,
                   z_range_mm: tuple[float, float], margin_px: float = 25.0,
                   telecentric: bool = False, along_rows: bool = True
@@ -60,12 +76,11 @@ def band_and_side(camera: CameraModel, start, end, pivot_height_mm: float,
     itself in the image: +1 to larger rows (columns when not ``along_rows``), −1 to
     smaller, 0 where it cannot be told (the line outside the image)."""
     plane = light_plane(pivot_height_mm, start, end, telecentric)
-    s = np.linspace(-0.05, 1.05, 96)[:, None]
-    xy = (1 - s) * np.asarray(start, float) + s * np.asarray(end, float)
+    xy = _ALONG[0] * np.asarray(start, float) + _ALONG[1] * np.asarray(end, float)
     axis = 0 if abs(plane[0]) >= abs(plane[1]) else 1      # solve the plane for x or for y
     along, across = (0, 1) if along_rows else (1, 0)
     n = camera.width if along_rows else camera.height
-    grid = np.arange(n, dtype=np.float64)
+    grid = _grid(n)
     z = np.asarray(z_range_mm, np.float64)[:, None]                 # the two ends, (2, 1)
     p = np.empty((2, len(xy), 3))
     p[..., :2], p[..., 2] = xy, z

@@ -45,7 +45,8 @@ def continuity(v1, v2, ok1, ok2, weight1, weight2, max_jump):
     the first and second candidates.
     """
     W = len(v1)
-    V, OK, Wt = np.r_[v1, v2].astype(np.float64), np.r_[ok1, ok2], np.r_[weight1, weight2]
+    V = np.concatenate((v1, v2)).astype(np.float64)
+    OK, Wt = np.concatenate((ok1, ok2)), np.concatenate((weight1, weight2))
     lab = chain_labels(V, OK, float(max_jump))
     support = np.bincount(lab[OK], weights=Wt[OK], minlength=2 * W)
     return (np.where(ok1, support[lab[:W]], 0.0), np.where(ok2, support[lab[W:]], 0.0),

@@ -24,6 +24,7 @@ from insitu.formats.validation import one_of
 from insitu.vision.centres import CENTRE_METHODS, line_centres
 from insitu.vision.detect import LineCentres
 from insitu.vision.laser_image import check_bits
+from insitu.vision.peak_rows import per_column
 from insitu.vision.profile import frame_noise
 from insitu.vision.smooth_kernel import kept_and_smoothed, run_edges, wander_scale
 
@@ -115,14 +116,14 @@ def band_crop(shape: tuple[int, int], band, margin: int = CROP_MARGIN
     rows, a clipped plateau's run, Steger's derivatives) lies in the margin, so the rectangle's
     centres are the frame's."""
     H, W = shape
-    lo, hi = (np.broadcast_to(np.asarray(b, np.float64), (W,)) for b in band)
+    lo, hi = (per_column(b, W) for b in band)
     with np.errstate(invalid="ignore"):
         cols = np.flatnonzero(np.isfinite(lo) & np.isfinite(hi) & (lo <= hi)
                               & (hi >= 0) & (lo <= H - 1))
     if not len(cols):
         return (slice(0, min(H, 1)), slice(0, min(W, 1))), (lo[:1], hi[:1])
-    r0 = int(np.clip(np.floor(lo[cols].min()) - margin, 0, H - 1))
-    r1 = int(np.clip(np.ceil(hi[cols].max()) + margin + 1, r0 + 1, H))
+    r0 = int(min(max(np.floor(lo[cols].min()) - margin, 0), H - 1))
+    r1 = int(min(max(np.ceil(hi[cols].max()) + margin + 1, r0 + 1), H))
     c0, c1 = max(int(cols[0]) - margin, 0), min(int(cols[-1]) + margin + 1, W)
     return (slice(r0, r1), slice(c0, c1)), (lo[c0:c1] - r0, hi[c0:c1] - r0)
 

@@ -9,6 +9,12 @@ import cv2
 import numpy as np
 
 
+def per_column(b, W: int) -> np.ndarray:
+    """A band's end ``b`` (scalar or (W,)) as (W,) float64 (itself when it is one)."""
+    a = np.asarray(b, np.float64)
+    return a if a.shape == (W,) else np.broadcast_to(a, (W,))
+
+
 def band_rows(shape, band):
     """The first and last row (W,) int64 of each column's band in a frame of ``shape``
     (H, W) (all rows without a band; −1 last where a column is not searched), the searched
@@ -16,7 +22,7 @@ def band_rows(shape, band):
     H, W = shape
     if band is None:
         return np.zeros(W, np.int64), np.full(W, H - 1, np.int64), np.ones(W, bool), H
-    blo, bhi = (np.broadcast_to(np.asarray(b, np.float64), (W,)) for b in band)
+    blo, bhi = (per_column(b, W) for b in band)
     with np.errstate(invalid="ignore"):
         flo, fhi = np.ceil(blo), np.floor(bhi)
         searched = (np.isfinite(flo) & np.isfinite(fhi) & (flo <= fhi) & (flo <= H - 1)
