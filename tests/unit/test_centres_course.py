@@ -11,6 +11,7 @@ import numpy as np
 from insitu.vision.course import (
     FILL_PX,
     fill_gaps,
+    filled_cores,
     in_frame,
     off_the_excess,
     on_course,
@@ -209,3 +210,39 @@ def test_a_long_stretch_beside_the_lasers_colour_goes_one_on_it_stays():
 
 def _fill(c, e, rows, white):
     return fill_gaps(c, e, rows, white, 8)
+
+
+def test_a_core_clipped_in_the_lasers_channel_peaks_at_its_middle_a_lit_edge_stays():
+    """A red stripe at row 20 (σ 3 px, 1000 gray values at its peak, clipped at 255) whose
+    light leaks into green and blue (crosstalk 0.11) beside a bright square (rows 0–8: 200
+    in all three, red clipped by the halo): the excess R − (G + B) / 2 dips at the core
+    between two peaks 3 px either side. Filled, it peaks at row 20; the square's run, with no
+    dip, stays as it is; a dip shallower than the least contrast of a peak stays too."""
+    row = np.arange(40.0)[:, None] * np.ones((1, 5))
+    light = 1000 * np.exp(-0.5 * ((row - 20) / 3) ** 2)
+    square = row <= 8
+    bgr = np.empty((40, 5, 3))
+    bgr[..., 0] = bgr[..., 1] = np.where(square, 200, 40 + 0.11 * light)
+    bgr[..., 2] = np.where(square, 255, np.minimum(40 + light, 255))
+    bgr = np.round(bgr).astype(np.uint8)
+    ex = np.maximum(bgr[..., 2] - (bgr[..., 0] + bgr[..., 1].astype(float)) / 2, 0)
+    ex = ex.astype(np.float32)
+    assert (np.abs(ex.argmax(axis=0) - 20) >= 2).all()
+    filled = filled_cores(ex, bgr, 2, 255.0, {"min_contrast": 20.0}, 1.0)
+    assert (filled.argmax(axis=0) == 20).all()
+    assert np.array_equal(filled[:9], ex[:9])
+    dip = float(ex[14:27].max() - ex[20].min())
+    assert np.array_equal(filled_cores(ex, bgr, 2, 255.0, {"min_contrast": dip + 1}, 1.0), ex)
+
+
+def test_a_fill_with_a_least_run_takes_no_lone_scan_line():
+    """Gaps on columns 40–59 and 70 of a stripe at row 50, the excess's centres on all of
+    them within FILL_PX of its course: with a least run of 20 consecutive scan lines the
+    lone column 70 (a glint, a mark's rim) stays empty, the 20 are filled."""
+    u = np.r_[np.arange(40.0), np.arange(60.0, 70.0), np.arange(71.0, 100.0)]
+    c = centres(u, np.full(len(u), 50.0))
+    e = centres(np.r_[np.arange(40.0, 60.0), 70.0], np.full(21, 51.0))
+    white = np.zeros((100, 100), bool)
+    filled = fill_gaps(c, e, True, white, 8, 20)
+    assert len(filled) == 100 - 1 and 70 not in filled.u
+    assert len(fill_gaps(c, e, True, white, 8)) == 100

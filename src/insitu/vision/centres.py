@@ -23,6 +23,7 @@ from insitu.vision.centroid import gray_centroid
 from insitu.vision.chains import longest_ridge
 from insitu.vision.course import (
     fill_gaps,
+    filled_cores,
     in_frame,
     kept,
     off_the_excess,
@@ -202,29 +203,29 @@ def _centres_in(li: LaserImage, method, direction, band, clipped, kw,
         scan = c.u if direction == "rows" else c.v
         if not 1 < len(c) < np.ptp(scan) + 1:                              # no gaps
             return c
-        return fill_gaps(c, _in_excess(li, c, fn, direction, scaled), direction == "rows",
-                         white, colour_reach(img.shape)[0])
+        for cores in (False, True):      # the clipped cores' dips filled where gaps are left
+            c = fill_gaps(c, _in_excess(li, c, fn, direction, scaled, cores),
+                          direction == "rows", white, colour_reach(img.shape)[0], PHOTO_RUN * cores)
+        return c
     if colour and white is not None:
         c = off_the_excess(c, direction == "rows", COURSE * min(img.shape), PHOTO_RUN, fill)
     return c
 
 
-def _in_excess(li: LaserImage, c: LineCentres, fn, direction, scaled) -> LineCentres:
-    """``fn``'s centres in the laser channel's excess over the others, found only round the
-    gaps of the stripe's centres ``c``: in each window from a gap's last centre before to its
-    first after, ± 4 × the colour's reach along and across the line (windows that overlap
-    joined), measured in one pass over the windows laid side by side
-    (:data:`_APART` blank scan lines between), with the whole excess's noise, each scan
-    line's peak its brightest laser-coloured pixel rather than the ridge on the longest
-    track (a window round a gap holds the stripe's colour and little else;
-    :func:`~insitu.vision.course.fill_gaps` takes only centres on the gaps, near their
-    course)."""
+def _in_excess(li: LaserImage, c: LineCentres, fn, direction, scaled, cores) -> LineCentres:
+    """``fn``'s centres in the laser channel's excess over the others round the gaps of the
+    stripe's centres ``c``: in each window from a gap's last centre before to its first
+    after, ± 4 × the colour's reach along and across (overlapping windows joined), measured
+    in one pass over the windows side by side (:data:`_APART` scan lines between) with the
+    whole excess's noise, each scan line's peak its brightest laser-coloured pixel (a window
+    round a gap holds the stripe's colour and little else; cores: the dips at cores clipped
+    in the laser's channel filled, :func:`~insitu.vision.course.filled_cores`)."""
     rows = direction == "rows"
     scan, cross = (c.u, c.v) if rows else (c.v, c.u)
     order = np.argsort(scan, kind="stable")
     s, x = np.round(scan[order]).astype(np.int64), cross[order]
-    ex = excess(li)
-    ex, allow = (ex, li.allow) if rows else (ex.T, li.allow.T)        # (cross, scan)
+    ex, bgr, allow = ((excess(li), li.bgr, li.allow) if rows else                # (cross, scan)
+                      (excess(li).T, li.bgr.transpose(1, 0, 2), li.allow.T))
     margin = 4 * colour_reach(ex.shape)[0]
     gap = np.flatnonzero(np.diff(s) > 1)
     windows = []
@@ -235,15 +236,17 @@ def _in_excess(li: LaserImage, c: LineCentres, fn, direction, scaled) -> LineCen
         windows.append((max(a, 0), min(b + 1, ex.shape[1]), lo, hi))
     if not windows:
         return kept(c, slice(0))
+    noise, kw = frame_noise(ex), scaled(li.full_scale)
     height = max(hi - lo for _, _, lo, hi in windows)
     at = np.cumsum([0] + [b - a + _APART for a, b, _, _ in windows])
     img = np.zeros((height, at[-1]), np.float32)
     ok = np.zeros((height, at[-1]), bool)
     for (a, b, lo, hi), k in zip(windows, at):
-        img[:hi - lo, k:k + b - a] = ex[lo:hi, a:b]
+        img[:hi - lo, k:k + b - a] = filled_cores(
+            ex[lo:hi, a:b], bgr[lo:hi, a:b], CHANNELS[li.channel], li.full_scale, kw,
+            noise) if cores else ex[lo:hi, a:b]
         ok[:hi - lo, k:k + b - a] = allow[lo:hi, a:b]
-    e = _along(fn, img, "rows", None, ok,
-               scaled(li.full_scale) | {"noise": frame_noise(ex), "ridge": False})
+    e = _along(fn, img, "rows", None, ok, kw | {"noise": noise, "ridge": False})
     i = np.searchsorted(at, np.round(e.u), side="right") - 1
     start, top = np.array([w[0] for w in windows]), np.array([w[2] for w in windows])
     along, across = e.u - at[i] + start[i], e.v + top[i]

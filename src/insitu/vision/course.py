@@ -1,16 +1,19 @@
 """A photograph's stripe kept on its course: the centres on no laser-coloured ridge dropped
 (:func:`on_laser`: a bright square's edge beside the stripe), the scan lines it has no centre
-on filled from the laser colour's excess (:func:`fill_gaps`), and the stretches of centres
+on filled from the laser colour's excess (:func:`fill_gaps`; its dips at cores clipped in the
+laser's channel filled, :func:`filled_cores`), and the stretches of centres
 that slid off it onto the rim of a dark mark or a bright square's edge dropped
 (:func:`on_course`)."""
 
 from __future__ import annotations
 
+import inspect
 from dataclasses import replace
 
 import numpy as np
 
-from insitu.vision.detect import LineCentres
+from insitu.vision.detect import LineCentres, detect
+from insitu.vision.laser_image import WHITE
 
 FLANKS = 0.5
 """Least laser colour on each side of a centre that is not white, of the most within reach
@@ -67,7 +70,7 @@ def on_laser(c: LineCentres, bgr: np.ndarray, channel: int, white: float, along_
 
 
 def fill_gaps(c: LineCentres, e: LineCentres, along_rows: bool, white: np.ndarray,
-              reach: int) -> LineCentres:
+              reach: int, run: int = 0) -> LineCentres:
     """``c`` with the centres of ``e`` added on the scan lines ``c`` has none, between its
     ends, where they lie within :data:`FILL_PX` of ``c``'s course there (interpolated
     between its neighbours) and, where pixels of ``white`` ((H, W) bool: all three channels
@@ -76,7 +79,9 @@ def fill_gaps(c: LineCentres, e: LineCentres, along_rows: bool, white: np.ndarra
     board's pattern cancels and a stripe running along a dark square's edge (a step in the
     channel, no peak) is a ridge; a core clipped white is a hole in that excess: a centre
     amid it is the hole's middle, one beside it its halo's flank (clipped_white spent seed
-    10004: 49 columns filled 8.5 px off the line)."""
+    10004: 49 columns filled 8.5 px off the line). run: the least number of consecutive
+    scan lines the centres added fill (a core clipped along a stripe, not a lone scan line's
+    glint or mark's rim)."""
     key = (lambda x: x.u) if along_rows else (lambda x: x.v)
     cross = (lambda x: x.v) if along_rows else (lambda x: x.u)
     sc, se = np.round(key(c)).astype(np.int64), np.round(key(e)).astype(np.int64)
@@ -85,10 +90,55 @@ def fill_gaps(c: LineCentres, e: LineCentres, along_rows: bool, white: np.ndarra
     add = ((se > sc.min()) & (se < sc.max()) & ~np.isin(se, sc)
            & (np.abs(cross(e) - course) <= FILL_PX)
            & ~(np.abs(_white_middle(e, white, reach, along_rows) - cross(e)) > FILL_PX))
+    if run > 1 and add.any():
+        lines = np.unique(se[add])
+        part = np.r_[0, np.cumsum(np.diff(lines) > 1)]
+        long = np.bincount(part) >= run
+        add &= np.isin(se, lines[long[part]])
     if not add.any():
         return c
     keep = np.argsort(np.r_[sc, se[add]], kind="stable")
     return replace(c, **{f: np.r_[getattr(c, f), getattr(e, f)[add]][keep] for f in FIELDS})
+
+
+def least_contrast(kw: dict, full_scale: float, noise: float) -> float:
+    """The least contrast (gray values) :func:`~insitu.vision.detect.detect` takes for a
+    peak with the keywords ``kw`` (its own defaults where they give none), a frame of
+    ``full_scale`` and ``noise`` sigma."""
+    d = {k: p.default for k, p in inspect.signature(detect).parameters.items()} | kw
+    return max(d["min_contrast"] * full_scale / 255, d["snr"] * noise)
+
+
+def filled_cores(ex: np.ndarray, bgr: np.ndarray, channel: int, full_scale: float, kw: dict,
+                 noise: float) -> np.ndarray:
+    """``ex`` (n, m) the laser's excess in ``bgr`` (n, m, 3), scan lines along axis 1, with
+    the dips filled on the runs of pixels across the line where the laser's ``channel`` is
+    at full scale (≥ :data:`~insitu.vision.laser_image.WHITE` × ``full_scale``) and the
+    others are not (white: no excess left, a hole :func:`fill_gaps` takes the middle of).
+    There the laser channel's light is read from the others' crosstalk: its value stays at
+    full scale, the others rise with the light, and the excess dips at the core between two
+    peaks at the run's flanks (clipped_white spent seed 13007: 123 at the core, 146 and 158
+    some 3 px either side; the excess's centres went to a square's edge lit 9–13 px off).
+    Each such pixel gets the lower of the greatest excess before it and after it on the
+    run plus its dip below that (the dip mirrored: highest at the core), on runs whose dip
+    is as deep as the least contrast of a peak (:func:`least_contrast`, the detection's
+    keywords ``kw`` and the excess's ``noise``): a dip the detection resolves into two
+    peaks. A bright square's edge lit by the halo has no such dip: it stays as it is."""
+    level = WHITE * full_scale
+    clip = (bgr[..., channel] >= level) & (bgr.min(axis=2) < level)
+    if not clip.any():
+        return ex
+    x = ex.astype(np.float64)
+    big = float(x.max()) + 1.0
+    label = np.cumsum(~clip | np.r_[np.ones((1, clip.shape[1]), bool), ~clip[:-1]], axis=0)
+    label += np.arange(clip.shape[1]) * (clip.shape[0] + 1)    # each scan line's apart
+    up = np.maximum.accumulate(x + label * big, axis=0) - label * big
+    down = (np.maximum.accumulate((x - label * big)[::-1], axis=0) + label[::-1] * big)[::-1]
+    top = np.where(clip, np.minimum(up, down), x)
+    dip = np.zeros(int(label.max()) + 1)
+    np.maximum.at(dip, label, top - x)
+    least = least_contrast(kw, full_scale, noise)
+    return np.where(dip[label] >= least, 2 * top - x, x).astype(ex.dtype)
 
 
 def _white_middle(c: LineCentres, white: np.ndarray, reach: int,
