@@ -8,16 +8,9 @@ import functools
 
 import numpy as np
 
-from insitu.vision.course import (
-    FILL_PX,
-    fill_gaps,
-    filled_cores,
-    in_frame,
-    off_the_excess,
-    on_course,
-    on_laser,
-)
+from insitu.vision.course import FILL_PX, in_frame, off_the_excess, on_course, on_laser
 from insitu.vision.detect import LineCentres
+from insitu.vision.excess_fill import fill_gaps, filled_cores
 from insitu.vision.tracks import on_longest_track, track_length
 
 

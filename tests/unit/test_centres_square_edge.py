@@ -3,7 +3,7 @@ course window (benchmarks/clipped_white.py, tune seed 11: a red line clipped whi
 squares, red on the black ones, 8.5 px halo): the white square's bright side pulls a method's
 centre onto the edge, where the stripe's colour lies on one side only (course.on_laser drops
 it), and the gap is filled from the laser colour's excess, also where the laser's channel
-clips (course.fill_gaps)."""
+clips (excess_fill.fill_gaps)."""
 
 from __future__ import annotations
 
@@ -70,7 +70,7 @@ def test_two_stretches_slid_beside_a_dark_square_judge_each_other_not():
 def test_the_gaps_are_filled_also_when_the_rest_is_covered():
     """Tune seed 22: the gray centroid has centres on more than 95 % of the stripe's columns
     and still misses some 5 % of the board's, where the stripe crosses dark marks; the gaps
-    are filled from the laser's excess all the same (course.fill_gaps)."""
+    are filled from the laser's excess all the same (excess_fill.fill_gaps)."""
     wrong, found = _wrong_and_found(22, "gray")
     assert wrong <= 0.002 and found >= 0.99
 
@@ -91,7 +91,7 @@ def test_a_gap_beside_a_dark_square_is_filled_on_a_core_clipped_red():
     """Spent seed 13007 (squares, red, 10 px halo): on whole dark squares the edge centres
     are dropped and the gap filled from the laser's excess, which dips at the core (red
     clipped, the crosstalk lifting green and blue) between two peaks 3 px either side, while
-    the lit square's edge 9–13 px off has none (course.filled_cores): the gray centroid found
+    the lit square's edge 9–13 px off has none (excess_fill.filled_cores): the gray centroid found
     89.6 % of the board's columns, Steger 87.5 %."""
     for method in ("gray", "steger"):
         wrong, found = _wrong_and_found(13007, method)

@@ -21,16 +21,9 @@ import numpy as np
 
 from insitu.vision.centroid import gray_centroid
 from insitu.vision.chains import longest_ridge
-from insitu.vision.course import (
-    fill_gaps,
-    filled_cores,
-    in_frame,
-    kept,
-    off_the_excess,
-    on_course,
-    on_laser,
-)
+from insitu.vision.course import in_frame, off_the_excess, on_course, on_laser
 from insitu.vision.detect import LineCentres
+from insitu.vision.excess_fill import filled
 from insitu.vision.laser_image import (
     CHANNELS,
     WHITE,
@@ -38,7 +31,6 @@ from insitu.vision.laser_image import (
     LaserImage,
     colour_margin,
     colour_reach,
-    excess,
     laser_image,
     noise_sigma,
     ridges,
@@ -46,7 +38,6 @@ from insitu.vision.laser_image import (
 )
 from insitu.vision.profile import (
     as_image,
-    frame_noise,
     gather,
     saturation_level,
 )
@@ -171,7 +162,7 @@ def _centres_in(li: LaserImage, method, direction, band, clipped, kw,
     kept on the stripe's course (:mod:`insitu.vision.course`), those of clipped cores cut by a
     dark mark's edge moved to the line (:func:`~insitu.vision.rims.cut_cores`), and the gaps
     of the stripe filled from the laser channel's excess over the others
-    (:func:`~insitu.vision.course.fill_gaps`)."""
+    (:func:`~insitu.vision.excess_fill.filled`)."""
     fn = CENTRE_METHODS[method].find
     img, allow = li.gray, li.allow
     if direction is None:
@@ -200,73 +191,10 @@ def _centres_in(li: LaserImage, method, direction, band, clipped, kw,
         c = cut_cores(c, li.total if in_sum else img, clipped * (3 if in_sum else 1)
                       * li.full_scale, direction == "rows")
     def fill(c):
-        scan = c.u if direction == "rows" else c.v
-        if not 1 < len(c) < np.ptp(scan) + 1:                              # no gaps
-            return c
-        for cores in (False, True):      # the clipped cores' dips filled where gaps are left
-            c = fill_gaps(c, _in_excess(li, c, fn, direction, scaled, cores),
-                          direction == "rows", white, colour_reach(img.shape)[0], PHOTO_RUN * cores)
-        return c
+        return filled(c, li, fn, direction == "rows", scaled, white, PHOTO_RUN)
     if colour and white is not None:
         c = off_the_excess(c, direction == "rows", COURSE * min(img.shape), PHOTO_RUN, fill)
     return c
-
-
-def _in_excess(li: LaserImage, c: LineCentres, fn, direction, scaled, cores) -> LineCentres:
-    """``fn``'s centres in the laser channel's excess over the others round the gaps of the
-    stripe's centres ``c``: in each window from a gap's last centre before to its first
-    after, ± 4 × the colour's reach along and across (overlapping windows joined), measured
-    in one pass over the windows side by side (:data:`_APART` scan lines between) with the
-    whole excess's noise, each scan line's peak its brightest laser-coloured pixel (a window
-    round a gap holds the stripe's colour and little else; cores: the dips at cores clipped
-    in the laser's channel filled, :func:`~insitu.vision.course.filled_cores`)."""
-    rows = direction == "rows"
-    scan, cross = (c.u, c.v) if rows else (c.v, c.u)
-    order = np.argsort(scan, kind="stable")
-    s, x = np.round(scan[order]).astype(np.int64), cross[order]
-    ex, bgr, allow = ((excess(li), li.bgr, li.allow) if rows else                # (cross, scan)
-                      (excess(li).T, li.bgr.transpose(1, 0, 2), li.allow.T))
-    margin = 4 * colour_reach(ex.shape)[0]
-    gap = np.flatnonzero(np.diff(s) > 1)
-    windows = []
-    for a, b in _joined(s[gap] - margin, s[gap + 1] + margin):
-        near = (s >= a) & (s <= b)
-        lo = max(int(x[near].min()) - margin, 0)
-        hi = min(int(np.ceil(x[near].max())) + margin + 1, ex.shape[0])
-        windows.append((max(a, 0), min(b + 1, ex.shape[1]), lo, hi))
-    if not windows:
-        return kept(c, slice(0))
-    noise, kw = frame_noise(ex), scaled(li.full_scale)
-    height = max(hi - lo for _, _, lo, hi in windows)
-    at = np.cumsum([0] + [b - a + _APART for a, b, _, _ in windows])
-    img = np.zeros((height, at[-1]), np.float32)
-    ok = np.zeros((height, at[-1]), bool)
-    for (a, b, lo, hi), k in zip(windows, at):
-        img[:hi - lo, k:k + b - a] = filled_cores(
-            ex[lo:hi, a:b], bgr[lo:hi, a:b], CHANNELS[li.channel], li.full_scale, kw,
-            noise) if cores else ex[lo:hi, a:b]
-        ok[:hi - lo, k:k + b - a] = allow[lo:hi, a:b]
-    e = _along(fn, img, "rows", None, ok, kw | {"noise": noise, "ridge": False})
-    i = np.searchsorted(at, np.round(e.u), side="right") - 1
-    start, top = np.array([w[0] for w in windows]), np.array([w[2] for w in windows])
-    along, across = e.u - at[i] + start[i], e.v + top[i]
-    return replace(e, u=along, v=across) if rows else replace(e, u=across, v=along)
-
-
-_APART = 16
-"""Blank scan lines between the windows of :func:`_in_excess` (more than a line's track
-carries across)."""
-
-
-def _joined(starts: np.ndarray, ends: np.ndarray) -> list[tuple[int, int]]:
-    """The windows [starts[i], ends[i]] (sorted by start) with those that overlap joined."""
-    out: list[list[int]] = []
-    for a, b in zip(starts.tolist(), ends.tolist()):
-        if out and a <= out[-1][1]:
-            out[-1][1] = max(out[-1][1], b)
-        else:
-            out.append([a, b])
-    return [(a, b) for a, b in out]
 
 
 def _quiet(bgr: np.ndarray, total: np.ndarray, level: float) -> np.ndarray:

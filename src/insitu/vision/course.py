@@ -1,19 +1,16 @@
 """A photograph's stripe kept on its course: the centres on no laser-coloured ridge dropped
-(:func:`on_laser`: a bright square's edge beside the stripe), the scan lines it has no centre
-on filled from the laser colour's excess (:func:`fill_gaps`; its dips at cores clipped in the
-laser's channel filled, :func:`filled_cores`), and the stretches of centres
-that slid off it onto the rim of a dark mark or a bright square's edge dropped
-(:func:`on_course`)."""
+(:func:`on_laser`: a bright square's edge beside the stripe), the stretches of centres that
+slid off it onto the rim of a dark mark or a bright square's edge dropped (:func:`on_course`)
+or, where the laser colour's excess runs on beside them, replaced by its centres
+(:func:`off_the_excess`; the gaps filled from the excess by :mod:`insitu.vision.excess_fill`)."""
 
 from __future__ import annotations
 
-import inspect
 from dataclasses import replace
 
 import numpy as np
 
-from insitu.vision.detect import LineCentres, detect
-from insitu.vision.laser_image import WHITE
+from insitu.vision.detect import LineCentres
 
 FLANKS = 0.5
 """Least laser colour on each side of a centre that is not white, of the most within reach
@@ -22,7 +19,7 @@ FIELDS = ("u", "v", "peak", "width", "contrast", "saturated", "ambiguous")
 """A :class:`LineCentres`' per-centre arrays."""
 FILL_PX = 4.0
 """How far (px) a centre filling a gap may lie from the course of the stripe's centres on
-either side (:func:`fill_gaps`)."""
+either side (:func:`~insitu.vision.excess_fill.fill_gaps`)."""
 
 
 def kept(c: LineCentres, keep: np.ndarray | slice) -> LineCentres:
@@ -67,92 +64,6 @@ def on_laser(c: LineCentres, bgr: np.ndarray, channel: int, white: float, along_
     if keep.all():
         return c
     return kept(c, keep)
-
-
-def fill_gaps(c: LineCentres, e: LineCentres, along_rows: bool, white: np.ndarray,
-              reach: int, run: int = 0) -> LineCentres:
-    """``c`` with the centres of ``e`` added on the scan lines ``c`` has none, between its
-    ends, where they lie within :data:`FILL_PX` of ``c``'s course there (interpolated
-    between its neighbours) and, where pixels of ``white`` ((H, W) bool: all three channels
-    clipped) lie within ±``reach`` px across on their scan line, within FILL_PX of their
-    middle. ``e``: the centres in the laser channel's excess over the others, where a neutral
-    board's pattern cancels and a stripe running along a dark square's edge (a step in the
-    channel, no peak) is a ridge; a core clipped white is a hole in that excess: a centre
-    amid it is the hole's middle, one beside it its halo's flank (clipped_white spent seed
-    10004: 49 columns filled 8.5 px off the line). run: the least number of consecutive
-    scan lines the centres added fill (a core clipped along a stripe, not a lone scan line's
-    glint or mark's rim)."""
-    key = (lambda x: x.u) if along_rows else (lambda x: x.v)
-    cross = (lambda x: x.v) if along_rows else (lambda x: x.u)
-    sc, se = np.round(key(c)).astype(np.int64), np.round(key(e)).astype(np.int64)
-    order = np.argsort(sc)
-    course = np.interp(se, sc[order], cross(c)[order])
-    add = ((se > sc.min()) & (se < sc.max()) & ~np.isin(se, sc)
-           & (np.abs(cross(e) - course) <= FILL_PX)
-           & ~(np.abs(_white_middle(e, white, reach, along_rows) - cross(e)) > FILL_PX))
-    if run > 1 and add.any():
-        lines = np.unique(se[add])
-        part = np.r_[0, np.cumsum(np.diff(lines) > 1)]
-        long = np.bincount(part) >= run
-        add &= np.isin(se, lines[long[part]])
-    if not add.any():
-        return c
-    keep = np.argsort(np.r_[sc, se[add]], kind="stable")
-    return replace(c, **{f: np.r_[getattr(c, f), getattr(e, f)[add]][keep] for f in FIELDS})
-
-
-def least_contrast(kw: dict, full_scale: float, noise: float) -> float:
-    """The least contrast (gray values) :func:`~insitu.vision.detect.detect` takes for a
-    peak with the keywords ``kw`` (its own defaults where they give none), a frame of
-    ``full_scale`` and ``noise`` sigma."""
-    d = {k: p.default for k, p in inspect.signature(detect).parameters.items()} | kw
-    return max(d["min_contrast"] * full_scale / 255, d["snr"] * noise)
-
-
-def filled_cores(ex: np.ndarray, bgr: np.ndarray, channel: int, full_scale: float, kw: dict,
-                 noise: float) -> np.ndarray:
-    """``ex`` (n, m) the laser's excess in ``bgr`` (n, m, 3), scan lines along axis 1, with
-    the dips filled on the runs of pixels across the line where the laser's ``channel`` is
-    at full scale (≥ :data:`~insitu.vision.laser_image.WHITE` × ``full_scale``) and the
-    others are not (white: no excess left, a hole :func:`fill_gaps` takes the middle of).
-    There the laser channel's light is read from the others' crosstalk: its value stays at
-    full scale, the others rise with the light, and the excess dips at the core between two
-    peaks at the run's flanks (clipped_white spent seed 13007: 123 at the core, 146 and 158
-    some 3 px either side; the excess's centres went to a square's edge lit 9–13 px off).
-    Each such pixel gets the lower of the greatest excess before it and after it on the
-    run plus its dip below that (the dip mirrored: highest at the core), on runs whose dip
-    is as deep as the least contrast of a peak (:func:`least_contrast`, the detection's
-    keywords ``kw`` and the excess's ``noise``): a dip the detection resolves into two
-    peaks. A bright square's edge lit by the halo has no such dip: it stays as it is."""
-    level = WHITE * full_scale
-    clip = (bgr[..., channel] >= level) & (bgr.min(axis=2) < level)
-    if not clip.any():
-        return ex
-    x = ex.astype(np.float64)
-    big = float(x.max()) + 1.0
-    label = np.cumsum(~clip | np.r_[np.ones((1, clip.shape[1]), bool), ~clip[:-1]], axis=0)
-    label += np.arange(clip.shape[1]) * (clip.shape[0] + 1)    # each scan line's apart
-    up = np.maximum.accumulate(x + label * big, axis=0) - label * big
-    down = (np.maximum.accumulate((x - label * big)[::-1], axis=0) + label[::-1] * big)[::-1]
-    top = np.where(clip, np.minimum(up, down), x)
-    dip = np.zeros(int(label.max()) + 1)
-    np.maximum.at(dip, label, top - x)
-    least = least_contrast(kw, full_scale, noise)
-    return np.where(dip[label] >= least, 2 * top - x, x).astype(ex.dtype)
-
-
-def _white_middle(c: LineCentres, white: np.ndarray, reach: int,
-                  along_rows: bool) -> np.ndarray:
-    """(n,) px across the line: the middle of the pixels of ``white`` (H, W) within
-    ±``reach`` px of each centre of ``c`` on its scan line (NaN where there is none)."""
-    g = white if along_rows else white.T
-    s = np.clip(np.round(c.u if along_rows else c.v).astype(np.int64), 0, g.shape[1] - 1)
-    x = np.round(c.v if along_rows else c.u).astype(np.int64)
-    across = np.clip(x[None, :] + np.arange(-reach, reach + 1)[:, None], 0, g.shape[0] - 1)
-    w = g[across, s[None, :]]
-    lo = np.where(w, across, np.iinfo(np.int64).max).min(axis=0)
-    hi = np.where(w, across, -1).max(axis=0)
-    return np.where(w.any(axis=0), (lo + hi) / 2, np.nan)
 
 
 def on_course(c: LineCentres, along_rows: bool, half: float) -> LineCentres:
@@ -208,7 +119,8 @@ def _running_median(s: np.ndarray, flat: np.ndarray, h: int) -> np.ndarray:
 
 def off_the_excess(c: LineCentres, along_rows: bool, half: float, run: int,
                    fill) -> LineCentres:
-    """``fill(c)`` (``c`` with its gaps filled from the laser's excess, :func:`fill_gaps`),
+    """``fill(c)`` (``c`` with its gaps filled from the laser's excess,
+    :func:`~insitu.vision.excess_fill.filled`),
     with the excess's centres in place of the centres beside them: ``run`` or more centres
     in a row (a stripe's least length in scan lines) that lie more than :data:`FILL_PX` / 2
     off the stripe's course (the running median over ±2 × ``half`` scan lines, its median
