@@ -11,13 +11,13 @@ from insitu.vision.detect_kernel import compiled
 
 
 @compiled
-def _median_at(lo, mid, hi, p, x, q):
-    """The 3 × 3 median about column x from its columns p, x, q sorted (lo, mid, hi): the
-    median of the greatest least, the middle middle and the least greatest."""
-    g = max(max(lo[p], lo[x]), lo[q])
-    a, b = min(mid[p], mid[x]), max(mid[p], mid[x])
-    m = max(a, min(b, mid[q]))
-    s = min(min(hi[p], hi[x]), hi[q])
+def _median_of_sorted(l0, l1, l2, m0, m1, m2, h0, h1, h2):
+    """The median of the nine values of three sorted triples (l ≤ m ≤ h each): the median of
+    the greatest least, the middle middle and the least greatest."""
+    g = max(max(l0, l1), l2)
+    a, b = min(m0, m1), max(m0, m1)
+    m = max(a, min(b, m2))
+    s = min(min(h0, h1), h2)
     a, b = min(g, m), max(g, m)
     return max(a, min(b, s))
 
@@ -26,17 +26,23 @@ def _median_at(lo, mid, hi, p, x, q):
 def _median_row(img, y, lo, mid, hi, out):
     """``out`` (W,): row y of the 3 × 3 median of ``img`` (H, W), the frame's edges
     replicated (medianBlur's border): each column's three rows sorted (lo, mid, hi (W,) work
-    space), then the median of three columns' (a 3 × 3 median exactly)."""
+    space), then the median of three columns' (a 3 × 3 median exactly). The inner columns
+    read the sorted rows through shifted views, without index arithmetic: a loop the compiler
+    vectorises, in the machine code the numba cache keeps as in a fresh compile."""
     H, W = img.shape
     ra, rb, rc = img[max(y - 1, 0)], img[y], img[min(y + 1, H - 1)]
     for x in range(W):
         p, q, r = ra[x], rb[x], rc[x]
         a, b = min(p, q), max(p, q)
         lo[x], mid[x], hi[x] = min(a, r), max(a, min(b, r)), max(b, r)
-    for x in range(1, W - 1):
-        out[x] = _median_at(lo, mid, hi, x - 1, x, x + 1)
-    out[0] = _median_at(lo, mid, hi, 0, 0, min(1, W - 1))
-    out[W - 1] = _median_at(lo, mid, hi, max(W - 2, 0), W - 1, W - 1)
+    n = max(W - 2, 0)
+    l0, l1, l2, m0, m1, m2 = lo[:n], lo[1:n + 1], lo[2:n + 2], mid[:n], mid[1:n + 1], mid[2:n + 2]
+    h0, h1, h2, o = hi[:n], hi[1:n + 1], hi[2:n + 2], out[1:n + 1]
+    for x in range(n):
+        o[x] = _median_of_sorted(l0[x], l1[x], l2[x], m0[x], m1[x], m2[x], h0[x], h1[x], h2[x])
+    for x, p, q in ((0, 0, min(1, W - 1)), (W - 1, max(W - 2, 0), W - 1)):
+        out[x] = _median_of_sorted(lo[p], lo[x], lo[q], mid[p], mid[x], mid[q], hi[p], hi[x],
+                                   hi[q])
 
 
 @compiled
