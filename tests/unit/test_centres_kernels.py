@@ -19,7 +19,8 @@ from insitu.vision.extract import _run_edges, _wander
 from insitu.vision.peak_rows import band_rows, peak_rows, second_rows
 from insitu.vision.profile import frame_noise, fwhm, gather
 from insitu.vision.smooth_kernel import kept_and_smoothed, local_quadratic
-from insitu.vision.steger_kernel import widths_and_clipping
+from insitu.vision.steger import _kernels
+from insitu.vision.steger_kernel import column_derivatives, widths_and_clipping
 
 
 @pytest.mark.parametrize("dtype", [np.uint8, np.uint16, np.float32])
@@ -189,3 +190,37 @@ def test_runs_and_smoothing_equal_the_array_form(end_fraction):
         got_keep, got = kept_and_smoothed(np.round(u).astype(np.int64), v, peak, edges, h, 1.0,
                                           end_fraction, 3)
         assert np.array_equal(got_keep, keep) and np.array_equal(got, want), k
+
+
+def _derivatives_array_form(img, r, c, h, M):
+    """column_derivatives' array form: each column's patch (rows r − M − R … r + M + R,
+    columns c − R … c + R, clipped) as float32, summed along u then v over the kernel in its
+    order, one float32 product and sum at a time."""
+    H, W = img.shape
+    R = h.shape[1] // 2
+    out = np.empty((5, 2 * M + 1, len(r)), np.float32)
+    for i in range(len(r)):
+        rows = np.clip(np.arange(r[i] - M - R, r[i] + M + R + 1), 0, H - 1)
+        cols = np.clip(np.arange(c[i] - R, c[i] + R + 1), 0, W - 1)
+        patch = img[rows[:, None], cols[None, :]].astype(np.float32)
+        A = np.zeros((3, len(rows)), np.float32)
+        for q in range(h.shape[1]):
+            A = A + patch[:, q] * h[:, q, None]
+        for k, (a, b) in enumerate(((1, 0), (0, 1), (2, 0), (0, 2), (1, 1))):
+            d = np.zeros(2 * M + 1, np.float32)
+            for q in range(h.shape[1]):
+                d = d + A[a, q:q + 2 * M + 1] * h[b, q]
+            out[k, :, i] = d
+    return out
+
+
+@pytest.mark.parametrize("dtype", [np.uint8, np.uint16, np.float32])
+def test_column_derivatives_equal_the_array_form(dtype):
+    rng = np.random.default_rng(9)
+    H, W = 60, 150
+    img = rng.integers(0, 4000 if dtype != np.uint8 else 256, (H, W)).astype(dtype)
+    n = 140                                           # more than one block, the frame's edges
+    r, c = rng.integers(-3, H + 3, n), rng.integers(-3, W + 3, n)
+    h = _kernels(1.7, 6)
+    got = column_derivatives(img, r, c, h, 4)
+    assert np.array_equal(got, _derivatives_array_form(img, r, c, h, 4))

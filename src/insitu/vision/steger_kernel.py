@@ -37,34 +37,56 @@ def _sign(x):
     return np.float32(1.0) if x > 0 else (np.float32(-1.0) if x < 0 else x)
 
 
+_BLOCK = 64
+"""Columns whose derivatives are worked out together (:func:`column_derivatives`): their
+pixels, float32, fit the first-level cache."""
+
+
 @compiled
-def _derivatives(img, r0, c0, h, D):
-    """Iu, Iv, Iuu, Ivv, Iuv (rows of ``D`` (5, k)) at the k rows from r0 + R of column
-    c0 + R of ``img`` (borders clipped), by the kernels ``h`` (3, 2R + 1): along u, then v."""
+def column_derivatives(img, r, c, h, M):
+    """(5, 2M + 1, n) float32: Iu, Iv, Iuu, Ivv, Iuv at rows r − M … r + M of each column c
+    (n,) of ``img`` (H, W) (borders clipped), by the kernels ``h`` (3, 2R + 1): along u,
+    then v, each a sum over the kernel in its order. Columns go in blocks of :data:`_BLOCK`,
+    each block's pixels laid out so that the sums run over its columns side by side."""
     H, W = img.shape
-    K, k2 = h.shape[1], D.shape[1]
-    L = k2 + K - 1
-    A = np.empty((3, L), np.float32)
-    inside = r0 >= 0 and r0 + L <= H and c0 >= 0 and c0 + K <= W
-    for li in range(L):
-        row = r0 + li if inside else min(max(r0 + li, 0), H - 1)
-        a0 = a1 = a2 = np.float32(0.0)
-        for q in range(K):
-            col = c0 + q if inside else min(max(c0 + q, 0), W - 1)
-            p = np.float32(img[row, col])
-            a0 += p * h[0, q]
-            a1 += p * h[1, q]
-            a2 += p * h[2, q]
-        A[0, li], A[1, li], A[2, li] = a0, a1, a2
-    for j in range(k2):
-        s_iu = s_iv = s_iuu = s_ivv = s_iuv = np.float32(0.0)
-        for q in range(K):
-            s_iu += A[1, j + q] * h[0, q]
-            s_iv += A[0, j + q] * h[1, q]
-            s_iuu += A[2, j + q] * h[0, q]
-            s_ivv += A[0, j + q] * h[2, q]
-            s_iuv += A[1, j + q] * h[1, q]
-        D[0, j], D[1, j], D[2, j], D[3, j], D[4, j] = s_iu, s_iv, s_iuu, s_ivv, s_iuv
+    K, n, k2 = h.shape[1], len(r), 2 * M + 1
+    R, L = K // 2, k2 + K - 1
+    X = np.empty((L, K, _BLOCK), np.float32)               # a block's pixels
+    A = np.empty((3, L, _BLOCK), np.float32)               # smoothed, 1st, 2nd along u
+    D = np.empty((5, k2, n), np.float32)
+    for b0 in range(0, n, _BLOCK):
+        nb = min(_BLOCK, n - b0)
+        for i in range(nb):
+            r0, c0 = r[b0 + i] - M - R, c[b0 + i] - R
+            inside = r0 >= 0 and r0 + L <= H and c0 >= 0 and c0 + K <= W
+            for li in range(L):
+                row = r0 + li if inside else min(max(r0 + li, 0), H - 1)
+                for q in range(K):
+                    col = c0 + q if inside else min(max(c0 + q, 0), W - 1)
+                    X[li, q, i] = np.float32(img[row, col])
+        for li in range(L):
+            a0, a1, a2 = A[0, li], A[1, li], A[2, li]
+            a0[:nb], a1[:nb], a2[:nb] = 0, 0, 0
+            for q in range(K):
+                h0, h1, h2, x = h[0, q], h[1, q], h[2, q], X[li, q]
+                for i in range(nb):
+                    a0[i] += x[i] * h0
+                    a1[i] += x[i] * h1
+                    a2[i] += x[i] * h2
+        for j in range(k2):
+            iu, iv, iuu = D[0, j, b0:b0 + nb], D[1, j, b0:b0 + nb], D[2, j, b0:b0 + nb]
+            ivv, iuv = D[3, j, b0:b0 + nb], D[4, j, b0:b0 + nb]
+            iu[:], iv[:], iuu[:], ivv[:], iuv[:] = 0, 0, 0, 0, 0
+            for q in range(K):
+                h0, h1, h2 = h[0, q], h[1, q], h[2, q]
+                s0, s1, s2 = A[0, j + q], A[1, j + q], A[2, j + q]
+                for i in range(nb):
+                    iu[i] += s1[i] * h0
+                    iv[i] += s0[i] * h1
+                    iuu[i] += s2[i] * h0
+                    ivv[i] += s0[i] * h2
+                    iuv[i] += s1[i] * h1
+    return D
 
 
 @compiled
@@ -72,19 +94,17 @@ def steger_columns(img, r, c, h, M, min_curvature, across):
     """Steger's centres (u, v float64 (n,), found bool (n,)) of the columns ``c`` (n,) with
     their detected peaks at rows ``r`` (n,) of ``img`` (H, W): derivatives by the kernels
     ``h`` (3, 2R + 1) float32 (smoothing, first, second derivative) at rows r − M … r + M
-    (borders clipped), the line pixel by the Hessian's test with ``min_curvature`` (float32),
-    ``across``: a column without one measured down the column alone (steger's keywords)."""
-    H, W = img.shape
-    n, K = len(r), h.shape[1]
-    R = K // 2
-    k2 = 2 * M + 1
+    (borders clipped, :func:`column_derivatives`), the line pixel by the Hessian's test with
+    ``min_curvature`` (float32), ``across``: a column without one measured down the column
+    alone (steger's keywords)."""
+    n, k2 = len(r), 2 * M + 1
     u, v, found = np.empty(n), np.empty(n), np.zeros(n, np.bool_)
-    D = np.empty((5, k2), np.float32)                      # Iu, Iv, Iuu, Ivv, Iuv
+    derivatives = column_derivatives(img, r, c, h, M)      # Iu, Iv, Iuu, Ivv, Iuv
     gcol, dcol = np.empty(k2, np.float32), np.empty(k2, np.float32)
     lam, nu, nv, t = (np.empty(k2, np.float32), np.empty(k2, np.float32),
                       np.empty(k2, np.float32), np.empty(k2, np.float32))
     for i in range(n):
-        _derivatives(img, r[i] - M - R, c[i] - R, h, D)
+        D = derivatives[:, :, i]
         best, k = -np.inf, 0
         for j in range(k2):                                # the Hessian's normal
             Iu, Iv, Iuu, Ivv, Iuv = D[0, j], D[1, j], D[2, j], D[3, j], D[4, j]
