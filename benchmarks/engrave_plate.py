@@ -14,7 +14,8 @@ are spent, so they tune too; :data:`HELD_OUT` was fixed before anything was run 
 run once on the final code (seed 11 is not used here: the engraving loop spent it).
 
 A pocket's depth is stated only when its standard error (the floor's lines as independent
-samples, the top's own beside it) puts it within ±5 µm at 2σ
+samples or, where larger, the scatter along them; the top's own beside it) puts it within
+±5 µm at 2σ
 (:meth:`~insitu.marking.engrave_depth.DepthMap.pocket_depth`); the others are scored too,
 marked ✗.
 

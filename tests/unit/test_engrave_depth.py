@@ -97,6 +97,24 @@ def test_the_pockets_depth_error_is_honest_and_refused_beyond_the_tolerance():
     assert quiet.pocket_depth(0.005)[0] == pytest.approx(0.2, abs=0.003)
 
 
+def test_lines_that_happen_to_agree_do_not_shrink_the_depths_error():
+    """Each line's floor points scatter by 50 µm in grains 0.5 mm long (the speckle's) yet
+    every line's mean is nearly the same: the lines' scatter says 1.7 µm, the grains along
+    them 3.0 µm, and the depth's error is the larger; refused at ±5 µm."""
+    rng = np.random.default_rng(5)
+    p, line = _scan(rng, 0.1, lambda rng, n: 0.0005 * rng.standard_normal(n))
+    floor = (np.abs(p[:, 0]) < 1.0) & (np.abs(p[:, 1]) < 1.0)
+    grain = 0.05 * rng.standard_normal((line.max() + 1, 10))[line, ((p[:, 1] + 2) // 0.5)
+                                                             .astype(int)]
+    for k in np.unique(line[floor]):
+        on = floor & (line == k)
+        p[on, 2] -= grain[on] - grain[on].mean()
+    dm = measure_depth(p, line, POCKET, DepthSettings(ring_mm=1.5))
+    assert 0.0025 < dm.mean_depth()[1] < 0.006
+    with pytest.raises(MeasurementError, match="not to the ±5.0 µm asked"):
+        dm.pocket_depth(0.005)
+
+
 def test_a_wall_parallel_to_the_scan_lines_keeps_a_narrower_zone():
     """A 2 × 2 mm pocket 0.2 mm deep whose floor within 0.2 mm of the walls the lines cross
     reads 30 µm short: those points are left out, the cells 0.125 mm from a wall parallel to

@@ -17,8 +17,8 @@ by fewer than ``min_lines`` lines with trusted points is not measured at all.
 
 The lines: a line's floor points also share an error its top points do not see (the floor
 it crosses); each line's share, estimated from its points' residuals against the other lines'
-around them, is removed before the map is made (:func:`_line_terms`); what is left of it counts
-in the cells' standard errors, which count lines, not points (:func:`_cell_means`).
+around them, is removed before the map is made; what is left of it counts in the cells'
+standard errors, which count lines, not points (:mod:`insitu.marking.engrave_stats`).
 
 The map: a cell's depth is the Gaussian-weighted mean of the floor points around its centre
 (σ ``kernel_mm``), with its standard error; each cell of the pocket is
@@ -42,6 +42,7 @@ from scipy.ndimage import distance_transform_edt
 from scipy.spatial import cKDTree
 
 from insitu.errors import MeasurementError
+from insitu.marking.engrave_stats import cell_means, line_sem, line_terms
 from insitu.marking.engrave_top import top_model
 from insitu.marking.engrave_walls import clear, line_direction, unreachable
 
@@ -183,7 +184,8 @@ class DepthMap:
     :data:`OUTSIDE` off the pocket); ``floor`` (M, 3): each floor point's x, y and depth;
     ``top_rms``: the top model's residual rms, ``point_sigma``: a floor point's depth
     scatter (robust), ``mean_sem``: the standard error of :meth:`mean_depth` (the floor's
-    lines as independent samples, the top's own error beside it; NaN: from ``point_sigma``),
+    lines as independent samples or, where larger, the scatter along them; the top's own
+    error beside it; NaN: from ``point_sigma``),
     ``floor_lines``: the scan lines the floor's points lie on, mm."""
 
     cells: PocketCells
@@ -256,8 +258,8 @@ def measure_depth(points: np.ndarray, line: np.ndarray, region, settings: DepthS
     fx, fy, d = points[floor, 0][trusted], points[floor, 1][trusted], d[trusted]
     fline = np.unique(line[floor][trusted], return_inverse=True)[1]
     raw = d
-    d, line_var = _line_terms(fx, fy, d, fline, s.kernel_mm)
-    depth, sem, neff, sigma, keep = _cell_means(cells, fx, fy, d, s.kernel_mm, fline,
+    d, line_var = line_terms(fx, fy, d, fline, s.kernel_mm)
+    depth, sem, neff, sigma, keep = cell_means(cells, fx, fy, d, s.kernel_mm, fline,
                                                 line_var)
     state = np.full(cells.shape, OUTSIDE, np.int8)
     state[cells.inside] = UNMEASURED
@@ -274,21 +276,10 @@ def measure_depth(points: np.ndarray, line: np.ndarray, region, settings: DepthS
         state[(state == WALL) & blocked] = HIDDEN
     depth = np.where(state == OUTSIDE, np.nan, np.where(neff > 0, depth, np.nan))
     floor_pts = np.column_stack([fx, fy, d])[keep]
-    mean_sem = _line_sem(raw[keep], fline[keep], top_fit.sem(floor_pts))
+    pos = np.column_stack([fx, fy])[keep] @ along
+    mean_sem = line_sem(raw[keep], fline[keep], pos, top_fit.sem(floor_pts))
     return DepthMap(cells, depth, sem, neff, state, floor_pts, top_fit.rms, sigma, mean_sem,
                     int(np.unique(fline[keep]).size))
-
-
-def _line_sem(d: np.ndarray, line: np.ndarray, top_sem: float) -> float:
-    """The standard error (mm) of the mean of ``d`` (N,) whose points share an error along
-    their ``line`` (N,) (lines independent: the clustered estimate, L/(L−1) corrected), with
-    the top's own standard error ``top_sem`` mm beside it."""
-    lines, inv = np.unique(line, return_inverse=True)
-    if len(lines) < 2:
-        return float("inf")
-    sums = np.bincount(inv, d - d.mean())
-    var = len(lines) / (len(lines) - 1) * (sums ** 2).sum() / len(d) ** 2
-    return float(np.sqrt(var + top_sem ** 2))
 
 
 def _local_median(xy: np.ndarray, d: np.ndarray, radius_mm: float) -> np.ndarray:
@@ -297,99 +288,6 @@ def _local_median(xy: np.ndarray, d: np.ndarray, radius_mm: float) -> np.ndarray
     shallow-reading points near a wall and drop the deep-reading ones)."""
     near = cKDTree(xy).query_ball_point(xy, radius_mm)
     return np.array([np.median(d[i]) for i in near])
-
-
-def _line_terms(x, y, d, line, kernel_mm: float) -> tuple[np.ndarray, np.ndarray]:
-    """The floor's depths ``d`` (N,) with each scan line's own error removed, and the
-    variance (mm²) of what is left of it per line (L,) (``line`` (N,): 0 … L−1): the lines'
-    scatter in a cell does not show it (each was fitted to the lines around it).
-
-    A line's floor points share an error the top's offset does not catch (the speckle and
-    texture of the floor it crosses). Each point's residual against the other lines' points
-    around it (Gaussian weights, σ ``kernel_mm``) averages, per line, to the line's term;
-    the terms are shrunk by their evidence (a random effect: their spread beyond the
-    residuals' noise) and centred, so the floor's mean depth is left as the lines give it."""
-    n_lines = int(line.max()) + 1 if len(line) else 0
-    if n_lines < 3:
-        return d, np.zeros(n_lines)
-    pts = np.column_stack([x, y])
-    tree = cKDTree(pts)
-    pairs = tree.query_pairs(3 * kernel_mm, output_type="ndarray")
-    pairs = pairs[line[pairs[:, 0]] != line[pairs[:, 1]]]
-    i, j = np.concatenate([pairs[:, 0], pairs[:, 1]]), np.concatenate([pairs[:, 1], pairs[:, 0]])
-    w = np.exp(-((x[i] - x[j]) ** 2 + (y[i] - y[j]) ** 2) / (2 * kernel_mm ** 2))
-    wsum = np.bincount(i, w, minlength=len(d))
-    term, var = np.zeros(n_lines), np.zeros(n_lines)
-    for _ in range(2):
-        fixed = d - term[line]
-        ref = np.bincount(i, w * fixed[j], minlength=len(d)) / np.maximum(wsum, 1e-12)
-        ok = wsum > 1e-6
-        r = d - ref
-        n = np.bincount(line[ok], minlength=n_lines).astype(float)
-        mean = np.bincount(line[ok], r[ok], minlength=n_lines) / np.maximum(n, 1)
-        noise = (np.median(np.abs(r[ok] - mean[line[ok]])) * 1.4826) ** 2 / np.maximum(n, 1)
-        has = n > 0
-        between = max(float(np.var(mean[has]) - np.mean(noise[has])), 0.0) if has.any() else 0
-        shrink = between / (between + noise)
-        term = np.where(has, mean * shrink, 0.0)
-        term -= np.average(term[has], weights=n[has]) if has.any() else 0.0
-        var = np.where(has, noise * shrink, between)
-    return d - term[line], var
-
-
-def _cell_means(cells: PocketCells, x, y, d, kernel_mm: float, line=None, line_var=None):
-    """Per cell the Gaussian-weighted mean depth of the floor points, its standard error, and
-    effective points; the robust point scatter; which points were kept (beyond 4σ of their
-    cell's mean: left out, a ghost or a dropped centre).
-
-    The standard error counts lines, not points: a floor point's error goes with its
-    neighbours' along the line (the speckle's grains, the texture, what is left of the line's
-    own error) and stays where it is scan after scan, while the lines (0.1 mm apart, each its
-    own frame) are independent. A cell's depth is the weighted mean of its lines' means; the
-    variance of a line's mean (pooled over the cells: their lines' weighted scatter about the
-    cell's depth, the cell's own share taken out) times Σ (the line's weight share)², with
-    what is left of the lines' own errors (``line_var`` (L,) mm², which the scatter does not
-    show)."""
-    shape = cells.shape
-    if len(d) == 0:
-        zero = np.zeros(shape)
-        return zero, np.full(shape, np.inf), zero, float("nan"), np.zeros(0, bool)
-    gx, gy = cells.centres()
-    tree = cKDTree(np.column_stack([x, y]))
-    keep = np.ones(len(d), bool)
-    if line is None:
-        line, line_var = np.zeros(len(d), int), np.zeros(1)
-    for _ in range(2):
-        depth, wsum, w2sum, share2, shared = (np.zeros(shape) for _ in range(5))
-        scatter, dof = 0.0, 0.0
-        near = tree.query_ball_point(np.column_stack([gx.ravel(), gy.ravel()]), 3 * kernel_mm)
-        for k, idx in enumerate(near):
-            idx = np.asarray(idx, int)
-            idx = idx[keep[idx]]
-            if len(idx) == 0:
-                continue
-            w = np.exp(-((x[idx] - gx.flat[k]) ** 2 + (y[idx] - gy.flat[k]) ** 2)
-                       / (2 * kernel_mm ** 2))
-            i, j = divmod(k, shape[1])
-            depth[i, j] = (w * d[idx]).sum() / w.sum()
-            wsum[i, j], w2sum[i, j] = w.sum(), (w * w).sum()
-            lines, inv = np.unique(line[idx], return_inverse=True)
-            wl = np.bincount(inv, w)
-            ml = np.bincount(inv, w * d[idx]) / wl
-            share = wl / w.sum()
-            share2[i, j] = (share ** 2).sum()
-            shared[i, j] = (share ** 2 * line_var[lines]).sum()
-            scatter += (wl * (ml - depth[i, j]) ** 2).sum()
-            dof += (wl * (1.0 - share)).sum()
-        row, col = cells.index(x, y)
-        resid = d - depth[row, col]
-        sigma = float(np.median(np.abs(resid[keep])) * 1.4826)
-        keep = np.abs(resid) <= 4 * max(sigma, 1e-6)
-    neff = np.where(w2sum > 0, wsum ** 2 / np.where(w2sum > 0, w2sum, 1), 0.0)
-    unit = scatter / dof if dof > 0 else sigma ** 2
-    sem = np.where(neff > 0, np.sqrt(np.maximum(unit * share2, sigma ** 2 / np.maximum(
-        neff, 1e-9)) + shared), np.inf)
-    return depth, sem, neff, sigma, keep
 
 
 def _nearest_depth(depth: np.ndarray, ok: np.ndarray) -> np.ndarray:
