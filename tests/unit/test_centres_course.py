@@ -229,13 +229,31 @@ def test_a_core_clipped_in_the_lasers_channel_peaks_at_its_middle_a_lit_edge_sta
 
 
 def test_a_fill_with_a_least_run_takes_no_lone_scan_line():
-    """Gaps on columns 40–59 and 70 of a stripe at row 50, the excess's centres on all of
-    them within FILL_PX of its course: with a least run of 20 consecutive scan lines the
-    lone column 70 (a glint, a mark's rim) stays empty, the 20 are filled."""
-    u = np.r_[np.arange(40.0), np.arange(60.0, 70.0), np.arange(71.0, 100.0)]
+    """Gaps on columns 40–59 and 70–72 of a stripe at row 50, the excess's centres on all of
+    the first and on column 70 within FILL_PX of its course: with a least run of 20
+    consecutive scan lines the lone column 70 (a glint, a mark's rim) stays empty, the 20
+    are filled."""
+    u = np.r_[np.arange(40.0), np.arange(60.0, 70.0), np.arange(73.0, 100.0)]
     c = centres(u, np.full(len(u), 50.0))
     e = centres(np.r_[np.arange(40.0, 60.0), 70.0], np.full(21, 51.0))
     white = np.zeros((100, 100), bool)
     filled = fill_gaps(c, e, True, white, 8, 20)
-    assert len(filled) == 100 - 1 and 70 not in filled.u
-    assert len(fill_gaps(c, e, True, white, 8)) == 100
+    assert len(filled) == 100 - 3 and 70 not in filled.u
+    assert len(fill_gaps(c, e, True, white, 8)) == 100 - 2
+
+
+def test_a_fill_of_a_whole_gap_as_long_as_the_colours_reach_counts_shorter_than_a_run():
+    """Gaps on columns 30–43, 50–52 and 60–79 of a stripe at row 50, the excess's centres
+    within FILL_PX of its course on all of the first two and on 60–73 of the third; a least
+    run of 20, the colour's reach 8 px: the first gap (14 scan lines, from the stripe's
+    centre before to the one after) is filled; the second, shorter than the reach, and the
+    14 centres that leave 74–79 open are not (clipped_white spent seed 13005)."""
+    u = np.r_[np.arange(30.0), np.arange(44.0, 50.0), np.arange(53.0, 60.0),
+              np.arange(80.0, 100.0)]
+    c = centres(u, np.full(len(u), 50.0))
+    e = centres(np.r_[np.arange(30.0, 44.0), np.arange(50.0, 53.0), np.arange(60.0, 74.0)],
+                np.full(31, 51.0))
+    filled = fill_gaps(c, e, True, np.zeros((100, 100), bool), 8, 20)
+    assert len(filled) == len(c) + 14
+    assert set(range(30, 44)) <= set(filled.u.tolist())
+    assert 50 not in filled.u and 60 not in filled.u

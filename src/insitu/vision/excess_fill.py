@@ -105,7 +105,10 @@ def fill_gaps(c: LineCentres, e: LineCentres, along_rows: bool, white: np.ndarra
     amid it is the hole's middle, one beside it its halo's flank (clipped_white spent seed
     10004: 49 columns filled 8.5 px off the line). run: the least number of consecutive
     scan lines the centres added fill (a core clipped along a stripe, not a lone scan line's
-    glint or mark's rim)."""
+    glint or mark's rim), unless they fill a whole gap of ``reach`` or more scan lines, from
+    the stripe's centre before it to the one after (a fill that splits a gap leaves runs
+    shorter than ``run``: clipped_white spent seed 13005, 14 scan lines; across a shorter
+    gap, between neighbours themselves off, a centre can lie over 5 px off)."""
     key = (lambda x: x.u) if along_rows else (lambda x: x.v)
     cross = (lambda x: x.v) if along_rows else (lambda x: x.u)
     sc, se = np.round(key(c)).astype(np.int64), np.round(key(e)).astype(np.int64)
@@ -117,8 +120,10 @@ def fill_gaps(c: LineCentres, e: LineCentres, along_rows: bool, white: np.ndarra
     if run > 1 and add.any():
         lines = np.unique(se[add])
         part = np.r_[0, np.cumsum(np.diff(lines) > 1)]
-        long = np.bincount(part) >= run
-        add &= np.isin(se, lines[long[part]])
+        ends = np.flatnonzero(np.diff(part))
+        first, last = lines[np.r_[0, ends + 1]], lines[np.r_[ends, len(lines) - 1]]
+        whole = np.isin(first - 1, sc) & np.isin(last + 1, sc) & (last - first + 1 >= reach)
+        add &= np.isin(se, lines[((np.bincount(part) >= run) | whole)[part]])
     if not add.any():
         return c
     keep = np.argsort(np.r_[sc, se[add]], kind="stable")
