@@ -4,7 +4,7 @@ apart, the height calibration recorded with crossed lines), each with its room-l
 under four lights (:data:`LIGHTS`), and each part once more near the origin, scanned crossed
 (0.25 mm both ways) with its frames: the scan reference a user would make. Two halves of
 poses drawn from different seeds: "tune" (the σ model and thresholds were chosen on it),
-"hold", "hold2", … "hold6" (each reported once, spent) and "hold7" (split off before any
+"hold", "hold2", … "hold7" (each reported once, spent) and "hold8" (split off before any
 result on it was seen, not run yet). Everything is cached in ``cache`` (a few
 hundred MB).
 
@@ -36,7 +36,7 @@ from insitu.sim.world import SimWorld
 CACHE = Path("/tmp/insitu-locate-corpus")
 PARTS = {"step-block": 1, "arc": 2, "insert": 3}          # name: fold of its symmetry
 HALVES = {"tune": 310, "hold": 320, "hold2": 330, "hold3": 340, "hold4": 350,  # poses' seed
-          "hold5": 360, "hold6": 370, "hold7": 380}
+          "hold5": 360, "hold6": 370, "hold7": 380, "hold8": 390}
 POSES = 6
 REFERENCE_POSE = (0.4, -0.3, 1.5)
 """Where the reference part lies when it is scanned (roughly square, as a user lays it)."""

@@ -17,7 +17,7 @@ A pose is accepted when 2σ at its rim lies within the tolerance (0.05 mm) and 3
 within 0.1°. With --independent the posed arc is also located against its
 own scan and frame as reference (its pieces scored against the true outline).
 
-Run: .venv/bin/python benchmarks/locate_honest.py [--half tune|hold|...|hold7] [--cached]
+Run: .venv/bin/python benchmarks/locate_honest.py [--half tune|hold|...|hold8] [--cached]
      [--independent]
      [--names step-block,arc,insert] [--lights all|diffuse,...] [--references cad,scan]
 """
