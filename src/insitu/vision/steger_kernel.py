@@ -191,6 +191,7 @@ def plateau_centres(raw, inside, sat, noise, unit):
     g, bg = np.empty(K), np.empty(K)
     above, use, run, near = (np.empty(K, np.bool_), np.empty(K, np.bool_),
                              np.empty(K, np.bool_), np.empty(K, np.bool_))
+    m, t = np.empty(5), np.empty(3)                        # the moments' sums
     for i in range(n):
         top = median_of_3(raw[0, i], raw[1, i], raw[2, i])          # the sloping background
         bot = median_of_3(raw[K - 3, i], raw[K - 2, i], raw[K - 1, i])
@@ -208,8 +209,7 @@ def plateau_centres(raw, inside, sat, noise, unit):
             for y in range(h, -1 if step < 0 else K, step):
                 joined = joined and above[y]
                 use[y] = use[y] and joined
-        m = np.zeros(5)
-        t = np.zeros(3)
+        m[:], t[:] = 0.0, 0.0
         below = beyond = False
         count = 0
         for y in range(K):
