@@ -15,7 +15,7 @@ from scipy.signal import savgol_filter
 
 from insitu.vision.chains import OWN_COLUMNS, junction
 from insitu.vision.detect_kernel import band_peaks
-from insitu.vision.extract import _run_edges, _wander
+from insitu.vision.extract import CROP_MARGIN, _run_edges, _wander, band_crop
 from insitu.vision.peak_rows import band_rows, peak_rows, second_rows
 from insitu.vision.profile import frame_noise, fwhm, gather
 from insitu.vision.smooth_kernel import kept_and_smoothed, local_quadratic
@@ -224,3 +224,64 @@ def test_column_derivatives_equal_the_array_form(dtype):
     h = _kernels(1.7, 6)
     got = column_derivatives(img, r, c, h, 4)
     assert np.array_equal(got, _derivatives_array_form(img, r, c, h, 4))
+
+
+def _band_rows_array_form(shape, band):
+    """band_rows' array form: the band's ends rounded inwards, the columns searched where
+    they are finite, in order and meet the frame's rows, clipped to them."""
+    H, W = shape
+    blo, bhi = (np.broadcast_to(np.asarray(b, np.float64), (W,)) for b in band)
+    with np.errstate(invalid="ignore"):
+        flo, fhi = np.ceil(blo), np.floor(bhi)
+        searched = (np.isfinite(flo) & np.isfinite(fhi) & (flo <= fhi) & (flo <= H - 1)
+                    & (fhi >= 0))
+    lo = np.where(searched, np.clip(flo, 0, H - 1), 0).astype(np.int64)
+    hi = np.where(searched, np.clip(fhi, 0, H - 1), -1).astype(np.int64)
+    return lo, hi, searched, max(int((hi - lo).max()) if W else 0, 0) + 1
+
+
+def test_band_rows_equal_the_array_form():
+    rng = np.random.default_rng(11)
+    for k in range(40):
+        H, W = int(rng.integers(1, 200)), int(rng.integers(0, 300))
+        lo = rng.uniform(-50, H + 50, W).round(int(rng.integers(0, 3)))
+        lo[rng.random(W) < 0.1] = np.nan
+        hi = lo + rng.uniform(-5, 120, W)
+        hi[rng.random(W) < 0.05] = np.inf
+        band = (lo, hi) if k % 5 else (float(rng.uniform(-5, H)), float(rng.uniform(0, H + 5)))
+        got, want = band_rows((H, W), band), _band_rows_array_form((H, W), band)
+        assert all(np.array_equal(a, b) for a, b in zip(got, want)), k
+
+
+def _band_crop_array_form(shape, band, margin=CROP_MARGIN):
+    """band_crop's array form: the columns whose band is finite, in order and meets the
+    frame's rows, their rows' extent and margin round it, clipped to the frame."""
+    H, W = shape
+    lo, hi = (np.broadcast_to(np.asarray(b, np.float64), (W,)) for b in band)
+    with np.errstate(invalid="ignore"):
+        cols = np.flatnonzero(np.isfinite(lo) & np.isfinite(hi) & (lo <= hi)
+                              & (hi >= 0) & (lo <= H - 1))
+    if not len(cols):
+        return (slice(0, min(H, 1)), slice(0, min(W, 1))), (lo[:1], hi[:1])
+    r0 = int(min(max(np.floor(lo[cols].min()) - margin, 0), H - 1))
+    r1 = int(min(max(np.ceil(hi[cols].max()) + margin + 1, r0 + 1), H))
+    c0, c1 = max(int(cols[0]) - margin, 0), min(int(cols[-1]) + margin + 1, W)
+    return (slice(r0, r1), slice(c0, c1)), (lo[c0:c1] - r0, hi[c0:c1] - r0)
+
+
+def test_band_crop_equals_the_array_form():
+    rng = np.random.default_rng(13)
+    for k in range(60):
+        H, W = int(rng.integers(1, 400)), int(rng.integers(1, 500))
+        lo = rng.uniform(-150, H + 150, W).round(int(rng.integers(0, 3)))
+        lo[rng.random(W) < (0.1 if k % 7 else 1.0)] = np.nan
+        hi = lo + rng.uniform(-5, 120, W)
+        if k % 6 == 0:                                  # a band whose first row is the last
+            lo[:], hi[:] = np.nan, np.nan
+            lo[W // 2], hi[W // 2] = H - 1, H + 3
+        band = (lo, hi) if k % 5 else (float(rng.uniform(-5, H)), float(rng.uniform(0, H + 5)))
+        (rows, cols), (blo, bhi) = band_crop((H, W), band)
+        (rows_, cols_), (blo_, bhi_) = _band_crop_array_form((H, W), band)
+        assert (rows, cols) == (rows_, cols_), k
+        assert np.array_equal(blo, blo_, equal_nan=True) and np.array_equal(bhi, bhi_,
+                                                                              equal_nan=True)

@@ -24,7 +24,7 @@ from insitu.formats.validation import one_of
 from insitu.vision.centres import CENTRE_METHODS, line_centres
 from insitu.vision.detect import LineCentres
 from insitu.vision.laser_image import check_bits
-from insitu.vision.peak_rows import per_column
+from insitu.vision.peak_rows import band_extent, per_column
 from insitu.vision.profile import frame_noise
 from insitu.vision.smooth_kernel import kept_and_smoothed, run_edges, wander_scale
 
@@ -116,15 +116,13 @@ def band_crop(shape: tuple[int, int], band, margin: int = CROP_MARGIN
     rows, a clipped plateau's run, Steger's derivatives) lies in the margin, so the rectangle's
     centres are the frame's."""
     H, W = shape
-    lo, hi = (per_column(b, W) for b in band)
-    with np.errstate(invalid="ignore"):
-        cols = np.flatnonzero(np.isfinite(lo) & np.isfinite(hi) & (lo <= hi)
-                              & (hi >= 0) & (lo <= H - 1))
-    if not len(cols):
+    lo, hi = (np.ascontiguousarray(per_column(b, W)) for b in band)
+    first, last, least, most = band_extent(lo, hi, H)
+    if first < 0:
         return (slice(0, min(H, 1)), slice(0, min(W, 1))), (lo[:1], hi[:1])
-    r0 = int(min(max(np.floor(lo[cols].min()) - margin, 0), H - 1))
-    r1 = int(min(max(np.ceil(hi[cols].max()) + margin + 1, r0 + 1), H))
-    c0, c1 = max(int(cols[0]) - margin, 0), min(int(cols[-1]) + margin + 1, W)
+    r0 = int(min(max(np.floor(least) - margin, 0), H - 1))
+    r1 = int(min(max(np.ceil(most) + margin + 1, r0 + 1), H))
+    c0, c1 = max(first - margin, 0), min(last + margin + 1, W)
     return (slice(r0, r1), slice(c0, c1)), (lo[c0:c1] - r0, hi[c0:c1] - r0)
 
 

@@ -8,6 +8,8 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
+from insitu.vision.detect_kernel import compiled
+
 
 def per_column(b, W: int) -> np.ndarray:
     """A band's end ``b`` (scalar or (W,)) as (W,) float64 (itself when it is one)."""
@@ -18,18 +20,42 @@ def per_column(b, W: int) -> np.ndarray:
 def band_rows(shape, band):
     """The first and last row (W,) int64 of each column's band in a frame of ``shape``
     (H, W) (all rows without a band; −1 last where a column is not searched), the searched
-    columns (W,) bool and the most rows a band has."""
+    columns (W,) bool and the most rows a band has (:func:`band_limits`)."""
     H, W = shape
     if band is None:
         return np.zeros(W, np.int64), np.full(W, H - 1, np.int64), np.ones(W, bool), H
-    blo, bhi = (per_column(b, W) for b in band)
-    with np.errstate(invalid="ignore"):
-        flo, fhi = np.ceil(blo), np.floor(bhi)
-        searched = (np.isfinite(flo) & np.isfinite(fhi) & (flo <= fhi) & (flo <= H - 1)
-                    & (fhi >= 0))
-    lo = np.where(searched, np.clip(flo, 0, H - 1), 0).astype(np.int64)
-    hi = np.where(searched, np.clip(fhi, 0, H - 1), -1).astype(np.int64)
-    return lo, hi, searched, max(int((hi - lo).max()) if W else 0, 0) + 1
+    blo, bhi = (np.ascontiguousarray(per_column(b, W)) for b in band)
+    return band_limits(blo, bhi, H)
+
+
+@compiled
+def band_limits(blo, bhi, H):
+    """:func:`band_rows` of the band's ends blo, bhi (W,) float64 (NaN: not searched) in a
+    frame of H rows, in one pass: each column searched where ceil(blo) ≤ floor(bhi), both
+    finite and within the frame's rows, its rows clipped to them."""
+    W = len(blo)
+    lo, hi, searched = np.zeros(W, np.int64), np.full(W, -1, np.int64), np.zeros(W, np.bool_)
+    span = 0
+    for x in range(W):
+        flo, fhi = np.ceil(blo[x]), np.floor(bhi[x])
+        if np.isfinite(flo) and np.isfinite(fhi) and flo <= fhi and flo <= H - 1 and fhi >= 0:
+            searched[x] = True
+            lo[x], hi[x] = int(min(max(flo, 0.0), H - 1.0)), int(min(max(fhi, 0.0), H - 1.0))
+        span = max(span, hi[x] - lo[x])
+    return lo, hi, searched, span + 1
+
+
+@compiled
+def band_extent(lo, hi, H):
+    """The first and last of the columns whose band lo … hi (W,) float64 is finite, in order
+    and meets the frame's H rows (−1, −1: none), the least lo and the greatest hi over them."""
+    first, last, least, most = -1, -1, np.inf, -np.inf
+    for x in range(len(lo)):
+        a, b = lo[x], hi[x]
+        if np.isfinite(a) and np.isfinite(b) and a <= b and b >= 0 and a <= H - 1:
+            first = x if first < 0 else first
+            last, least, most = x, min(least, a), max(most, b)
+    return first, last, least, most
 
 
 def search_rows(pre, band, allow, fill, ridge, thr):
