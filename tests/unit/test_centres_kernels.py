@@ -2,8 +2,8 @@
 (vision.detect_kernel; the array form vision.peak_rows: each column's first greatest pixel in
 its band, and the greatest more than w rows from it, on frames with bands that end inside the
 ±w rows), the frame's noise, the wander's correlation length, each column's FWHM and
-clipping, the chains' junctions, the smoothing's runs and kept points (their array forms
-here)."""
+clipping, the chains' junctions, the smoothing's runs and kept points, Steger's derivatives,
+the band's rows and rectangle (their array forms here)."""
 
 from __future__ import annotations
 
