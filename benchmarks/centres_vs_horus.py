@@ -13,7 +13,7 @@ along y, so Horus gets each frame transposed (before the clock starts: a mountin
 
 insitu: exactly what a scan runs per frame (:class:`~insitu.reconstruct.scan.ScanReconstructor`):
 the band the commanded line can fall in over the head's focus range
-(:func:`~insitu.reconstruct.plane.band_and_side`) and :func:`~insitu.vision.extract.extract_centres`
+(:func:`~insitu.reconstruct.plane.line_band`) and :func:`~insitu.vision.extract.extract_centres`
 with the default settings (Steger, the along-line window of issue 11's robustness) in it; the
 same in the narrower band of the heights a survey measured (as ``produce`` with a recipe's
 ``scan.survey_mm`` searches its lines, :mod:`insitu.services.survey`: eight frames spread
@@ -58,7 +58,7 @@ from rich.console import Console  # noqa: E402
 from rich.table import Table  # noqa: E402
 
 from insitu.formats.sequence import Sequence  # noqa: E402
-from insitu.reconstruct.plane import band_and_side, line_runs_along_rows  # noqa: E402
+from insitu.reconstruct.plane import line_band, line_runs_along_rows  # noqa: E402
 from insitu.reconstruct.scan import ScanReconstructor  # noqa: E402
 from insitu.services.common import camera_model  # noqa: E402
 from insitu.services.survey import HEIGHT_PAD_MM  # noqa: E402
@@ -180,12 +180,13 @@ def ours(frame: dict, banded: bool = True, heights: str = "z_range"):
     """The scan's centres of one frame (ScanReconstructor.add's extraction), in the band of
     the frame's ``heights`` ("z_range": the focus range; "survey_z": a survey's)."""
     start, end = frame["line"]
-    rows = line_runs_along_rows(frame["camera"], start, end)
     band, upper = None, 0
     if banded:
-        lo, hi, upper = band_and_side(frame["camera"], start, end, frame["pivot"],
-                                      frame[heights], along_rows=rows)
+        rows, lo, hi, upper = line_band(frame["camera"], start, end, frame["pivot"],
+                                        frame[heights])
         band = (lo, hi)
+    else:
+        rows = line_runs_along_rows(frame["camera"], start, end)
     return extract_centres(frame["image"], CentreSettings(), band, rows, upper)
 
 

@@ -75,24 +75,49 @@ def band_and_side(camera: CameraModel, start, end, pivot_height_mm: float,
     """:func:`expected_band` (lo, hi), and which way a higher surface moves the line across
     itself in the image: +1 to larger rows (columns when not ``along_rows``), −1 to
     smaller, 0 where it cannot be told (the line outside the image)."""
+    return _band(camera, start, end, pivot_height_mm, z_range_mm, margin_px, telecentric,
+                 along_rows)[1:]
+
+
+def line_band(camera: CameraModel, start, end, pivot_height_mm: float,
+              z_range_mm: tuple[float, float], margin_px: float = 25.0,
+              telecentric: bool = False) -> tuple[bool, np.ndarray, np.ndarray, int]:
+    """(along_rows, lo, hi, side): :func:`line_runs_along_rows` and :func:`band_and_side` of
+    the line in one projection (the line's ends on z = 0 projected with the band's points);
+    the same values as the two calls."""
+    return _band(camera, start, end, pivot_height_mm, z_range_mm, margin_px, telecentric,
+                 None)
+
+
+def _band(camera, start, end, pivot_height_mm, z_range_mm, margin_px, telecentric,
+          along_rows):
+    """(along_rows, lo, hi, side); ``along_rows`` None: decided from the same projection."""
     plane = light_plane(pivot_height_mm, start, end, telecentric)
     xy = _ALONG[0] * np.asarray(start, float) + _ALONG[1] * np.asarray(end, float)
     axis = 0 if abs(plane[0]) >= abs(plane[1]) else 1      # solve the plane for x or for y
+    z = np.asarray(z_range_mm, np.float64)[:, None]                 # the two ends, (2, 1)
+    p = np.zeros((2 * len(xy) + 2, 3))
+    q = p[:-2].reshape(2, len(xy), 3)
+    q[..., :2], q[..., 2] = xy, z
+    q[..., axis] = -(plane[1 - axis] * q[..., 1 - axis] + plane[2] * z + plane[3]) / plane[axis]
+    if along_rows is None:                                         # the ends on z = 0
+        p[-2:, :2] = [start[0], start[1]], [end[0], end[1]]
+        pix = camera.project(p)
+        du, dv = np.abs(pix[-1] - pix[-2])
+        along_rows, pix = bool(du >= dv), pix[:-2]
+    else:
+        pix = camera.project(p[:-2])
     along, across = (0, 1) if along_rows else (1, 0)
     n = camera.width if along_rows else camera.height
     grid = _grid(n)
-    z = np.asarray(z_range_mm, np.float64)[:, None]                 # the two ends, (2, 1)
-    p = np.empty((2, len(xy), 3))
-    p[..., :2], p[..., 2] = xy, z
-    p[..., axis] = -(plane[1 - axis] * p[..., 1 - axis] + plane[2] * z + plane[3]) / plane[axis]
     edges = []
-    for uv in camera.project(p.reshape(-1, 3)).reshape(2, -1, 2):
+    for uv in pix.reshape(2, -1, 2):
         uv = uv[np.isfinite(uv).all(axis=1)]
         if len(uv) < 2:
-            return np.full(n, np.nan), np.full(n, np.nan), 0
+            return along_rows, np.full(n, np.nan), np.full(n, np.nan), 0
         o = np.argsort(uv[:, along])
         edges.append(np.interp(grid, uv[o, along], uv[o, across], left=np.nan, right=np.nan))
     rise = (edges[1] - edges[0]) * np.sign(z_range_mm[1] - z_range_mm[0])
     rise = rise[np.isfinite(rise)]
     side = int(np.sign(median_of(rise))) if len(rise) else 0
-    return np.fmin(*edges) - margin_px, np.fmax(*edges) + margin_px, side
+    return along_rows, np.fmin(*edges) - margin_px, np.fmax(*edges) + margin_px, side

@@ -12,7 +12,7 @@ from insitu.geometry.camera import CameraModel
 from insitu.reconstruct.bands import Packing, Sheets, exclusive
 from insitu.reconstruct.consistency import cross_line_inliers
 from insitu.reconstruct.height_models import HeightModel
-from insitu.reconstruct.plane import band_and_side, line_runs_along_rows, reconstruct_line
+from insitu.reconstruct.plane import line_band, line_runs_along_rows, reconstruct_line
 from insitu.reconstruct.plate_models import check_bracket
 from insitu.reconstruct.turned_sheet import (
     TurnedSheetModel,
@@ -82,12 +82,13 @@ class ScanReconstructor:
         centres and points (before outlier removal), for live display."""
         self._check(index, image)
         self.frames += 1
-        rows = line_runs_along_rows(self.camera, start, end)
         band, upper = None, 0
         if self.z_range:
-            lo, hi, upper = band_and_side(self.camera, start, end, self.H, self.z_range,
-                                          telecentric=self.telecentric, along_rows=rows)
+            rows, lo, hi, upper = line_band(self.camera, start, end, self.H, self.z_range,
+                                            telecentric=self.telecentric)
             band = (lo, hi)
+        else:
+            rows = line_runs_along_rows(self.camera, start, end)
         centres = extract_centres(image, self.settings, band, rows, upper, self.pixel_bits)
         self.last_centres, self.last_points = centres.uv, np.zeros((0, 3))
         return self._store(index, start, end, centres)
