@@ -113,8 +113,10 @@ def run_pocket(material: str, pattern: str, width: float | None, depth: float, c
         req = EngraveRequest(out, Placement(pattern, (0.0, 0.0), width, 0.0), cloud, depth,
                              rescan_every, material, open_loop_passes=budget)
         log: list[np.ndarray] = []
+        shifts: list[float] = []
 
         def measured(dm, summary):
+            shifts.append(round(dm.shift_mm * 1e3, 1))
             ok = (dm.state == MEASURED) & np.isfinite(dm.depth) & np.isfinite(dm.sem)
             truth = cell_truth(st.world, dm.cells)
             sigma = np.hypot(dm.sem, SCAN_ERROR_MM)
@@ -134,7 +136,7 @@ def run_pocket(material: str, pattern: str, width: float | None, depth: float, c
             "rounds": len(rec.rounds), "measures": len(rec.measures), "station_s": seconds,
             "finishing": sum(r.finishing for r in rec.rounds),
             "state": rec.state, "held": out.get("held_cells", 0),
-            "model": out.get("model_cells", 0)}
+            "model": out.get("model_cells", 0), "shift_um": shifts}
 
 
 def loop(args, folder: Path) -> None:

@@ -20,8 +20,14 @@ it crosses); each line's share, estimated from its points' residuals against the
 around them, is removed before the map is made; what is left of it counts in the cells'
 standard errors, which count lines, not points (:mod:`insitu.marking.engrave_stats`).
 
+The marks' frame: an engraving's map first shifts the points along the lines so that the
+walls they cross sit on the outline (the camera's calibration places them ~0.1 mm off there:
+:mod:`insitu.marking.engrave_register`), so each cell reads the floor its passes go to.
+
 The map: a cell's depth is the Gaussian-weighted mean of the floor points around its centre
-(σ ``kernel_mm``), with its standard error; each cell of the pocket is
+(σ ``kernel_mm``), with its standard error (and the error of the kernel's averaging over more
+than the cell, from the map's own texture: :func:`~insitu.marking.engrave_stats.texture_var`);
+each cell of the pocket is
   measured   — enough trusted floor points around it (``min_points`` effective), its centre
                beyond the bias zone at its depth: the one state whose depth can be trusted;
   wall       — its centre within the band (``parallel_band_mm`` of a wall parallel to the
@@ -42,7 +48,8 @@ from scipy.ndimage import distance_transform_edt
 from scipy.spatial import cKDTree
 
 from insitu.errors import MeasurementError
-from insitu.marking.engrave_stats import cell_means, line_sem, line_terms
+from insitu.marking.engrave_register import wall_shift
+from insitu.marking.engrave_stats import cell_means, line_sem, line_terms, texture_var
 from insitu.marking.engrave_top import top_model
 from insitu.marking.engrave_walls import clear, line_direction, unreachable
 
@@ -63,7 +70,10 @@ class DepthSettings:
     lines, the larger of the two (see the module docstring); ``faced_band_mm``: the zone of
     a parallel wall facing the camera (the floor's line mirrored in it pulls the lines
     beside it short on a specular blank, :mod:`~insitu.marking.engrave_walls`);
-    ``min_lines``: scan lines with trusted floor points for any cell to count as measured."""
+    ``min_lines``: scan lines with trusted floor points for any cell to count as measured;
+    ``register_mm``: the points are shifted along the lines to put the walls they cross on the
+    outline, the shift searched within ± this (0: not registered;
+    :mod:`~insitu.marking.engrave_register`)."""
 
     wall_band_mm: float = 0.2
     bias_per_depth: float = 0.25
@@ -75,6 +85,7 @@ class DepthSettings:
     cell_mm: float = 0.25
     kernel_mm: float = 0.2
     min_points: float = 8.0
+    register_mm: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -186,7 +197,8 @@ class DepthMap:
     scatter (robust), ``mean_sem``: the standard error of :meth:`mean_depth` (the floor's
     lines as independent samples or, where larger, the scatter along them; the top's own
     error beside it; NaN: from ``point_sigma``),
-    ``floor_lines``: the scan lines the floor's points lie on, mm."""
+    ``floor_lines``: the scan lines the floor's points lie on; ``shift_mm``: the shift along
+    the lines taken off the points (:attr:`DepthSettings.register_mm`)."""
 
     cells: PocketCells
     depth: np.ndarray
@@ -198,6 +210,7 @@ class DepthMap:
     point_sigma: float
     mean_sem: float = float("nan")
     floor_lines: int = 0
+    shift_mm: float = 0.0
 
     def mean_depth(self) -> tuple[float, float]:
         """The floor's mean depth and its standard error, mm (points beyond 4σ left out)."""
@@ -240,15 +253,17 @@ def measure_depth(points: np.ndarray, line: np.ndarray, region, settings: DepthS
     s = settings
     outline = outline or Outline(region, s.ring_mm + s.cell_mm)
     cells = cells or outline.cells(s.cell_mm)
-    dist = outline.distance(points[:, 0], points[:, 1])
-    top = (dist <= -s.wall_band_mm) & (dist >= -s.ring_mm)
-    floor = dist >= min(s.wall_band_mm, s.parallel_band_mm)
-    if top.sum() < 20:
-        raise MeasurementError(f"the scan has {int(top.sum())} points on the top around the "
-                               "pocket: scan beyond its outline")
-    if floor.sum() < 5:
-        raise MeasurementError(f"the scan has {int(floor.sum())} points on the pocket's floor")
+    dist, top, floor = _split(points, outline, s)
     top_fit = top_model(points[top], line[top])
+    shift = 0.0
+    if s.register_mm > 0:
+        along = line_direction(points[floor, :2], line[floor])
+        shift = wall_shift(points[:, 0], points[:, 1], top_fit.at(points, line) - points[:, 2],
+                           along, outline, s.register_mm)
+        points = points.copy()
+        points[:, :2] -= shift * along
+        dist, top, floor = _split(points, outline, s)
+        top_fit = top_model(points[top], line[top])
     d = top_fit.at(points[floor], line[floor]) - points[floor, 2]
     zone_d = _local_median(points[floor, :2], d, s.kernel_mm)
     along = line_direction(points[floor, :2], line[floor])
@@ -275,11 +290,26 @@ def measure_depth(points: np.ndarray, line: np.ndarray, region, settings: DepthS
         state[(state == UNMEASURED) & blocked] = HIDDEN
         state[(state == WALL) & blocked] = HIDDEN
     depth = np.where(state == OUTSIDE, np.nan, np.where(neff > 0, depth, np.nan))
+    sem = np.sqrt(sem ** 2 + texture_var(depth, state == MEASURED, cells.cell_mm, s.kernel_mm))
     floor_pts = np.column_stack([fx, fy, d])[keep]
     pos = np.column_stack([fx, fy])[keep] @ along
     mean_sem = line_sem(raw[keep], fline[keep], pos, top_fit.sem(floor_pts))
     return DepthMap(cells, depth, sem, neff, state, floor_pts, top_fit.rms, sigma, mean_sem,
-                    int(np.unique(fline[keep]).size))
+                    int(np.unique(fline[keep]).size), shift)
+
+
+def _split(points: np.ndarray, outline: Outline, s: DepthSettings):
+    """(N,) each point's distance to the outline, and which are top and which floor;
+    MeasurementError when too few are either."""
+    dist = outline.distance(points[:, 0], points[:, 1])
+    top = (dist <= -s.wall_band_mm) & (dist >= -s.ring_mm)
+    floor = dist >= min(s.wall_band_mm, s.parallel_band_mm)
+    if top.sum() < 20:
+        raise MeasurementError(f"the scan has {int(top.sum())} points on the top around the "
+                               "pocket: scan beyond its outline")
+    if floor.sum() < 5:
+        raise MeasurementError(f"the scan has {int(floor.sum())} points on the pocket's floor")
+    return dist, top, floor
 
 
 def _local_median(xy: np.ndarray, d: np.ndarray, radius_mm: float) -> np.ndarray:
