@@ -174,9 +174,9 @@ def test_the_engravings_maps_keep_the_cells_beside_the_faced_wall():
 
 def _ringed(rng, shift: float, period: float = 3.0, rings: float = 0.12):
     """Lines along y 0.1 mm apart over a 4 × 4 mm pocket whose floor is 0.2 mm ± ``rings`` in
-    bands ``period`` mm apart across y (a wood's rings), each point placed ``shift`` mm off along the
-    line (a camera's calibration error), 5 µm noise, points 0.075 mm apart from a place
-    drawn for each line: (points, line, the floor's depth at world x, y)."""
+    bands ``period`` mm apart across y (a wood's rings), each point placed ``shift`` mm off
+    along the line (a camera's calibration error), 5 µm noise, points 0.075 mm apart from a
+    place drawn for each line: (points, line, the floor's depth at world x, y)."""
     def floor(x, y):
         return 0.2 * (1 + rings * np.sin(2 * np.pi * y / period + 0.4))
     pts, line = [], []
