@@ -19,9 +19,15 @@ code as a recording of `lines` frames; truth.json scores only.
 
 Hold-out: the packing's margins (reconstruct.bands.Packing) were set on the step block at
 binning 4, seed 11; every other row (binning 2, seed 5 with Method 1, the other parts, the
-independent frames) was run only after.
+independent frames) was run only after. Settings 1 and 2 are spent.
 
-Run: nice .venv/bin/python benchmarks/multiline.py [--parts step-block,arc,...] [--quick]
+Renders (``--renders tune|held-out|S,S``): the rig of a setting (its seed: camera, head,
+operator's calibration) with the world drawn from other seeds (noise, speckle, texture), one
+row per seed and part, and the ratio also on the points both scans measured. TUNE_RENDERS
+may be run at will; HELD_OUT_RENDERS are run once, on the final code, then marked spent here.
+
+Run: nice .venv/bin/python benchmarks/multiline.py [--parts step-block,arc,...]
+         [--settings 1 --renders tune --no-independent]
 """
 
 from __future__ import annotations
@@ -38,7 +44,7 @@ from rich.console import Console
 from rich.table import Table
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from accuracy import coverage, height_errors  # noqa: E402
+from accuracy import coverage, height_errors, on_top  # noqa: E402
 from independent import coverage as coverage_lines  # noqa: E402
 from independent import errors, true_part  # noqa: E402
 from scipy.spatial import cKDTree  # noqa: E402
@@ -53,7 +59,8 @@ from insitu.reconstruct.packing import line_ids  # noqa: E402
 from insitu.services import calibrate_height, camera_model, scan_live, scan_replay  # noqa: E402
 from insitu.services.scan import plan_lines  # noqa: E402
 from insitu.services.station import simulated  # noqa: E402
-from insitu.sim.world import sim_world  # noqa: E402
+from insitu.sim.rig import default_rig  # noqa: E402
+from insitu.sim.world import SimWorld, workpiece_at  # noqa: E402
 from insitu.vision.extract import CentreSettings  # noqa: E402
 
 console = Console(width=160)
@@ -64,6 +71,8 @@ SETTINGS = (   # (binning, seed, height calibration): the first tuned the margin
     (2, 11, ROOT / "tests/data/height-cal-b2.json"),
     (2, 5, None),
 )
+TUNE_RENDERS = (101, 102, 103, 104, 105, 106, 107, 108)   # world seeds, run at will
+HELD_OUT_RENDERS = (201, 202, 203)   # declared 2026-12-05 before any run; not yet run
 
 
 def calibration(source: Path | None, cache: Path) -> HeightCalibration | None:
@@ -114,10 +123,12 @@ def wrong_line(world, cloud, frames: dict) -> int:
     return bad
 
 
-def run_scan(part: str, binning: int, seed: int, cal, per_frame):
-    """One live scan on a fresh simulated world: (result, world, line id → (its line, the
-    lines of the frame that measured it))."""
-    world = sim_world(part, seed=seed, binning=binning)
+def run_scan(part: str, binning: int, seed: int, cal, per_frame, render: int | None = None):
+    """One live scan on a fresh simulated world (the rig of ``seed``, the world's draws of
+    ``render``, default ``seed``): (result, world, line id → (its line, the lines of the
+    frame that measured it))."""
+    world = SimWorld(default_rig(seed=seed, binning=binning), parts=[workpiece_at(part)],
+                     seed=seed if render is None else render)
     station = simulated(world)
     groups: list[list] = []
     head = station.devices.head
@@ -147,7 +158,47 @@ def score(result, world, frames) -> dict:
     return {"rms": float(np.sqrt(np.mean(e ** 2))), "max": float(np.max(np.abs(e))),
             "cov": coverage(part, cloud), "wrong": wrong_line(world, cloud, frames),
             "frames": s.camera_frames, "station": s.station_s, "cpu": s.cpu_s,
-            "packing": s.packing}
+            "packing": s.packing, "keys": _keys(part, cloud)}
+
+
+def _keys(part, cloud) -> dict:
+    """Height errors of the points over the part's top by (line, y to 0.1 mm): the same
+    place measured by two scans has the same key."""
+    ok, z = on_top(part, cloud.points)
+    p, line = cloud.points[ok], cloud.attributes["line"][ok].astype(np.int64)
+    y = np.round(p[:, 1] / 0.1).astype(np.int64)
+    return dict(zip((line * 100000 + y).tolist(), (p[:, 2] - z[ok]).tolist()))
+
+
+def both_rms(a: dict, b: dict) -> tuple[float, float, int]:
+    """RMS of two scans' errors over the places both measured, and how many."""
+    both = np.intersect1d(list(a), list(b))
+    ea, eb = np.array([a[k] for k in both]), np.array([b[k] for k in both])
+    return float(np.sqrt(np.mean(ea ** 2))), float(np.sqrt(np.mean(eb ** 2))), len(both)
+
+
+def renders_table(parts, setting, renders, cache: Path) -> None:
+    """One line per frame against packed on the rig of ``setting`` with the world drawn
+    from each of ``renders``: the distribution of packed / one-line RMS."""
+    binning, seed, source = setting
+    cal = calibration(source, cache)
+    print("part | render | RMS 1 / packed (×) | on both (×, n) | max 1 / packed | "
+          "coverage 1 / packed | wrong | frames", flush=True)
+    for part in parts:
+        ratios, both = [], []
+        for render in renders:
+            a, b = (score(*run_scan(part, binning, seed, cal, pf, render))
+                    for pf in (None, "auto"))
+            ra, rb, n = both_rms(a["keys"], b["keys"])
+            ratios.append(b["rms"] / a["rms"])
+            both.append(rb / ra)
+            print(f"{part} | {render} | {a['rms']:.4f} / {b['rms']:.4f} ({ratios[-1]:.2f}) | "
+                  f"{ra:.4f} / {rb:.4f} ({both[-1]:.2f}, {n}) | {a['max']:.3f} / "
+                  f"{b['max']:.3f} | {a['cov']:.1%} / {b['cov']:.1%} | {b['wrong']} | "
+                  f"{a['frames']} / {b['frames']}", flush=True)
+        print(f"{part}: × one line median {np.median(ratios):.2f}, range {min(ratios):.2f}–"
+              f"{max(ratios):.2f}; on both median {np.median(both):.2f}, range "
+              f"{min(both):.2f}–{max(both):.2f}", flush=True)
 
 
 def simulator_table(parts, settings, cache: Path) -> None:
@@ -287,13 +338,19 @@ def main() -> None:
     ap.add_argument("--parts", default=",".join(PARTS))
     ap.add_argument("--settings", default="0,1,2", help="indices into SETTINGS (none: '')")
     ap.add_argument("--no-independent", action="store_true")
+    ap.add_argument("--renders", default="", help="tune, held-out or seeds: the world drawn "
+                    "from each, the rig of the one setting given")
     ap.add_argument("--recordings", type=Path, default=ROOT.parents[1] / "shared" / "recordings")
     args = ap.parse_args()
     cache = Path(tempfile.gettempdir()) / "insitu-multiline-bench"
     cache.mkdir(exist_ok=True)
     if not args.no_independent:
         independent_table(args.recordings, cache)
-    if args.settings:
+    if args.renders:
+        named = {"tune": TUNE_RENDERS, "held-out": HELD_OUT_RENDERS}
+        renders = named.get(args.renders) or [int(x) for x in args.renders.split(",")]
+        renders_table(args.parts.split(","), SETTINGS[int(args.settings)], renders, cache)
+    elif args.settings:
         simulator_table(args.parts.split(","),
                         [SETTINGS[int(i)] for i in args.settings.split(",")], cache)
 
