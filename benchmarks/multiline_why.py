@@ -11,7 +11,8 @@ exclusive) in:
 - the K lines' light with one line's room light: the other lines' stray light and halos;
 - the line alone with K exposures of room light: the room light of the longer exposure;
 - the K lines as the scan draws them (K exposures of room light);
-- the same less (K − 1)/K of a laser-off frame of its exposure (what the scan does).
+- the same less the texture of (K − 1)/K of a laser-off frame of its exposure (what the
+  scan does, :func:`~insitu.reconstruct.scan.excess_room_light`).
 
 Truth-scored (height RMS and max over the top, coverage). Tune half: binning 4, seed 11 (the
 held-out rows are benchmarks/multiline.py's binning 2).
@@ -37,7 +38,7 @@ from multiline import calibration  # noqa: E402
 
 from insitu.reconstruct.bands import Packing, exclusive  # noqa: E402
 from insitu.reconstruct.packing import FramePlan  # noqa: E402
-from insitu.reconstruct.scan import excess_room_light  # noqa: E402
+from insitu.reconstruct.scan import excess_room_light, less_room_light  # noqa: E402
 from insitu.services.scan import plan_lines, reconstructor  # noqa: E402
 from insitu.services.station import simulated  # noqa: E402
 from insitu.sim.world import sim_world  # noqa: E402
@@ -64,7 +65,7 @@ def variants(r, one):
             else:
                 image = packed(f, "scan")
                 off = excess_room_light(r.ambient_frame(EXPOSURE_MS * k), k)
-                cache[key] = image - np.minimum(image, off)
+                cache[key] = less_room_light(image, off)
         return cache[key]
 
     def alone_k(f, k):

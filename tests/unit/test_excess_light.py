@@ -1,6 +1,6 @@
-"""A frame of K lines holds K exposures of room light: (K − 1)/K of a laser-off frame of its
-exposure is taken before it and subtracted, so each line's centres see the room light of one
-line's exposure, as in a frame of its own."""
+"""A frame of K lines holds K exposures of room light: a laser-off frame of its exposure is
+taken before it and (K − 1)/K of its texture subtracted, so each line's centres see the room
+light's texture of one line's exposure, as in a frame of its own (at the level of K)."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ import numpy as np
 
 from insitu.reconstruct.bands import Band
 from insitu.reconstruct.packing import Frame
-from insitu.reconstruct.scan import excess_room_light
+from insitu.reconstruct.scan import excess_room_light, less_room_light
 from insitu.services.scan_frames import Shots, laser_off_frames
 from insitu.vision.band_centres import centres_in_bands
 
@@ -31,12 +31,16 @@ def _u8(x: np.ndarray) -> np.ndarray:
     return np.clip(np.round(x), 0, 255).astype(np.uint8)
 
 
-def test_excess_is_k_minus_one_kth_rounded_in_the_frames_dtype():
+def test_excess_is_k_minus_one_kth_rounded_less_its_level_where_read():
+    """(K − 1)/K of the laser-off frame, rounded, less its median over the pixels read (> 0);
+    0 where none was read (outside the camera's window)."""
     off = np.array([[0, 1, 2, 3, 255]], np.uint8)
-    got = excess_room_light(off, 4)
-    assert got.dtype == np.uint8 and got.tolist() == [[0, 1, 2, 2, 191]]
-    deep = excess_room_light(np.array([[4095]], np.uint16), 3)
-    assert deep.dtype == np.uint16 and int(deep[0, 0]) == 2730
+    got = excess_room_light(off, 4)                    # 1, 2, 2, 191 read: median 2
+    assert got.dtype == np.int32 and got.tolist() == [[0, -1, 0, 0, 189]]
+    deep = excess_room_light(np.array([[4095, 3000, 0]], np.uint16), 3)
+    assert deep.tolist() == [[365, -365, 0]]           # 2730 and 2000, median 2365
+    assert less_room_light(np.array([[10, 10, 65535]], np.uint16), deep).tolist() == [
+        [0, 375, 65535]]
 
 
 def test_the_excess_room_light_is_what_biases_a_packed_line():
@@ -47,7 +51,7 @@ def test_the_excess_room_light_is_what_biases_a_packed_line():
     alone = centres_in_bands(_u8(_stripe() + _room(1)), [band])[0]
     packed_image = _u8(_stripe() + _room(K))
     packed = centres_in_bands(packed_image, [band])[0]
-    less = packed_image - np.minimum(packed_image, excess_room_light(_u8(_room(K)), K))
+    less = less_room_light(packed_image, excess_room_light(_u8(_room(K)), K))
     fixed = centres_in_bands(less, [band])[0]
     bias_alone = abs(np.median(alone.v) - 40.0)
     bias_packed = abs(np.median(packed.v) - 40.0)

@@ -153,3 +153,33 @@ def test_a_frames_lines_are_drawn_from_the_end_nearest_the_head():
     assert undirected(drawn) == undirected(lines)                   # the same lines
     assert all(np.sign(b[1] - a[1]) != np.sign(d[1] - c[1])       # back and forth
                for (a, b), (c, d) in zip(drawn, drawn[1:]))
+
+
+def _room(rng, k: int) -> np.ndarray:
+    """(H, W) float DN: ``k`` exposures of a textured room light (8 DN an exposure, its
+    texture ±2 DN in 3-px cells, the same in every exposure) and a dark offset of 3 DN."""
+    cells = np.kron(rng.uniform(-2.0, 2.0, (H // 3 + 1, W // 3 + 1)), np.ones((3, 3)))
+    return 3.0 + k * (8.0 + cells[:H, :W])
+
+
+def test_the_other_exposures_room_light_goes_its_level_stays():
+    """(K − 1)/K of a laser-off frame of a 4-line exposure taken from the frame leaves one
+    exposure's texture, and the level of four, on which a faint stripe (26 DN over the room
+    light) still clears the detector's floor (40 DN) in every column; the frame less the
+    laser-off frame's level too loses it."""
+    from insitu.reconstruct.scan import excess_room_light, less_room_light
+    from insitu.vision.extract import extract_centres
+
+    rng = np.random.default_rng(3)
+    room, k = _room(np.random.default_rng(1), 4), 4
+    v = np.arange(H, dtype=np.float64)[:, None]
+    stripe = 26.0 * np.exp(-0.5 * ((v - 50.0) / 1.5) ** 2) * np.ones((1, W))
+    frame = np.clip(np.rint(room + stripe + rng.normal(0, 1.0, (H, W))), 0, 255).astype(np.uint8)
+    off = np.clip(np.rint(room + rng.normal(0, 1.0, (H, W))), 0, 255).astype(np.uint8)
+    left = less_room_light(frame, excess_room_light(off, k))
+    one = _room(np.random.default_rng(1), 1)
+    background = left[:40].astype(float) - left[:40].mean()
+    assert np.std(background - (one[:40] - one[:40].mean())) < 1.8      # one exposure's texture
+    assert abs(left[:40].mean() - room[:40].mean()) < 2.0                # four exposures' level
+    found = extract_centres(left, band=(np.full(W, 40.0), np.full(W, 60.0)))
+    assert len(found) >= W - 4 and np.all(np.abs(found.v - 50.0) < 0.5)

@@ -100,11 +100,11 @@ class ScanReconstructor:
         each line's centres only inside its band for surfaces within ``z_range`` mm
         (:mod:`insitu.reconstruct.bands`, widened by ``packing``), none where two bands hold
         the same pixel. ``excess_light`` (:func:`excess_room_light`, the frame's shape and
-        dtype): subtracted first. Returns the points the frame gave; ``last_centres``,
-        ``last_points`` hold all its lines'."""
+        int32): subtracted first (:func:`less_room_light`). Returns the points the frame gave;
+        ``last_centres``, ``last_points`` hold all its lines'."""
         self._check(ids[0], image)
         if excess_light is not None:
-            image = image - np.minimum(image, excess_light)
+            image = less_room_light(image, excess_light)
         self.frames += len(lines)
         bands = exclusive([self.sheets.band(a, b, z_range, packing.margin_px) for a, b in lines],
                           packing.guard_px)
@@ -226,16 +226,28 @@ class ScanReconstructor:
 
 
 def excess_room_light(laser_off: np.ndarray, k: int) -> np.ndarray:
-    """(K − 1)/K of ``laser_off`` (H, W), a frame with the laser off exposed as long as a
-    frame of ``k`` lines (rounded, its dtype): the room light such a frame holds beyond one
-    line's exposure. Subtracted from the frame, it leaves on average the room light of a
-    one-line frame (its texture, its level: the detector's absolute floor means what it
-    means there) without the texture and shading of the other K − 1 exposures, which bias
-    the centres (on the simulator's tilted plane and freeform 1.16–1.2 × the RMS of one
-    line a frame at K = 4; the lines' own stray light, the bands and the sheets' lookup
-    cost nothing: benchmarks/multiline_why.py)."""
-    wide = laser_off.astype(np.uint32) * (k - 1)
-    return ((wide + k // 2) // k).astype(laser_off.dtype)
+    """(H, W) int32 DN: (K − 1)/K of ``laser_off`` (H, W), a frame with the laser off exposed
+    as long as a frame of ``k`` lines, less its median level over the pixels read (> 0;
+    0 where none was read): the texture and shading of the room light such a frame holds
+    beyond one line's exposure. Subtracted from the frame (:func:`less_room_light`), it
+    leaves the room light's texture of a one-line frame at the level of K exposures. The
+    texture of the other K − 1 exposures biases the centres (on the simulator's tilted plane
+    and freeform 1.16–1.2 × the RMS of one line a frame at K = 4; the lines' own stray light,
+    the bands and the sheets' lookup cost nothing: benchmarks/multiline_why.py); their level
+    is kept because the detector's absolute floor (``min_peak``) passes a faint stripe on
+    it as in the frame itself (taken away, 1–3 % of the simulator's insert top was lost at
+    binning 2, a third at binning 4: benchmarks/multiline.py)."""
+    read = laser_off > 0
+    excess = np.rint(laser_off.astype(np.float64) * ((k - 1) / k))
+    level = float(np.median(excess[read])) if read.any() else 0.0
+    return np.where(read, excess - level, 0.0).astype(np.int32)
+
+
+def less_room_light(image: np.ndarray, excess: np.ndarray) -> np.ndarray:
+    """``image`` (H, W, uint8 or uint16) less ``excess`` (:func:`excess_room_light`),
+    clipped to the dtype's range."""
+    top = np.iinfo(image.dtype).max
+    return np.clip(image.astype(np.int32) - excess, 0, top).astype(image.dtype)
 
 
 def density_inliers(points: np.ndarray, radius_mm: float, neighbours: int) -> np.ndarray:
