@@ -32,15 +32,18 @@ def _u8(x: np.ndarray) -> np.ndarray:
 
 
 def test_excess_is_k_minus_one_kth_rounded_less_its_level_where_read():
-    """(K − 1)/K of the laser-off frame, rounded, less its median over the pixels read (> 0);
-    0 where none was read (outside the camera's window)."""
+    """(K − 1)/K of the laser-off frame, rounded, less its median over the pixels read (> 0),
+    split into what to take and what to give; nothing where none was read (outside the
+    camera's window); applied with saturation at 0 and the frame's full scale."""
     off = np.array([[0, 1, 2, 3, 255]], np.uint8)
     got = excess_room_light(off, 4)                    # 1, 2, 2, 191 read: median 2
-    assert got.dtype == np.int32 and got.tolist() == [[0, -1, 0, 0, 189]]
+    assert got.dtype == np.uint8 and got.tolist() == [[[0, 0, 0, 0, 189]], [[0, 1, 0, 0, 0]]]
     deep = excess_room_light(np.array([[4095, 3000, 0]], np.uint16), 3)
-    assert deep.tolist() == [[365, -365, 0]]           # 2730 and 2000, median 2365
-    assert less_room_light(np.array([[10, 10, 65535]], np.uint16), deep).tolist() == [
-        [0, 375, 65535]]
+    assert deep.dtype == np.uint16                     # 2730 and 2000, median 2365
+    assert deep.tolist() == [[[365, 0, 0]], [[0, 365, 0]]]
+    frame = np.array([[10, 4000, 4095]], np.uint16)
+    assert less_room_light(frame, deep, 4095).tolist() == [[0, 4095, 4095]]
+    assert less_room_light(frame, deep).tolist() == [[0, 4365, 4095]]
 
 
 def test_the_excess_room_light_is_what_biases_a_packed_line():
