@@ -2,8 +2,9 @@
 (vision.detect_kernel; the array form vision.peak_rows: each column's first greatest pixel in
 its band, and the greatest more than w rows from it, on frames with bands that end inside the
 ±w rows), the frame's noise, the wander's correlation length, each column's FWHM and
-clipping, the chains' junctions, the smoothing's runs and kept points, Steger's derivatives,
-the band's rows and rectangle (their array forms here)."""
+clipping, the chains' junctions, the smoothing's runs and kept points, Steger's derivatives
+and centres, a clipped plateau's flank fit, the band's rows and rectangle (their array forms
+here)."""
 
 from __future__ import annotations
 
@@ -20,7 +21,13 @@ from insitu.vision.peak_rows import band_rows, peak_rows, second_rows
 from insitu.vision.profile import frame_noise, fwhm, gather
 from insitu.vision.smooth_kernel import kept_and_smoothed, local_quadratic
 from insitu.vision.steger import _kernels
-from insitu.vision.steger_kernel import column_derivatives, widths_and_clipping
+from insitu.vision.steger_kernel import (
+    clipped_centres,
+    column_derivatives,
+    plateau_centres,
+    steger_columns,
+    widths_and_clipping,
+)
 
 
 @pytest.mark.parametrize("dtype", [np.uint8, np.uint16, np.float32])
@@ -285,3 +292,176 @@ def test_band_crop_equals_the_array_form():
         assert (rows, cols) == (rows_, cols_), k
         assert np.array_equal(blo, blo_, equal_nan=True) and np.array_equal(bhi, bhi_,
                                                                               equal_nan=True)
+
+
+def _hermite_array_form(y0, d0, y1, d1):
+    """_hermite_root's array form (float32): Newton from the linear estimate, 4 steps."""
+    f = np.float32
+    s = np.clip(y0 / np.where(y0 != y1, y0 - y1, f(1)), f(0), f(1))
+    a2 = f(3) * (y1 - y0) - f(2) * d0 - d1
+    a3 = f(2) * (y0 - y1) + d0 + d1
+    for _ in range(4):
+        p = y0 + s * (d0 + s * (a2 + s * a3))
+        dp = d0 + s * (f(2) * a2 + s * (f(3) * a3))
+        s = np.clip(s - p / np.where(np.abs(dp) > f(1e-12), dp, f(1e-12)), f(0), f(1))
+    return s
+
+
+def _steger_array_form(img, r, c, h, M, min_curvature, across):
+    """steger_columns' array form: the Hessian's eigenvalues, normal and Taylor step at every
+    row of every column (float32, numpy's steps), the strongest passing row (rows 1 … 2M −
+    1; the first row where none passes), the column alone where none does (``across``), the
+    root of n·∇I by the cubic Hermite fit with the next or the previous row."""
+    f, k2, n = np.float32, 2 * M + 1, len(r)
+    Iu, Iv, Iuu, Ivv, Iuv = column_derivatives(img, r, c, h, M)
+    half, d = (Iuu + Ivv) / f(2), (Iuu - Ivv) / f(2)
+    root = np.sqrt(d * d + Iuv * Iuv)
+    lam, other = half - root, half + root
+    e1v, e2u = lam - Iuu, lam - Ivv
+    first = Iuv * Iuv + e1v * e1v >= e2u * e2u + Iuv * Iuv
+    a, b = np.where(first, Iuv, e2u), np.where(first, e1v, Iuv)
+    norm = np.hypot(a, b)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        tiny = norm < f(1e-12)
+        a, b = np.where(tiny, f(0), a / norm), np.where(tiny, f(1), b / norm)
+        t = -(a * Iu + b * Iv) / lam
+        t1 = -Iv / Ivv
+    inner = (np.arange(k2) > 0)[:, None] & (np.arange(k2) < k2 - 1)[:, None]
+    ok = (inner & (lam <= -min_curvature) & (-lam >= np.abs(other))
+          & (np.abs(t * a) <= f(0.6)) & (np.abs(t * b) <= f(0.6)))
+    cols = np.arange(n)
+    k = np.argmax(np.where(ok, -lam, -np.inf), axis=0)
+    hit = ok.any(axis=0)
+    bu, bv, bt = a[k, cols], b[k, cols], t[k, cols]
+    ok1 = inner & (Ivv <= -min_curvature) & (np.abs(t1) <= f(0.6))
+    k1 = np.argmax(np.where(ok1, -Ivv, -np.inf), axis=0)
+    alone = across & ~hit & ok1.any(axis=0)
+    k = np.where(alone, k1, k)
+    bu, bv = np.where(alone, f(0), bu), np.where(alone, f(1), bv)
+    bt, hit = np.where(alone, t1[k1, cols], bt), hit | alone
+    g, dg = bu * Iu + bv * Iv, bu * Iuv + bv * Ivv
+    y0, d0 = g[k, cols], dg[k, cols]
+    yn, dn = g[(k + 1) % k2, cols], dg[(k + 1) % k2, cols]
+    yp, dp = g[(k - 1) % k2, cols], dg[(k - 1) % k2, cols]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        down = np.sign(y0) != np.sign(yn)
+        root = down | (np.sign(yp) != np.sign(y0))
+        s = np.where(down, _hermite_array_form(y0, d0, yn, dn),
+                     _hermite_array_form(yp, dp, y0, d0))
+    u = np.where(root, c, c + (bt * bu).astype(np.float64))
+    v = r + (k - M) + np.where(root, s.astype(np.float64) - np.where(down, 0.0, 1.0),
+                               (bt * bv).astype(np.float64))
+    return u, v, hit
+
+
+@pytest.mark.parametrize("dtype", [np.uint8, np.uint16, np.float32])
+def test_steger_columns_equal_the_array_form(dtype):
+    rng = np.random.default_rng(17)
+    H, W, n = 70, 260, 250
+    x = np.arange(W)
+    line = 30 + 8 * np.sin(x / 25) + np.where(x > 130, 9, 0)          # a step
+    sigma = np.where(x % 3, 1.6, 2.4)
+    img = 20 + 180 * np.exp(-0.5 * ((np.arange(H)[:, None] - line) / sigma) ** 2)
+    img[:, 200:215] += 90 * np.exp(-0.5 * ((np.arange(H)[:, None] - line[200:215]) / 7) ** 2)
+    img = np.clip(img + rng.normal(0, 6, (H, W)), 0, 255).astype(dtype)
+    c = rng.integers(-3, W + 3, n)                            # the frame's edges too
+    r = np.round(line[np.clip(c, 0, W - 1)]).astype(np.int64) + rng.integers(-3, 4, n)
+    r[::17] = rng.integers(-3, H + 3, len(r[::17]))           # off the line
+    h = _kernels(1.7, 6)
+    for across in (True, False):
+        u, v, found = steger_columns(img, r, c, h, 4, np.float32(2.0), across)
+        u_, v_, found_ = _steger_array_form(img, r, c, h, 4, np.float32(2.0), across)
+        assert found.any() and not found.all() and np.array_equal(found, found_)
+        assert np.array_equal(u, u_, equal_nan=True) and np.array_equal(v, v_, equal_nan=True)
+
+
+def _segment_array_form(mask, at):
+    """(k, n) bool: the run of True rows of ``mask`` (k, n) holding row ``at`` (n,)."""
+    label, cols = np.cumsum(~mask, axis=0), np.arange(mask.shape[1])
+    return mask & (label == label[at, cols]) & mask[at, cols]
+
+
+def _run_centroid_array_form(raw, inside, sat, bg, g):
+    """_run_centroid's array form: the centroid above half-way (or, on a steep background,
+    above the mean of the peak and the higher side 3 px beyond the clipped run) of the
+    pixels joined to the peak (the first greatest of the middle rows −2 … +2)."""
+    K, n = raw.shape
+    h, cols = K // 2, np.arange(n)
+    peak = h - 2 + np.argmax(raw[h - 2:h + 3], axis=0)
+    run = _segment_array_form(sat, peak)
+    first = np.where(run.any(axis=0), np.argmax(run, axis=0), 0)
+    last = np.where(run.any(axis=0), K - 1 - np.argmax(run[::-1], axis=0), K - 1)
+    lo, hi = np.clip(first - 3, 0, K - 1), np.clip(last + 3, 0, K - 1)
+    top = raw[peak, cols]
+    steep = np.abs(bg[-1] - bg[0]) > (top - np.maximum(bg[0], bg[-1])) / 2
+    level = np.where(steep, ((top + np.maximum(raw[lo, cols], raw[hi, cols])) / np.float32(2))
+                     .astype(np.float64), bg + g.max(axis=0) / 2)
+    near = _segment_array_form((inside & (raw > level)) | run, peak)
+    moment, total = np.zeros(n), np.zeros(n)
+    for y in range(K):
+        weight = np.where(near[y], raw[y].astype(np.float64) - level[y], 0.0)
+        moment, total = moment + weight * (y - h), total + weight
+    return moment / np.maximum(total, 1e-9)
+
+
+def _plateau_array_form(raw, inside, sat, noise, unit):
+    """plateau_centres' array form: the sloping background, every row's test (at the floor,
+    falling away from the middle or clipped), the rows joined to the middle, their weighted
+    moments summed row by row, the log-parabola's vertex; else the run's centroid."""
+    f, (K, n) = np.float32, raw.shape
+    h, y = K // 2, np.arange(K)[:, None]
+    top, bot = (np.maximum(np.minimum(a, b), np.minimum(np.maximum(a, b), c))
+                for a, b, c in (raw[:3], raw[-3:]))
+    mid, slope = (top + bot) / f(2), (bot - top) / f(2 * h)
+    bg = mid.astype(np.float64) + slope.astype(np.float64) * (y - h)
+    g = np.where(inside, raw.astype(np.float64) - bg, 0.0)
+    high = inside & (g >= np.maximum(max(3 * unit, 3 * noise), np.abs(bg[-1] - bg[0])))
+    falls = np.ones((K, n), bool)
+    falls[:h], falls[h + 1:] = g[:h] <= g[1:h + 1], g[h + 1:] <= g[h:-1]
+    above = high & (falls | sat)
+    joined = np.zeros((K, n), bool)
+    joined[h::-1] = np.logical_and.accumulate(above[h::-1], axis=0)
+    joined[h:] = np.logical_and.accumulate(above[h:], axis=0)
+    use = high & ~sat & joined
+    m, t = np.zeros((5, n)), np.zeros((3, n))
+    for row in range(K):
+        wgt, x, p = g[row], np.float64(row - h), 1.0
+        ly = np.log(np.maximum(wgt, unit))
+        for q in range(5):
+            m[q] = np.where(use[row], m[q] + p * wgt, m[q])
+            if q < 3:
+                t[q] = np.where(use[row], t[q] + p * (wgt * ly), t[q])
+            p *= x
+    c0, c1, c2 = m[2] * m[4] - m[3] ** 2, m[2] * m[3] - m[1] * m[4], m[1] * m[3] - m[2] ** 2
+    c3, c4, c5 = m[0] * m[4] - m[2] ** 2, m[1] * m[2] - m[0] * m[3], m[0] * m[2] - m[1] ** 2
+    with np.errstate(divide="ignore", invalid="ignore"):
+        det = m[0] * c0 + m[1] * c1 + m[2] * c2
+        b = (c1 * t[0] + c3 * t[1] + c4 * t[2]) / det
+        a = (c2 * t[0] + c4 * t[1] + c5 * t[2]) / det
+        vertex = -b / (2 * a)
+    fit = ((use & (y < h)).any(axis=0) & (use & (y > h)).any(axis=0) & (use.sum(axis=0) >= 3)
+           & (np.abs(det) > 1e-9 * np.maximum(m[0], 1.0) ** 3) & (a < 0)
+           & (np.abs(vertex) <= h))
+    return np.where(fit, vertex, _run_centroid_array_form(raw, inside, sat, bg, g))
+
+
+@pytest.mark.parametrize("dtype", [np.uint8, np.uint16, np.float32])
+def test_clipped_plateaus_equal_the_array_form(dtype):
+    rng = np.random.default_rng(19)
+    H, W, w = 50, 300, 11
+    x = np.arange(W)
+    line = np.where(x < 260, 25 + 6 * np.sin(x / 30), 6.0)         # by the frame's edge too
+    ys = np.arange(H)[:, None]
+    cut = np.where(x % 9 == 0, ys < line + 3, np.where(x % 9 == 4, ys > line - 3, True))
+    core = 600 * np.exp(-0.5 * ((ys - line) / 2.5) ** 2) * cut
+    img = (30 + 0.8 * ys * (x % 5 == 0) + 120 * (ys > line + 4) * (x % 7 == 0)  # slopes, lit
+           + np.where(x % 11 == 0, 0, core) + rng.normal(0, 4, (H, W)))      # side, cut core
+    img = np.where(x % 3 == 0, np.round(img / 16) * 16, img)            # ties on the flanks
+    img = np.clip(img, 0, 255).astype(dtype)
+    r = np.round(line).astype(np.int64) + rng.integers(-2, 3, W)
+    level = np.float32(250)
+    raw, inside = gather(img, r[None, :] + np.arange(-w, w + 1)[:, None], x)
+    want = _plateau_array_form(raw, inside, raw >= level, 2.0, 1.0)
+    got = plateau_centres(raw, inside, raw >= level, 2.0, 1.0)
+    assert np.array_equal(got, want, equal_nan=True)
+    assert np.array_equal(clipped_centres(img, r, x, w, level, 2.0, 1.0), want, equal_nan=True)

@@ -33,7 +33,12 @@ from insitu.vision.profile import (
     gather,
     saturation_level,
 )
-from insitu.vision.steger_kernel import plateau_centres, steger_columns, widths_and_clipping
+from insitu.vision.steger_kernel import (
+    clipped_centres,
+    plateau_centres,
+    steger_columns,
+    widths_and_clipping,
+)
 
 FLAT_PX = 2.5
 """Farthest (px) a flat top's centre (``clip``) may lie from the 3-point fit on it: the fit
@@ -162,7 +167,6 @@ def steger(image: np.ndarray, sigma: float | None = None, min_peak: float = 40.0
                  extend_ends=extend_ends, upper=upper, scale=scale, allow=allow,
                  min_run=min_run, ridge=ridge, noise=noise, white=white, quiet=quiet)
     c, r, n, w, unit = det.cols, det.row, len(det.cols), det.window, det.full_scale / 255
-    x = np.arange(-w, w + 1)[:, None]
     level = saturation_level(img, saturation, scale)
     width, sat = widths_and_clipping(det.pre, img, r.astype(np.int64), c.astype(np.int64), w,
                                      (det.gmax - det.contrast + det.gmax) / 2,
@@ -176,8 +180,9 @@ def steger(image: np.ndarray, sigma: float | None = None, min_peak: float = 40.0
     u, v, found = steger_columns(img, r.astype(np.int64), c.astype(np.int64), h, _M + 1,
                                  np.float32(min_curvature), bool(across))
     if sat.any():                                 # clipped plateau: the flank fit instead
-        raw, inside = gather(img, r[None, sat] + x, c[sat])
-        v[sat] = r[sat] + plateau_centres(raw, inside, raw >= level, det.noise, unit)
+        v[sat] = r[sat] + clipped_centres(img, r[sat].astype(np.int64),
+                                          c[sat].astype(np.int64), w, np.float32(level),
+                                          det.noise, unit)
         u[sat], found[sat] = c[sat], True
     keep = found & np.isfinite(u) & np.isfinite(v)
     return LineCentres(u[keep].astype(np.float64), v[keep].astype(np.float64),

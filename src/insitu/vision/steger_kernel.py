@@ -90,46 +90,59 @@ def column_derivatives(img, r, c, h, M):
 
 
 @compiled
+def _eigen(D, j):
+    """The Hessian's most negative eigenvalue and the other at row j of a column's
+    derivatives D (5, 2M + 1) (Iu, Iv, Iuu, Ivv, Iuv), float32."""
+    Iuu, Ivv, Iuv = D[2, j], D[3, j], D[4, j]
+    half = (Iuu + Ivv) / _TWO
+    d = (Iuu - Ivv) / _TWO
+    root = np.sqrt(d * d + Iuv * Iuv)
+    return half - root, half + root
+
+
+@compiled
+def _normal(D, j, lj):
+    """The unit normal (n_u, n_v) of eigenvalue lj at row j of D (:func:`_eigen`) and the
+    Taylor step t = −(n·∇I)/lj, float32."""
+    Iu, Iv, Iuu, Ivv, Iuv = D[0, j], D[1, j], D[2, j], D[3, j], D[4, j]
+    e1v, e2u = lj - Iuu, lj - Ivv
+    if Iuv * Iuv + e1v * e1v >= e2u * e2u + Iuv * Iuv:
+        a, b = Iuv, e1v
+    else:
+        a, b = e2u, Iuv
+    norm = np.hypot(a, b)
+    if norm < _TINY:
+        a, b = np.float32(0.0), np.float32(1.0)
+    else:
+        a, b = a / norm, b / norm
+    return a, b, -(a * Iu + b * Iv) / lj
+
+
+@compiled
 def steger_columns(img, r, c, h, M, min_curvature, across):
     """Steger's centres (u, v float64 (n,), found bool (n,)) of the columns ``c`` (n,) with
     their detected peaks at rows ``r`` (n,) of ``img`` (H, W): derivatives by the kernels
     ``h`` (3, 2R + 1) float32 (smoothing, first, second derivative) at rows r − M … r + M
     (borders clipped, :func:`column_derivatives`), the line pixel by the Hessian's test with
     ``min_curvature`` (float32), ``across``: a column without one measured down the column
-    alone (steger's keywords)."""
+    alone (steger's keywords). The normal is worked out only at rows whose eigenvalues can
+    pass the test (and at the first row of a column with none, whose (u, v) is not found)."""
     n, k2 = len(r), 2 * M + 1
     u, v, found = np.empty(n), np.empty(n), np.zeros(n, np.bool_)
     derivatives = column_derivatives(img, r, c, h, M)      # Iu, Iv, Iuu, Ivv, Iuv
-    gcol, dcol = np.empty(k2, np.float32), np.empty(k2, np.float32)
-    lam, nu, nv, t = (np.empty(k2, np.float32), np.empty(k2, np.float32),
-                      np.empty(k2, np.float32), np.empty(k2, np.float32))
     for i in range(n):
         D = derivatives[:, :, i]
         best, k = -np.inf, 0
-        for j in range(k2):                                # the Hessian's normal
-            Iu, Iv, Iuu, Ivv, Iuv = D[0, j], D[1, j], D[2, j], D[3, j], D[4, j]
-            half = (Iuu + Ivv) / _TWO
-            d = (Iuu - Ivv) / _TWO
-            root = np.sqrt(d * d + Iuv * Iuv)
-            lj, other = half - root, half + root
-            e1v, e2u = lj - Iuu, lj - Ivv
-            if Iuv * Iuv + e1v * e1v >= e2u * e2u + Iuv * Iuv:
-                a, b = Iuv, e1v
-            else:
-                a, b = e2u, Iuv
-            norm = np.hypot(a, b)
-            if norm < _TINY:
-                a, b = np.float32(0.0), np.float32(1.0)
-            else:
-                a, b = a / norm, b / norm
-            tj = -(a * Iu + b * Iv) / lj
-            lam[j], nu[j], nv[j], t[j] = lj, a, b, tj
-            ok = (lj <= -min_curvature and -lj >= abs(other) and abs(tj * a) <= _T_MAX
-                  and abs(tj * b) <= _T_MAX and 0 < j < k2 - 1)
-            if ok and -lj > best:
-                best, k = -lj, j
+        bu, bv, bt = np.float32(0.0), np.float32(0.0), np.float32(0.0)
+        for j in range(1, k2 - 1):                         # the Hessian's line pixel
+            lj, other = _eigen(D, j)
+            if lj <= -min_curvature and -lj >= abs(other) and -lj > best:
+                a, b, tj = _normal(D, j, lj)
+                if abs(tj * a) <= _T_MAX and abs(tj * b) <= _T_MAX:
+                    best, k, bu, bv, bt = -lj, j, a, b, tj
         hit = best > -np.inf
-        bu, bv, bt = nu[k], nv[k], t[k]
+        if not hit:
+            bu, bv, bt = _normal(D, 0, _eigen(D, 0)[0])
         if across and not hit:                             # down the column alone
             best1, k1 = -np.inf, -1
             for j in range(1, k2 - 1):
@@ -140,11 +153,11 @@ def steger_columns(img, r, c, h, M, min_curvature, across):
             if k1 >= 0:
                 k, hit = k1, True
                 bu, bv, bt = np.float32(0.0), np.float32(1.0), -D[1, k1] / D[3, k1]
-        for j in range(k2):
-            gcol[j] = bu * D[0, j] + bv * D[1, j]          # n·∇I down the column
-            dcol[j] = bu * D[4, j] + bv * D[3, j]          # its v-derivative
         kn, kp = (k + 1) % k2, (k - 1) % k2
-        y0, d0, yn, dn, yp, dp = gcol[k], dcol[k], gcol[kn], dcol[kn], gcol[kp], dcol[kp]
+        y0 = bu * D[0, k] + bv * D[1, k]                   # n·∇I down the column
+        d0 = bu * D[4, k] + bv * D[3, k]                   # its v-derivative
+        yn, dn = bu * D[0, kn] + bv * D[1, kn], bu * D[4, kn] + bv * D[3, kn]
+        yp, dp = bu * D[0, kp] + bv * D[1, kp], bu * D[4, kp] + bv * D[3, kp]
         down = _sign(y0) != _sign(yn)
         if down or _sign(yp) != _sign(y0):
             s = (_hermite_root(y0, d0, yn, dn) if down else _hermite_root(yp, dp, y0, d0))
@@ -182,54 +195,89 @@ def _moment_vertex(m0, m1, m2, m3, m4, t0, t1, t2, half):
 
 @compiled
 def plateau_centres(raw, inside, sat, noise, unit):
-    """:func:`~insitu.vision.steger._plateau_centre` of each column of ``raw`` (k, n) float32
-    (the band of 2h + 1 rows centred on a clipped peak), ``inside`` and ``sat`` (k, n) bool:
-    offsets (n,) px from the band's middle."""
+    """:func:`_plateau` of each column of ``raw`` (k, n) float32 (the band of 2h + 1 rows
+    centred on a clipped peak), ``inside`` and ``sat`` (k, n) bool: offsets (n,) px from
+    the band's middle."""
     K, n = raw.shape
-    h = K // 2
     out = np.empty(n)
-    g, bg = np.empty(K), np.empty(K)
-    above, use, run, near = (np.empty(K, np.bool_), np.empty(K, np.bool_),
-                             np.empty(K, np.bool_), np.empty(K, np.bool_))
-    m, t = np.empty(5), np.empty(3)                        # the moments' sums
+    bg, g = np.empty(K), np.empty(K)
+    run, near = np.empty(K, np.bool_), np.empty(K, np.bool_)
     for i in range(n):
-        top = median_of_3(raw[0, i], raw[1, i], raw[2, i])          # the sloping background
-        bot = median_of_3(raw[K - 3, i], raw[K - 2, i], raw[K - 1, i])
-        mid, slope = (top + bot) / _TWO, (bot - top) / np.float32(2 * h)
-        for y in range(K):
-            bg[y] = np.float64(mid) + np.float64(slope) * (y - h)
-            g[y] = np.float64(raw[y, i]) - bg[y] if inside[y, i] else 0.0
-        floor = max(max(3.0 * unit, 3.0 * noise), abs(bg[K - 1] - bg[0]))
-        for y in range(K):                     # at the floor, falling away from the middle
-            falls = (y == h or (y < h and g[y] <= g[y + 1]) or (y > h and g[y] <= g[y - 1]))
-            above[y] = inside[y, i] and g[y] >= floor and (falls or sat[y, i])
-            use[y] = inside[y, i] and g[y] >= floor and not sat[y, i]
-        for step in (-1, 1):                   # only the run of rows joined to the middle
-            joined = True
-            for y in range(h, -1 if step < 0 else K, step):
-                joined = joined and above[y]
-                use[y] = use[y] and joined
-        m[:], t[:] = 0.0, 0.0
-        below = beyond = False
-        count = 0
-        for y in range(K):
-            if use[y]:
-                x, wgt = np.float64(y - h), g[y]
-                ly = np.log(max(g[y], unit))
-                p = 1.0
-                for q in range(5):
-                    m[q] += p * wgt
-                    if q < 3:
-                        t[q] += p * (wgt * ly)
-                    p *= x
-                below, beyond, count = below or y < h, beyond or y > h, count + 1
-        vertex = np.nan
-        if below and beyond and count >= 3:
-            vertex = _moment_vertex(m[0], m[1], m[2], m[3], m[4], t[0], t[1], t[2], h)
-        if not np.isfinite(vertex):
-            vertex = _run_centroid(raw[:, i], inside[:, i], sat[:, i], bg, g, run, near)
-        out[i] = vertex
+        out[i] = _plateau(raw[:, i], inside[:, i], sat[:, i], noise, unit, bg, g, run, near)
     return out
+
+
+@compiled
+def clipped_centres(img, r, c, w, level, noise, unit):
+    """:func:`plateau_centres` of the columns ``c`` (n,) of ``img`` (H, W) over the rows
+    r − w … r + w about their peaks ``r`` (n,) (clipped to the frame; rows outside it not
+    inside), the pixels at ``level`` (float32) or more clipped: offsets (n,) px from r."""
+    H, K, n = img.shape[0], 2 * w + 1, len(r)
+    out = np.empty(n)
+    raw, inside, sat = np.empty(K, np.float32), np.empty(K, np.bool_), np.empty(K, np.bool_)
+    bg, g = np.empty(K), np.empty(K)
+    run, near = np.empty(K, np.bool_), np.empty(K, np.bool_)
+    for i in range(n):
+        for y in range(K):
+            row = r[i] - w + y
+            inside[y] = row >= 0 and row < H
+            raw[y] = np.float32(img[min(max(row, 0), H - 1), c[i]])
+            sat[y] = raw[y] >= level
+        out[i] = _plateau(raw, inside, sat, noise, unit, bg, g, run, near)
+    return out
+
+
+@compiled
+def _plateau(raw, inside, sat, noise, unit, bg, g, run, near):
+    """The centre of one column's clipped plateau, offset px from the middle of ``raw`` (k,)
+    float32 (k = 2h + 1, ``inside``, ``sat`` (k,) bool): the vertex of the log-parabola
+    fitted by weighted moments to the unclipped rows of its flanks above the sloping
+    background (a straight line between the medians of the 3 px at each end) by more than
+    the floor (3 gray values of ``unit``, 3 ``noise``, the background's change across the
+    band), joined to the middle while they fall away from it; else (fewer than 3 rows, none
+    on a side, a vertex beyond ±h or opening upwards) :func:`_run_centroid`. bg, g (k,)
+    float64 and run, near (k,) bool: work space."""
+    K = len(raw)
+    h = K // 2
+    top = median_of_3(raw[0], raw[1], raw[2])                # the sloping background
+    bot = median_of_3(raw[K - 3], raw[K - 2], raw[K - 1])
+    mid, slope = (top + bot) / _TWO, (bot - top) / np.float32(2 * h)
+    for y in range(K):
+        bg[y] = np.float64(mid) + np.float64(slope) * (y - h)
+        g[y] = np.float64(raw[y]) - bg[y] if inside[y] else 0.0
+    floor = max(max(3.0 * unit, 3.0 * noise), abs(bg[K - 1] - bg[0]))
+    vertex = np.nan
+    if inside[h] and g[h] >= floor:        # the rows at the floor joined to the middle,
+        lo, hi = h, h                      # falling away from it (or clipped)
+        while lo > 0 and inside[lo - 1] and g[lo - 1] >= floor and (
+                g[lo - 1] <= g[lo] or sat[lo - 1]):
+            lo -= 1
+        while hi < K - 1 and inside[hi + 1] and g[hi + 1] >= floor and (
+                g[hi + 1] <= g[hi] or sat[hi + 1]):
+            hi += 1
+        m0 = m1 = m2 = m3 = m4 = t0 = t1 = t2 = 0.0         # the moments of the unclipped
+        count = 0
+        for y in range(lo, hi + 1):
+            if not sat[y]:
+                x, wgt = np.float64(y - h), g[y]
+                wl = wgt * np.log(max(g[y], unit))
+                p2 = x * x
+                m0 += wgt
+                m1 += x * wgt
+                m2 += p2 * wgt
+                m3 += p2 * x * wgt
+                m4 += p2 * x * x * wgt
+                t0 += wl
+                t1 += x * wl
+                t2 += p2 * wl
+                count += 1
+        below = lo < h and not sat[lo:h].all()
+        beyond = hi > h and not sat[h + 1:hi + 1].all()
+        if below and beyond and count >= 3:
+            vertex = _moment_vertex(m0, m1, m2, m3, m4, t0, t1, t2, h)
+    if not np.isfinite(vertex):
+        vertex = _run_centroid(raw, inside, sat, bg, g, run, near)
+    return vertex
 
 
 @compiled
