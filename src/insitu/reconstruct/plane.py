@@ -3,13 +3,11 @@ scan head's geometry defines (pivot a = (0, 0, H) and the commanded segment b–
 
 from __future__ import annotations
 
-from functools import lru_cache
-
 import numpy as np
 
 from insitu.geometry.beams import light_plane
 from insitu.geometry.camera import CameraModel
-from insitu.vision.chains import median_of
+from insitu.reconstruct.band_kernel import band_edges, plane_points
 
 
 def intersect_plane(camera: CameraModel, uv: np.ndarray, plane: np.ndarray) -> np.ndarray:
@@ -54,18 +52,10 @@ def expected_band(camera: CameraModel, start, end, pivot_height_mm: float,
     return lo, hi
 
 
-_S = np.linspace(-0.05, 1.05, 96)[:, None]
-_ALONG = (1 - _S, _S)
+_S = np.linspace(-0.05, 1.05, 96)
+_ALONG = np.stack((1 - _S, _S))
 """The 96 points along the line, 5 % beyond each end, :func:`band_and_side` projects: the
-weights of its start and its end, (96, 1) each."""
-
-
-@lru_cache(maxsize=4)
-def _grid(n: int) -> np.ndarray:
-    """0 … n − 1 as float64 (read-only: shared by every frame of a camera)."""
-    g = np.arange(n, dtype=np.float64)
-    g.flags.writeable = False
-    return g
+weights of its start and its end, (2, 96)."""
 
 
 def band_and_side(camera: CameraModel, start, end, pivot_height_mm: float,
@@ -91,17 +81,14 @@ def line_band(camera: CameraModel, start, end, pivot_height_mm: float,
 
 def _band(camera, start, end, pivot_height_mm, z_range_mm, margin_px, telecentric,
           along_rows):
-    """(along_rows, lo, hi, side); ``along_rows`` None: decided from the same projection."""
+    """(along_rows, lo, hi, side); ``along_rows`` None: decided from the same projection
+    (:func:`~insitu.reconstruct.band_kernel.plane_points`,
+    :func:`~insitu.reconstruct.band_kernel.band_edges`)."""
     plane = light_plane(pivot_height_mm, start, end, telecentric)
-    xy = _ALONG[0] * np.asarray(start, float) + _ALONG[1] * np.asarray(end, float)
     axis = 0 if abs(plane[0]) >= abs(plane[1]) else 1      # solve the plane for x or for y
-    z = np.asarray(z_range_mm, np.float64)[:, None]                 # the two ends, (2, 1)
-    p = np.zeros((2 * len(xy) + 2, 3))
-    q = p[:-2].reshape(2, len(xy), 3)
-    q[..., :2], q[..., 2] = xy, z
-    q[..., axis] = -(plane[1 - axis] * q[..., 1 - axis] + plane[2] * z + plane[3]) / plane[axis]
+    p = plane_points(np.asarray(start, np.float64), np.asarray(end, np.float64), plane,
+                     np.asarray(z_range_mm, np.float64), _ALONG, axis)
     if along_rows is None:                                         # the ends on z = 0
-        p[-2:, :2] = [start[0], start[1]], [end[0], end[1]]
         pix = camera.project(p)
         du, dv = np.abs(pix[-1] - pix[-2])
         along_rows, pix = bool(du >= dv), pix[:-2]
@@ -109,15 +96,13 @@ def _band(camera, start, end, pivot_height_mm, z_range_mm, margin_px, telecentri
         pix = camera.project(p[:-2])
     along, across = (0, 1) if along_rows else (1, 0)
     n = camera.width if along_rows else camera.height
-    grid = _grid(n)
     edges = []
     for uv in pix.reshape(2, -1, 2):
         uv = uv[np.isfinite(uv).all(axis=1)]
         if len(uv) < 2:
             return along_rows, np.full(n, np.nan), np.full(n, np.nan), 0
         o = np.argsort(uv[:, along])
-        edges.append(np.interp(grid, uv[o, along], uv[o, across], left=np.nan, right=np.nan))
-    rise = (edges[1] - edges[0]) * np.sign(z_range_mm[1] - z_range_mm[0])
-    rise = rise[np.isfinite(rise)]
-    side = int(np.sign(median_of(rise))) if len(rise) else 0
-    return along_rows, np.fmin(*edges) - margin_px, np.fmax(*edges) + margin_px, side
+        edges += [uv[o, along], uv[o, across]]
+    lo, hi, side = band_edges(*edges, n, float(np.sign(z_range_mm[1] - z_range_mm[0])),
+                              float(margin_px))
+    return along_rows, lo, hi, side
