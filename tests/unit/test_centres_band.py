@@ -14,7 +14,7 @@ from insitu.formats.sequence import Sequence
 from insitu.reconstruct.plane import band_and_side, line_runs_along_rows
 from insitu.services.common import camera_model
 from insitu.vision.extract import CentreSettings, band_crop, extract_centres
-from insitu.vision.laser_image import noise_sigma
+from insitu.vision.laser_image import noise_sigma, read_window
 from insitu.vision.profile import frame_noise
 
 SCAN = Path(__file__).resolve().parents[1] / "data" / "scan-step-block-b2"
@@ -91,6 +91,27 @@ def test_synthetic_banded_equals_whole_frame_and_stays_in_band(along_rows):
     assert inside(banded, lo, hi, along_rows)
     scan, cross = (banded.u, banded.v) if along_rows else (banded.v, banded.u)
     assert scan.min() >= 60 and np.abs(cross - true[np.round(scan).astype(int)]).max() < 0.2
+
+
+@pytest.mark.parametrize("window", [(300, 700, 160, 900), (0, 1000, 48, 400),
+                                    (5, 37, 0, 1000), (960, 1000, 961, 1000)])
+def test_a_region_of_interests_frame_is_measured_where_it_was_read(window):
+    """A camera reading a region of interest gives the whole frame with 0 outside it: the noise
+    is the region's, not the zeros' (0 when they are most of the frame), and a frame read whole
+    is measured whole even with pixels at 0."""
+    rng = np.random.default_rng(4)
+    img = np.clip(rng.normal(12.0, 3.0, (1000, 1000)), 0, 255).astype(np.uint8)
+    r0, r1, c0, c1 = window
+    read = np.zeros_like(img)
+    read[r0:r1, c0:c1] = img[r0:r1, c0:c1]
+    assert read_window(read).shape == (r1 - r0, c1 - c0)
+    assert read_window(read.T).shape == (c1 - c0, r1 - r0)
+    assert np.shares_memory(read_window(read), read)
+    crop = np.ascontiguousarray(img[r0:r1, c0:c1])
+    for frame in (read, read.T):
+        assert frame_noise(frame) == frame_noise(crop if frame is read else crop.T) > 1.0
+        assert noise_sigma(frame) == noise_sigma(crop if frame is read else crop.T) > 2.0
+    assert read_window(img) is img and read_window(img.astype(np.float32)).shape == img.shape
 
 
 def test_frame_noise_is_the_whole_frames():

@@ -28,6 +28,7 @@ import numpy as np
 
 from insitu.errors import MeasurementError
 from insitu.formats.images import PIXEL_BITS
+from insitu.vision.noise_kernel import read_bounds
 
 CHANNELS = {"b": 0, "g": 1, "r": 2}                  # BGR, as OpenCV reads colour images
 CHROMA = 12 / 255
@@ -135,9 +136,24 @@ def _excess(bgr: np.ndarray, c: int, ch=None) -> np.ndarray:
                            dtype=cv2.CV_32F)
 
 
+def read_window(img: np.ndarray, step: int = 32) -> np.ndarray:
+    """The part of the frame ``img`` (H, W) its camera read: a frame read with a region of
+    interest comes whole with 0 outside it (:class:`~insitu.devices.protocols.RoiCamera`), so
+    the rectangle of the ``step`` px grid's points other than 0, its edges found to the pixel
+    (:func:`~insitu.vision.noise_kernel.read_bounds`); the whole frame when every grid point
+    holds a value (a region narrower than ``step`` px is not seen), and any other than an
+    integer frame (a camera's)."""
+    if img.dtype.kind != "u":
+        return img
+    r0, r1, c0, c1 = read_bounds(img, step)
+    return img if (r0, r1, c0, c1) == (0, *img.shape[:1], 0, img.shape[1]) else img[r0:r1, c0:c1]
+
+
 def noise_sigma(img: np.ndarray) -> float:
     """Robust noise sigma of (H, W) ``img`` from differences of rows 8 apart, ≤ 32 row
-    pairs, every second column (a line or an edge moves few of them)."""
+    pairs, every second column (a line or an edge moves few of them), over the part of the
+    frame its camera read (:func:`read_window`)."""
+    img = read_window(img)
     H = img.shape[0]
     d = min(8, H - 1)
     if d < 1:

@@ -80,3 +80,53 @@ def median_row_differences(img, rows_a, rows_b):
             s2 = value
             break
     return (s1 + s2) / 2.0
+
+
+@compiled
+def _read(img, k, axis, lo, hi, step):
+    """Whether row k (``axis`` 0; its columns lo ≤ c ≤ hi) or column k (axis 1; its rows lo,
+    lo + step, … ≤ hi: a column's pixels lie far apart) of ``img`` holds a value other than 0."""
+    if axis == 0:
+        for c in range(lo, hi + 1):
+            if img[k, c] != 0:
+                return True
+        return False
+    for r in range(lo, hi + 1, step):
+        if img[r, k] != 0:
+            return True
+    return False
+
+
+@compiled
+def _edge(img, out, inside, axis, lo, hi, step):
+    """The first row or column read (:func:`_read`) from ``out`` (not read) towards
+    ``inside`` (read), by bisection."""
+    while abs(inside - out) > 1:
+        mid = (out + inside) // 2
+        if _read(img, mid, axis, lo, hi, step):
+            inside = mid
+        else:
+            out = mid
+    return inside
+
+
+@compiled
+def read_bounds(img, step):
+    """(r0, r1, c0, c1): the rectangle of the integer frame ``img`` (H, W) holding its values
+    other than 0 — the grid's (every ``step`` px) points other than 0 bounded, the edges
+    bisected to the pixel; (0, H, 0, W) when every grid point, or none, holds one."""
+    H, W = img.shape
+    i0, i1, j0, j1, zeros = H, -1, W, -1, 0
+    for i in range(0, H, step):
+        for j in range(0, W, step):
+            if img[i, j] == 0:
+                zeros += 1
+            else:
+                i0, i1, j0, j1 = min(i0, i), max(i1, i), min(j0, j), max(j1, j)
+    if zeros == 0 or i1 < 0:
+        return 0, H, 0, W
+    r0 = _edge(img, i0 - step if i0 else -1, i0, 0, j0, j1, step)
+    r1 = _edge(img, min(i1 + step, H), i1, 0, j0, j1, step) + 1
+    c0 = _edge(img, j0 - step if j0 else -1, j0, 1, i0, i1, step)
+    c1 = _edge(img, min(j1 + step, W), j1, 1, i0, i1, step) + 1
+    return r0, r1, c0, c1

@@ -9,7 +9,7 @@ import cv2
 import numpy as np
 
 from insitu.vision.chains import leading, median3
-from insitu.vision.laser_image import full_scale
+from insitu.vision.laser_image import full_scale, read_window
 from insitu.vision.noise_kernel import median_row_differences
 
 FWHM_PER_SIGMA = 2.0 * np.sqrt(2.0 * np.log(2.0))
@@ -51,7 +51,10 @@ def frame_noise(img: np.ndarray, median: int = 3) -> float:
     (any array, a transposed view too; ``median``: the methods' default pre-filter),
     from only the rows :func:`~insitu.vision.laser_image.noise_sigma` samples: each filtered
     with its own neighbours (3-row strips stacked; the frame's edges replicated, as
-    medianBlur does), so a crop of the frame is measured with the whole frame's noise."""
+    medianBlur does), so a crop of the frame is measured with the whole frame's noise; only
+    the part of the frame its camera read counts (:func:`~insitu.vision.laser_image.read_window`:
+    a region of interest's frame is 0 outside it)."""
+    img = read_window(img)
     H = img.shape[0]
     d = min(8, H - 1)
     if d < 1:
