@@ -37,10 +37,11 @@ def test_excess_is_k_minus_one_kth_rounded_less_its_level_where_read():
     camera's window); applied with saturation at 0 and the frame's full scale."""
     off = np.array([[0, 1, 2, 3, 255]], np.uint8)
     got = excess_room_light(off, 4)                    # 1, 2, 2, 191 read: median 2
-    assert got.dtype == np.uint8 and got.tolist() == [[[0, 0, 0, 0, 189]], [[0, 1, 0, 0, 0]]]
+    assert got.split.dtype == np.uint8 and got.level == 2.0
+    assert got.split.tolist() == [[[0, 0, 0, 0, 189]], [[0, 1, 0, 0, 0]]]
     deep = excess_room_light(np.array([[4095, 3000, 0]], np.uint16), 3)
-    assert deep.dtype == np.uint16                     # 2730 and 2000, median 2365
-    assert deep.tolist() == [[[365, 0, 0]], [[0, 365, 0]]]
+    assert deep.split.dtype == np.uint16 and deep.level == 2365.0   # 2730 and 2000
+    assert deep.split.tolist() == [[[365, 0, 0]], [[0, 365, 0]]]
     frame = np.array([[10, 4000, 4095]], np.uint16)
     assert less_room_light(frame, deep, 4095).tolist() == [[0, 4095, 4095]]
     assert less_room_light(frame, deep).tolist() == [[0, 4365, 4095]]
@@ -61,6 +62,24 @@ def test_the_excess_room_light_is_what_biases_a_packed_line():
     bias_fixed = abs(np.median(fixed.v) - 40.0)
     assert bias_packed > 3 * bias_alone + 0.01, (bias_alone, bias_packed)
     assert bias_fixed < bias_alone + 0.01, (bias_alone, bias_fixed)
+
+
+def test_a_packed_peak_stands_the_floor_above_the_level_kept():
+    """A stripe of 25 DN over one exposure's room light (10 DN) stays under the detector's
+    floor (40 DN) in a frame of its own; over four exposures' level it would pass it. With
+    the level the packed frame keeps (30 DN) it gives no centre, as alone; a brighter one
+    (60 DN) is kept either way."""
+    band = Band(np.full(W, 30.0), np.full(W, 50.0), True, 1)
+    flat = np.full((H, W), 10.0)
+    for height, kept in ((25.0, False), (60.0, True)):
+        stripe = _stripe() * height / 60.0
+        alone = centres_in_bands(_u8(stripe + flat), [band])[0]
+        packed = _u8(stripe + K * flat)
+        excess = excess_room_light(_u8(K * flat), K)
+        assert excess.level == 30.0
+        left = centres_in_bands(less_room_light(packed, excess), [band], level=excess.level)[0]
+        assert (len(alone) > W // 2) == kept and (len(left) > W // 2) == kept, (height, len(left))
+        assert len(centres_in_bands(packed, [band])[0]) > W // 2   # on the level: passes
 
 
 class _Camera:

@@ -87,6 +87,21 @@ def test_band_assignment_is_never_wrong_at_a_15_mm_step(step_frame):
         assert np.all(np.abs(mine[:, 0] - a[0]) < 1.5)
 
 
+def test_a_packed_frame_measures_its_peaks_above_the_level_it_keeps(step_frame):
+    """add_lines hands the room light's level kept (:class:`ExcessLight`) to the bands'
+    detection: on no level the frame's lines are found; on a level the sensor cannot stand
+    the floor above, none."""
+    from insitu.reconstruct.scan import ExcessLight
+
+    _, rig, lines, image = step_frame
+    found = []
+    for level in (0.0, float(np.iinfo(image.dtype).max)):
+        rec = ScanReconstructor(rig.camera, rig.head.pivot_height_mm, min_points=10)
+        excess = ExcessLight(np.zeros((2, *image.shape), image.dtype), level)
+        found.append(rec.add_lines(image, lines, [0, 1, 2], (-0.5, 15.5), Packing(), excess))
+    assert found[0] > 300 and found[1] == 0, found
+
+
 def test_a_height_range_too_narrow_is_what_makes_lines_wrong(step_frame):
     """The same frame with bands for 10 … 15.5 mm only: the table and the low steps' stripes
     fall in the neighbours' bands — the heights bound the assignment (the survey frames

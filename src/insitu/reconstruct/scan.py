@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import cv2
 import numpy as np
 from scipy.ndimage import map_coordinates
@@ -100,8 +102,9 @@ class ScanReconstructor:
         line ``ids[k]`` of the scan each (its place across its pass: the cloud's ``line``):
         each line's centres only inside its band for surfaces within ``z_range`` mm
         (:mod:`insitu.reconstruct.bands`, widened by ``packing``), none where two bands hold
-        the same pixel. ``excess_light`` (:func:`excess_room_light`, (2, H, W) in the frame's
-        dtype): subtracted first (:func:`less_room_light`). Returns the points the frame gave;
+        the same pixel. ``excess_light`` (:func:`excess_room_light`): subtracted first
+        (:func:`less_room_light`), and each peak must stand the detector's floor above the
+        room light's level it keeps, as in a frame of one line. Returns the points the frame gave;
         ``last_centres``, ``last_points`` hold all its lines'."""
         self._check(ids[0], image)
         if excess_light is not None:
@@ -110,7 +113,9 @@ class ScanReconstructor:
         self.frames += len(lines)
         bands = exclusive([self.sheets.band(a, b, z_range, packing.margin_px) for a, b in lines],
                           packing.guard_px)
-        found = centres_in_bands(image, bands, self.settings, packing.edge_px, self.pixel_bits)
+        level = excess_light.level if excess_light is not None else 0.0
+        found = centres_in_bands(image, bands, self.settings, packing.edge_px, self.pixel_bits,
+                                 level)
         total, centres, points = 0, [], []
         for (a, b), k, c in zip(lines, ids, found):
             total += self._store(int(k), a, b, c)
@@ -227,8 +232,19 @@ class ScanReconstructor:
         return keep
 
 
-def excess_room_light(laser_off: np.ndarray, k: int) -> np.ndarray:
-    """(2, H, W) in ``laser_off``'s dtype, what to take from and what to give to a frame:
+@dataclass(frozen=True)
+class ExcessLight:
+    """The room light a frame of K lines holds beyond one line's exposure: ``split`` (2, H, W)
+    in the laser-off frame's dtype, what to take from and what to give to the frame (its
+    texture and shading), and ``level`` (DN), what it keeps ((K − 1)/K of the laser-off
+    frame's median over the pixels read)."""
+
+    split: np.ndarray
+    level: float
+
+
+def excess_room_light(laser_off: np.ndarray, k: int) -> ExcessLight:
+    """:class:`ExcessLight`, what to take from and what to give to a frame:
     (K − 1)/K of ``laser_off`` (H, W), a frame with the laser off exposed as long as a frame
     of ``k`` lines, less its median level over the pixels read (> 0; nothing where none was
     read), split by sign: the texture and shading of the room light such a frame holds
@@ -236,24 +252,26 @@ def excess_room_light(laser_off: np.ndarray, k: int) -> np.ndarray:
     the room light's texture of a one-line frame at the level of K exposures. The texture of
     the other K − 1 exposures biases the centres (on the simulator's tilted plane and
     freeform 1.16–1.2 × the RMS of one line a frame at K = 4; the lines' own stray light,
-    the bands and the sheets' lookup cost nothing: benchmarks/multiline_why.py); their level
-    is kept because the detector's absolute floor (``min_peak``) passes a faint stripe on
-    it as in the frame itself (without it, 1–3 % of the simulator's insert top goes at
-    binning 2, a third at binning 4: benchmarks/multiline.py)."""
+    the bands and the sheets' lookup cost nothing: benchmarks/multiline_why.py). Their level
+    stays in the frame and is returned: a peak must stand the detector's absolute floor
+    (``min_peak``) above it (:func:`~insitu.vision.band_centres.centres_in_bands`), as in a
+    frame of one line (on the level alone, stripes too faint for that floor passed and
+    gave the simulator's packed insert its worst points: benchmarks/multiline.py)."""
     read = laser_off > 0
     excess = np.rint(laser_off.astype(np.float64) * ((k - 1) / k))
     level = float(np.median(excess[read])) if read.any() else 0.0
     signed = np.where(read, excess - level, 0.0)
-    return np.stack([np.maximum(signed, 0), np.maximum(-signed, 0)]).astype(laser_off.dtype)
+    split = np.stack([np.maximum(signed, 0), np.maximum(-signed, 0)]).astype(laser_off.dtype)
+    return ExcessLight(split, level)
 
 
-def less_room_light(image: np.ndarray, excess: np.ndarray, top: int | None = None
+def less_room_light(image: np.ndarray, excess: ExcessLight, top: int | None = None
                     ) -> np.ndarray:
-    """``image`` (H, W, uint8 or uint16) less ``excess`` (:func:`excess_room_light`):
-    ``excess[0]`` taken, ``excess[1]`` given, clipped to 0 … ``top`` (the frame's full
+    """``image`` (H, W, uint8 or uint16) less ``excess`` (:func:`excess_room_light`): its
+    split's first plane taken, its second given, clipped to 0 … ``top`` (the frame's full
     scale; None: the dtype's). Saturating integer steps: a frame's subtraction in ≈ 1 ms
     at 2448 × 2048, where int32 arithmetic takes ≈ 20 × that."""
-    out = cv2.add(cv2.subtract(image, excess[0]), excess[1])
+    out = cv2.add(cv2.subtract(image, excess.split[0]), excess.split[1])
     if top is not None and top < np.iinfo(image.dtype).max:
         np.minimum(out, top, out=out)
     return out

@@ -22,7 +22,7 @@ from insitu.geometry.camera import CameraModel
 from insitu.reconstruct.bands import Packing
 from insitu.reconstruct.packing import FramePlan, RecordedPlan
 from insitu.reconstruct.plan import check_region, clip_lines, scan_lines
-from insitu.reconstruct.scan import ScanReconstructor, excess_room_light
+from insitu.reconstruct.scan import ExcessLight, ScanReconstructor, excess_room_light
 from insitu.reconstruct.turned_sheet import CROSS_ANGLE_DEG
 from insitu.services.common import Progress, camera_model
 from insitu.services.height import centre_settings, check_same_camera, crossed_model, height_model
@@ -262,7 +262,7 @@ def _scan(camera: Camera, head: ScanHead, plan, rec: ScanReconstructor, t0: Step
           on_frame: FrameCallback | None, rig: RigRecord | None = None,
           room_light: Callable[[], np.ndarray | None] | None = None,
           roi: tuple[int, int, int, int] | None = None,
-          excess: dict[int, np.ndarray] | None = None) -> ScanResult:
+          excess: dict[int, ExcessLight] | None = None) -> ScanResult:
     """The scan loop: ``room_light()`` (the laser-off frame, or None) first — a camera that
     gives none (a trigger only the head sends) leaves the points without grey values, said in the
     summary's ``ambient`` — then the ``plan``'s survey frames (their heights bound the packed

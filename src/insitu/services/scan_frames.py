@@ -13,7 +13,7 @@ from insitu.devices.protocols import Camera, ExposureCamera, RoiCamera, ScanHead
 from insitu.errors import DeviceError
 from insitu.reconstruct.packing import Frame
 from insitu.reconstruct.plane import band_and_side, line_runs_along_rows
-from insitu.reconstruct.scan import ScanReconstructor, excess_room_light
+from insitu.reconstruct.scan import ExcessLight, ScanReconstructor, excess_room_light
 
 
 class ScanInterrupted(DeviceError):
@@ -223,11 +223,11 @@ def laser_off_frames(shot: Shots, frames: list[Frame]) -> dict[int, np.ndarray]:
     return out
 
 
-def recorded_excess(seq) -> dict[int, np.ndarray]:
+def recorded_excess(seq) -> dict[int, ExcessLight]:
     """A recording's (:class:`~insitu.formats.sequence.Sequence`) laser-off frames as the
     :func:`~insitu.reconstruct.scan.excess_room_light` of the packed frames of the same
     exposure (K lines → its (K − 1)/K); none for frames without an exposure."""
-    out: dict[int, np.ndarray] = {}
+    out: dict[int, ExcessLight] = {}
     for i, off in enumerate(seq.laser_off):
         ks = {len(f.drawn()) for f in seq.frames if not f.survey and len(f.drawn()) > 1
               and f.exposure_ms is not None and off.exposure_ms is not None
