@@ -42,9 +42,10 @@ from rich.table import Table
 
 from insitu.marking.engrave_depth import DepthSettings, measure_depth
 from insitu.marking.engrave_walls import viewpoints
+from insitu.reconstruct.packing import line_ids
 from insitu.reconstruct.plan import scan_lines
 from insitu.services.pocket import DEPTH_CENTRES
-from insitu.services.scan import scan_live
+from insitu.services.scan import plan_lines, scan_live
 from insitu.services.station import simulated
 from insitu.sim.ablation import ABLATION, Engraving
 from insitu.sim.rig import default_rig
@@ -129,7 +130,7 @@ def measure_plate(blank: str, seed: int, optics: dict, binning: int,
         scan = scan_live(st, spacing_mm, region, centres=CentreSettings(**DEPTH_CENTRES),
                          room_light=False, exposure_ms=exposure_ms, cross=cross)
         pts, line = scan.cloud.points, scan.cloud.attributes["line"]
-        first = line < len(scan_lines(region, spacing_mm))
+        first = along_y(line, region, spacing_mm, cross)
         out, passes = [], []
         for cx, depth in zip(CENTRES_X, DEPTHS):
             near = np.abs(pts[:, 0] - cx) <= HALF + s.ring_mm
@@ -143,6 +144,14 @@ def measure_plate(blank: str, seed: int, optics: dict, binning: int,
             out.append((depth, mean, sem, stated, truth))
             passes.append([(m - truth, e) for m, e, _ in each])
     return out, scan.summary.station_s, passes
+
+
+def along_y(line: np.ndarray, region, spacing_mm: float, cross: bool) -> np.ndarray:
+    """(N,) bool: which of a scan's points (their ``line`` ids (N,), the cloud's) lie on its
+    lines along y (:func:`~insitu.services.scan.plan_lines`' first pass; the ids number
+    the passes by angle, so the crossed pass's come first)."""
+    ids = line_ids(plan_lines(region, spacing_mm, cross))
+    return np.isin(line, ids[:len(scan_lines(region, spacing_mm))])
 
 
 def combine(each: list[tuple[float, float, bool]]) -> tuple[float, float, bool]:

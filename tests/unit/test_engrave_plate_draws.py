@@ -44,18 +44,21 @@ def test_each_variation_of_a_seed_draws_its_own_random_numbers():
     assert np.array_equal(_draws(1), draws[1])
 
 
-def test_the_crossed_pass_is_told_apart_by_its_lines_ids():
-    """A crossed scan's first pass is the plain scan's lines, in order; the crossed lines'
-    ids follow (the benchmark measures each pass on its own by these ids)."""
+def test_the_lines_along_y_are_told_apart_by_their_ids():
+    """A crossed scan's points on its lines along y: the ids :func:`line_ids` gives those
+    lines (the crossed pass, at 45°, is numbered first); a plain scan's: all."""
+    from insitu.reconstruct.packing import line_ids
     from insitu.services.scan import plan_lines
 
+    ep = _plate()
     region = (-10.5, 10.5, -2.5, 2.5)
-    plain = _plate().scan_lines(region, 0.1)
-    both = plan_lines(region, 0.1, cross=True)
-    assert len(both) > len(plain)
-    for (a0, a1), (b0, b1) in zip(plain, both):
-        assert np.allclose(a0, b0) and np.allclose(a1, b1)
-    assert all(abs((b1 - b0)[0]) > 0.01 for b0, b1 in both[len(plain):])
+    lines = plan_lines(region, 0.1, cross=True)
+    ids = np.array(line_ids(lines))
+    vertical = np.array([abs((b - a)[0]) < 1e-9 for a, b in lines])
+    assert 0 < vertical.sum() < len(lines)
+    line = np.repeat(ids, 3)
+    assert np.array_equal(ep.along_y(line, region, 0.1, True), np.repeat(vertical, 3))
+    assert ep.along_y(np.arange(211), region, 0.1, False).all()
 
 
 def test_the_passes_combine_by_their_variances():
