@@ -189,7 +189,8 @@ def main() -> None:
                     "on its own and their depths combined")
     args = ap.parse_args()
     t = Table(title=f"measured pocket depth − truth ± its 1σ, µm; ✗: not stated to ±5 µm "
-              f"(2σ) (insitu's simulator, one scan a plate, lines {args.spacing:g} mm apart)")
+              f"(2σ) (insitu's simulator, one scan a plate, lines {args.spacing:g} mm apart"
+              f"{', a crossed pass' if args.cross else ''})")
     for col in ("settings", "blank", "seed", "draw", *(f"{d:g} mm" for d in DEPTHS),
                 "station s"):
         t.add_column(col, justify="right")
