@@ -83,8 +83,9 @@ INDEPENDENT_DARK_DN = 3.0   # the other renderer's dark offset: its arc's frames
 # intercept of the room light's line, with or without an offset in ambient.png)
 TUNE_RENDERS = (101, 102, 103, 104, 105, 106, 107, 108)   # world seeds, run at will
 SPENT_RENDERS = (201, 202, 203,   # held out, run once on 79183bf (docs/speed.md)
-                 204, 205, 206)   # held out, run once on 52b954a / 441811d (docs/speed.md)
-HELD_OUT_RENDERS = (207, 208, 209)   # declared 2026-12-05 before any run; not yet run
+                 204, 205, 206,   # held out, run once on 52b954a / 441811d (docs/speed.md)
+                 207, 208, 209)   # held out, run once on 0eb8866 (insert, step block)
+HELD_OUT_RENDERS = (210, 211, 212)   # declared 2026-12-05 before any run; not yet run
 
 
 def calibration(source: Path | None, cache: Path) -> HeightCalibration | None:
