@@ -229,3 +229,26 @@ def test_a_floor_the_kernel_flattens_widens_its_cells_error():
         if not rings:
             assert texture_var(dm.depth, dm.state == MEASURED, 0.25, 0.2) < 0.001 ** 2
     assert ratios[0] < 1.5
+
+
+def test_a_crossed_scan_is_refused_one_pass_is_measured():
+    """Lines of two directions over the pocket (a crossed scan) are refused in one line: the
+    walls' zones, the scatter along the lines and the registration take one direction; the
+    same pass alone, or lines a few degrees off one another, are measured."""
+    rng = np.random.default_rng(5)
+    p, line = _scan(rng, 0.2, _heavy(0.005))
+    turn = np.deg2rad(45.0)
+    rot = np.array([[np.cos(turn), -np.sin(turn)], [np.sin(turn), np.cos(turn)]])
+    q = p.copy()
+    q[:, :2] = p[:, :2] @ rot.T
+    inside = (np.abs(q[:, 0]) < 2.5) & (np.abs(q[:, 1]) < 2.5)
+    both = np.vstack([p, q[inside]]), np.concatenate([line, line[inside] + line.max() + 1])
+    with pytest.raises(MeasurementError, match="more than one direction.*one pass"):
+        measure_depth(*both, POCKET, DepthSettings(ring_mm=1.5))
+    assert measure_depth(p, line, POCKET, DepthSettings(ring_mm=1.5)).mean_depth()[0] == \
+        pytest.approx(0.2, abs=0.003)
+    small = np.deg2rad(2.0) * (line % 2)                    # every other line 2° off
+    r = p.copy()
+    r[:, 0] += np.sin(small) * p[:, 1]
+    assert measure_depth(r, line, POCKET, DepthSettings(ring_mm=1.5)).mean_depth()[0] == \
+        pytest.approx(0.2, abs=0.003)

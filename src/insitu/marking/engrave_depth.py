@@ -51,7 +51,7 @@ from insitu.errors import MeasurementError
 from insitu.marking.engrave_register import wall_shift
 from insitu.marking.engrave_stats import cell_means, line_sem, line_terms, texture_var
 from insitu.marking.engrave_top import top_model
-from insitu.marking.engrave_walls import clear, line_direction, unreachable
+from insitu.marking.engrave_walls import MAX_CROSSING, clear, line_axes, line_direction, unreachable
 
 STATES = ("measured", "wall", "hidden", "unmeasured")
 MEASURED, WALL, HIDDEN, UNMEASURED = range(4)
@@ -254,6 +254,13 @@ def measure_depth(points: np.ndarray, line: np.ndarray, region, settings: DepthS
     outline = outline or Outline(region, s.ring_mm + s.cell_mm)
     cells = cells or outline.cells(s.cell_mm)
     dist, top, floor = _split(points, outline, s)
+    near = dist >= -s.ring_mm
+    crossing = line_axes(points[near, :2], line[near])[1]
+    if crossing > MAX_CROSSING:
+        raise MeasurementError(f"the scan's lines over the pocket run in more than one direction "
+                               f"(spread across them {crossing:.2f} of along, at most "
+                               f"{MAX_CROSSING}: a crossed scan?): measure the pocket from one "
+                               "pass of parallel lines")
     top_fit = top_model(points[top], line[top])
     shift = 0.0
     if s.register_mm > 0:
