@@ -8,25 +8,15 @@ clips (excess_fill.fill_gaps)."""
 from __future__ import annotations
 
 import functools
-import importlib.util
-from pathlib import Path
 
 import numpy as np
 
+from benchmark_module import benchmark
 from insitu.vision.centres import photo_centres
-
-_PATH = Path(__file__).parents[2] / "benchmarks" / "clipped_white.py"
-
-
-def _clipped_white():
-    spec = importlib.util.spec_from_file_location("clipped_white", _PATH)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
 
 
 def test_a_stripe_along_a_white_squares_edge_is_found_and_not_pulled_onto_it():
-    cw = _clipped_white()
+    cw = benchmark("clipped_white")
     bgr, true, _ = cw.photograph(11)
     c = photo_centres(bgr, "gaussian")
     board = np.isfinite(true)
@@ -42,11 +32,11 @@ def test_a_stripe_along_a_white_squares_edge_is_found_and_not_pulled_onto_it():
 
 @functools.lru_cache(maxsize=1)
 def _photograph(seed: int):
-    return _clipped_white().photograph(seed)
+    return benchmark("clipped_white").photograph(seed)
 
 
 def _wrong_and_found(seed: int, method: str) -> tuple[float, float]:
-    cw = _clipped_white()
+    cw = benchmark("clipped_white")
     bgr, true, _ = _photograph(seed)
     c = photo_centres(bgr, method)
     err = np.full(true.shape, np.nan)

@@ -5,32 +5,22 @@ columns) there is nothing to find, and a method is neither credited nor blamed t
 from __future__ import annotations
 
 import functools
-import importlib.util
-from pathlib import Path
 
 import numpy as np
 
+from benchmark_module import benchmark
 from insitu.vision.detect import LineCentres
 
-_PATH = Path(__file__).parents[2] / "benchmarks" / "clipped_white.py"
 SEED = 13005
 
 
 @functools.lru_cache(maxsize=1)
-def _cw():
-    spec = importlib.util.spec_from_file_location("clipped_white", _PATH)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
-
-
-@functools.lru_cache(maxsize=1)
 def _photograph():
-    return _cw().photograph(SEED)
+    return benchmark("clipped_white").photograph(SEED)
 
 
 def _board_and_course():
-    cw = _cw()
+    cw = benchmark("clipped_white")
     col = np.arange(cw.W, dtype=np.float32)
     course = cw.stripe_course(cw.settings(SEED), col)
     board = (col > 310) & (col < 1440) & (course > 110) & (course < 850)
@@ -48,7 +38,7 @@ def test_the_columns_left_out_are_those_the_lamp_covers_white():
 
 
 def test_a_method_right_wherever_the_stripe_is_seen_scores_all_found_none_wrong(monkeypatch):
-    cw = _cw()
+    cw = benchmark("clipped_white")
     bgr, true, lc = _photograph()
     board, course = _board_and_course()
     u = np.flatnonzero(board).astype(np.float64)

@@ -4,32 +4,21 @@ be the base row's draws scaled: their flat top's residuals correlate 0.97)."""
 
 from __future__ import annotations
 
-import functools
-import importlib.util
 from dataclasses import replace
-from pathlib import Path
 
 import numpy as np
 
+from benchmark_module import benchmark
 from insitu.sim.rig import default_rig
 from insitu.sim.world import sim_world
 
-_PATH = Path(__file__).parents[2] / "benchmarks" / "engrave_plate.py"
 SEED = 0
-
-
-@functools.lru_cache(maxsize=1)
-def _plate():
-    spec = importlib.util.spec_from_file_location("engrave_plate", _PATH)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
 
 
 def _draws(k: int, n: int = 64) -> np.ndarray:
     """The first ``n`` normal draws of the renderer of variation ``k`` of :data:`SEED`
     (its speckle field, frame offsets, blotches and sensor noise all come from this stream)."""
-    ep = _plate()
+    ep = benchmark("engrave_plate")
     rig = default_rig(seed=SEED)
     world = sim_world("blank-stainless", seed=SEED,
                       rig=replace(rig, optics=replace(rig.optics, **ep.VARIATIONS[k][2])))
@@ -38,7 +27,7 @@ def _draws(k: int, n: int = 64) -> np.ndarray:
 
 
 def test_each_variation_of_a_seed_draws_its_own_random_numbers():
-    draws = np.array([_draws(k) for k in range(len(_plate().VARIATIONS))])
+    draws = np.array([_draws(k) for k in range(len(benchmark("engrave_plate").VARIATIONS))])
     r = np.corrcoef(draws)[np.triu_indices(len(draws), 1)]
     assert np.abs(r).max() < 0.6, r
     assert np.array_equal(_draws(1), draws[1])
@@ -50,7 +39,7 @@ def test_the_lines_along_y_are_told_apart_by_their_ids():
     from insitu.reconstruct.packing import line_ids
     from insitu.services.scan import plan_lines
 
-    ep = _plate()
+    ep = benchmark("engrave_plate")
     region = (-10.5, 10.5, -2.5, 2.5)
     lines = plan_lines(region, 0.1, cross=True)
     ids = np.array(line_ids(lines))
@@ -64,7 +53,7 @@ def test_the_lines_along_y_are_told_apart_by_their_ids():
 def test_the_passes_combine_by_their_variances():
     """Two passes 2 and 4 µm off with σ 2 and 4 µm: the combined mean 2.4 µm, σ 1.79 µm; not
     stated when a pass has too few lines or 2σ exceeds the tolerance."""
-    combine = _plate().combine
+    combine = benchmark("engrave_plate").combine
     mean, sem, ok = combine([(0.002, 0.002, True), (0.004, 0.004, True)])
     assert np.isclose(mean, 0.0024) and np.isclose(sem, 1 / np.sqrt(1 / 4e-6 + 1 / 16e-6))
     assert ok
