@@ -17,12 +17,9 @@ from dataclasses import replace
 
 import numpy as np
 
-from insitu.vision.detect import LineCentres
+from insitu.vision.detect import MIN_PEAK, LineCentres
 from insitu.vision.extract import CentreSettings, extract_centres
 
-MIN_PEAK = 40.0
-"""The detector's absolute floor of a peak (:func:`~insitu.vision.detect.detect`'s
-``min_peak``), gray values of 255."""
 PAD_PX = 16
 """Rows (columns) beside a band's strip read with it: the detection's median filter and its
 background at ±12 px from the peak see the same pixels as in the whole frame."""
@@ -37,9 +34,10 @@ def centres_in_bands(image: np.ndarray, bands: Sequence,
     frame ``image`` (H, W): that line's centres found inside its band only, at least
     ``edge_px`` from the band's ends. ``pixel_bits``: the frame's significant bits.
     ``level`` (gray values > 0): room light the frame holds beyond one line's exposure; a
-    peak must stand :data:`MIN_PEAK` above it, as in a frame of one line (a stripe too faint
-    for that floor alone passes it on the level: the simulator's insert, binning 2, renders
-    101 and 104, packed max 0.083 and 0.077 mm at 21-24 DN of contrast)."""
+    peak must stand :data:`~insitu.vision.detect.MIN_PEAK` above it, as in a frame of one
+    line (a stripe too faint for that floor alone passes it on the level: the simulator's
+    insert, binning 2, renders 101 and 104, packed max 0.083 and 0.077 mm at 21-24 DN of
+    contrast)."""
     return [_one(image, b, settings, edge_px, pixel_bits, level) for b in bands]
 
 

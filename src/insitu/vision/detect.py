@@ -72,6 +72,10 @@ from insitu.vision.peak_rows import band_rows, peak_rows, search_rows, second_ro
 from insitu.vision.profile import as_image, gather
 from insitu.vision.tracks import candidates, on_longest_track
 
+MIN_PEAK = 40.0
+"""A peak's absolute floor, gray values of 255 (``min_peak``, scaled to the frame's full
+scale)."""
+
 
 @dataclass(frozen=True)
 class LineCentres:
@@ -165,7 +169,7 @@ def _half_width(pre, row, gmax, w, cols) -> np.ndarray:
     return np.minimum(np.maximum(up, down), w)
 
 
-def detect(image, median=3, band=None, window=12, min_peak=40.0, min_contrast=20.0,
+def detect(image, median=3, band=None, window=12, min_peak=MIN_PEAK, min_contrast=20.0,
            snr=6.0, continuity=True, max_jump=4.0, decisive=1.25,
            extend_ends=True, upper=0, *, scale=None, allow=None,
            min_run=0, ridge=False, noise=None, white=None, quiet=None) -> Detection:
