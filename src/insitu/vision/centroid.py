@@ -7,11 +7,11 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from insitu.vision.detect import LineCentres, detect, raw_saturated
+from insitu.vision.detect import MIN_PEAK, LineCentres, detect, raw_saturated
 from insitu.vision.profile import as_image, band_background, fwhm, gather, saturation_level
 
 
-def gray_centroid(image: np.ndarray, k: float = 0.5, min_peak: float = 40.0,
+def gray_centroid(image: np.ndarray, k: float = 0.5, min_peak: float = MIN_PEAK,
                   window: int | None = 12, median: int = 3, *, band=None,
                   min_contrast: float = 20.0, snr: float = 6.0, continuity: bool = True,
                   saturation: float | None = None, subtract: bool = False,

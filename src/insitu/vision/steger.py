@@ -25,7 +25,7 @@ import numpy as np
 from scipy.special import ndtr
 
 from insitu.vision.chains import median_of
-from insitu.vision.detect import LineCentres, detect
+from insitu.vision.detect import MIN_PEAK, LineCentres, detect
 from insitu.vision.profile import (
     FWHM_PER_SIGMA,
     as_image,
@@ -55,7 +55,7 @@ def _segment(mask, at):
     return mask & (label == label[at, cols]) & mask[at, cols]
 
 
-def gaussian_peak(image: np.ndarray, min_peak: float = 40.0, window: int = 12, median: int = 3,
+def gaussian_peak(image: np.ndarray, min_peak: float = MIN_PEAK, window: int = 12, median: int = 3,
                   *, band=None, min_contrast: float = 20.0, snr: float = 6.0,
                   continuity: bool = True, saturation: float | None = None,
                   extend_ends: bool = True, upper: int = 0, scale: float | None = None,
@@ -136,7 +136,7 @@ def _kernels(sigma: float, radius: int) -> np.ndarray:
     return np.stack(gaussian_kernels(sigma, radius))
 
 
-def steger(image: np.ndarray, sigma: float | None = None, min_peak: float = 40.0,
+def steger(image: np.ndarray, sigma: float | None = None, min_peak: float = MIN_PEAK,
            window: int = 12, median: int = 3, *, band=None, min_contrast: float = 20.0,
            snr: float = 6.0, continuity: bool = True, saturation: float | None = None,
            min_curvature: float | None = None, extend_ends: bool = True,
