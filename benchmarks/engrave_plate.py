@@ -3,8 +3,9 @@ each pocket (``marking.engrave_depth``: its floor against the top of the same li
 calibration) is from the truth the simulator removed (``SimWorld.true_depth``, never read by
 the code under test).
 
-The plate: four 2 × 2 mm pockets 0.05, 0.1, 0.2 and 0.5 mm deep cut straight into a blank
-(walls tapered over 30 µm), 5 mm apart along x, scanned once (lines along y, 0.1 mm apart)
+The plate: four 2 × 2 mm pockets (``--size 6``: the issue's 6 × 6 mm) 0.05, 0.1, 0.2 and
+0.5 mm deep cut straight into a blank (walls tapered over 30 µm), 3 mm apart along x
+(:func:`centres_x`), scanned once (lines along y, 0.1 mm apart)
 and each pocket mapped from that one scan. The settings varied: the rig's seed (its camera,
 calibration errors, speckle and noise), the sensor's noise (read noise × 3, a third of the
 electrons per DN), the image speckle's contrast (0.35 → 0.6), the exposure (5 and 20 ms
@@ -26,7 +27,7 @@ The other renderer's pocket plate is not in /work/shared/recordings (the recordi
 listed); only our simulator is scored here.
 
 Run: nice .venv/bin/python benchmarks/engrave_plate.py [--half tune|spent|held] [--seed N]
-[--only NAME] [--spacing MM] [--draws N] [--cross]
+[--only NAME] [--spacing MM] [--draws N] [--size MM] [--cross]
 """
 
 from __future__ import annotations
@@ -54,8 +55,10 @@ from insitu.vision.extract import CentreSettings
 
 RECORDINGS = Path("/work/shared/recordings")
 DEPTHS = (0.05, 0.1, 0.2, 0.5)
-CENTRES_X = (-7.5, -2.5, 2.5, 7.5)
-HALF = 1.0
+SIZE_MM = 2.0
+"""The pockets' side, mm (``--size``; the issue's pockets are 6 mm)."""
+GAP_MM = 3.0
+"""Between two pockets' walls, mm: each pocket's top ring (1.5 mm) clear of the next one."""
 TOLERANCE = 0.005
 SPACING_MM = 0.1
 DRAWS = 0xD4A
@@ -82,17 +85,23 @@ HELD_OUT = (53, 55)
 SEEDS = {"tune": TUNE, "spent": SPENT, "held": HELD_OUT}
 
 
-def cut_plate(world, taper_mm: float = 0.03) -> None:
-    """The four pockets straight into part 0 of ``world``."""
+def centres_x(size_mm: float = SIZE_MM) -> np.ndarray:
+    """(4,) the pockets' centres' x, mm, for pockets ``size_mm`` wide: :data:`GAP_MM` between
+    them, the plate centred on x = 0 (2 mm: −7.5, −2.5, 2.5, 7.5)."""
+    return (np.arange(len(DEPTHS)) - (len(DEPTHS) - 1) / 2) * (size_mm + GAP_MM)
+
+
+def cut_plate(world, taper_mm: float = 0.03, size_mm: float = SIZE_MM) -> None:
+    """The four pockets, ``size_mm`` square, straight into part 0 of ``world``."""
     part = world.parts[0]
     eng = Engraving(ABLATION[part.name], seed=1)
-    eng.cover(part, np.array([min(CENTRES_X) - HALF, -HALF]),
-              np.array([max(CENTRES_X) + HALF, HALF]))
+    half, cxs = size_mm / 2, centres_x(size_mm)
+    eng.cover(part, np.array([cxs.min() - half, -half]), np.array([cxs.max() + half, half]))
     xs, ys = eng.nodes()
     removed = np.zeros((len(ys), len(xs)))
-    for cx, depth in zip(CENTRES_X, DEPTHS):
-        d = np.minimum(np.clip(HALF - np.abs(xs - cx)[None, :], 0, None),
-                       np.clip(HALF - np.abs(ys)[:, None], 0, None))
+    for cx, depth in zip(cxs, DEPTHS):
+        d = np.minimum(np.clip(half - np.abs(xs - cx)[None, :], 0, None),
+                       np.clip(half - np.abs(ys)[:, None], 0, None))
         removed = np.maximum(removed, np.minimum(d / taper_mm, 1.0) * depth)
     eng.removed = removed.astype(np.float32)
     eng.version += 1
@@ -111,7 +120,7 @@ def own_draws(world, seed: int, draw: int) -> None:
 
 def measure_plate(blank: str, seed: int, optics: dict, binning: int,
                   exposure_ms: float | None, draw: int = 0, spacing_mm: float = SPACING_MM,
-                  cross: bool = False):
+                  cross: bool = False, size_mm: float = SIZE_MM):
     """(depth, measured mean, its standard error, stated to :data:`TOLERANCE`, true mean) mm
     of each pocket from one scan of the plate, lines ``spacing_mm`` apart, the renderer's
     random numbers those of ``draw`` (:func:`own_draws`); the scan's station time, s; and
@@ -119,27 +128,28 @@ def measure_plate(blank: str, seed: int, optics: dict, binning: int,
     of crossed lines (:func:`~insitu.services.scan.plan_lines`): each pass measured on its
     own (:func:`measure_depth` takes one line direction), their means weighted by their
     variances; stated when both passes have 8 lines on the floor and 2σ is within
-    :data:`TOLERANCE`."""
+    :data:`TOLERANCE`. ``size_mm``: the pockets' side (:func:`cut_plate`)."""
     rig = default_rig(seed=seed, binning=binning)
     rig = replace(rig, optics=replace(rig.optics, **optics))
     s = DepthSettings(ring_mm=1.5)
-    region = (min(CENTRES_X) - 3, max(CENTRES_X) + 3, -HALF - s.ring_mm, HALF + s.ring_mm)
+    half, cxs = size_mm / 2, centres_x(size_mm)
+    region = (cxs.min() - half - 2, cxs.max() + half + 2, -half - s.ring_mm, half + s.ring_mm)
     with simulated(sim_world(blank, seed=seed, rig=rig)) as st:
         own_draws(st.world, seed, draw)
-        cut_plate(st.world)
+        cut_plate(st.world, size_mm=size_mm)
         scan = scan_live(st, spacing_mm, region, centres=CentreSettings(**DEPTH_CENTRES),
                          room_light=False, exposure_ms=exposure_ms, cross=cross)
         pts, line = scan.cloud.points, scan.cloud.attributes["line"]
         first = along_y(line, region, spacing_mm, cross)
         out, passes = [], []
-        for cx, depth in zip(CENTRES_X, DEPTHS):
-            near = np.abs(pts[:, 0] - cx) <= HALF + s.ring_mm
-            pocket = shapely.box(cx - HALF, -HALF, cx + HALF, HALF)
+        for cx, depth in zip(cxs, DEPTHS):
+            near = np.abs(pts[:, 0] - cx) <= half + s.ring_mm
+            pocket = shapely.box(cx - half, -half, cx + half, half)
             each = [_pocket(pts[near & p], line[near & p], pocket, s, st.rig)
                     for p in ((first, ~first) if cross else (first,))]
             mean, sem, stated = combine(each)
-            g = np.meshgrid(np.linspace(cx - HALF + 0.2, cx + HALF - 0.2, 41),
-                            np.linspace(-HALF + 0.2, HALF - 0.2, 41))
+            g = np.meshgrid(np.linspace(cx - half + 0.2, cx + half - 0.2, 41),
+                            np.linspace(-half + 0.2, half - 0.2, 41))
             truth = float(st.world.true_depth(*g).mean())
             out.append((depth, mean, sem, stated, truth))
             passes.append([(m - truth, e) for m, e, _ in each])
@@ -184,12 +194,15 @@ def main() -> None:
                     help="the scan lines' spacing, mm")
     ap.add_argument("--draws", type=int, default=1,
                     help="scans of each row, each with its own draws")
+    ap.add_argument("--size", type=float, default=SIZE_MM,
+                    help="the pockets' side, mm (6: the issue's 6 × 6 mm pockets)")
     ap.add_argument("--cross", action="store_true",
                     help="a second pass of crossed lines over the plate, each pass measured "
                     "on its own and their depths combined")
     args = ap.parse_args()
     t = Table(title=f"measured pocket depth − truth ± its 1σ, µm; ✗: not stated to ±5 µm "
-              f"(2σ) (insitu's simulator, one scan a plate, lines {args.spacing:g} mm apart"
+              f"(2σ) (insitu's simulator, one scan a plate of {args.size:g} mm pockets, lines "
+              f"{args.spacing:g} mm apart"
               f"{', a crossed pass' if args.cross else ''})")
     for col in ("settings", "blank", "seed", "draw", *(f"{d:g} mm" for d in DEPTHS),
                 "station s"):
@@ -203,13 +216,14 @@ def main() -> None:
             for j in range(args.draws):
                 draw = k + len(VARIATIONS) * j
                 r, station_s, passes = measure_plate(blank, seed, optics, binning, exposure,
-                                                     draw, args.spacing, args.cross)
+                                                     draw, args.spacing, args.cross,
+                                                     args.size)
                 rows += [((m - tr) * 1e3, sem * 1e3, ok) for _, m, sem, ok, tr in r]
                 t.add_row(name, blank, str(seed), str(draw),
                           *(f"{(m - tr) * 1e3:+.1f} ±{sem * 1e3:.1f}{'' if ok else ' ✗'}"
                             for _, m, sem, ok, tr in r), f"{station_s:.1f}")
-                console.print(f"{name} {blank} seed {seed} draw {draw} spacing "
-                              f"{args.spacing:g} mm, station {station_s:.1f} s: {r}; "
+                console.print(f"{name} {blank} seed {seed} draw {draw} size {args.size:g} mm "
+                              f"spacing {args.spacing:g} mm, station {station_s:.1f} s: {r}; "
                               f"each pass's (error, σ): {passes}", highlight=False)
     console.print(t)
     err, sem, ok = (np.array(c) for c in zip(*rows))

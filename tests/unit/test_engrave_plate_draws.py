@@ -60,3 +60,12 @@ def test_the_passes_combine_by_their_variances():
     assert not combine([(0.002, 0.002, True), (0.004, 0.004, False)])[2]
     assert not combine([(0.002, 0.004, True), (0.002, 0.004, True)])[2]
     assert combine([(0.002, 0.002, True)]) == (0.002, 0.002, True)
+
+
+def test_the_plate_keeps_its_2_mm_pockets_and_spaces_wider_ones():
+    """2 mm pockets at x = −7.5, −2.5, 2.5, 7.5 (the plate every spent seed was run on); 6 mm
+    ones 9 mm apart, each one's top ring (1.5 mm) clear of the next pocket, on a 40 mm blank."""
+    ep = benchmark("engrave_plate")
+    assert np.allclose(ep.centres_x(2.0), [-7.5, -2.5, 2.5, 7.5])
+    c = ep.centres_x(6.0)
+    assert np.all(np.diff(c) - 6.0 >= 2 * 1.5) and c.max() + 3.0 + 2 < 20.0
