@@ -48,17 +48,12 @@ from insitu.reconstruct.plan import scan_lines
 from insitu.services.pocket import DEPTH_CENTRES
 from insitu.services.scan import plan_lines, scan_live
 from insitu.services.station import simulated
-from insitu.sim.ablation import ABLATION, Engraving
+from insitu.sim.pocket_plate import DEPTHS, SIZE_MM, centres_x, cut_plate, pocket_truth
 from insitu.sim.rig import default_rig
 from insitu.sim.world import sim_world
 from insitu.vision.extract import CentreSettings
 
 RECORDINGS = Path("/work/shared/recordings")
-DEPTHS = (0.05, 0.1, 0.2, 0.5)
-SIZE_MM = 2.0
-"""The pockets' side, mm (``--size``; the issue's pockets are 6 mm)."""
-GAP_MM = 3.0
-"""Between two pockets' walls, mm: each pocket's top ring (1.5 mm) clear of the next one."""
 TOLERANCE = 0.005
 SPACING_MM = 0.1
 DRAWS = 0xD4A
@@ -83,30 +78,6 @@ f08d089, 41 and 43 on f7116a9, 45 and 47 on 6ab7c44, 49 and 51 on d47dbf0)."""
 HELD_OUT = (53, 55)
 """Fixed before any result on them was seen; run once, at the end, on the final code."""
 SEEDS = {"tune": TUNE, "spent": SPENT, "held": HELD_OUT}
-
-
-def centres_x(size_mm: float = SIZE_MM) -> np.ndarray:
-    """(4,) the pockets' centres' x, mm, for pockets ``size_mm`` wide: :data:`GAP_MM` between
-    them, the plate centred on x = 0 (2 mm: −7.5, −2.5, 2.5, 7.5)."""
-    return (np.arange(len(DEPTHS)) - (len(DEPTHS) - 1) / 2) * (size_mm + GAP_MM)
-
-
-def cut_plate(world, taper_mm: float = 0.03, size_mm: float = SIZE_MM) -> None:
-    """The four pockets, ``size_mm`` square, straight into part 0 of ``world``."""
-    part = world.parts[0]
-    eng = Engraving(ABLATION[part.name], seed=1)
-    half, cxs = size_mm / 2, centres_x(size_mm)
-    eng.cover(part, np.array([cxs.min() - half, -half]), np.array([cxs.max() + half, half]))
-    xs, ys = eng.nodes()
-    removed = np.zeros((len(ys), len(xs)))
-    for cx, depth in zip(cxs, DEPTHS):
-        d = np.minimum(np.clip(half - np.abs(xs - cx)[None, :], 0, None),
-                       np.clip(half - np.abs(ys)[:, None], 0, None))
-        removed = np.maximum(removed, np.minimum(d / taper_mm, 1.0) * depth)
-    eng.removed = removed.astype(np.float32)
-    eng.version += 1
-    world.engravings[0] = eng
-    world.invalidate()
 
 
 def own_draws(world, seed: int, draw: int) -> None:
@@ -141,16 +112,14 @@ def measure_plate(blank: str, seed: int, optics: dict, binning: int,
                          room_light=False, exposure_ms=exposure_ms, cross=cross)
         pts, line = scan.cloud.points, scan.cloud.attributes["line"]
         first = along_y(line, region, spacing_mm, cross)
-        out, passes = [], []
-        for cx, depth in zip(cxs, DEPTHS):
+        out, passes, truths = [], [], pocket_truth(st.world)
+        for k, (cx, depth) in enumerate(zip(cxs, DEPTHS)):
             near = np.abs(pts[:, 0] - cx) <= half + s.ring_mm
             pocket = shapely.box(cx - half, -half, cx + half, half)
             each = [_pocket(pts[near & p], line[near & p], pocket, s, st.rig)
                     for p in ((first, ~first) if cross else (first,))]
             mean, sem, stated = combine(each)
-            g = np.meshgrid(np.linspace(cx - half + 0.2, cx + half - 0.2, 41),
-                            np.linspace(-half + 0.2, half - 0.2, 41))
-            truth = float(st.world.true_depth(*g).mean())
+            truth = truths[k]["true_mean_mm"]
             out.append((depth, mean, sem, stated, truth))
             passes.append([(m - truth, e) for m, e, _ in each])
     return out, scan.summary.station_s, passes

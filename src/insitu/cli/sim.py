@@ -19,6 +19,7 @@ from insitu.cli.common import (
 from insitu.cli.options import PartPose, RecordCross
 from insitu.formats.project import SIM_BINNING
 from insitu.services import record
+from insitu.sim.pocket_plate import PLATES
 from insitu.sim.workpieces import WORKPIECES
 
 app = typer.Typer(help="The simulated rig.", no_args_is_help=True,
@@ -29,8 +30,11 @@ Kind = Annotated[str, typer.Argument(help="scan | height-calibration | field-cal
                                            "camera-calibration")]
 Output = Annotated[Path, typer.Option("-o", "--output",
                                       help="Folder to write (replaced if it exists).")]
-Part = Annotated[str, typer.Option(help=f"For a scan: {', '.join(WORKPIECES)} or a mesh file "
-                                        "(STL/PLY/OBJ).")]
+Part = Annotated[str, typer.Option(help=f"For a scan: {', '.join(WORKPIECES)}, "
+                                        f"{', '.join(PLATES)} (a stainless blank with four "
+                                        "2 × 2 mm pockets 0.05 … 0.5 mm deep at x = −7.5, "
+                                        "−2.5, 2.5, 7.5 mm; truth.json gives each one's true "
+                                        "depth) or a mesh file (STL/PLY/OBJ).")]
 Spacing = Annotated[float, typer.Option(callback=bounded("spacing_mm"),
                                         help="Scan line spacing, mm.")]
 Region = Annotated[tuple[float, float, float, float] | None, typer.Option(

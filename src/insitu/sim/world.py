@@ -68,7 +68,9 @@ class SimWorld:
     head's last list left it (mm on z = 0); ``materials``: parts' materials by name in place
     of the catalogue's (:class:`insitu.sim.scene.Scene`); ``engravings``: the material removed
     from ``parts[i]`` (:class:`~insitu.sim.ablation.Engraving`, only parts of an ablation
-    material); ``beam``: the true marking laser."""
+    material); ``beam``: the true marking laser; ``plate``: the side (mm) of the pocket
+    plate's pockets cut in ``parts[0]`` (:func:`~insitu.sim.pocket_plate.cut_plate`; None:
+    none)."""
 
     rig: SimRig
     parts: list[Workpiece] = field(default_factory=list)
@@ -83,6 +85,7 @@ class SimWorld:
     materials: dict | None = None
     engravings: dict[int, Engraving] = field(default_factory=dict)
     beam: MarkingBeam = field(default_factory=MarkingBeam)
+    plate: float | None = None
     _renderer: Renderer | None = field(default=None, repr=False)
     _built: dict = field(default_factory=dict, repr=False)  # i → (engraving, version, part)
     _rng: np.random.Generator | None = field(default=None, repr=False)
@@ -203,11 +206,15 @@ class SimWorld:
 
     def truth(self, **extra) -> dict:
         """The true rig and parts, each with its pose ``T_world_part`` (4 × 4: its own frame
-        → world), with ``extra`` (a recording's ``truth.json``)."""
+        → world), the pockets of a plate (:func:`~insitu.sim.pocket_plate.pocket_truth`) when
+        it has them, with ``extra`` (a recording's ``truth.json``)."""
+        from insitu.sim.pocket_plate import pocket_truth
+
+        pockets = {"pockets": pocket_truth(self)} if self.plate is not None else {}
         return {"rig": self.rig.truth_dict(),
                 "workpieces": [{"name": p.name, "params": p.params,
                                 "T_world_part": part_matrix(p).tolist()} for p in self.parts],
-                **extra}
+                **pockets, **extra}
 
     def place_part(self, pose: Pose, index: int = 0) -> None:
         """Put part ``index`` down again at ``pose`` (x, y mm, turn about z, degrees)."""
@@ -223,13 +230,19 @@ class SimWorld:
     def clear_table(self) -> None:
         """Take the parts off the table (for a calibration on the plate)."""
         self.parts = []
-        self.engravings, self._built = {}, {}
+        self.engravings, self._built, self.plate = {}, {}, None
         self.invalidate()
 
 
 def sim_world(workpiece: str = "step-block", seed: int = 0, binning: int = 1,
               rig: SimRig | None = None, pose: Pose = (0.0, 0.0, 0.0)) -> SimWorld:
-    """The simulated station with ``workpiece`` (a catalogue name or a mesh file) on the
-    table at ``pose`` (x, y mm, turn about z, degrees)."""
-    return SimWorld(rig or default_rig(seed=seed, binning=binning),
-                    parts=[workpiece_at(workpiece, pose)], seed=seed)
+    """The simulated station with ``workpiece`` (a catalogue name, a plate of
+    :data:`~insitu.sim.pocket_plate.PLATES` or a mesh file) on the table at ``pose`` (x, y mm,
+    turn about z, degrees)."""
+    from insitu.sim.pocket_plate import PLATES, cut_plate
+
+    world = SimWorld(rig or default_rig(seed=seed, binning=binning),
+                     parts=[workpiece_at(PLATES.get(workpiece, workpiece), pose)], seed=seed)
+    if workpiece in PLATES:
+        cut_plate(world)
+    return world
