@@ -12,6 +12,7 @@ import typer.core
 from insitu.cli import calibrate as calibrate_cmd
 from insitu.cli import camera as camera_cmd
 from insitu.cli import centres as centres_cmd
+from insitu.cli import depth as depth_cmd
 from insitu.cli import engrave as engrave_cmd
 from insitu.cli import field as field_cmd
 from insitu.cli import inspect as inspect_cmd
@@ -40,6 +41,7 @@ app.command("locate")(locate_cmd.locate)
 app.command("record")(record_cmd.record)
 app.command("centres")(centres_cmd.centres)
 app.command("engrave")(engrave_cmd.engrave)
+app.command("depth")(depth_cmd.depth)
 calibrate_cmd.app.command("camera")(camera_cmd.camera)
 calibrate_cmd.app.command("field")(field_cmd.field)
 app.add_typer(calibrate_cmd.app, name="calibrate")

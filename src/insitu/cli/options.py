@@ -8,9 +8,11 @@ from typing import Annotated
 
 import typer
 
-from insitu.cli.common import bounded, bounded_each
+from insitu.cli.common import bounded, bounded_each, fail, progress_bar
+from insitu.formats.validation import one_of
 from insitu.marking.modes import PROJECTIONS
 from insitu.patterns.load import sources_help
+from insitu.reconstruct.height_models import HEIGHT_MODELS
 
 # options of every command that marks on the rig (``insitu job run``, ``insitu mark --run``)
 Resume = Annotated[bool, typer.Option(help="Continue an interrupted job: the paths its "
@@ -41,6 +43,17 @@ CrossSpacing = Annotated[float | None, typer.Option(
     callback=bounded("spacing_mm"),
     help="With --cross: the crossed lines' spacing, mm (default: --spacing; the crossed "
          "pass only has to cross the edges, so it may be coarser).")]
+# how a scan's heights are measured (``insitu scan``, ``insitu depth``)
+HeightCal = Annotated[Path | None, typer.Option(
+    "--height-cal", help="Height calibration: a recorded folder or a file from 'insitu "
+                         "calibrate height' (a live scan with --rig: default the rig "
+                         "file's).")]
+Method = Annotated[str | None, typer.Option(
+    help="plane: light-plane intersection only (Method 1); height: with the height "
+         "calibration (Method 2, the default when --height-cal is given).")]
+HeightModel = Annotated[str | None, typer.Option(
+    help="With --method height: " + " or ".join(f"{k} ({m.description})" for k, m in
+                                                 HEIGHT_MODELS.items()) + ".")]
 RecordCross = Annotated[bool | None, typer.Option(
     "--cross/--no-cross",
     help="Scan: a second, crossed pass (lines at 45° to x; default off). Height calibration: "
@@ -126,3 +139,21 @@ def rig_height_calibration(rig: Path) -> Path | None:
 
     cfg = load_json_model(rig, RigConfig)
     return cfg.resolve(cfg.height_calibration)
+
+
+def scan_calibration(method: str | None, height_cal: Path | None, height_model: str | None):
+    """The height calibration a scan uses (None: Method 1), its options (:data:`Method`,
+    :data:`HeightCal`, :data:`HeightModel`) checked."""
+    from insitu import services
+
+    method = method or ("height" if height_cal is not None else "plane")
+    if method not in ("plane", "height"):
+        fail(f"--method {method!r}: expected 'plane' or 'height'")
+    if method == "height" and height_cal is None:
+        fail("--method height needs --height-cal HCAL")
+    if height_model is not None and height_model not in HEIGHT_MODELS:
+        fail(f"--height-model {height_model!r}: expected {one_of(HEIGHT_MODELS)}")
+    if method != "height":
+        return None
+    with progress_bar("height calibration") as progress:
+        return services.load_height_calibration(height_cal, progress)

@@ -13,28 +13,21 @@ from insitu.cli.common import bounded, check_output, console, fail, one_line_err
 from insitu.cli.options import (
     CrossScan,
     CrossSpacing,
+    HeightCal,
+    HeightModel,
+    Method,
     PartPose,
     Rig,
     Seed,
     Workpiece,
     rig_height_calibration,
+    scan_calibration,
 )
 from insitu.formats.atomic import atomic_write_bytes
 from insitu.formats.project import SIM_BINNING
-from insitu.formats.validation import one_of
-from insitu.reconstruct.height_models import HEIGHT_MODELS
 
 Output = Annotated[Path, typer.Option("-o", "--output", help="Point cloud to write (.ply).")]
 Replay = Annotated[Path | None, typer.Option(help="Recorded scan folder to reconstruct.")]
-HeightCal = Annotated[Path | None, typer.Option(
-    "--height-cal", help="Height calibration: a recorded folder or a file from 'insitu "
-                         "calibrate height' (default with --rig: the rig file's).")]
-Method = Annotated[str | None, typer.Option(
-    help="plane: light-plane intersection only (Method 1); height: with the height "
-         "calibration (Method 2, the default when --height-cal is given).")]
-HeightModel = Annotated[str | None, typer.Option(
-    help="With --method height: " + " or ".join(f"{k} ({m.description})" for k, m in
-                                                 HEIGHT_MODELS.items()) + ".")]
 Spacing = Annotated[float, typer.Option(callback=bounded("spacing_mm"), help="Line spacing, mm.")]
 Region = Annotated[tuple[float, float, float, float] | None, typer.Option(
     metavar="X0 X1 Y0 Y1", callback=bounded("position_mm"),
@@ -84,7 +77,7 @@ def scan(out: Output, replay: Replay = None, height_cal: HeightCal = None,
         check_output(room_light, ".png")
     if height_cal is None and rig is not None and replay is None:
         height_cal = rig_height_calibration(rig)
-    cal = _calibration(method, height_cal, height_model)
+    cal = scan_calibration(method, height_cal, height_model)
     packing = {"heights": _heights(part_heights)}
     with progress_bar("scanning", "lines") as progress:
         if replay is not None:
@@ -103,23 +96,6 @@ def scan(out: Output, replay: Replay = None, height_cal: HeightCal = None,
         from insitu.reconstruct.preview import save_cloud_picture
         save_cloud_picture(result.cloud, check_output(preview, ".png"), title=out.name)
     console.print(_table(result, out, room_light))
-
-
-def _calibration(method: str | None, height_cal: Path | None, height_model: str | None):
-    """The height calibration a scan uses (None: Method 1), its options checked."""
-    from insitu import services
-
-    method = method or ("height" if height_cal is not None else "plane")
-    if method not in ("plane", "height"):
-        fail(f"--method {method!r}: expected 'plane' or 'height'")
-    if method == "height" and height_cal is None:
-        fail("--method height needs --height-cal HCAL")
-    if height_model is not None and height_model not in HEIGHT_MODELS:
-        fail(f"--height-model {height_model!r}: expected {one_of(HEIGHT_MODELS)}")
-    if method != "height":
-        return None
-    with progress_bar("height calibration") as progress:
-        return services.load_height_calibration(height_cal, progress)
 
 
 def _heights(part_heights) -> tuple[float, float] | None:

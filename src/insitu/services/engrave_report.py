@@ -32,8 +32,10 @@ def _save(fig, path: Path) -> None:
     atomic_write_bytes(path, buf.getvalue())
 
 
-def depth_picture(path: Path, dm: DepthMap, target_mm: float, title: str) -> None:
-    """The depth map (µm) of ``dm``'s cells, the target in the middle of the colour scale."""
+def depth_picture(path: Path, dm: DepthMap, target_mm: float, title: str,
+                  centre: str = "target") -> None:
+    """The depth map (µm) of ``dm``'s cells, ``target_mm`` in the middle of the colour scale
+    (named ``centre`` on it)."""
     from matplotlib.figure import Figure
 
     c = dm.cells
@@ -56,7 +58,7 @@ def depth_picture(path: Path, dm: DepthMap, target_mm: float, title: str) -> Non
             ax.plot(gx[m], gy[m], marker, color="k", ms=3, ls="", label=label)
     if (dm.state >= HIDDEN).any() or (dm.state == WALL).any():
         ax.legend(loc="upper right", fontsize=7)
-    fig.colorbar(im, ax=ax, label=f"depth, µm (target {target_mm * 1e3:g})")
+    fig.colorbar(im, ax=ax, label=f"depth, µm ({centre} {target_mm * 1e3:g})")
     ax.set_xlabel("x, mm")
     ax.set_ylabel("y, mm")
     ax.set_title(title, fontsize=9)

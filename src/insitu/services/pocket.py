@@ -32,6 +32,13 @@ DEPTH_CENTRES = dict(method="gaussian", smooth_half_window=0, smooth_grains=0.0)
 smoothed along it, so a wall's step is not carried onto the floor beside it."""
 
 
+def depth_centres(height_cal: HeightCalibration | None) -> CentreSettings:
+    """The centre finding of a depth scan: the height calibration's (None: the default)
+    with :data:`DEPTH_CENTRES` over it."""
+    base = centre_settings(height_cal).to_dict() if height_cal is not None else {}
+    return CentreSettings(**{**base, **DEPTH_CENTRES})
+
+
 LINES_ALONG = np.array([0.0, 1.0])
 """The direction a depth scan's lines run in (world x, y): along y, stepped across x."""
 
@@ -63,10 +70,9 @@ def measure_pocket(station: Station, region, settings: DepthSettings | None = No
     Cancelled when ``cancel`` is set; MeasurementError when too few points land on the top
     or the floor."""
     s = settings or DepthSettings()
-    centres = CentreSettings(**{**(centre_settings(height_cal).to_dict()
-                                   if height_cal is not None else {}), **DEPTH_CENTRES})
     scan = scan_live(station, spacing_mm, pocket_scan_region(region, s), height_cal,
-                     centres=centres, cancel=cancel, progress=progress, room_light=False)
+                     centres=depth_centres(height_cal), cancel=cancel, progress=progress,
+                     room_light=False)
     dm = measure_depth(scan.cloud.points, scan.cloud.attributes["line"], region, s, outline,
                        cells, viewpoints(station.rig), expected_mm)
     return PocketScan(dm, scan.summary.frames)

@@ -181,7 +181,8 @@ def scan_replay(folder: str | Path, height_cal: HeightCalibration | None = None,
                 cancel: threading.Event | None = None,
                 on_frame: FrameCallback | None = None,
                 heights: tuple[float, float] | None = None,
-                packing: Packing = Packing()) -> ScanResult:
+                packing: Packing = Packing(),
+                centres: CentreSettings | None = None) -> ScanResult:
     """Reconstruct a recorded scan sequence (docs/formats.md, recorded sequence): Method 1,
     or Method 2 when a height calibration is given. The recording is a camera like any other
     (:class:`~insitu.devices.replay.ReplayCamera`): the same loop as a live scan; frames of
@@ -189,7 +190,8 @@ def scan_replay(folder: str | Path, height_cal: HeightCalibration | None = None,
     RecordedPlan`: the lines of a frame told apart by their bands, for the ``heights`` given,
     else those its survey frame measured). Its ambient frame, when it has one, gives each
     point its ``ambient`` grey value; its laser-off frames of packed exposures are
-    subtracted in part from those frames, as a live scan's."""
+    subtracted in part from those frames, as a live scan's. ``centres``: how line centres are
+    found (None: as the height calibration was made, else the default)."""
     t0 = StepTimer(None)
     seq = Sequence.open(folder)
     if seq.kind != "scan":
@@ -202,7 +204,7 @@ def scan_replay(folder: str | Path, height_cal: HeightCalibration | None = None,
                         head.lens == "telecentric", tuple(head.z_range_mm), height_cal, model,
                         str(seq.folder), cross=any(abs(a[0] - b[0]) > 1e-9
                                                    for f in drawn for a, b in f),
-                        pixel_bits=seq.pixel_bits)
+                        centres=centres, pixel_bits=seq.pixel_bits)
     return _scan(ReplayCamera(seq), RecordedHead(), plan, rec, t0, "frames", progress, cancel,
                  on_frame, room_light=seq.read_ambient, excess=recorded_excess(seq))
 

@@ -1,0 +1,87 @@
+"""``insitu depth``: the depth of pockets measured on a recorded scan."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated
+
+import typer
+from rich.table import Table
+
+from insitu.cli.common import bounded, console, fail, missing, one_line_errors, progress_bar, warn
+from insitu.cli.options import HeightCal, HeightModel, Method, scan_calibration
+
+Scan = Annotated[Path, typer.Argument(
+    metavar="SCAN", help="A recorded scan folder (replayed with the depth scan's line "
+                         "centres: across the line only), or a measured cloud (.ply) that "
+                         "keeps each point's line.")]
+Pockets = Annotated[list[str] | None, typer.Option(
+    "--pocket", metavar="X0,Y0,X1,Y1",
+    help="A pocket's box, mm, world frame (again for more pockets).")]
+Tolerance = Annotated[float, typer.Option(
+    callback=bounded("depth_mm"),
+    help="A depth is stated when its 2σ is within this, mm.")]
+Report = Annotated[Path | None, typer.Option(
+    "-o", "--output", metavar="REPORT_DIR",
+    help="Also write a report folder (replaced as a whole): depth.json and each measured "
+         "pocket's depth map (pocket-K.png).")]
+
+
+@one_line_errors
+def depth(scan: Scan, pocket: Pockets = None, height_cal: HeightCal = None,
+          method: Method = None, height_model: HeightModel = None,
+          tolerance: Tolerance = 0.005, out: Report = None) -> None:
+    """Measure each pocket's depth on a scan: its floor against the top around it, from the
+    same scan lines (lines ≤ 0.1 mm apart across a 2 mm pocket give it the 8 lines clear of
+    its walls it needs). A pocket that cannot be measured gets one line saying why and what
+    to do; the others are still measured. Exit 1 when none is."""
+    import shapely
+
+    from insitu.services.depth import load_depth_scan, measure_pockets, write_report
+
+    if not pocket:
+        missing("--pocket: missing; expected X0,Y0,X1,Y1 (mm), once per pocket")
+    regions = [shapely.box(*_box(p)) for p in pocket]
+    if out is not None and not out.parent.is_dir():
+        fail(f"-o {out}: folder {out.parent} does not exist")
+    cal = scan_calibration(method, height_cal, height_model)
+    with progress_bar("replaying", "frames") as progress:
+        data = load_depth_scan(scan, cal, height_model, progress)
+    results = measure_pockets(data, regions, tolerance)
+    console.print(_table(results, scan, data, tolerance))
+    for p in results:
+        if p.refused is not None:
+            warn(f"pocket {p.name}: not measured: {p.refused}")
+    if out is not None:
+        write_report(out, results, tolerance, str(scan), data.method)
+        console.print(f"report → {out}", highlight=False)
+    if all(p.map is None for p in results):
+        fail("no pocket measured")
+
+
+def _box(text: str) -> tuple[float, float, float, float]:
+    """"x0,y0,x1,y1" (mm) → the box, checked."""
+    try:
+        x0, y0, x1, y1 = (float(v) for v in text.replace(" ", ",").split(",") if v)
+    except ValueError:
+        fail(f"--pocket {text!r}: expected X0,Y0,X1,Y1 (four numbers, mm)")
+    if not (x0 < x1 and y0 < y1):
+        fail(f"--pocket {text!r}: expected X0 < X1 and Y0 < Y1")
+    return x0, y0, x1, y1
+
+
+def _table(results, scan: Path, data, tolerance: float) -> Table:
+    table = Table(title=f"depth → {scan} ({data.method}; stated: 2σ within "
+                        f"±{tolerance * 1e3:g} µm)")
+    for col in ("pocket, mm", "depth mm", "±1σ µm", "stated", "floor lines", "points"):
+        table.add_column(col, justify="right")
+    for p in results:
+        if p.map is None:
+            table.add_row(p.name, "—", "—", "not measured", "—", "—")
+        else:
+            table.add_row(p.name, f"{p.mean_mm:.4f}", f"{p.sem_mm * 1e3:.1f}",
+                          "yes" if p.stated else "no", str(p.map.floor_lines),
+                          f"{len(p.map.floor):,}")
+    if data.viewpoints is None:
+        table.caption = "the cloud names no camera: cells a wall hides are not told apart"
+    return table
