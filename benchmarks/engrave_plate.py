@@ -27,7 +27,7 @@ The other renderer's pocket plate is not in /work/shared/recordings (the recordi
 listed); only our simulator is scored here.
 
 Run: nice .venv/bin/python benchmarks/engrave_plate.py [--half tune|spent|held] [--seed N]
-[--only NAME] [--spacing MM] [--draws N] [--size MM] [--cross]
+[--only NAME] [--spacing MM] [--draws N] [--size MM] [--taper MM] [--cross]
 """
 
 from __future__ import annotations
@@ -48,7 +48,7 @@ from insitu.reconstruct.plan import scan_lines
 from insitu.services.pocket import DEPTH_CENTRES
 from insitu.services.scan import plan_lines, scan_live
 from insitu.services.station import simulated
-from insitu.sim.pocket_plate import DEPTHS, SIZE_MM, centres_x, cut_plate, pocket_truth
+from insitu.sim.pocket_plate import DEPTHS, SIZE_MM, TAPER_MM, centres_x, cut_plate, pocket_truth
 from insitu.sim.rig import default_rig
 from insitu.sim.world import sim_world
 from insitu.vision.extract import CentreSettings
@@ -91,7 +91,8 @@ def own_draws(world, seed: int, draw: int) -> None:
 
 def measure_plate(blank: str, seed: int, optics: dict, binning: int,
                   exposure_ms: float | None, draw: int = 0, spacing_mm: float = SPACING_MM,
-                  cross: bool = False, size_mm: float = SIZE_MM):
+                  cross: bool = False, size_mm: float = SIZE_MM,
+                  taper_mm: float = TAPER_MM):
     """(depth, measured mean, its standard error, stated to :data:`TOLERANCE`, true mean) mm
     of each pocket from one scan of the plate, lines ``spacing_mm`` apart, the renderer's
     random numbers those of ``draw`` (:func:`own_draws`); the scan's station time, s; and
@@ -99,7 +100,8 @@ def measure_plate(blank: str, seed: int, optics: dict, binning: int,
     of crossed lines (:func:`~insitu.services.scan.plan_lines`): each pass measured on its
     own (:func:`measure_depth` takes one line direction), their means weighted by their
     variances; stated when both passes have 8 lines on the floor and 2σ is within
-    :data:`TOLERANCE`. ``size_mm``: the pockets' side (:func:`cut_plate`)."""
+    :data:`TOLERANCE`. ``size_mm``, ``taper_mm``: the pockets' side and how far their walls
+    slope (:func:`cut_plate`)."""
     rig = default_rig(seed=seed, binning=binning)
     rig = replace(rig, optics=replace(rig.optics, **optics))
     s = DepthSettings(ring_mm=1.5)
@@ -107,7 +109,7 @@ def measure_plate(blank: str, seed: int, optics: dict, binning: int,
     region = (cxs.min() - half - 2, cxs.max() + half + 2, -half - s.ring_mm, half + s.ring_mm)
     with simulated(sim_world(blank, seed=seed, rig=rig)) as st:
         own_draws(st.world, seed, draw)
-        cut_plate(st.world, size_mm=size_mm)
+        cut_plate(st.world, taper_mm=taper_mm, size_mm=size_mm)
         scan = scan_live(st, spacing_mm, region, centres=CentreSettings(**DEPTH_CENTRES),
                          room_light=False, exposure_ms=exposure_ms, cross=cross)
         pts, line = scan.cloud.points, scan.cloud.attributes["line"]
@@ -165,6 +167,8 @@ def main() -> None:
                     help="scans of each row, each with its own draws")
     ap.add_argument("--size", type=float, default=SIZE_MM,
                     help="the pockets' side, mm (6: the issue's 6 × 6 mm pockets)")
+    ap.add_argument("--taper", type=float, default=TAPER_MM,
+                    help="how far the pockets' walls slope across, mm")
     ap.add_argument("--cross", action="store_true",
                     help="a second pass of crossed lines over the plate, each pass measured "
                     "on its own and their depths combined")
@@ -186,13 +190,13 @@ def main() -> None:
                 draw = k + len(VARIATIONS) * j
                 r, station_s, passes = measure_plate(blank, seed, optics, binning, exposure,
                                                      draw, args.spacing, args.cross,
-                                                     args.size)
+                                                     args.size, args.taper)
                 rows += [((m - tr) * 1e3, sem * 1e3, ok) for _, m, sem, ok, tr in r]
                 t.add_row(name, blank, str(seed), str(draw),
                           *(f"{(m - tr) * 1e3:+.1f} ±{sem * 1e3:.1f}{'' if ok else ' ✗'}"
                             for _, m, sem, ok, tr in r), f"{station_s:.1f}")
                 console.print(f"{name} {blank} seed {seed} draw {draw} size {args.size:g} mm "
-                              f"spacing {args.spacing:g} mm, station {station_s:.1f} s: {r}; "
+                              f"taper {args.taper:g} mm spacing {args.spacing:g} mm, station {station_s:.1f} s: {r}; "
                               f"each pass's (error, σ): {passes}", highlight=False)
     console.print(t)
     err, sem, ok = (np.array(c) for c in zip(*rows))
