@@ -8,7 +8,7 @@ from typing import Annotated
 import typer
 from rich.table import Table
 
-from insitu.cli.common import bounded, console, fail, missing, one_line_errors, progress_bar, warn
+from insitu.cli.common import bounded, console, fail, one_line_errors, progress_bar, warn
 from insitu.cli.options import HeightCal, HeightModel, Method, scan_calibration
 
 Scan = Annotated[Path, typer.Argument(
@@ -17,7 +17,10 @@ Scan = Annotated[Path, typer.Argument(
                          "keeps each point's line.")]
 Pockets = Annotated[list[str] | None, typer.Option(
     "--pocket", metavar="X0,Y0,X1,Y1",
-    help="A pocket's box, mm, world frame (again for more pockets).")]
+    help="A pocket's box, mm, world frame (again for more pockets). Without any: the "
+         "pockets are found — regions of ≥ 0.5 mm² below the scan's top by more than 3 × "
+         "its noise, each outlined where the depth crosses half the pocket's (a rectangle, "
+         "turned as it lies, where it is one).")]
 Tolerance = Annotated[float, typer.Option(
     callback=bounded("depth_mm"),
     help="A depth is stated when its 2σ is within this, mm.")]
@@ -33,22 +36,27 @@ def depth(scan: Scan, pocket: Pockets = None, height_cal: HeightCal = None,
           tolerance: Tolerance = 0.005, out: Report = None) -> None:
     """Measure each pocket's depth on a scan: its floor against the top around it, from the
     same scan lines (lines ≤ 0.1 mm apart across a 2 mm pocket give it the 8 lines clear of
-    its walls it needs). A pocket that cannot be measured gets one line saying why and what
-    to do; the others are still measured. Exit 1 when none is."""
+    its walls it needs); without --pocket, on the pockets it finds. A pocket that cannot be
+    measured gets one line saying why and what to do; the others are still measured. Exit 1
+    when none is."""
     import shapely
 
     from insitu.services.depth import load_depth_scan, measure_pockets, write_report
+    from insitu.services.depth_find import find_pockets
 
-    if not pocket:
-        missing("--pocket: missing; expected X0,Y0,X1,Y1 (mm), once per pocket")
-    regions = [shapely.box(*_box(p)) for p in pocket]
+    regions = [shapely.box(*_box(p)) for p in pocket or ()]
     if out is not None and not out.parent.is_dir():
         fail(f"-o {out}: folder {out.parent} does not exist")
     cal = scan_calibration(method, height_cal, height_model)
     with progress_bar("replaying", "frames") as progress:
         data = load_depth_scan(scan, cal, height_model, progress)
+    if not regions:
+        regions = find_pockets(data.points, data.line)
+        if not regions:
+            fail(f"{scan}: no pocket found (no region of 0.5 mm² below the top by more than "
+                 "3 × its noise): give the pockets with --pocket X0,Y0,X1,Y1")
     results = measure_pockets(data, regions, tolerance)
-    console.print(_table(results, scan, data, tolerance))
+    console.print(_table(results, scan, data, tolerance, found=not pocket))
     for p in results:
         if p.refused is not None:
             warn(f"pocket {p.name}: not measured: {p.refused}")
@@ -70,16 +78,20 @@ def _box(text: str) -> tuple[float, float, float, float]:
     return x0, y0, x1, y1
 
 
-def _table(results, scan: Path, data, tolerance: float) -> Table:
+def _table(results, scan: Path, data, tolerance: float, found: bool) -> Table:
+    from insitu.services.depth_find import describe
+
     table = Table(title=f"depth → {scan} ({data.method}; stated: 2σ within "
                         f"±{tolerance * 1e3:g} µm)")
-    for col in ("pocket, mm", "depth mm", "±1σ µm", "stated", "floor lines", "points"):
+    for col in ("pocket, mm", *(("found",) if found else ()), "depth mm", "±1σ µm", "stated",
+                "floor lines", "points"):
         table.add_column(col, justify="right")
     for p in results:
+        head = (p.name, describe(p.region)) if found else (p.name,)
         if p.map is None:
-            table.add_row(p.name, "—", "—", "not measured", "—", "—")
+            table.add_row(*head, "—", "—", "not measured", "—", "—")
         else:
-            table.add_row(p.name, f"{p.mean_mm:.4f}", f"{p.sem_mm * 1e3:.1f}",
+            table.add_row(*head, f"{p.mean_mm:.4f}", f"{p.sem_mm * 1e3:.1f}",
                           "yes" if p.stated else "no", str(p.map.floor_lines),
                           f"{len(p.map.floor):,}")
     if data.viewpoints is None:
