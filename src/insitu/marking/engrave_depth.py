@@ -20,9 +20,11 @@ it crosses); each line's share, estimated from its points' residuals against the
 around them, is removed before the map is made; what is left of it counts in the cells'
 standard errors, which count lines, not points (:mod:`insitu.marking.engrave_stats`).
 
-The marks' frame: an engraving's map first shifts the points along the lines so that the
-walls they cross sit on the outline (the camera's calibration places them ~0.1 mm off there:
-:mod:`insitu.marking.engrave_register`), so each cell reads the floor its passes go to.
+The marks' frame: the points are first shifted along the lines so that the walls they cross
+sit on the outline (the camera's calibration places them ~0.1 mm off there:
+:mod:`insitu.marking.engrave_register`), so each cell reads the floor its passes go to and
+the floor kept clear of a crossed wall is clear of the wall itself (unregistered, the floor
+within 0.1 mm of it, 13–75 µm short, pulled the simulated plate's pockets short).
 
 The map: a cell's depth is the Gaussian-weighted mean of the floor points around its centre
 (σ ``kernel_mm``), with its standard error (and the error of the kernel's averaging over more
@@ -73,7 +75,8 @@ class DepthSettings:
     ``min_lines``: scan lines with trusted floor points for any cell to count as measured;
     ``register_mm``: the points are shifted along the lines to put the walls they cross on the
     outline, the shift searched within ± this (0: not registered;
-    :mod:`~insitu.marking.engrave_register`)."""
+    :mod:`~insitu.marking.engrave_register`; the simulated plate's spent scans, 212 pockets:
+    mean error −1.11 → −0.36 µm, |err|/σ rms 1.13 → 1.03)."""
 
     wall_band_mm: float = 0.2
     bias_per_depth: float = 0.25
@@ -85,7 +88,7 @@ class DepthSettings:
     cell_mm: float = 0.25
     kernel_mm: float = 0.2
     min_points: float = 8.0
-    register_mm: float = 0.0
+    register_mm: float = 0.4
 
 
 @dataclass(frozen=True)

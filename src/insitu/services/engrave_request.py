@@ -18,7 +18,7 @@ NO_HEIGHT_CAL = ("warning: no height calibration: the depth scans' scale is the 
                  "alone, good to about ±2 % of the depth")
 
 
-LOOP_DEPTH = DepthSettings(faced_band_mm=0.0, register_mm=0.4)
+LOOP_DEPTH = DepthSettings(faced_band_mm=0.0)
 """How the engraving maps its pocket between rounds: the cells beside the wall facing the
 camera are kept (a pocket's depth leaves them out; in the loop that took beech's 6 × 6 mm
 pocket's 95 % from 21.3 / 22.8 to 21.9 / 25.1 µm on the tune seeds 0 / 2)."""
