@@ -76,7 +76,9 @@ SPENT = (5, 7, 9, 21, 31, 33, 41, 43, 45, 47, 49, 51)
 """Held out before and looked at: they tune now (9 and 21 run once on 4bb92d8, 31 and 33 on
 f08d089, 41 and 43 on f7116a9, 45 and 47 on 6ab7c44, 49 and 51 on d47dbf0)."""
 HELD_OUT = (53, 55)
-"""Fixed before any result on them was seen; run once, at the end, on the final code."""
+"""Fixed before any result on them was seen (at stop 45); run once, every variation, at both
+sizes (``--size 2`` and ``--size 6``), on the depth code of 208640d (the pocket's depth
+registered on its crossed walls)."""
 SEEDS = {"tune": TUNE, "spent": SPENT, "held": HELD_OUT}
 
 
