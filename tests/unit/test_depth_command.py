@@ -56,7 +56,7 @@ def test_a_pocket_is_measured_from_its_floor_and_the_top_of_the_same_lines():
 def test_each_pocket_it_cannot_measure_says_why_and_what_to_do():
     """Outside the scan; reaching beyond its points; 0.3 mm lines (5 on the floor, fewer
     than 8: the spacing that gives 8, ≤ 0.19 mm); lines only over the pocket (no top);
-    a crossed scan. Each one line, the pocket beside it still measured."""
+    a crossed scan; a box between two lines. Each one line, the pocket beside it still measured."""
     good = shapely.box(-1, -1, 1, 1)
     cases = [
         (_scan(), shapely.box(8, -1, 10, 1), "lies outside the scan"),
@@ -64,6 +64,7 @@ def test_each_pocket_it_cannot_measure_says_why_and_what_to_do():
         (_scan(spacing=0.3), good, "scan with lines ≤ 0.19 mm apart"),
         (_scan(x=(-1.15, 1.15), y=(-1.15, 1.15)), good, "on the top around the pocket"),
         (_scan(cross=True), good, "more than one direction"),
+        (_scan(spacing=1.5), shapely.box(0.1, -1, 0.4, 1), "lie on its floor"),
     ]
     for scan, region, why in cases:
         results = measure_pockets(scan, [region, good], 0.005)
@@ -106,7 +107,12 @@ def test_the_command_tables_each_pocket_and_exits_1_when_none_is_measured(tmp_pa
     run = CliRunner().invoke(app, ["depth", str(tmp_path / "cloud.ply"), "--pocket",
                                    "8,-1,10,1"])
     assert run.exit_code == 1 and "no pocket measured" in run.output
-    for bad in ("1,1,-1,-1", "1,2,3"):
+    corners = "-1,-1,1,-1,1,1,-1,1"       # the same pocket as its outline's corners
+    run = CliRunner().invoke(app, ["depth", str(tmp_path / "cloud.ply"), "--pocket", corners,
+                                   "-o", str(tmp_path / "corners")])
+    again = json.loads((tmp_path / "corners" / "depth.json").read_text())["pockets"][0]
+    assert run.exit_code == 0 and again["depth_mm"] == first["depth_mm"]
+    for bad in ("1,1,-1,-1", "1,2,3", "0,0,1,1,0,1,1,0"):
         run = CliRunner().invoke(app, ["depth", str(tmp_path / "cloud.ply"), "--pocket", bad])
         assert run.exit_code == 1 and f"--pocket {bad!r}" in run.output
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Annotated
 
+import numpy as np
 import typer
 from rich.table import Table
 
@@ -17,7 +18,8 @@ Scan = Annotated[Path, typer.Argument(
                          "keeps each point's line.")]
 Pockets = Annotated[list[str] | None, typer.Option(
     "--pocket", metavar="X0,Y0,X1,Y1",
-    help="A pocket's box, mm, world frame (again for more pockets). Without any: the "
+    help="A pocket's box, mm, world frame, or its outline's corners X1,Y1,X2,Y2,X3,Y3,… (a "
+         "turned pocket; again for more pockets). Without any: the "
          "pockets are found — regions of ≥ 0.5 mm² below the scan's top by more than 3 × "
          "its noise, each outlined where the depth crosses half the pocket's (a rectangle, "
          "turned as it lies, where it is one).")]
@@ -39,12 +41,10 @@ def depth(scan: Scan, pocket: Pockets = None, height_cal: HeightCal = None,
     its walls it needs); without --pocket, on the pockets it finds. A pocket that cannot be
     measured gets one line saying why and what to do; the others are still measured. Exit 1
     when none is."""
-    import shapely
-
     from insitu.services.depth import load_depth_scan, measure_pockets, write_report
     from insitu.services.depth_find import find_pockets
 
-    regions = [shapely.box(*_box(p)) for p in pocket or ()]
+    regions = [_region(p) for p in pocket or ()]
     if out is not None and not out.parent.is_dir():
         fail(f"-o {out}: folder {out.parent} does not exist")
     cal = scan_calibration(method, height_cal, height_model)
@@ -67,15 +67,24 @@ def depth(scan: Scan, pocket: Pockets = None, height_cal: HeightCal = None,
         fail("no pocket measured")
 
 
-def _box(text: str) -> tuple[float, float, float, float]:
-    """"x0,y0,x1,y1" (mm) → the box, checked."""
+def _region(text: str):
+    """"x0,y0,x1,y1" (mm): the box; "x1,y1,x2,y2,x3,y3,…": the polygon of those corners;
+    checked."""
+    import shapely
+
     try:
-        x0, y0, x1, y1 = (float(v) for v in text.replace(" ", ",").split(",") if v)
+        v = [float(t) for t in text.replace(" ", ",").split(",") if t]
     except ValueError:
-        fail(f"--pocket {text!r}: expected X0,Y0,X1,Y1 (four numbers, mm)")
-    if not (x0 < x1 and y0 < y1):
-        fail(f"--pocket {text!r}: expected X0 < X1 and Y0 < Y1")
-    return x0, y0, x1, y1
+        v = []
+    if len(v) == 4:
+        if not (v[0] < v[2] and v[1] < v[3]):
+            fail(f"--pocket {text!r}: expected X0 < X1 and Y0 < Y1")
+        return shapely.box(*v)
+    poly = shapely.Polygon(np.reshape(v, (-1, 2))) if len(v) >= 6 and len(v) % 2 == 0 else None
+    if poly is None or not poly.is_valid or poly.area <= 0:
+        fail(f"--pocket {text!r}: expected X0,Y0,X1,Y1 (a box) or the corners of a simple "
+             "outline X1,Y1,X2,Y2,X3,Y3,… (mm)")
+    return poly
 
 
 def _table(results, scan: Path, data, tolerance: float, found: bool) -> Table:

@@ -114,6 +114,11 @@ def _measure(scan: DepthScan, region, hull, tolerance_mm: float, s: DepthSetting
     near = ((scan.points[:, 0] >= x0 - pad) & (scan.points[:, 0] <= x1 + pad)
             & (scan.points[:, 1] >= y0 - pad) & (scan.points[:, 1] <= y1 + pad))
     pts, line = scan.points[near], scan.line[near]
+    inner = shapely.contains_xy(region.buffer(-s.parallel_band_mm), pts[:, 0], pts[:, 1])
+    if inner.sum() < 5:
+        raise MeasurementError(f"{int(inner.sum())} of the scan's points lie on its floor "
+                               f"{s.parallel_band_mm:g} mm clear of its walls: check its box, "
+                               "or scan it with lines closer together")
     dm = measure_depth(pts, line, region, s, viewpoints=scan.viewpoints)
     mean, sem = dm.mean_depth()
     if dm.floor_lines < s.min_lines:
