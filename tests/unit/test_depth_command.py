@@ -134,3 +134,12 @@ def test_a_failed_report_leaves_the_folder_as_it_was(tmp_path, monkeypatch):
     assert sorted(p.name for p in tmp_path.iterdir()) == ["cloud.ply", "report"]
     assert [p.name for p in report.iterdir()] == ["depth.json"]
     assert (report / "depth.json").read_text() == "old"
+
+
+def test_without_a_height_calibration_the_pockets_far_out_in_the_field_are_named():
+    from insitu.services.depth import plane_scale_warning
+
+    near, far = shapely.box(-1, -1, 1, 1), shapely.box(40, -1, 42, 1)
+    assert "beyond" not in plane_scale_warning([near])
+    text = plane_scale_warning([near, far])
+    assert "40 -1 42 1" in text and "-1 -1 1 1" not in text and "--height-cal" in text

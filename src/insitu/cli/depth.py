@@ -41,7 +41,12 @@ def depth(scan: Scan, pocket: Pockets = None, height_cal: HeightCal = None,
     its walls it needs); without --pocket, on the pockets it finds. A pocket that cannot be
     measured gets one line saying why and what to do; the others are still measured. Exit 1
     when none is."""
-    from insitu.services.depth import load_depth_scan, measure_pockets, write_report
+    from insitu.services.depth import (
+        load_depth_scan,
+        measure_pockets,
+        plane_scale_warning,
+        write_report,
+    )
     from insitu.services.depth_find import find_pockets
 
     regions = [_region(p) for p in pocket or ()]
@@ -56,6 +61,8 @@ def depth(scan: Scan, pocket: Pockets = None, height_cal: HeightCal = None,
             fail(f"{scan}: no pocket found (no region of 0.5 mm² below the top by more than "
                  "3 × its noise): give the pockets with --pocket X0,Y0,X1,Y1")
     results = measure_pockets(data, regions, tolerance)
+    if cal is None and scan.is_dir():
+        warn(plane_scale_warning(regions))
     console.print(_table(results, scan, data, tolerance, found=not pocket))
     for p in results:
         if p.refused is not None:

@@ -26,6 +26,11 @@ from insitu.services.engrave_report import depth_picture
 from insitu.services.pocket import depth_centres
 from insitu.services.scan import scan_replay
 
+PLANE_SCALE_MM = 30.0
+"""Within this distance of the field's centre (world x, y = 0) the light plane alone holds a
+depth's scale to ≈ 0.4 %; nearer the edge the head's distortion tilts the light and a depth
+can be ≈ 4 % off (docs/accuracy.md, the height scale a depth carries)."""
+
 
 @dataclass(frozen=True)
 class DepthScan:
@@ -83,6 +88,20 @@ def load_depth_scan(path: Path, height_cal: HeightCalibration | None = None,
         raise FormatError(f"{path}: the cloud has no line index per point (`line`), which "
                           "the depth needs: measure from the recorded scan folder")
     return DepthScan(cloud.points, cloud.attributes["line"], None, "as the cloud was measured")
+
+
+def plane_scale_warning(regions: list) -> str:
+    """The warning for depths measured without a height calibration (Method 1): the scale
+    it holds, and the pockets of ``regions`` (shapely, world mm) farther than
+    :data:`PLANE_SCALE_MM` from the field's centre, where it holds less."""
+    far = [r for r in regions if np.hypot(*r.centroid.coords[0]) > PLANE_SCALE_MM]
+    where = ""
+    if far:
+        names = ", ".join(" ".join(f"{v:g}" for v in np.round(r.bounds, 1)) for r in far)
+        where = (f"; the pocket{'s' if len(far) > 1 else ''} at {names} lie beyond it, where "
+                 "the depth can be ≈ 4 % off")
+    return (f"no height calibration: the depths' scale is the light plane's alone, ≈ 0.4 % "
+            f"within {PLANE_SCALE_MM:g} mm of the field's centre{where}: give --height-cal")
 
 
 def measure_pockets(scan: DepthScan, regions: list, tolerance_mm: float,
