@@ -143,3 +143,18 @@ def test_without_a_height_calibration_the_pockets_far_out_in_the_field_are_named
     assert "beyond" not in plane_scale_warning([near])
     text = plane_scale_warning([near, far])
     assert "40 -1 42 1" in text and "-1 -1 1 1" not in text and "--height-cal" in text
+
+
+def test_many_points_inside_a_pocket_that_cannot_be_floor_are_said():
+    """Two lines inside the pocket read 3 mm above the top (another light path taken for the
+    line): the depth is the floor's, and the pocket's result says how many points were left
+    out; a clean scan says nothing."""
+    pts, line = _cloud()
+    ghost = (np.abs(pts[:, 0] + 0.8) < 0.06) & (np.abs(pts[:, 1]) < 0.9)
+    pts[ghost, 2] += 3.0
+    (p,) = measure_pockets(DepthScan(pts, line, None, "plane"), [shapely.box(-1, -1, 1, 1)],
+                           0.005)
+    assert abs(p.mean_mm - 0.2) < 3 * p.sem_mm
+    assert p.map.not_floor >= ghost.sum() - 2 and str(p.map.not_floor) in p.off_floor
+    (clean,) = measure_pockets(_scan(), [shapely.box(-1, -1, 1, 1)], 0.005)
+    assert clean.off_floor is None

@@ -67,6 +67,8 @@ def depth(scan: Scan, pocket: Pockets = None, height_cal: HeightCal = None,
     for p in results:
         if p.refused is not None:
             warn(f"pocket {p.name}: not measured: {p.refused}")
+        elif p.off_floor is not None:
+            warn(f"pocket {p.name}: {p.off_floor}")
     if out is not None:
         write_report(out, results, tolerance, str(scan), data.method)
         console.print(f"report → {out}", highlight=False)

@@ -51,9 +51,23 @@ from scipy.spatial import cKDTree
 
 from insitu.errors import MeasurementError
 from insitu.marking.engrave_register import wall_shift
-from insitu.marking.engrave_stats import cell_means, line_sem, line_terms, texture_var
+from insitu.marking.engrave_stats import (
+    cell_means,
+    floor_like,
+    line_sem,
+    line_terms,
+    texture_var,
+)
 from insitu.marking.engrave_top import top_model
-from insitu.marking.engrave_walls import MAX_CROSSING, clear, line_axes, line_direction, unreachable
+from insitu.marking.engrave_walls import (
+    MAX_CROSSING,
+    beyond_feet,
+    clear,
+    line_axes,
+    line_direction,
+    unreachable,
+    wall_feet,
+)
 
 STATES = ("measured", "wall", "hidden", "unmeasured")
 MEASURED, WALL, HIDDEN, UNMEASURED = range(4)
@@ -201,7 +215,8 @@ class DepthMap:
     lines as independent samples or, where larger, the scatter along them; the top's own
     error beside it; NaN: from ``point_sigma``),
     ``floor_lines``: the scan lines the floor's points lie on; ``shift_mm``: the shift along
-    the lines taken off the points (:attr:`DepthSettings.register_mm`)."""
+    the lines taken off the points (:attr:`DepthSettings.register_mm`); ``not_floor``: the
+    points inside the pocket that cannot be its floor, left out (:func:`floor_like`)."""
 
     cells: PocketCells
     depth: np.ndarray
@@ -214,6 +229,7 @@ class DepthMap:
     mean_sem: float = float("nan")
     floor_lines: int = 0
     shift_mm: float = 0.0
+    not_floor: int = 0
 
     def mean_depth(self) -> tuple[float, float]:
         """The floor's mean depth and its standard error, mm (points beyond 4σ left out)."""
@@ -275,11 +291,15 @@ def measure_depth(points: np.ndarray, line: np.ndarray, region, settings: DepthS
         dist, top, floor = _split(points, outline, s)
         top_fit = top_model(points[top], line[top])
     d = top_fit.at(points[floor], line[floor]) - points[floor, 2]
+    real = floor_like(d, line[floor], top_fit.rms)
+    floor = np.flatnonzero(floor)[real]
+    d = d[real]
     zone_d = _local_median(points[floor, :2], d, s.kernel_mm)
     along = line_direction(points[floor, :2], line[floor])
     camera = None if viewpoints is None else viewpoints[0][:2]
-    trusted = clear(outline.wall_distances(points[floor, 0], points[floor, 1], along, camera),
-                    zone_d, s)
+    wd = outline.wall_distances(points[floor, 0], points[floor, 1], along, camera)
+    feet = wall_feet(wd, d)
+    trusted = clear(wd, zone_d, s) & beyond_feet(wd, feet)
     fx, fy, d = points[floor, 0][trusted], points[floor, 1][trusted], d[trusted]
     fline = np.unique(line[floor][trusted], return_inverse=True)[1]
     raw = d
@@ -293,7 +313,7 @@ def measure_depth(points: np.ndarray, line: np.ndarray, region, settings: DepthS
     near = _nearest_depth(depth, ok) if expected_mm is None else np.where(ok, depth,
                                                                           expected_mm)
     walls = outline.wall_distances(*cells.centres(), along, camera)
-    state[ok & clear(walls, near, s)] = MEASURED
+    state[ok & clear(walls, near, s) & beyond_feet(walls, feet)] = MEASURED
     state[cells.inside & ~clear(walls, 0.0, s)] = WALL
     if viewpoints is not None:
         blocked = unreachable(cells, near, outline, viewpoints)
@@ -305,7 +325,7 @@ def measure_depth(points: np.ndarray, line: np.ndarray, region, settings: DepthS
     pos = np.column_stack([fx, fy])[keep] @ along
     mean_sem = line_sem(raw[keep], fline[keep], pos, top_fit.sem(floor_pts))
     return DepthMap(cells, depth, sem, neff, state, floor_pts, top_fit.rms, sigma, mean_sem,
-                    int(np.unique(fline[keep]).size), shift)
+                    int(np.unique(fline[keep]).size), shift, int((~real).sum()))
 
 
 def _split(points: np.ndarray, outline: Outline, s: DepthSettings):

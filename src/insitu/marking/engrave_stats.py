@@ -164,3 +164,27 @@ def texture_var(depth: np.ndarray, ok: np.ndarray, cell_mm: float, kernel_mm: fl
     smooth = gaussian_filter(np.where(ok, depth, 0.0), kernel_mm / cell_mm)
     diff = (depth - smooth / np.maximum(w, 1e-9))[ok]
     return float(np.mean(diff ** 2)) * (1.0 - cell_mm ** 2 / (12.0 * kernel_mm ** 2)) ** 2
+
+
+NOT_FLOOR_SIGMAS = 8.0
+"""How far (robust σ of the pocket's floor points, or of the top's residuals where larger)
+a floor point, or a line's median, may lie from the floor's median, and a point above the
+top (the top's residual rms), before it cannot be floor."""
+
+
+def floor_like(d: np.ndarray, line: np.ndarray, top_rms: float) -> np.ndarray:
+    """(N,) bool: which of a pocket's points inside its outline can be its floor, from their
+    depths ``d`` (N,) mm below the top and their scan ``line`` (N,): not above the top by more
+    than its noise allows (``top_rms`` mm × :data:`NOT_FLOOR_SIGMAS` / 2), nor farther from the
+    pocket's median depth than :data:`NOT_FLOOR_SIGMAS` × its robust spread, nor on a line
+    whose median is. A light path the camera mistakes for the line (the simulated plate's
+    0.5 mm pocket, walls sloping over 0.3 mm: one line 3 mm above the top) is one line's
+    points far off; kept, its line's term spreads it over the map."""
+    if len(d) == 0:
+        return np.ones(0, bool)
+    med = np.median(d)
+    spread = max(1.4826 * np.median(np.abs(d - med)), top_rms, 1e-6)
+    ok = (d >= -NOT_FLOOR_SIGMAS / 2 * top_rms) & (np.abs(d - med) <= NOT_FLOOR_SIGMAS * spread)
+    lines, inv = np.unique(line, return_inverse=True)
+    line_med = np.array([np.median(d[inv == k]) for k in range(len(lines))])
+    return ok & (np.abs(line_med - med) <= NOT_FLOOR_SIGMAS * spread)[inv]

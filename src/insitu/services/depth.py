@@ -45,6 +45,10 @@ class DepthScan:
     method: str
 
 
+OFF_FLOOR_SHARE = 0.02
+"""Points left out as not floor beyond this share of a pocket's floor points are said."""
+
+
 @dataclass(frozen=True)
 class PocketDepth:
     """A pocket ``region`` (shapely, world mm) and its depth ``map`` with ``mean_mm``,
@@ -57,6 +61,20 @@ class PocketDepth:
     sem_mm: float = float("nan")
     stated: bool = False
     refused: str | None = None
+
+    @property
+    def off_floor(self) -> str | None:
+        """A line saying how many of the points inside the pocket could not be its floor and
+        were left out (:func:`~insitu.marking.engrave_stats.floor_like`), when they are more
+        than :data:`OFF_FLOOR_SHARE` of its floor's points; None otherwise."""
+        if self.map is None:
+            return None
+        n, floor = self.map.not_floor, len(self.map.floor)
+        if n <= OFF_FLOOR_SHARE * max(floor, 1):
+            return None
+        return (f"{n} points inside it lie above the top or far off its floor's depth (the "
+                f"camera took another light path for the line, e.g. a mirrored one): left out "
+                f"of its {floor} floor points; look at its depth map")
 
     @property
     def name(self) -> str:
@@ -187,7 +205,8 @@ def write_report(folder: Path, pockets: list[PocketDepth], tolerance_mm: float,
                               f"{p.sem_mm * 1e3:.1f} µm (1σ)", centre="mean")
                 row |= {"depth_mm": round(p.mean_mm, 6), "sigma_mm": round(p.sem_mm, 6),
                         "stated": p.stated, "floor_lines": p.map.floor_lines,
-                        "floor_points": len(p.map.floor), "picture": picture}
+                        "floor_points": len(p.map.floor),
+                        "not_floor_points": p.map.not_floor, "picture": picture}
             rows.append(row)
         atomic_write_text(tmp / "depth.json", json.dumps(
             {"scan": source, "method": method, "tolerance_mm": tolerance_mm,
