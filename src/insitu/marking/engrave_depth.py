@@ -11,9 +11,13 @@ offset(line) − z.
 The wall's neighbourhood: a point within ``wall_band_mm`` of the outline is not top; the
 floor counts only beyond the walls' bias zones, wider for the walls the scan lines cross than
 for those parallel to them, and growing with the depth
-(:mod:`insitu.marking.engrave_walls`). A floor point's error is
-shared along its line (the speckle of the floor it crosses, about 0.01 mm): a floor crossed
-by fewer than ``min_lines`` lines with trusted points is not measured at all.
+(:mod:`insitu.marking.engrave_walls`), and beyond where each kind of wall reaches the floor's
+level as measured (walls that slope wide: :func:`~insitu.marking.engrave_walls.wall_feet`).
+Points inside the outline that cannot be floor (above the top, or far off the floor's depth:
+:func:`~insitu.marking.engrave_stats.floor_like`) are left out first and counted. A floor
+point's error is shared along its line (the speckle of the floor it crosses, about 0.01 mm):
+a floor crossed by fewer than ``min_lines`` lines with trusted points is not measured at
+all.
 
 The lines: a line's floor points also share an error its top points do not see (the floor
 it crosses); each line's share, estimated from its points' residuals against the other lines'
