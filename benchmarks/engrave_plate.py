@@ -116,7 +116,7 @@ def measure_plate(blank: str, seed: int, optics: dict, binning: int,
                          room_light=False, exposure_ms=exposure_ms, cross=cross)
         pts, line = scan.cloud.points, scan.cloud.attributes["line"]
         first = along_y(line, region, spacing_mm, cross)
-        out, passes, truths = [], [], pocket_truth(st.world)
+        out, passes, truths = [], [], pocket_truth(st.world, taper_mm)
         for k, (cx, depth) in enumerate(zip(cxs, DEPTHS)):
             near = np.abs(pts[:, 0] - cx) <= half + s.ring_mm
             pocket = shapely.box(cx - half, -half, cx + half, half)

@@ -36,3 +36,12 @@ def test_a_blank_has_no_pockets_in_its_truth():
 def test_the_plate_benchmark_measures_the_simulators_plate():
     ep = benchmark("engrave_plate")
     assert ep.cut_plate is pocket_plate.cut_plate and ep.centres_x is pocket_plate.centres_x
+
+
+def test_the_truth_of_a_plate_whose_walls_slope_wide_is_its_floor_not_its_wall():
+    """Walls sloping over 0.3 mm: the truth is the floor's depth as cut (taken 0.2 mm inside
+    the walls it would average 0.1 mm of wall, 2.8–27.8 µm shallow)."""
+    world = sim_world("blank-stainless")
+    pocket_plate.cut_plate(world, taper_mm=0.3)
+    truth = [p["true_mean_mm"] for p in pocket_plate.pocket_truth(world, taper_mm=0.3)]
+    assert np.allclose(truth, pocket_plate.DEPTHS, atol=1e-6)

@@ -21,7 +21,8 @@ GAP_MM = 3.0
 """Between two pockets' walls, mm: each pocket's top ring (1.5 mm) clear of the next one."""
 TAPER_MM = 0.03
 TRUTH_INSET_MM = 0.2
-"""The true mean depth is taken this far inside the walls (beyond their taper)."""
+"""The true mean depth is taken this far inside the walls (beyond their taper), or as far as
+they slope where that is wider."""
 
 
 def centres_x(size_mm: float = SIZE_MM) -> np.ndarray:
@@ -50,14 +51,16 @@ def cut_plate(world, taper_mm: float = TAPER_MM, size_mm: float = SIZE_MM) -> No
     world.invalidate()
 
 
-def pocket_truth(world) -> list[dict]:
+def pocket_truth(world, taper_mm: float = TAPER_MM) -> list[dict]:
     """Each pocket of the plate cut in part 0 of ``world`` (:func:`cut_plate`): ``depth_mm``
     (as cut), ``corners`` (4, 2) world x, y mm of its outline, ``box`` [x0, y0, x1, y1] world
     mm (its bounding box: the outline itself when the part is not turned) and
     ``true_mean_mm``, the world's removed depth (``SimWorld.true_depth``) averaged over
-    41 × 41 points of its floor :data:`TRUTH_INSET_MM` inside the walls."""
+    41 × 41 points of its floor :data:`TRUTH_INSET_MM` inside the walls, or ``taper_mm`` (how
+    far they slope, :func:`cut_plate`) where that is wider: a pocket's depth is its floor's,
+    the wall is not the floor."""
     part, half = world.parts[0], world.plate / 2
-    inset = TRUTH_INSET_MM
+    inset = max(TRUTH_INSET_MM, taper_mm)
     out = []
     for cx, depth in zip(centres_x(world.plate), DEPTHS):
         g = np.meshgrid(np.linspace(cx - half + inset, cx + half - inset, 41),
