@@ -79,7 +79,12 @@ HELD_OUT = (53, 55)
 """Fixed before any result on them was seen (at stop 45); run once, every variation, at both
 sizes (``--size 2`` and ``--size 6``), on the depth code of 208640d (the pocket's depth
 registered on its crossed walls)."""
-SEEDS = {"tune": TUNE, "spent": SPENT, "held": HELD_OUT}
+HELD_OUT_WALLS = (61, 63)
+"""Fixed before any result on them was seen (2026-12-05, beside :data:`HELD_OUT`, which
+another run holds): run once, base and beech, ``--size 2``, ``--taper 0.03`` and ``0.3``, on
+the depth code that leaves out points that cannot be floor and begins the floor at the walls'
+measured feet."""
+SEEDS = {"tune": TUNE, "spent": SPENT, "held": HELD_OUT, "held-walls": HELD_OUT_WALLS}
 
 
 def own_draws(world, seed: int, draw: int) -> None:
@@ -160,7 +165,7 @@ def _pocket(pts: np.ndarray, line: np.ndarray, pocket, s: DepthSettings, rig
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--half", choices=tuple(SEEDS), default="tune",
-                    help="which seeds: tune (0), spent (tune too), held (held out)")
+                    help="which seeds: tune (0), spent (tune too), held, held-walls (held out)")
     ap.add_argument("--seed", type=int, help="only this seed of the half")
     ap.add_argument("--only", action="append", help="only the runs of this name")
     ap.add_argument("--spacing", type=float, default=SPACING_MM,
