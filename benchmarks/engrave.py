@@ -252,9 +252,9 @@ def walls(args, folder: Path) -> None:
     console.print(t)
 
 
-HELD_OUT_SEED = 23
+HELD_OUT_SEED = 25
 """The fresh held-out seed of ``loop``: fixed before anything was run on it, run once at the
-end. Seeds 0, 2, … tune; 1, 3, 5, 7, 11, 13, 15, 17, 19, 21 were held out and are spent
+end. Seeds 0, 2, … tune; 1, 3, 5, 7, 11, 13, 15, 17, 19, 21, 23 were held out and are spent
 (looked at)."""
 
 
