@@ -217,7 +217,8 @@ class DepthMap:
     ``top_rms``: the top model's residual rms, ``point_sigma``: a floor point's depth
     scatter (robust), ``mean_sem``: the standard error of :meth:`mean_depth` (the floor's
     lines as independent samples or, where larger, the scatter along them; the top's own
-    error beside it; NaN: from ``point_sigma``),
+    error and the lines' shared one beside it: :func:`~.engrave_stats.line_sem`; NaN: from
+    ``point_sigma``),
     ``floor_lines``: the scan lines the floor's points lie on; ``shift_mm``: the shift along
     the lines taken off the points (:attr:`DepthSettings.register_mm`); ``not_floor``: the
     points inside the pocket that cannot be its floor, left out (:func:`floor_like`)."""
