@@ -54,14 +54,14 @@ def test_a_pocket_is_measured_from_its_floor_and_the_top_of_the_same_lines():
 
 
 def test_each_pocket_it_cannot_measure_says_why_and_what_to_do():
-    """Outside the scan; reaching beyond its points; 0.3 mm lines (5 on the floor, fewer
-    than 8: the spacing that gives 8, ≤ 0.19 mm); lines only over the pocket (no top);
-    a crossed scan; a box between two lines. Each one line, the pocket beside it still measured."""
+    """Outside the scan; reaching beyond its points; 1.2 mm lines (one on the floor);
+    lines only over the pocket (no top); a crossed scan; a box between two lines. Each one
+    line, the pocket beside it still measured."""
     good = shapely.box(-1, -1, 1, 1)
     cases = [
         (_scan(), shapely.box(8, -1, 10, 1), "lies outside the scan"),
         (_scan(), shapely.box(2, -1, 4, 1), "reaches beyond the scan's points"),
-        (_scan(spacing=0.3), good, "scan with lines ≤ 0.19 mm apart"),
+        (_scan(spacing=1.2), good, "1 scan line crosses its floor"),
         (_scan(x=(-1.15, 1.15), y=(-1.15, 1.15)), good, "on the top around the pocket"),
         (_scan(cross=True), good, "more than one direction"),
         (_scan(spacing=1.5), shapely.box(0.1, -1, 0.4, 1), "lie on its floor"),
@@ -72,12 +72,17 @@ def test_each_pocket_it_cannot_measure_says_why_and_what_to_do():
     assert measure_pockets(_scan(), [shapely.box(8, -1, 10, 1), good], 0.005)[1].map is not None
 
 
-def test_the_spacing_asked_for_gives_the_pocket_its_lines():
-    """The spacing a refusal names (0.3 mm lines: ≤ 0.19 mm) measures the pocket."""
+def test_a_floor_of_few_lines_is_measured_not_stated_and_names_the_spacing_that_would():
+    """0.3 mm lines put 5 on the floor, fewer than the 8 a statement needs: the depth and
+    its σ (wider by Student's t for 5 lines) come out, not stated, with the spacing that
+    gives 8 (≤ 0.19 mm), which does."""
     (p,) = measure_pockets(_scan(spacing=0.3), [shapely.box(-1, -1, 1, 1)], 0.005)
-    asked = float(p.refused.split("≤ ")[1].split(" mm")[0])
+    assert p.refused is None and not p.stated and 2 <= p.map.floor_lines < 8
+    assert abs(p.mean_mm - 0.2) < 3 * p.sem_mm and "depth not stated" in p.note
+    asked = float(p.note.split("≤ ")[1].split(" mm")[0])
+    assert asked == pytest.approx(0.19, abs=0.011)
     (q,) = measure_pockets(_scan(spacing=asked), [shapely.box(-1, -1, 1, 1)], 0.005)
-    assert q.map is not None and q.map.floor_lines >= 8
+    assert q.map is not None and q.map.floor_lines >= 8 and q.note is None
 
 
 def test_a_cloud_needs_its_lines_and_takes_no_height_calibration(tmp_path):

@@ -37,10 +37,12 @@ def depth(scan: Scan, pocket: Pockets = None, height_cal: HeightCal = None,
           method: Method = None, height_model: HeightModel = None,
           tolerance: Tolerance = 0.005, out: Report = None) -> None:
     """Measure each pocket's depth on a scan: its floor against the top around it, from the
-    same scan lines (lines ≤ 0.1 mm apart across a 2 mm pocket give it the 8 lines clear of
-    its walls it needs); without --pocket, on the pockets it finds. A pocket that cannot be
-    measured gets one line saying why and what to do; the others are still measured. Exit 1
-    when none is."""
+    same scan lines; without --pocket, on the pockets it finds. A depth is stated when 2σ is
+    within the tolerance and its floor holds the 8 lines clear of its walls a statement needs
+    (lines ≤ 0.1 mm apart across a 2 mm pocket); from fewer lines (at least 2) it is given
+    with its σ, not stated, and one line naming the spacing that would. A pocket that cannot
+    be measured gets one line saying why and what to do; the others are still measured.
+    Exit 1 when none is."""
     from insitu.services.depth import (
         load_depth_scan,
         measure_pockets,
@@ -67,8 +69,10 @@ def depth(scan: Scan, pocket: Pockets = None, height_cal: HeightCal = None,
     for p in results:
         if p.refused is not None:
             warn(f"pocket {p.name}: not measured: {p.refused}")
-        elif p.off_floor is not None:
-            warn(f"pocket {p.name}: {p.off_floor}")
+            continue
+        for line in (p.note, p.off_floor):
+            if line is not None:
+                warn(f"pocket {p.name}: {line}")
     if out is not None:
         write_report(out, results, tolerance, str(scan), data.method)
         console.print(f"report → {out}", highlight=False)
@@ -110,7 +114,8 @@ def _table(results, scan: Path, data, tolerance: float, found: bool) -> Table:
             table.add_row(*head, "—", "—", "not measured", "—", "—")
         else:
             table.add_row(*head, f"{p.mean_mm:.4f}", f"{p.sem_mm * 1e3:.1f}",
-                          "yes" if p.stated else "no", str(p.map.floor_lines),
+                          "yes" if p.stated else "no, few lines" if p.note else "no",
+                          str(p.map.floor_lines),
                           f"{len(p.map.floor):,}")
     if data.viewpoints is None:
         table.caption = "the cloud names no camera: cells a wall hides are not told apart"

@@ -52,14 +52,17 @@ OFF_FLOOR_SHARE = 0.02
 @dataclass(frozen=True)
 class PocketDepth:
     """A pocket ``region`` (shapely, world mm) and its depth ``map`` with ``mean_mm``,
-    ``sem_mm`` (1σ) and ``stated`` (2σ within the tolerance); or, when it could not be
-    measured, ``refused``: why and what to do (``map`` None)."""
+    ``sem_mm`` (1σ) and ``stated`` (2σ within the tolerance); ``note``: why a measured depth
+    is not stated whatever its σ (its floor holds fewer lines than a statement needs), and
+    what to do; or, when it could not be measured, ``refused``: why and what to do (``map``
+    None)."""
 
     region: object
     map: DepthMap | None = None
     mean_mm: float = float("nan")
     sem_mm: float = float("nan")
     stated: bool = False
+    note: str | None = None
     refused: str | None = None
 
     @property
@@ -159,7 +162,10 @@ def _measure(scan: DepthScan, region, hull, tolerance_mm: float, s: DepthSetting
     dm = measure_depth(pts, line, region, s, viewpoints=scan.viewpoints)
     mean, sem = dm.mean_depth()
     if dm.floor_lines < s.min_lines:
-        raise MeasurementError(_too_few_lines(pts, line, region, dm, mean, s))
+        why = _too_few_lines(pts, line, region, dm, mean, s)
+        if dm.floor_lines < 2:
+            raise MeasurementError(why)
+        return PocketDepth(region, dm, mean, sem, False, note=f"depth not stated: {why}")
     return PocketDepth(region, dm, mean, sem, bool(2 * sem <= tolerance_mm))
 
 
@@ -178,7 +184,8 @@ def _too_few_lines(pts: np.ndarray, line: np.ndarray, region, dm: DepthMap, dept
     centres = np.sort(np.unique(np.round(
         [np.median(pts[line == k, :2] @ across) for k in np.unique(line)], 4)))
     spacing = float(np.median(np.diff(centres))) if len(centres) > 1 else float("nan")
-    head = (f"{dm.floor_lines} scan lines cross its floor clear of the walls, fewer than "
+    n = dm.floor_lines
+    head = (f"{n} scan line{'s cross' if n != 1 else ' crosses'} its floor clear of the walls, fewer than "
             f"{s.min_lines} (the lines here {spacing:.2g} mm apart)")
     if width <= 0:
         return (f"{head}: at {depth:.2g} mm deep it is too narrow across the lines for its "
@@ -207,6 +214,8 @@ def write_report(folder: Path, pockets: list[PocketDepth], tolerance_mm: float,
                         "stated": p.stated, "floor_lines": p.map.floor_lines,
                         "floor_points": len(p.map.floor),
                         "not_floor_points": p.map.not_floor, "picture": picture}
+                if p.note is not None:
+                    row["note"] = p.note
             rows.append(row)
         atomic_write_text(tmp / "depth.json", json.dumps(
             {"scan": source, "method": method, "tolerance_mm": tolerance_mm,
