@@ -27,7 +27,7 @@ marked ✗.
 The other renderer's pocket plate is not in /work/shared/recordings (the recordings there are
 listed); only our simulator is scored here.
 
-Run: nice .venv/bin/python benchmarks/engrave_plate.py [--half tune|spent|held] [--seed N]
+Run: nice .venv/bin/python benchmarks/engrave_plate.py [--half tune|spent|held|held-coarse] [--seed N]
 [--only NAME] [--spacing MM] [--draws N] [--size MM] [--taper MM] [--cross]
 """
 
@@ -81,7 +81,11 @@ f08d089, 41 and 43 on f7116a9, 45 and 47 on 6ab7c44, 49 and 51 on d47dbf0, 53 an
 HELD_OUT = (65, 67)
 """Fixed before any result on them was seen; run once, every variation, at both sizes
 (``--size`` 2 and 6), at the end, on the final code."""
-SEEDS = {"tune": TUNE, "spent": SPENT, "held": HELD_OUT}
+HELD_OUT_COARSE = (69, 71)
+"""Fixed before any result on them was seen: lines 0.5 and 1 mm apart (``--spacing``; the
+floor of a 2 mm pocket holds 2–3 lines, not stated), ``--size`` 2 at 0.5 and 6 at both,
+every variation; run once, at the end, on the final code."""
+SEEDS = {"tune": TUNE, "spent": SPENT, "held": HELD_OUT, "held-coarse": HELD_OUT_COARSE}
 
 
 def own_draws(world, seed: int, draw: int) -> None:
@@ -162,7 +166,8 @@ def _pocket(pts: np.ndarray, line: np.ndarray, pocket, s: DepthSettings, rig
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--half", choices=tuple(SEEDS), default="tune",
-                    help="which seeds: tune (0), spent (tune too), held (held out)")
+                    help="which seeds: tune (0), spent (tune too), held (held out), "
+                    "held-coarse (held out for lines 0.5 and 1 mm apart)")
     ap.add_argument("--seed", type=int, help="only this seed of the half")
     ap.add_argument("--only", action="append", help="only the runs of this name")
     ap.add_argument("--spacing", type=float, default=SPACING_MM,
