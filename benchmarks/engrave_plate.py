@@ -43,11 +43,11 @@ from rich.console import Console
 from rich.table import Table
 
 from insitu.marking.engrave_depth import DepthSettings, measure_depth
+from insitu.marking.engrave_passes import combine, line_passes
+from insitu.marking.engrave_stats import SHARED_MM
 from insitu.marking.engrave_walls import viewpoints
-from insitu.reconstruct.packing import line_ids
-from insitu.reconstruct.plan import scan_lines
 from insitu.services.pocket import DEPTH_CENTRES
-from insitu.services.scan import plan_lines, scan_live
+from insitu.services.scan import scan_live
 from insitu.services.station import simulated
 from insitu.sim.pocket_plate import DEPTHS, SIZE_MM, TAPER_MM, centres_x, cut_plate, pocket_truth
 from insitu.sim.rig import default_rig
@@ -105,11 +105,12 @@ def measure_plate(blank: str, seed: int, optics: dict, binning: int,
     of each pocket from one scan of the plate, lines ``spacing_mm`` apart, the renderer's
     random numbers those of ``draw`` (:func:`own_draws`); the scan's station time, s; and
     each pocket's (error, standard error) mm from each pass. With ``cross`` a second pass
-    of crossed lines (:func:`~insitu.services.scan.plan_lines`): each pass measured on its
-    own (:func:`measure_depth` takes one line direction), their means weighted by their
-    variances; stated when both passes have 8 lines on the floor and 2σ is within
-    :data:`TOLERANCE`. ``size_mm``, ``taper_mm``: the pockets' side and how far their walls
-    slope (:func:`cut_plate`)."""
+    of crossed lines (:func:`~insitu.services.scan.plan_lines`): each pass
+    (:func:`~insitu.marking.engrave_passes.line_passes`) measured on its own
+    (:func:`measure_depth` takes one line direction), their means weighted by their inverse
+    variances (:func:`~insitu.marking.engrave_passes.combine`); stated when both passes
+    have 8 lines on the floor and 2σ is within :data:`TOLERANCE`. ``size_mm``, ``taper_mm``:
+    the pockets' side and how far their walls slope (:func:`cut_plate`)."""
     rig = default_rig(seed=seed, binning=binning)
     rig = replace(rig, optics=replace(rig.optics, **optics))
     s = DepthSettings(ring_mm=1.5)
@@ -121,36 +122,25 @@ def measure_plate(blank: str, seed: int, optics: dict, binning: int,
         scan = scan_live(st, spacing_mm, region, centres=CentreSettings(**DEPTH_CENTRES),
                          room_light=False, exposure_ms=exposure_ms, cross=cross)
         pts, line = scan.cloud.points, scan.cloud.attributes["line"]
-        first = along_y(line, region, spacing_mm, cross)
+        on = [p.holds(line) for p in line_passes(pts[:, :2], line)]
         out, passes, truths = [], [], pocket_truth(st.world, taper_mm)
         for k, (cx, depth) in enumerate(zip(cxs, DEPTHS)):
             near = np.abs(pts[:, 0] - cx) <= half + s.ring_mm
             pocket = shapely.box(cx - half, -half, cx + half, half)
-            each = [_pocket(pts[near & p], line[near & p], pocket, s, st.rig)
-                    for p in ((first, ~first) if cross else (first,))]
-            mean, sem, stated = combine(each)
+            each = [_pocket(pts[near & p], line[near & p], pocket, s, st.rig) for p in on]
+            mean, sem, stated = combined(each)
             truth = truths[k]["true_mean_mm"]
             out.append((depth, mean, sem, stated, truth))
             passes.append([(m - truth, e) for m, e, _ in each])
     return out, scan.summary.station_s, passes
 
 
-def along_y(line: np.ndarray, region, spacing_mm: float, cross: bool) -> np.ndarray:
-    """(N,) bool: which of a scan's points (their ``line`` ids (N,), the cloud's) lie on its
-    lines along y (:func:`~insitu.services.scan.plan_lines`' first pass; the ids number
-    the passes by angle, so the crossed pass's come first)."""
-    ids = line_ids(plan_lines(region, spacing_mm, cross))
-    return np.isin(line, ids[:len(scan_lines(region, spacing_mm))])
-
-
-def combine(each: list[tuple[float, float, bool]]) -> tuple[float, float, bool]:
+def combined(each: list[tuple[float, float, bool]]) -> tuple[float, float, bool]:
     """(mean, standard error mm, stated) of a pocket from its passes' (mean, standard error,
-    enough lines) measured on their own: the means weighted by their inverse variances (the
-    passes' speckle independent), stated when every pass has enough lines and 2σ is within
-    :data:`TOLERANCE`."""
-    w = np.array([1 / sem ** 2 for _, sem, _ in each])
-    mean = float(np.dot(w, [m for m, _, _ in each]) / w.sum())
-    sem = float(1 / np.sqrt(w.sum()))
+    enough lines) measured on their own (:func:`~insitu.marking.engrave_passes.combine`, the
+    error the lines share, :data:`~insitu.marking.engrave_stats.SHARED_MM`, common to both),
+    stated when every pass has enough lines and 2σ is within :data:`TOLERANCE`."""
+    mean, sem = combine([(m, e) for m, e, _ in each], SHARED_MM)
     return mean, sem, all(ok for _, _, ok in each) and 2 * sem <= TOLERANCE
 
 

@@ -1,7 +1,7 @@
 """``insitu depth`` on measured clouds (no renderer): each pocket's depth from the floor and top
 of the same lines, and one line for each pocket it cannot measure — outside the scan, beyond
 its points, too few lines on its floor (with the spacing that gives enough), no top around
-it, crossed lines — while the others are still measured; exit 1 when none is; the report
+it — while the others are still measured; exit 1 when none is; the report
 folder written whole or not at all."""
 
 import json
@@ -14,7 +14,7 @@ from typer.testing import CliRunner
 from insitu.cli.main import app
 from insitu.errors import ConfigError, FormatError
 from insitu.formats.pointcloud import PointCloud, write_ply
-from insitu.services import depth as depth_service
+from insitu.services import depth_report
 from insitu.services.depth import DepthScan, load_depth_scan, measure_pockets
 
 POCKET = "-1,-1,1,1"
@@ -55,7 +55,7 @@ def test_a_pocket_is_measured_from_its_floor_and_the_top_of_the_same_lines():
 
 def test_each_pocket_it_cannot_measure_says_why_and_what_to_do():
     """Outside the scan; reaching beyond its points; 1.2 mm lines (one on the floor);
-    lines only over the pocket (no top); a crossed scan; a box between two lines. Each one
+    lines only over the pocket (no top); a box between two lines. Each one
     line, the pocket beside it still measured."""
     good = shapely.box(-1, -1, 1, 1)
     cases = [
@@ -63,7 +63,6 @@ def test_each_pocket_it_cannot_measure_says_why_and_what_to_do():
         (_scan(), shapely.box(2, -1, 4, 1), "reaches beyond the scan's points"),
         (_scan(spacing=1.2), good, "1 scan line crosses its floor"),
         (_scan(x=(-1.15, 1.15), y=(-1.15, 1.15)), good, "on the top around the pocket"),
-        (_scan(cross=True), good, "more than one direction"),
         (_scan(spacing=1.5), shapely.box(0.1, -1, 0.4, 1), "lie on its floor"),
     ]
     for scan, region, why in cases:
@@ -132,7 +131,7 @@ def test_a_failed_report_leaves_the_folder_as_it_was(tmp_path, monkeypatch):
     def broken(path, *a, **kw):
         path.write_bytes(b"half")
         raise FormatError(f"{path}: disk full")
-    monkeypatch.setattr(depth_service, "depth_picture", broken)
+    monkeypatch.setattr(depth_report, "depth_picture", broken)
     run = CliRunner().invoke(app, ["depth", str(tmp_path / "cloud.ply"), "--pocket", POCKET,
                                    "-o", str(report)])
     assert run.exit_code != 0

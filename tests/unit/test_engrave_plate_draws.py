@@ -33,33 +33,44 @@ def test_each_variation_of_a_seed_draws_its_own_random_numbers():
     assert np.array_equal(_draws(1), draws[1])
 
 
-def test_the_lines_along_y_are_told_apart_by_their_ids():
-    """A crossed scan's points on its lines along y: the ids :func:`line_ids` gives those
-    lines (the crossed pass, at 45°, is numbered first); a plain scan's: all."""
+def test_the_lines_along_y_are_the_first_pass():
+    """A crossed plan's lines (the crossed pass, at 45°, numbered first by :func:`line_ids`),
+    points along each: :func:`line_passes` gives the lines along y as pass 1, the crossed
+    ones as pass 2; a plain scan's lines: one pass."""
+    from insitu.marking.engrave_passes import line_passes
     from insitu.reconstruct.packing import line_ids
     from insitu.services.scan import plan_lines
 
-    ep = benchmark("engrave_plate")
     region = (-10.5, 10.5, -2.5, 2.5)
-    lines = plan_lines(region, 0.1, cross=True)
-    ids = np.array(line_ids(lines))
-    vertical = np.array([abs((b - a)[0]) < 1e-9 for a, b in lines])
-    assert 0 < vertical.sum() < len(lines)
-    line = np.repeat(ids, 3)
-    assert np.array_equal(ep.along_y(line, region, 0.1, True), np.repeat(vertical, 3))
-    assert ep.along_y(np.arange(211), region, 0.1, False).all()
+    for cross in (True, False):
+        lines = plan_lines(region, 0.1, cross=cross)
+        ids = np.array(line_ids(lines))
+        t = np.linspace(0, 1, 40)[:, None]
+        xy = np.vstack([a[:2] + t * (b - a)[:2] for a, b in lines])
+        line = np.repeat(ids, len(t))
+        vertical = np.array([abs((b - a)[0]) < 1e-9 for a, b in lines])
+        passes = line_passes(xy, line)
+        assert len(passes) == (2 if cross else 1)
+        assert np.array_equal(np.sort(passes[0].lines), np.sort(ids[vertical]))
+        if cross:
+            assert np.array_equal(np.sort(passes[1].lines), np.sort(ids[~vertical]))
 
 
 def test_the_passes_combine_by_their_variances():
-    """Two passes 2 and 4 µm off with σ 2 and 4 µm: the combined mean 2.4 µm, σ 1.79 µm; not
-    stated when a pass has too few lines or 2σ exceeds the tolerance."""
-    combine = benchmark("engrave_plate").combine
-    mean, sem, ok = combine([(0.002, 0.002, True), (0.004, 0.004, True)])
-    assert np.isclose(mean, 0.0024) and np.isclose(sem, 1 / np.sqrt(1 / 4e-6 + 1 / 16e-6))
+    """Two passes 2 and 4 µm off with σ 2 and 4 µm, SHARED_MM of each common to both: the
+    means weighted by the rest of their variances, SHARED_MM kept whole in the σ; not stated
+    when a pass has too few lines or 2σ exceeds the tolerance; one pass: itself."""
+    from insitu.marking.engrave_stats import SHARED_MM
+
+    combined = benchmark("engrave_plate").combined
+    mean, sem, ok = combined([(0.002, 0.002, True), (0.004, 0.004, True)])
+    w = 1 / np.array([4e-6 - SHARED_MM ** 2, 16e-6 - SHARED_MM ** 2])
+    assert np.isclose(mean, (0.002 * w[0] + 0.004 * w[1]) / w.sum())
+    assert np.isclose(sem, np.sqrt(1 / w.sum() + SHARED_MM ** 2)) and 0.0018 < sem < 0.002
     assert ok
-    assert not combine([(0.002, 0.002, True), (0.004, 0.004, False)])[2]
-    assert not combine([(0.002, 0.004, True), (0.002, 0.004, True)])[2]
-    assert combine([(0.002, 0.002, True)]) == (0.002, 0.002, True)
+    assert not combined([(0.002, 0.002, True), (0.004, 0.004, False)])[2]
+    assert not combined([(0.002, 0.004, True), (0.002, 0.004, True)])[2]
+    assert np.allclose(combined([(0.002, 0.002, True)])[:2], (0.002, 0.002))
 
 
 def test_the_plate_keeps_its_2_mm_pockets_and_spaces_wider_ones():

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Annotated
+from typing import Annotated, Literal
 
 import numpy as np
 import typer
@@ -26,6 +26,13 @@ Pockets = Annotated[list[str] | None, typer.Option(
 Tolerance = Annotated[float, typer.Option(
     callback=bounded("depth_mm"),
     help="A depth is stated when its 2σ is within this, mm.")]
+Passes = Annotated[Literal["both", "1", "2"], typer.Option(
+    "--pass",
+    help="A crossed scan (recorded with --cross: two passes of parallel lines): both — each "
+         "pocket measured from each pass on its own, their depths combined by their inverse "
+         "variances (a pocket one pass cannot measure from the other alone, said); 1 — from "
+         "the first pass recorded alone; 2 — from the crossed one alone. A scan of one pass: "
+         "both and 1 alike.")]
 Report = Annotated[Path | None, typer.Option(
     "-o", "--output", metavar="REPORT_DIR",
     help="Also write a report folder (replaced as a whole): depth.json and each measured "
@@ -35,21 +42,24 @@ Report = Annotated[Path | None, typer.Option(
 @one_line_errors
 def depth(scan: Scan, pocket: Pockets = None, height_cal: HeightCal = None,
           method: Method = None, height_model: HeightModel = None,
-          tolerance: Tolerance = 0.005, out: Report = None) -> None:
+          tolerance: Tolerance = 0.005, which: Passes = "both", out: Report = None) -> None:
     """Measure each pocket's depth on a scan: its floor against the top around it, from the
     same scan lines; without --pocket, on the pockets it finds. A depth is stated when 2σ is
     within the tolerance and its floor holds the 8 lines clear of its walls a statement needs
     (lines ≤ 0.1 mm apart across a 2 mm pocket); from fewer lines (at least 2) it is given
     with its σ, not stated, and one line naming the spacing that would. A pocket that cannot
     be measured gets one line saying why and what to do; the others are still measured.
-    Exit 1 when none is."""
+    Exit 1 when none is. A crossed scan: each pocket from each pass, their depths combined
+    (--pass); its pockets found on its first pass."""
+    from insitu.errors import MeasurementError
     from insitu.services.depth import (
+        finding_points,
         load_depth_scan,
         measure_pockets,
         plane_scale_warning,
-        write_report,
     )
     from insitu.services.depth_find import find_pockets
+    from insitu.services.depth_report import write_report
 
     regions = [_region(p) for p in pocket or ()]
     if out is not None and not out.parent.is_dir():
@@ -57,12 +67,15 @@ def depth(scan: Scan, pocket: Pockets = None, height_cal: HeightCal = None,
     cal = scan_calibration(method, height_cal, height_model)
     with progress_bar("replaying", "frames") as progress:
         data = load_depth_scan(scan, cal, height_model, progress)
-    if not regions:
-        regions = find_pockets(data.points, data.line)
+    try:
         if not regions:
-            fail(f"{scan}: no pocket found (no region of 0.5 mm² below the top by more than "
-                 "3 × its noise): give the pockets with --pocket X0,Y0,X1,Y1")
-    results = measure_pockets(data, regions, tolerance)
+            regions = find_pockets(*finding_points(data, which))
+            if not regions:
+                fail(f"{scan}: no pocket found (no region of 0.5 mm² below the top by more "
+                     "than 3 × its noise): give the pockets with --pocket X0,Y0,X1,Y1")
+        results = measure_pockets(data, regions, tolerance, which=which)
+    except MeasurementError as e:
+        fail(f"{scan}: {e}")
     if cal is None and scan.is_dir():
         warn(plane_scale_warning(regions))
     console.print(_table(results, scan, data, tolerance, found=not pocket))
@@ -101,22 +114,38 @@ def _region(text: str):
 
 
 def _table(results, scan: Path, data, tolerance: float, found: bool) -> Table:
+    """A row per pocket; on a crossed scan a row per pass under it, and the pocket's own row
+    the passes' depths combined."""
     from insitu.services.depth_find import describe
 
+    crossed = any(p.passes for p in results)
     table = Table(title=f"depth → {scan} ({data.method}; stated: 2σ within "
                         f"±{tolerance * 1e3:g} µm)")
-    for col in ("pocket, mm", *(("found",) if found else ()), "depth mm", "±1σ µm", "stated",
-                "floor lines", "points"):
+    for col in ("pocket, mm", *(("found",) if found else ()), *(("pass",) if crossed else ()),
+                "depth mm", "±1σ µm", "stated", "floor lines", "points"):
         table.add_column(col, justify="right")
     for p in results:
         head = (p.name, describe(p.region)) if found else (p.name,)
+        if crossed:
+            used = [q for q in p.passes if q.map is not None]
+            head += ("both" if len(used) > 1 else
+                     f"{used[0].line_pass.number} alone" if used else "—",)
         if p.map is None:
             table.add_row(*head, "—", "—", "not measured", "—", "—")
         else:
+            few = p.note is not None and "depth not stated" in p.note
             table.add_row(*head, f"{p.mean_mm:.4f}", f"{p.sem_mm * 1e3:.1f}",
-                          "yes" if p.stated else "no, few lines" if p.note else "no",
-                          str(p.map.floor_lines),
-                          f"{len(p.map.floor):,}")
+                          "yes" if p.stated else "no, few lines" if few else "no",
+                          str(p.floor_lines), f"{p.floor_points:,}")
+        for q in p.passes:
+            under = ("", "") if found else ("",)
+            what = f"{q.line_pass.number} ({q.line_pass.angle_deg:.0f}°)"
+            if q.map is None:
+                table.add_row(*under, what, "—", "—", "not measured", "—", "—")
+            else:
+                table.add_row(*under, what, f"{q.mean_mm:.4f}", f"{q.sem_mm * 1e3:.1f}",
+                              "few lines" if q.note else "", str(q.map.floor_lines),
+                              f"{len(q.map.floor):,}")
     if data.viewpoints is None:
         table.caption = "the cloud names no camera: cells a wall hides are not told apart"
     return table

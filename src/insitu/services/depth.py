@@ -3,11 +3,13 @@ scan replays it (centres across the line only, :data:`~insitu.services.pocket.DE
 or a measured cloud that keeps each point's line; each pocket's depth from its floor against
 the top of the same lines (:func:`~insitu.marking.engrave_depth.measure_depth`, the default
 :class:`~insitu.marking.engrave_depth.DepthSettings`), or one line saying why it cannot be
-measured and what to do; the results and a depth map per pocket written as a report."""
+measured and what to do. A crossed scan (two passes of parallel lines,
+:func:`~insitu.marking.engrave_passes.line_passes`) measures each pocket from each pass on its
+own and combines their depths by their inverse variances; a pocket one pass cannot measure is
+measured from the other. The report: :mod:`insitu.services.depth_report`."""
 
 from __future__ import annotations
 
-import json
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -15,14 +17,14 @@ import numpy as np
 import shapely
 
 from insitu.errors import ConfigError, FormatError, MeasurementError
-from insitu.formats.atomic import atomic_folder, atomic_write_text
 from insitu.formats.calibration import HeightCalibration
 from insitu.formats.pointcloud import read_ply
 from insitu.formats.sequence import Sequence
 from insitu.marking.engrave_depth import DepthMap, DepthSettings, measure_depth
+from insitu.marking.engrave_passes import LinePass, combine, line_passes
+from insitu.marking.engrave_stats import SHARED_MM
 from insitu.marking.engrave_walls import line_direction
 from insitu.services.common import Progress, camera_model
-from insitu.services.engrave_report import depth_picture
 from insitu.services.pocket import depth_centres
 from insitu.services.scan import scan_replay
 
@@ -37,12 +39,14 @@ class DepthScan:
     """A scan's ``points`` (N, 3) world mm and the ``line`` (N,) each lies on;
     ``viewpoints`` (2, 3) world mm: the camera's centre and the head's pivot (None: not
     known, the cells a wall hides are not told apart); ``method``: how its heights were
-    measured."""
+    measured; ``first`` (2,): the direction of the lines recorded first (None: not known,
+    insitu records along y first)."""
 
     points: np.ndarray
     line: np.ndarray
     viewpoints: np.ndarray | None
     method: str
+    first: np.ndarray | None = None
 
 
 OFF_FLOOR_SHARE = 0.02
@@ -50,12 +54,28 @@ OFF_FLOOR_SHARE = 0.02
 
 
 @dataclass(frozen=True)
+class PassDepth:
+    """A pocket measured from one pass of a crossed scan (``line_pass``): its depth ``map``,
+    ``mean_mm`` and ``sem_mm`` (1σ), ``note``: why it cannot be stated (too few lines); or
+    ``refused``: why not measured (``map`` None)."""
+
+    line_pass: LinePass
+    map: DepthMap | None = None
+    mean_mm: float = float("nan")
+    sem_mm: float = float("nan")
+    note: str | None = None
+    refused: str | None = None
+
+
+@dataclass(frozen=True)
 class PocketDepth:
     """A pocket ``region`` (shapely, world mm) and its depth ``map`` with ``mean_mm``,
     ``sem_mm`` (1σ) and ``stated`` (2σ within the tolerance); ``note``: why a measured depth
     is not stated whatever its σ (its floor holds fewer lines than a statement needs), and
-    what to do; or, when it could not be measured, ``refused``: why and what to do (``map``
-    None)."""
+    what to do, and on a crossed scan which pass it was measured from alone, and why; or,
+    when it could not be measured, ``refused``: why and what to do (``map`` None). On a
+    crossed scan ``passes``: each pass's own (the depth theirs combined, ``map`` the first
+    measured pass's)."""
 
     region: object
     map: DepthMap | None = None
@@ -64,6 +84,22 @@ class PocketDepth:
     stated: bool = False
     note: str | None = None
     refused: str | None = None
+    passes: tuple[PassDepth, ...] = ()
+
+    @property
+    def maps(self) -> list[DepthMap]:
+        """The depth maps it was measured from: each measured pass's, or its one."""
+        if self.passes:
+            return [p.map for p in self.passes if p.map is not None]
+        return [] if self.map is None else [self.map]
+
+    @property
+    def floor_lines(self) -> int:
+        return sum(m.floor_lines for m in self.maps)
+
+    @property
+    def floor_points(self) -> int:
+        return sum(len(m.floor) for m in self.maps)
 
     @property
     def off_floor(self) -> str | None:
@@ -72,7 +108,7 @@ class PocketDepth:
         than :data:`OFF_FLOOR_SHARE` of its floor's points; None otherwise."""
         if self.map is None:
             return None
-        n, floor = self.map.not_floor, len(self.map.floor)
+        n, floor = sum(m.not_floor for m in self.maps), self.floor_points
         if n <= OFF_FLOOR_SHARE * max(floor, 1):
             return None
         return (f"{n} points inside it lie above the top or far off its floor's depth (the "
@@ -97,8 +133,10 @@ def load_depth_scan(path: Path, height_cal: HeightCalibration | None = None,
                              centres=depth_centres(height_cal))
         cam = camera_model(seq.camera)
         vp = np.array([cam.centre_world, [0.0, 0.0, seq.scan_head.pivot_height_mm]])
+        drawn = [line for f in seq.frames if not f.survey for line in f.drawn()]
+        first = np.subtract(drawn[0][1], drawn[0][0])[:2] if drawn else None
         return DepthScan(result.cloud.points, result.cloud.attributes["line"], vp,
-                         result.summary.method)
+                         result.summary.method, first)
     if path.suffix.lower() != ".ply":
         raise ConfigError(f"{path}: expected a recorded scan folder or a point cloud (.ply)")
     if height_cal is not None:
@@ -125,20 +163,106 @@ def plane_scale_warning(regions: list) -> str:
             f"within {PLANE_SCALE_MM:g} mm of the field's centre{where}: give --height-cal")
 
 
+PASSES = ("both", "1", "2")
+"""Which passes of a crossed scan measure: both (their depths combined), or one: 1 the first
+recorded, 2 the crossed one."""
+
+
+def scan_passes(scan: DepthScan, which: str = "both", min_lines: int = 8
+                ) -> tuple[list[LinePass], bool]:
+    """The passes of ``scan`` (:func:`line_passes`) that ``which`` (:data:`PASSES`) asks for,
+    and whether the scan is crossed (holds two). MeasurementError for a scan whose lines are
+    neither one pass nor two, or when a crossed scan's pass asked for holds fewer than
+    ``min_lines`` lines; ConfigError for pass 2 of a scan of one."""
+    passes = line_passes(scan.points[:, :2], scan.line, scan.first)
+    if which not in PASSES:
+        raise ConfigError(f"--pass {which!r}: expected one of {', '.join(PASSES)}")
+    if which == "2" and len(passes) == 1:
+        raise ConfigError(f"--pass 2: the scan holds one pass of parallel lines (at "
+                          f"{passes[0].angle_deg:.0f}° to x), no crossed one: give --pass 1 "
+                          "or both")
+    chosen = passes if which == "both" else [passes[int(which) - 1]]
+    for p in chosen:
+        if len(passes) > 1 and len(p.lines) < min_lines:
+            other = next((q for q in passes if q is not p), None)
+            also = f"measure from pass {other.number} alone (--pass {other.number}) or " \
+                if other is not None and len(other.lines) >= min_lines else ""
+            raise MeasurementError(f"{p.describe()} holds {len(p.lines)} lines, fewer than "
+                                   f"the {min_lines} a pocket's floor needs: too few to be a "
+                                   f"pass: {also}record the scan again")
+    return chosen, len(passes) > 1
+
+
+def finding_points(scan: DepthScan, which: str = "both") -> tuple[np.ndarray, np.ndarray]:
+    """(points (N, 3), line (N,)) the pockets are found on
+    (:func:`~insitu.services.depth_find.find_pockets`): a crossed scan's first pass ``which``
+    asks for (pass 1 unless "2"), alone. The passes' heights differ by more than a shallow
+    pocket (the simulated plate, Method 1: the crossed pass 62 µm above the first, its points
+    twice as scattered), so both together hide it (its 0.05 mm pocket not found)."""
+    passes, crossed = scan_passes(scan, which)
+    if not crossed:
+        return scan.points, scan.line
+    on = passes[0].holds(scan.line)
+    return scan.points[on], scan.line[on]
+
+
 def measure_pockets(scan: DepthScan, regions: list, tolerance_mm: float,
-                    settings: DepthSettings | None = None) -> list[PocketDepth]:
+                    settings: DepthSettings | None = None, which: str = "both"
+                    ) -> list[PocketDepth]:
     """Each pocket of ``regions`` (shapely, world mm) measured on ``scan`` (``settings``:
     None, the defaults); stated when 2σ is within ``tolerance_mm``. A pocket that cannot be
-    measured gets its reason."""
+    measured gets its reason. On a crossed scan each pass ``which`` asks for
+    (:func:`scan_passes`) measures on its own, their depths combined
+    (:func:`~insitu.marking.engrave_passes.combine`, :data:`SHARED_MM` common to both); a
+    pocket one of them cannot measure is measured from the other."""
     settings = settings or DepthSettings()
-    hull = shapely.MultiPoint(scan.points[:, :2]).convex_hull
+    passes, crossed = scan_passes(scan, which, settings.min_lines)
+    if not crossed:
+        hull = shapely.MultiPoint(scan.points[:, :2]).convex_hull
+        return [_measured(lambda r: _measure(scan, r, hull, tolerance_mm, settings), region)
+                for region in regions]
+    parts = []
+    for p in passes:
+        on = p.holds(scan.line)
+        part = DepthScan(scan.points[on], scan.line[on], scan.viewpoints, scan.method)
+        parts.append((p, part, shapely.MultiPoint(part.points[:, :2]).convex_hull))
     out = []
     for region in regions:
-        try:
-            out.append(_measure(scan, region, hull, tolerance_mm, settings))
-        except MeasurementError as e:
-            out.append(PocketDepth(region, refused=str(e)))
+        each = []
+        for p, part, hull in parts:
+            got = _measured(lambda r, part=part, hull=hull: _measure(
+                part, r, hull, tolerance_mm, settings), region)
+            each.append(PassDepth(p, got.map, got.mean_mm, got.sem_mm, got.note,
+                                  got.refused))
+        out.append(_combined(region, each, tolerance_mm))
     return out
+
+
+def _measured(measure, region) -> PocketDepth:
+    try:
+        return measure(region)
+    except MeasurementError as e:
+        return PocketDepth(region, refused=str(e))
+
+
+def _combined(region, each: list[PassDepth], tolerance_mm: float) -> PocketDepth:
+    """A pocket from its passes' depths: combined over those measured, stated when 2σ is
+    within ``tolerance_mm`` and no pass of them has too few lines for a statement; or refused
+    with each pass's reason."""
+    done = [p for p in each if p.map is not None]
+    if not done:
+        return PocketDepth(region, refused="; ".join(
+            f"{p.line_pass.describe()}: {p.refused}" for p in each), passes=tuple(each))
+    mean, sem = combine([(p.mean_mm, p.sem_mm) for p in done], SHARED_MM)
+    notes = [f"{p.line_pass.describe()}: {p.note}" for p in done if p.note is not None]
+    if len(done) < len(each):
+        names = " and ".join(p.line_pass.describe() for p in done)
+        why = "; ".join(f"{p.line_pass.describe()} not: {p.refused}" for p in each
+                        if p.map is None)
+        notes.insert(0, f"measured from {names} alone ({why})")
+    stated = 2 * sem <= tolerance_mm and all(p.note is None for p in done)
+    return PocketDepth(region, done[0].map, mean, sem, bool(stated),
+                       note="; ".join(notes) or None, passes=tuple(each))
 
 
 def _measure(scan: DepthScan, region, hull, tolerance_mm: float, s: DepthSettings
@@ -191,32 +315,3 @@ def _too_few_lines(pts: np.ndarray, line: np.ndarray, region, dm: DepthMap, dept
         return (f"{head}: at {depth:.2g} mm deep it is too narrow across the lines for its "
                 "walls' zones; scan with the lines along its narrow side")
     return f"{head}: scan with lines ≤ {width / s.min_lines:.2g} mm apart"
-
-
-def write_report(folder: Path, pockets: list[PocketDepth], tolerance_mm: float,
-                 source: str, method: str) -> None:
-    """``folder`` (replaced as a whole, or left as it was on a failure): ``depth.json``
-    (each pocket's outline, depth, 1σ, stated, floor lines and points, or why not measured)
-    and ``pocket-K.png``, the depth map of each measured pocket K (from 1)."""
-    rows = []
-    with atomic_folder(folder) as tmp:
-        for k, p in enumerate(pockets, start=1):
-            row = {"pocket": p.name, "outline": np.round(
-                np.asarray(p.region.exterior.coords)[:-1], 4).tolist()}
-            if p.map is None:
-                row["refused"] = p.refused
-            else:
-                picture = f"pocket-{k}.png"
-                depth_picture(tmp / picture, p.map, p.mean_mm,
-                              f"pocket {p.name}: {p.mean_mm * 1e3:.1f} ± "
-                              f"{p.sem_mm * 1e3:.1f} µm (1σ)", centre="mean")
-                row |= {"depth_mm": round(p.mean_mm, 6), "sigma_mm": round(p.sem_mm, 6),
-                        "stated": p.stated, "floor_lines": p.map.floor_lines,
-                        "floor_points": len(p.map.floor),
-                        "not_floor_points": p.map.not_floor, "picture": picture}
-                if p.note is not None:
-                    row["note"] = p.note
-            rows.append(row)
-        atomic_write_text(tmp / "depth.json", json.dumps(
-            {"scan": source, "method": method, "tolerance_mm": tolerance_mm,
-             "pockets": rows}, indent=2) + "\n")

@@ -6,7 +6,10 @@ its floor's depth (the floor set :func:`~insitu.marking.engrave_depth.measure_de
 starts 0.1–0.4 mm inside the outline, so the outline must sit on the walls, where the depth
 crosses half): their minimum rotated rectangle where they fill :data:`RECT_FILL` of it, else
 their own outline. On synthetic turned pockets its corners lie within 2–11 µm of the
-half-depth outline; the cells above the noise alone, 176–200 µm."""
+half-depth outline; the cells above the noise alone, 176–200 µm. Nothing in it assumes one
+direction of lines, but a crossed scan's pockets are found on one pass
+(:func:`~insitu.services.depth.finding_points`: the first): its two passes' heights differ by
+more than a shallow pocket."""
 
 from __future__ import annotations
 
@@ -15,7 +18,7 @@ import shapely
 from scipy import ndimage
 from scipy.spatial import cKDTree
 
-from insitu.marking.engrave_walls import line_direction
+from insitu.marking.engrave_passes import line_angles
 
 CELL_MM = 0.05
 """The raster the top's residuals are looked at on."""
@@ -34,7 +37,7 @@ def find_pockets(points: np.ndarray, line: np.ndarray) -> list:
     """The pockets (shapely polygons, world x, y mm), by x then y of their centres, of a
     scan's ``points`` (N, 3) mm on its lines ``line`` (N,) (a cell's neighbourhood grows to
     the points' spacing along the lines where they lie farther apart than
-    :data:`RADIUS_MM`)."""
+    :data:`RADIUS_MM`); lines of any direction, but of one pass (see the module docstring)."""
     depth = _below_top(points)
     radius = max(RADIUS_MM, _along_spacing(points, line))
     lo = points[:, :2].min(axis=0)
@@ -66,8 +69,11 @@ def find_pockets(points: np.ndarray, line: np.ndarray) -> list:
 
 
 def _along_spacing(points: np.ndarray, line: np.ndarray) -> float:
-    """The median distance (mm) between a line's neighbouring points."""
-    order = np.lexsort((points[:, :2] @ line_direction(points[:, :2], line), line))
+    """The median distance (mm) between a line's neighbouring points (each line in its own
+    direction: a crossed scan's passes alike)."""
+    ids, angle, _, _ = line_angles(points[:, :2], line)
+    a = np.radians(angle[np.searchsorted(ids, line)])
+    order = np.lexsort((points[:, 0] * np.cos(a) + points[:, 1] * np.sin(a), line))
     p, same = points[order, :2], line[order][1:] == line[order][:-1]
     gaps = np.linalg.norm(np.diff(p, axis=0), axis=1)[same]
     return float(np.median(gaps)) if len(gaps) else 0.0
@@ -75,15 +81,18 @@ def _along_spacing(points: np.ndarray, line: np.ndarray) -> float:
 
 def _below_top(points: np.ndarray, rounds: int = 6) -> np.ndarray:
     """(N,) each point's depth below the scan's top, a plane fitted to the points robustly
-    (those within 3 robust σ of the last fit, so the pockets drop out)."""
+    (those within 3 robust σ of the last fit's median residual, so the pockets drop out: a
+    first fit a large pocket pulls down leaves the top above the plane by more than its
+    noise)."""
     a = np.column_stack([points[:, 0], points[:, 1], np.ones(len(points))])
     keep = np.ones(len(points), bool)
     for _ in range(rounds):
         coef = np.linalg.lstsq(a[keep], points[keep, 2], rcond=None)[0]
         res = points[:, 2] - a @ coef
-        mad = 1.4826 * np.median(np.abs(res[keep] - np.median(res[keep])))
-        keep = np.abs(res) <= 3 * max(mad, 1e-4)
-    return -res
+        med = np.median(res[keep])
+        mad = 1.4826 * np.median(np.abs(res[keep] - med))
+        keep = np.abs(res - med) <= 3 * max(mad, 1e-4)
+    return -(res - med)
 
 
 def _outline(cx: np.ndarray, cy: np.ndarray):

@@ -36,8 +36,25 @@ def depth_picture(path: Path, dm: DepthMap, target_mm: float, title: str,
                   centre: str = "target") -> None:
     """The depth map (µm) of ``dm``'s cells, ``target_mm`` in the middle of the colour scale
     (named ``centre`` on it)."""
+    depth_pictures(path, [(dm, target_mm, title)], centre=centre)
+
+
+def depth_pictures(path: Path, maps: list[tuple[DepthMap, float, str]], title: str = "",
+                   centre: str = "target") -> None:
+    """The depth maps (µm) side by side, each (map, the value in the middle of its colour
+    scale mm, its title), under ``title``: e.g. a pocket measured from each pass of a crossed
+    scan."""
     from matplotlib.figure import Figure
 
+    fig = Figure(figsize=(6.4 * len(maps), 4.8))
+    for k, (dm, target_mm, panel) in enumerate(maps):
+        _depth_panel(fig, fig.add_subplot(1, len(maps), k + 1), dm, target_mm, panel, centre)
+    if title:
+        fig.suptitle(title, fontsize=10)
+    _save(fig, path)
+
+
+def _depth_panel(fig, ax, dm: DepthMap, target_mm: float, title: str, centre: str) -> None:
     c = dm.cells
     ny, nx = c.shape
     extent = (c.origin[0] - c.cell_mm / 2, c.origin[0] + (nx - 0.5) * c.cell_mm,
@@ -45,8 +62,6 @@ def depth_picture(path: Path, dm: DepthMap, target_mm: float, title: str,
     depth = np.where(dm.state == OUTSIDE, np.nan, dm.depth) * 1e3
     span = max(25.0, float(np.nanmax(np.abs(depth - target_mm * 1e3))) if np.isfinite(
         depth).any() else 25.0)
-    fig = Figure(figsize=(6.4, 4.8))
-    ax = fig.add_subplot()
     im = ax.imshow(depth, origin="lower", extent=extent, cmap="coolwarm_r",
                    vmin=target_mm * 1e3 - span, vmax=target_mm * 1e3 + span,
                    interpolation="nearest")
@@ -63,7 +78,6 @@ def depth_picture(path: Path, dm: DepthMap, target_mm: float, title: str,
     ax.set_ylabel("y, mm")
     ax.set_title(title, fontsize=9)
     ax.set_aspect("equal")
-    _save(fig, path)
 
 
 def histogram_picture(path: Path, dm: DepthMap, target_mm: float, tolerance_mm: float) -> None:
