@@ -8,12 +8,13 @@ import json
 import numpy as np
 import pytest
 import shapely
+import shapely.affinity
 from typer.testing import CliRunner
 
 from insitu.cli.main import app
 from insitu.errors import ConfigError, MeasurementError
 from insitu.formats.pointcloud import PointCloud, write_ply
-from insitu.marking.engrave_passes import combine, line_passes
+from insitu.marking.engrave_passes import combine, line_passes, obliquity
 from insitu.marking.engrave_stats import SHARED_MM
 from insitu.services.depth import DepthScan, finding_points, measure_pockets
 from insitu.services.depth_find import find_pockets
@@ -100,10 +101,11 @@ def test_combine_weights_the_passes_by_their_inverse_variances():
 
 
 def test_a_crossed_scan_measures_each_pass_and_combines_them():
-    """Pass 2's lines four times as far off on the floor: each pass's depth within 3σ of the
-    truth, the combined one their inverse-variance mean (SHARED_MM common to both), within
-    3 µm of the truth and surer than either."""
-    pts, line = _crossed(floor_errors=(0.003, 0.012), seed=1)
+    """Lines along y and along x, both square to the walls; pass 2's lines four times as far
+    off on the floor: each pass's depth within 3σ of the truth, the combined one their
+    inverse-variance mean (SHARED_MM common to both), within 3 µm of the truth and surer
+    than either."""
+    pts, line = _crossed(angles=(0.0, 90.0), floor_errors=(0.003, 0.012), seed=1)
     (p,) = measure_pockets(DepthScan(pts, line, None, "plane"), [POCKET], 0.005)
     assert p.refused is None and p.note is None and len(p.passes) == 2
     one, two = p.passes
@@ -131,9 +133,10 @@ def test_a_pocket_one_pass_cannot_measure_is_measured_from_the_other_and_says_so
 
 
 def test_a_pass_with_few_lines_on_the_floor_counts_but_the_depth_is_not_stated():
-    """The crossed pass 0.35 mm apart: 2–7 lines on the floor; its depth counts with its σ,
-    the combined depth is not stated, and the note names that pass and the spacing."""
-    pts, line = _crossed(spacings=(0.1, 0.35))
+    """The crossed pass (along x) 0.35 mm apart: 2–7 lines on the floor; its depth counts
+    with its σ, the combined depth is not stated, and the note names that pass and the
+    spacing."""
+    pts, line = _crossed(angles=(0.0, 90.0), spacings=(0.1, 0.35))
     (p,) = measure_pockets(DepthScan(pts, line, None, "plane"), [POCKET], 0.005)
     one, two = p.passes
     assert two.map is not None and 2 <= two.map.floor_lines < 8 and one.note is None
@@ -141,7 +144,27 @@ def test_a_pass_with_few_lines_on_the_floor_counts_but_the_depth_is_not_stated()
     assert (p.mean_mm, p.sem_mm) == pytest.approx(combine(
         [(one.mean_mm, one.sem_mm), (two.mean_mm, two.sem_mm)], SHARED_MM))
     assert 2 * p.sem_mm <= 0.005 and not p.stated
-    assert p.note.startswith("pass 2 (lines at 135° to x): depth not stated") and "≤ " in p.note
+    assert p.note.startswith("pass 2 (lines at 0° to x): depth not stated") and "≤ " in p.note
+
+
+def test_a_pass_slanted_to_the_walls_is_shown_not_combined():
+    """Lines along y and at 45° over a square pocket: the 45° pass is measured and reported,
+    but the depth is pass 1's alone, and the note says why and how to use pass 2; how far a
+    pass is from square to a pocket's walls, turned or not."""
+    pts, line = _crossed(seed=3)
+    (p,) = measure_pockets(DepthScan(pts, line, None, "plane"), [POCKET], 0.005)
+    one, two = p.passes
+    assert one.map is not None and two.map is not None
+    assert (p.mean_mm, p.sem_mm) == pytest.approx(combine([(one.mean_mm, one.sem_mm)],
+                                                          SHARED_MM)) and p.stated
+    assert p.note.startswith("pass 2 (lines at 135° to x) not combined")
+    assert "45° from square (pass 1 (lines at 90° to x): 0°)" in p.note
+    assert "--pass 2 uses it alone" in p.note
+    assert one.combined and not two.combined and p.floor_lines == one.map.floor_lines
+    assert obliquity(90.0, POCKET) == pytest.approx(0.0)
+    assert obliquity(100.0, POCKET) == pytest.approx(10.0)
+    assert obliquity(135.0, POCKET) == pytest.approx(45.0)
+    assert obliquity(135.0, shapely.affinity.rotate(POCKET, 45.0)) == pytest.approx(0.0)
 
 
 def test_a_pass_too_small_is_refused_unless_the_other_is_asked_for():
@@ -175,7 +198,7 @@ def test_a_crossed_scans_pockets_are_found_on_its_first_pass():
 
 
 def test_the_pass_option_chooses_and_the_report_gives_each_pass(tmp_path):
-    pts, line = _crossed(floor_errors=(0.004, 0.006), seed=2)
+    pts, line = _crossed(angles=(0.0, 90.0), floor_errors=(0.004, 0.006), seed=2)
     write_ply(tmp_path / "crossed.ply", PointCloud(pts, {"line": line.astype(np.int32)}))
     got = {}
     for which in ("both", "1", "2"):

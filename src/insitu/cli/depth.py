@@ -30,7 +30,9 @@ Passes = Annotated[Literal["both", "1", "2"], typer.Option(
     "--pass",
     help="A crossed scan (recorded with --cross: two passes of parallel lines): both — each "
          "pocket measured from each pass on its own, their depths combined by their inverse "
-         "variances (a pocket one pass cannot measure from the other alone, said); 1 — from "
+         "variances, of the passes crossing its walls as squarely as the best one (within "
+         "10°; a pass slanted to them, e.g. at 45° to a square pocket's walls, reported, not "
+         "combined; a pocket one pass cannot measure from the other alone; each said); 1 — from "
          "the first pass recorded alone; 2 — from the crossed one alone. A scan of one pass: "
          "both and 1 alike.")]
 Report = Annotated[Path | None, typer.Option(
@@ -127,7 +129,7 @@ def _table(results, scan: Path, data, tolerance: float, found: bool) -> Table:
     for p in results:
         head = (p.name, describe(p.region)) if found else (p.name,)
         if crossed:
-            used = [q for q in p.passes if q.map is not None]
+            used = [q for q in p.passes if q.map is not None and q.combined]
             head += ("both" if len(used) > 1 else
                      f"{used[0].line_pass.number} alone" if used else "—",)
         if p.map is None:
@@ -139,11 +141,12 @@ def _table(results, scan: Path, data, tolerance: float, found: bool) -> Table:
                           str(p.floor_lines), f"{p.floor_points:,}")
         for q in p.passes:
             under = ("", "") if found else ("",)
-            what = f"{q.line_pass.number} ({q.line_pass.angle_deg:.0f}°)"
+            what = f"{q.line_pass.number} ({round(q.line_pass.angle_deg) % 180}°)"
             if q.map is None:
                 table.add_row(*under, what, "—", "—", "not measured", "—", "—")
             else:
                 table.add_row(*under, what, f"{q.mean_mm:.4f}", f"{q.sem_mm * 1e3:.1f}",
+                              "not combined" if not q.combined else
                               "few lines" if q.note else "", str(q.map.floor_lines),
                               f"{len(q.map.floor):,}")
     if data.viewpoints is None:

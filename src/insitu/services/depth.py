@@ -10,7 +10,7 @@ measured from the other. The report: :mod:`insitu.services.depth_report`."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -21,7 +21,7 @@ from insitu.formats.calibration import HeightCalibration
 from insitu.formats.pointcloud import read_ply
 from insitu.formats.sequence import Sequence
 from insitu.marking.engrave_depth import DepthMap, DepthSettings, measure_depth
-from insitu.marking.engrave_passes import LinePass, combine, line_passes
+from insitu.marking.engrave_passes import OBLIQUE_DEG, LinePass, combine, line_passes, obliquity
 from insitu.marking.engrave_stats import SHARED_MM
 from insitu.marking.engrave_walls import line_direction
 from insitu.services.common import Progress, camera_model
@@ -56,7 +56,8 @@ OFF_FLOOR_SHARE = 0.02
 @dataclass(frozen=True)
 class PassDepth:
     """A pocket measured from one pass of a crossed scan (``line_pass``): its depth ``map``,
-    ``mean_mm`` and ``sem_mm`` (1σ), ``note``: why it cannot be stated (too few lines); or
+    ``mean_mm`` and ``sem_mm`` (1σ), ``note``: why it cannot be stated (too few lines), and
+    ``combined``: False when it is left out of the pocket's depth (slanted to its walls); or
     ``refused``: why not measured (``map`` None)."""
 
     line_pass: LinePass
@@ -65,6 +66,7 @@ class PassDepth:
     sem_mm: float = float("nan")
     note: str | None = None
     refused: str | None = None
+    combined: bool = True
 
 
 @dataclass(frozen=True)
@@ -88,9 +90,9 @@ class PocketDepth:
 
     @property
     def maps(self) -> list[DepthMap]:
-        """The depth maps it was measured from: each measured pass's, or its one."""
+        """The depth maps its depth comes from: each measured pass's combined, or its one."""
         if self.passes:
-            return [p.map for p in self.passes if p.map is not None]
+            return [p.map for p in self.passes if p.map is not None and p.combined]
         return [] if self.map is None else [self.map]
 
     @property
@@ -234,7 +236,7 @@ def measure_pockets(scan: DepthScan, regions: list, tolerance_mm: float,
                 part, r, hull, tolerance_mm, settings), region)
             each.append(PassDepth(p, got.map, got.mean_mm, got.sem_mm, got.note,
                                   got.refused))
-        out.append(_combined(region, each, tolerance_mm))
+        out.append(_combined(region, each, tolerance_mm, aligned=which == "both"))
     return out
 
 
@@ -245,17 +247,32 @@ def _measured(measure, region) -> PocketDepth:
         return PocketDepth(region, refused=str(e))
 
 
-def _combined(region, each: list[PassDepth], tolerance_mm: float) -> PocketDepth:
-    """A pocket from its passes' depths: combined over those measured, stated when 2σ is
-    within ``tolerance_mm`` and no pass of them has too few lines for a statement; or refused
-    with each pass's reason."""
+def _combined(region, each: list[PassDepth], tolerance_mm: float, aligned: bool = True
+              ) -> PocketDepth:
+    """A pocket from its passes' depths: combined over those measured (``aligned``: of them,
+    those whose lines cross its walls within :data:`OBLIQUE_DEG` as squarely as the best
+    one's; the others said), stated when 2σ is within ``tolerance_mm`` and no pass of them
+    has too few lines for a statement; or refused with each pass's reason."""
     done = [p for p in each if p.map is not None]
     if not done:
         return PocketDepth(region, refused="; ".join(
             f"{p.line_pass.describe()}: {p.refused}" for p in each), passes=tuple(each))
+    notes = []
+    if aligned and len(done) > 1:
+        slant = [obliquity(p.line_pass.angle_deg, region) for p in done]
+        best = done[int(np.argmin(slant))]
+        for p, a in zip(done, slant):
+            if a > min(slant) + OBLIQUE_DEG:
+                notes.append(f"{p.line_pass.describe()} not combined "
+                             f"({p.mean_mm:.4f} ± {p.sem_mm * 1e3:.1f} µm): its lines cross "
+                             f"the walls at {a:.0f}° from square ({best.line_pass.describe()}: "
+                             f"{min(slant):.0f}°), where the walls' zones read short; "
+                             f"--pass {p.line_pass.number} uses it alone")
+        done = [p for p, a in zip(done, slant) if a <= min(slant) + OBLIQUE_DEG]
+        each = [p if p.map is None or p in done else replace(p, combined=False) for p in each]
     mean, sem = combine([(p.mean_mm, p.sem_mm) for p in done], SHARED_MM)
-    notes = [f"{p.line_pass.describe()}: {p.note}" for p in done if p.note is not None]
-    if len(done) < len(each):
+    notes += [f"{p.line_pass.describe()}: {p.note}" for p in done if p.note is not None]
+    if any(p.map is None for p in each):
         names = " and ".join(p.line_pass.describe() for p in done)
         why = "; ".join(f"{p.line_pass.describe()} not: {p.refused}" for p in each
                         if p.map is None)

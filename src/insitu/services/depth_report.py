@@ -50,7 +50,8 @@ def _pass_row(q: PassDepth) -> dict:
     if q.map is None:
         return row | {"refused": q.refused}
     row |= {"depth_mm": round(q.mean_mm, 6), "sigma_mm": round(q.sem_mm, 6),
-            "floor_lines": q.map.floor_lines, "floor_points": len(q.map.floor)}
+            "floor_lines": q.map.floor_lines, "floor_points": len(q.map.floor),
+            "combined": q.combined}
     return row if q.note is None else row | {"note": q.note}
 
 
@@ -62,7 +63,9 @@ def _picture(path: Path, p: PocketDepth) -> None:
         depth_picture(path, p.map, p.mean_mm, head, centre="mean")
         return
     done = [q for q in p.passes if q.map is not None]
-    whence = "passes combined" if len(done) > 1 else f"pass {done[0].line_pass.number} alone"
+    used = [q for q in done if q.combined]
+    whence = "passes combined" if len(used) > 1 else f"pass {used[0].line_pass.number} alone"
     depth_pictures(path, [(q.map, p.mean_mm, f"{q.line_pass.describe()}: "
-                           f"{q.mean_mm * 1e3:.1f} ± {q.sem_mm * 1e3:.1f} µm")
+                           f"{q.mean_mm * 1e3:.1f} ± {q.sem_mm * 1e3:.1f} µm"
+                           f"{'' if q.combined else ', not combined'}")
                           for q in done], f"{head}, {whence}", centre="mean")
