@@ -13,8 +13,6 @@ from __future__ import annotations
 import numpy as np
 from scipy.ndimage import gaussian_filter
 from scipy.spatial import cKDTree
-from scipy.stats import norm
-from scipy.stats import t as student_t
 
 SPECKLE_MM = 0.25
 """A line's speckle grains on the part (the 1/e length of their correlation along it), mm."""
@@ -38,32 +36,21 @@ def line_sem(d: np.ndarray, line: np.ndarray, along_mm: np.ndarray, top_sem: flo
     may all miss the speckle's rare strong grains, so their scatter can say half of what
     their mean scatters by (the simulated plate's seed 33, its 0.1 mm pocket: 1.7 µm; its
     depth over 12 speckle draws on the same plate scatters by 3.5 µm), while along the lines
-    the grains show in ~3 blocks a line. Either is an estimate with few degrees of freedom
-    when the floor holds few lines (lines 0.5 mm apart over a 2 mm pocket: 2–3), so it is
-    widened by Student's t (:func:`_t_widening`), which keeps 2σ a 95 % interval.
-    :data:`SHARED_MM` beside both: what no line's scatter shows, which bounds a wide
-    pocket's σ from below."""
+    the grains show in ~3 blocks a line. :data:`SHARED_MM` beside both: what no line's
+    scatter shows, which bounds a wide pocket's σ from below."""
     lines, inv = np.unique(line, return_inverse=True)
     if len(lines) < 2:
         return float("inf")
     sums = np.bincount(inv, d - d.mean())
     var = len(lines) / (len(lines) - 1) * (sums ** 2).sum() / len(d) ** 2
-    along, along_dof = _along_var(d, inv, along_mm)
-    var, dof = max((var, len(lines) - 1), (along, along_dof))
-    return float(np.sqrt(var * _t_widening(dof) ** 2 + top_sem ** 2 + SHARED_MM ** 2))
+    return float(np.sqrt(max(var, _along_var(d, inv, along_mm)) + top_sem ** 2 + SHARED_MM ** 2))
 
 
-def _t_widening(dof: float) -> float:
-    """How much wider a σ estimated with ``dof`` degrees of freedom must be for its 2σ to
-    hold 95 %: Student's t over the normal's (3 lines: 2.2; 10: 1.15; 50: 1.02)."""
-    return float(student_t.ppf(0.975, max(dof, 1.0)) / norm.ppf(0.975))
-
-
-def _along_var(d: np.ndarray, inv: np.ndarray, along_mm: np.ndarray) -> tuple[float, float]:
+def _along_var(d: np.ndarray, inv: np.ndarray, along_mm: np.ndarray) -> float:
     """The variance (mm²) of the mean of the lines' means (``inv`` (N,): each point's line,
     0 … L−1) their points' scatter along the lines gives: blocks of 2 × :data:`SPECKLE_MM`
     along each line (nearly independent) pooled about their line's mean, a line's mean the
-    mean of its blocks; and its degrees of freedom."""
+    mean of its blocks."""
     block = np.floor((along_mm - along_mm.min()) / (2 * SPECKLE_MM)).astype(np.int64)
     key, binv = np.unique(inv.astype(np.int64) * (block.max() + 1) + block,
                           return_inverse=True)
@@ -72,9 +59,9 @@ def _along_var(d: np.ndarray, inv: np.ndarray, along_mm: np.ndarray) -> tuple[fl
     n = np.bincount(of).astype(float)
     dof = float((n - 1).sum())
     if dof < 1:
-        return 0.0, 0.0
+        return 0.0
     spread = ((means - (np.bincount(of, means) / n)[of]) ** 2).sum() / dof
-    return float((spread / n).sum() / len(n) ** 2), dof
+    return float((spread / n).sum() / len(n) ** 2)
 
 
 def line_terms(x, y, d, line, kernel_mm: float) -> tuple[np.ndarray, np.ndarray]:
