@@ -73,7 +73,7 @@ def test_each_pocket_it_cannot_measure_says_why_and_what_to_do():
 
 def test_a_floor_of_few_lines_is_measured_not_stated_and_names_the_spacing_that_would():
     """0.3 mm lines put 5 on the floor, fewer than the 8 a statement needs: the depth and
-    its σ (wider by Student's t for 5 lines) come out, not stated, with the spacing that
+    its σ come out, not stated, with the spacing that
     gives 8 (≤ 0.19 mm), which does."""
     (p,) = measure_pockets(_scan(spacing=0.3), [shapely.box(-1, -1, 1, 1)], 0.005)
     assert p.refused is None and not p.stated and 2 <= p.map.floor_lines < 8
