@@ -29,7 +29,6 @@ from insitu.marking.engrave_plan import (
     learn,
     plan_round,
 )
-from insitu.marking.engrave_stats import SHARED_MM
 from insitu.marking.engrave_walls import clear, unreachable
 
 TARGET = 0.2
@@ -115,7 +114,8 @@ def test_depth_from_the_floor_and_the_top_of_the_same_lines():
     dm = measure_depth(np.vstack(pts), np.concatenate(line), region, DepthSettings())
     mean, sem = dm.mean_depth()
     assert mean == pytest.approx(0.1, abs=0.001)
-    assert SHARED_MM <= sem < np.hypot(0.0005, SHARED_MM)   # the lines' share below 0.5 µm
+    # never below the error all lines share (1.2 µm, SHARED_MM); the lines' own below 0.5 µm
+    assert 0.0012 <= sem < np.hypot(0.0005, 0.0012)
     measured = dm.state == MEASURED
     assert measured.sum() >= 64
     assert np.nanmax(np.abs(dm.depth[measured] - 0.1)) < 0.005
