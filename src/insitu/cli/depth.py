@@ -118,6 +118,7 @@ def _region(text: str):
 def _table(results, scan: Path, data, tolerance: float, found: bool) -> Table:
     """A row per pocket; on a crossed scan a row per pass under it, and the pocket's own row
     the passes' depths combined."""
+    from insitu.services.depth import FEW_LINES
     from insitu.services.depth_find import describe
 
     crossed = any(p.passes for p in results)
@@ -135,7 +136,7 @@ def _table(results, scan: Path, data, tolerance: float, found: bool) -> Table:
         if p.map is None:
             table.add_row(*head, "—", "—", "not measured", "—", "—")
         else:
-            few = p.note is not None and "depth not stated" in p.note
+            few = p.note is not None and FEW_LINES in p.note
             table.add_row(*head, f"{p.mean_mm:.4f}", f"{p.sem_mm * 1e3:.1f}",
                           "yes" if p.stated else "no, few lines" if few else "no",
                           str(p.floor_lines), f"{p.floor_points:,}")

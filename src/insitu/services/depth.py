@@ -49,6 +49,9 @@ class DepthScan:
     first: np.ndarray | None = None
 
 
+FEW_LINES = "depth not stated"
+"""How a note begins that a depth comes from fewer lines than a statement needs."""
+
 OFF_FLOOR_SHARE = 0.02
 """Points left out as not floor beyond this share of a pocket's floor points are said."""
 
@@ -306,7 +309,7 @@ def _measure(scan: DepthScan, region, hull, tolerance_mm: float, s: DepthSetting
         why = _too_few_lines(pts, line, region, dm, mean, s)
         if dm.floor_lines < 2:
             raise MeasurementError(why)
-        return PocketDepth(region, dm, mean, sem, False, note=f"depth not stated: {why}")
+        return PocketDepth(region, dm, mean, sem, False, note=f"{FEW_LINES}: {why}")
     return PocketDepth(region, dm, mean, sem, bool(2 * sem <= tolerance_mm))
 
 
